@@ -1,0 +1,28 @@
+"""The `lensim` command line. Each subcommand group lives in its own module."""
+from __future__ import annotations
+
+import sys
+import warnings
+
+import typer
+
+from lensim.cli.common import console, err_console, run_guarded
+from lensim.cli.lens_cmd import lens_app
+
+app = typer.Typer(
+    name="lensim",
+    help="Optical aberration simulation and correction from a lens prescription.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+app.add_typer(lens_app, name="lens")
+
+
+def main() -> None:
+    """Console entry point: one-line errors, non-zero exit status on bad input."""
+    run_guarded(app)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,46 @@
+"""Shared CLI helpers: consoles, one-line error handling, JSON output."""
+from __future__ import annotations
+
+import json
+import math
+import sys
+import warnings
+
+import typer
+from rich.console import Console
+
+from lensim.errors import LensimError
+
+console = Console()
+err_console = Console(stderr=True)
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None):
+    err_console.print(f"[yellow]warning:[/yellow] {message}", highlight=False)
+
+
+def run_guarded(app: typer.Typer) -> None:
+    """Run a Typer app; lensim errors become one line on stderr and exit status 2."""
+    warnings.showwarning = _show_warning
+    try:
+        app(standalone_mode=True)
+    except LensimError as e:
+        err_console.print(f"[red]error:[/red] {e}", highlight=False, soft_wrap=True)
+        sys.exit(2)
+
+
+def _jsonable(x):
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if isinstance(x, dict):
+        return {k: _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if hasattr(x, "item"):
+        return _jsonable(x.item())
+    return x
+
+
+def print_json(data) -> None:
+    """Print a JSON document on stdout (non-finite numbers become null)."""
+    sys.stdout.write(json.dumps(_jsonable(data), indent=2) + "\n")

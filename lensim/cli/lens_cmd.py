@@ -1,0 +1,89 @@
+"""`lensim lens ...`: inspect, plot and convert lens prescriptions."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import typer
+from rich.table import Table
+
+from lensim.cli.common import console, print_json
+from lensim.optics.analysis import first_order_summary
+from lensim.optics.lens_file import load_lens, save_lens
+from lensim.optics.materials import Air
+
+lens_app = typer.Typer(help="Inspect, plot and convert lens prescriptions.", no_args_is_help=True)
+
+LENS_ARG = typer.Argument(..., help="Lens file (.json/.yaml native, .zmx Zemax, .seq CODE V) or a built-in lens name.")
+
+
+def _fmt(x, digits=6) -> str:
+    if x is None:
+        return "-"
+    if isinstance(x, float) and math.isinf(x):
+        return "inf"
+    return f"{x:.{digits}g}"
+
+
+@lens_app.command("info")
+def info(
+    lens_file: str = LENS_ARG,
+    json_out: bool = typer.Option(False, "--json", help="Print a JSON object instead of tables."),
+    aiming: str = typer.Option("real", help="Ray aiming for real-ray figures: real or paraxial."),
+) -> None:
+    """Surface table and first-order data (EFL, BFL, F/#, pupils, fields, wavelengths).
+
+    Example: lensim lens info cooke_triplet --json
+    """
+    lens = load_lens(lens_file)
+    summary = first_order_summary(lens, aiming=aiming)
+    if json_out:
+        print_json(summary)
+        return
+    t = Table(title=f"{lens.name or Path(lens.source).name}  (lengths in mm)")
+    for col in ("#", "radius", "thickness", "material", "nd", "conic", "clear s.d.", "note"):
+        t.add_column(col, justify="right" if col not in ("material", "note") else "left")
+    nd_wl = 0.5875618
+    for i, s in enumerate(lens.surfaces):
+        mat = "MIRROR" if s.is_mirror else ("" if isinstance(s.material, Air) else s.material.name)
+        nd = "" if isinstance(s.material, Air) or s.is_mirror else f"{s.material.index(nd_wl).item():.5f}"
+        note = ", ".join(x for x in ("STOP" if s.is_stop else "", "asphere" if s.is_aspheric else "",
+                                     f"obsc {s.obscuration_radius:g}" if s.obscuration_radius else "") if x)
+        t.add_row(str(i + 1), _fmt(s.radius), _fmt(s.thickness), mat, nd, _fmt(s.conic) if s.conic else "",
+                  _fmt(s.clear_radius) if s.clear_radius is not None else "", note)
+    console.print(t)
+    f = Table(title="First-order data", show_header=False)
+    f.add_column("quantity")
+    f.add_column("value", justify="right")
+    rows = [
+        ("EFL", f"{summary['efl_mm']:.6g} mm"), ("BFL", f"{summary['bfl_mm']:.6g} mm"),
+        ("F/# (image space)", f"{summary['fno']:.5g}"), ("working F/#", f"{summary['working_fno']:.5g}"),
+        ("entrance pupil diameter", f"{summary['epd_mm']:.6g} mm"),
+        ("entrance pupil z", f"{summary['entrance_pupil_z_mm']:.6g} mm"),
+        ("exit pupil z", f"{summary['exit_pupil_z_mm']:.6g} mm"),
+        ("exit pupil diameter", f"{summary['exit_pupil_diameter_mm']:.6g} mm"),
+        ("total track", f"{summary['total_track_mm']:.6g} mm"),
+        ("object distance", "infinity" if summary["object_distance_mm"] is None else f"{summary['object_distance_mm']:.6g} mm"),
+        ("fields", f"{', '.join(f'{v:g}' for v in lens.fields)} ({lens.field_type}, {summary['field_unit']})"),
+        ("wavelengths", ", ".join(f"{w * 1000:.1f}{'*' if i == lens.primary else ''}" for i, w in enumerate(lens.wavelengths_um)) + " nm (* primary)"),
+        ("real image height (max field)", f"{summary['image_height_mm']:.6g} mm"),
+    ]
+    for k, v in rows:
+        f.add_row(k, v)
+    console.print(f)
+    for note in lens.notes:
+        console.print(f"note: {note}", highlight=False)
+
+
+@lens_app.command("convert")
+def convert(
+    lens_file: str = LENS_ARG,
+    output: Path = typer.Option(..., "-o", "--output", help="Native lens file to write (.json or .yaml)."),
+) -> None:
+    """Convert any supported lens file to lensim's native format.
+
+    Example: lensim lens convert design.zmx -o design.yaml
+    """
+    lens = load_lens(lens_file)
+    save_lens(lens, output)
+    console.print(f"wrote {output}")

@@ -1,0 +1,170 @@
+"""The lens prescription: a sequential, rotationally symmetric optical system.
+
+Global frame: z along the optical axis, light leaves the object towards +z, the first
+surface vertex is at z = 0. Lengths in mm, wavelengths in um, field angles in degrees.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from lensim.errors import InputError
+from lensim.optics.materials import Air, Material
+from lensim.optics.surfaces import Surface
+
+ApertureType = Literal["epd", "fno", "stop_semi_diameter"]
+FieldType = Literal["angle", "object_height", "paraxial_image_height", "real_image_height"]
+APERTURE_TYPES = ("epd", "fno", "stop_semi_diameter")
+FIELD_TYPES = ("angle", "object_height", "paraxial_image_height", "real_image_height")
+
+
+@dataclass
+class Lens:
+    """A lens prescription.
+
+    surfaces: every surface from the first optical surface to the last one before the
+    image plane; the last surface's thickness is its distance to the image plane.
+    object_distance: mm from the object to the first surface vertex (math.inf for an
+    object at infinity). image_defocus: mm added to the last thickness (a focus shift).
+    aperture_value: entrance-pupil diameter (mm), image-space F-number (EFL / EPD), or
+    stop semi-diameter (mm), as aperture_type says. fields: field points along +y in the
+    unit of field_type (degrees or mm). wavelengths_um with weights; primary indexes them.
+    """
+
+    surfaces: list[Surface]
+    aperture_type: str = "epd"
+    aperture_value: float = 10.0
+    field_type: str = "angle"
+    fields: list[float] = field(default_factory=lambda: [0.0])
+    wavelengths_um: list[float] = field(default_factory=lambda: [0.5875618])
+    wavelength_weights: list[float] | None = None
+    primary: int = 0
+    object_distance: float = math.inf
+    object_material: Material = field(default_factory=Air)
+    image_defocus: float = 0.0
+    image_clear_radius: float | None = None
+    name: str = ""
+    source: str = "<lens>"
+    notes: list[str] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        if self.wavelength_weights is None:
+            self.wavelength_weights = [1.0] * len(self.wavelengths_um)
+        self.validate()
+
+    # ---- validation -------------------------------------------------------------
+    def _err(self, fld: str, msg: str) -> InputError:
+        return InputError(self.source, fld, msg)
+
+    def validate(self) -> None:
+        """Check the prescription; raise InputError naming the offending field."""
+        if not self.surfaces:
+            raise self._err("surfaces", "expected at least one surface")
+        if self.aperture_type not in APERTURE_TYPES:
+            raise self._err("aperture.type", f"expected one of {', '.join(APERTURE_TYPES)}, got {self.aperture_type!r}")
+        if not (self.aperture_value > 0 and math.isfinite(self.aperture_value)):
+            raise self._err("aperture.value", f"expected a positive number, got {self.aperture_value}")
+        if self.field_type not in FIELD_TYPES:
+            raise self._err("fields.type", f"expected one of {', '.join(FIELD_TYPES)}, got {self.field_type!r}")
+        if self.field_type == "object_height" and self.infinite_object:
+            raise self._err("fields.type", "object_height fields need a finite object distance; use angle for an object at infinity")
+        if not self.fields:
+            raise self._err("fields.values", "expected at least one field")
+        if any(not math.isfinite(f) for f in self.fields):
+            raise self._err("fields.values", "expected finite numbers")
+        if self.field_type == "angle" and any(abs(f) >= 90 for f in self.fields):
+            raise self._err("fields.values", "field angles must be below 90 degrees")
+        if not self.wavelengths_um:
+            raise self._err("wavelengths", "expected at least one wavelength")
+        if any(not (0.2 <= w <= 15.0) for w in self.wavelengths_um):
+            raise self._err("wavelengths", f"expected wavelengths between 200 nm and 15000 nm, got {[w * 1000 for w in self.wavelengths_um]} nm")
+        if len(self.wavelength_weights) != len(self.wavelengths_um) or any(w < 0 for w in self.wavelength_weights):
+            raise self._err("wavelengths.weights", "expected one non-negative weight per wavelength")
+        if not (0 <= self.primary < len(self.wavelengths_um)):
+            raise self._err("wavelengths.primary", f"expected an index 0..{len(self.wavelengths_um) - 1}, got {self.primary}")
+        if not (self.object_distance > 0):
+            raise self._err("object.distance", f"expected a positive distance (mm) or infinity, got {self.object_distance}")
+        stops = [i for i, s in enumerate(self.surfaces) if s.is_stop]
+        if len(stops) != 1:
+            raise self._err("surfaces", f"expected exactly one stop surface, found {len(stops)}")
+        direction = 1.0
+        for i, s in enumerate(self.surfaces):
+            if s.is_mirror:
+                direction = -direction
+            if not math.isfinite(s.thickness):
+                raise self._err(f"surfaces[{i}].thickness", f"expected a finite number, got {s.thickness}")
+            if not math.isfinite(s.curvature) or not math.isfinite(s.conic):
+                raise self._err(f"surfaces[{i}]", "expected finite curvature and conic")
+            if s.thickness * direction < 0:
+                expected = "positive" if direction > 0 else "negative (light travels towards -z after a mirror)"
+                raise self._err(f"surfaces[{i}].thickness", f"expected a {expected} thickness, got {s.thickness}")
+            if s.thickness == 0 and not s.is_mirror and not isinstance(s.material, Air) and i < len(self.surfaces) - 1:
+                raise self._err(f"surfaces[{i}].thickness", f"expected a non-zero thickness inside {s.material.name}, got 0")
+            if s.clear_radius is not None and s.clear_radius <= 0:
+                raise self._err(f"surfaces[{i}].clear_semi_diameter", f"expected a positive number, got {s.clear_radius}")
+            for p in s.asphere:
+                if p % 2 or not (2 <= p <= 20):
+                    raise self._err(f"surfaces[{i}].asphere", f"expected even powers r2..r20, got r{p}")
+
+    # ---- geometry ---------------------------------------------------------------
+    @property
+    def infinite_object(self) -> bool:
+        return math.isinf(self.object_distance)
+
+    @property
+    def stop_index(self) -> int:
+        return next(i for i, s in enumerate(self.surfaces) if s.is_stop)
+
+    @property
+    def num_surfaces(self) -> int:
+        return len(self.surfaces)
+
+    def vertex_z(self) -> np.ndarray:
+        """z (mm) of every surface vertex, then of the image plane (length N+1)."""
+        z = [0.0]
+        for s in self.surfaces[:-1]:
+            z.append(z[-1] + s.thickness)
+        z.append(z[-1] + self.surfaces[-1].thickness + self.image_defocus)
+        return np.asarray(z)
+
+    def media(self) -> list[Material]:
+        """Medium before surface 0, then after every surface (length N+1).
+        A mirror keeps the medium it reflects in."""
+        out = [self.object_material]
+        for s in self.surfaces:
+            out.append(out[-1] if s.is_mirror else s.material)
+        return out
+
+    def directions(self) -> np.ndarray:
+        """+1 / -1: the z direction light travels in each medium (length N+1)."""
+        d = [1.0]
+        for s in self.surfaces:
+            d.append(-d[-1] if s.is_mirror else d[-1])
+        return np.asarray(d)
+
+    def indices(self, wavelengths_um) -> np.ndarray:
+        """Refractive index of every medium (N+1, W) at the given wavelengths (um)."""
+        wl = np.atleast_1d(np.asarray(wavelengths_um, dtype=np.float64))
+        return np.stack([m.index(wl) for m in self.media()])
+
+    @property
+    def primary_wavelength_um(self) -> float:
+        return float(self.wavelengths_um[self.primary])
+
+    @property
+    def max_field(self) -> float:
+        return float(max(abs(f) for f in self.fields))
+
+    @property
+    def total_track(self) -> float:
+        """First vertex to image plane (mm)."""
+        return float(self.vertex_z()[-1])
+
+    def with_changes(self, **changes) -> "Lens":
+        """A copy with some top-level attributes replaced (surfaces are shared)."""
+        from dataclasses import replace
+
+        return replace(self, **changes)

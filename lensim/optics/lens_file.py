@@ -1,0 +1,294 @@
+"""lensim's native lens file format (JSON or YAML) and the loader for every lens format.
+
+    name: Cooke triplet
+    units: mm                      # lengths in mm (the only unit accepted)
+    object: {distance: infinity}   # or a distance in mm from the first vertex
+    aperture: {type: epd, value: 10}           # epd (mm) | fno (image-space EFL/EPD) | stop_semi_diameter (mm)
+    fields: {type: angle, values: [0, 14, 20]} # angle (deg) | object_height | paraxial_image_height | real_image_height (mm)
+    wavelengths: {nm: [480, 550, 650], weights: [1, 1, 1], primary: 1}   # primary: index into nm
+    surfaces:                      # first surface to last surface before the image
+      - {radius: 22.01359, thickness: 3.25896, material: J-SK16@Hikari}
+      - {radius: -435.76044, thickness: 6.00755}          # material defaults to air
+      - {radius: 20.29192, thickness: 4.75041, stop: true}
+      - {radius: 5.6, conic: -0.8, asphere: {r4: 1.1e-5, r6: 1.8e-7}, clear_semi_diameter: 3.2}
+      - {radius: -120, thickness: -30, mirror: true, obscuration: 5}
+    image: {defocus: 0.0}
+
+Surface keys: radius (mm, 'infinity' or omitted for a plane) or curvature (1/mm),
+thickness (mm to the next vertex; negative after a mirror), material (glass name,
+name@Catalog, air, {nd, vd} model glass or {n} constant index), conic, asphere
+({r2..r20: coefficient}), clear_semi_diameter (vignetting), obscuration (central
+obscuration radius), semi_diameter (drawing only), stop, mirror, comment.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+import warnings
+from pathlib import Path
+from typing import Any
+
+from lensim.errors import InputError, LensimError
+from lensim.optics.lens import Lens
+from lensim.optics.materials import Air, CatalogGlass, ConstantIndex, Material, ModelGlass, material_from_spec
+from lensim.optics.surfaces import Surface
+
+TOP_KEYS = {"name", "description", "units", "object", "aperture", "fields", "wavelengths", "surfaces", "image", "notes", "source"}
+SURFACE_KEYS = {"radius", "curvature", "thickness", "material", "conic", "asphere", "clear_semi_diameter",
+                "obscuration", "semi_diameter", "stop", "mirror", "comment"}
+
+
+class GlassSubstitutionWarning(UserWarning):
+    """A glass was not found exactly as named and a stated substitute was used."""
+
+
+def _number(src: str, field: str, value: Any, allow_inf: bool = False) -> float:
+    if isinstance(value, str) and value.strip().lower() in ("inf", "infinity", "+inf") and allow_inf:
+        return math.inf
+    if isinstance(value, bool):
+        raise InputError(src, field, f"expected a number, got {value!r}")
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise InputError(src, field, f"expected a number, got {value!r}") from None
+    if math.isnan(x) or (math.isinf(x) and not allow_inf):
+        raise InputError(src, field, f"expected a finite number, got {value!r}")
+    return x
+
+
+def _check_keys(src: str, field: str, data: Any, allowed: set[str]) -> dict:
+    if not isinstance(data, dict):
+        raise InputError(src, field, f"expected a mapping, got {type(data).__name__}")
+    unknown = sorted(set(data) - allowed)
+    if unknown:
+        raise InputError(src, field, f"unknown key(s) {', '.join(unknown)}; expected some of {', '.join(sorted(allowed))}")
+    return data
+
+
+def lens_from_dict(data: dict, source: str = "<lens>") -> Lens:
+    """Build and validate a Lens from the native format's mapping."""
+    src = source
+    data = _check_keys(src, "lens", data, TOP_KEYS)
+    units = data.get("units", "mm")
+    if units != "mm":
+        raise InputError(src, "units", f"expected 'mm', got {units!r}")
+    obj = _check_keys(src, "object", data.get("object", {}), {"distance", "material"})
+    distance = _number(src, "object.distance", obj.get("distance", "infinity"), allow_inf=True)
+    ap = _check_keys(src, "aperture", data.get("aperture", {}), {"type", "value"})
+    if "value" not in ap:
+        raise InputError(src, "aperture.value", "missing; expected the aperture size")
+    flds = _check_keys(src, "fields", data.get("fields", {"values": [0]}), {"type", "values"})
+    values = flds.get("values", [0])
+    if not isinstance(values, list):
+        raise InputError(src, "fields.values", f"expected a list of numbers, got {values!r}")
+    wls = _check_keys(src, "wavelengths", data.get("wavelengths", {"nm": [587.5618]}), {"nm", "weights", "primary"})
+    nm = wls.get("nm")
+    if not isinstance(nm, list) or not nm:
+        raise InputError(src, "wavelengths.nm", f"expected a non-empty list of wavelengths in nm, got {nm!r}")
+    nm = [_number(src, f"wavelengths.nm[{i}]", v) for i, v in enumerate(nm)]
+    weights = wls.get("weights", [1.0] * len(nm))
+    if not isinstance(weights, list):
+        raise InputError(src, "wavelengths.weights", "expected a list of numbers")
+    primary = wls.get("primary", 0)
+    if not isinstance(primary, int) or isinstance(primary, bool):
+        raise InputError(src, "wavelengths.primary", f"expected an integer index, got {primary!r}")
+    surfaces_data = data.get("surfaces")
+    if not isinstance(surfaces_data, list) or not surfaces_data:
+        raise InputError(src, "surfaces", "expected a non-empty list of surfaces")
+    notes: list[str] = list(data.get("notes", []))
+    surfaces = []
+    for i, sd in enumerate(surfaces_data):
+        f = f"surfaces[{i}]"
+        sd = _check_keys(src, f, sd, SURFACE_KEYS)
+        if "radius" in sd and "curvature" in sd:
+            raise InputError(src, f, "give either radius or curvature, not both")
+        if "curvature" in sd:
+            curv = _number(src, f + ".curvature", sd["curvature"])
+        else:
+            r = _number(src, f + ".radius", sd.get("radius", "infinity"), allow_inf=True)
+            if r == 0:
+                raise InputError(src, f + ".radius", "expected a non-zero radius (use infinity for a plane)")
+            curv = 0.0 if math.isinf(r) else 1.0 / r
+        asph_raw = sd.get("asphere", {}) or {}
+        if not isinstance(asph_raw, dict):
+            raise InputError(src, f + ".asphere", "expected a mapping like {r4: 1e-5, r6: -2e-8}")
+        asphere = {}
+        for k, v in asph_raw.items():
+            ks = str(k).lower().lstrip("ra")
+            if not ks.isdigit() or int(ks) % 2 or not 2 <= int(ks) <= 20:
+                raise InputError(src, f"{f}.asphere.{k}", "expected a key r2, r4, ... r20")
+            asphere[int(ks)] = _number(src, f"{f}.asphere.{k}", v)
+        try:
+            material = material_from_spec(sd.get("material", "air"), notes=notes)
+        except InputError as e:
+            raise InputError(src, f + ".material", e.message) from None
+        opt = {}
+        for key, attr in (("clear_semi_diameter", "clear_radius"), ("obscuration", "obscuration_radius"),
+                          ("semi_diameter", "semi_diameter")):
+            if sd.get(key) is not None:
+                opt[attr] = _number(src, f"{f}.{key}", sd[key])
+        for key in ("stop", "mirror"):
+            if key in sd and not isinstance(sd[key], bool):
+                raise InputError(src, f"{f}.{key}", f"expected true or false, got {sd[key]!r}")
+        surfaces.append(Surface(
+            curvature=curv,
+            thickness=_number(src, f + ".thickness", sd.get("thickness", 0.0)),
+            material=material,
+            conic=_number(src, f + ".conic", sd.get("conic", 0.0)),
+            asphere=asphere,
+            is_stop=bool(sd.get("stop", False)),
+            is_mirror=bool(sd.get("mirror", False)),
+            comment=str(sd.get("comment", "")),
+            **opt,
+        ))
+    image = _check_keys(src, "image", data.get("image", {}) or {}, {"defocus", "clear_semi_diameter"})
+    lens = Lens(
+        surfaces=surfaces,
+        aperture_type=str(ap.get("type", "epd")),
+        aperture_value=_number(src, "aperture.value", ap["value"]),
+        field_type=str(flds.get("type", "angle")),
+        fields=[_number(src, f"fields.values[{i}]", v) for i, v in enumerate(values)],
+        wavelengths_um=[v / 1000.0 for v in nm],
+        wavelength_weights=[_number(src, f"wavelengths.weights[{i}]", v) for i, v in enumerate(weights)],
+        primary=primary,
+        object_distance=distance,
+        object_material=material_from_spec(obj.get("material", "air")),
+        image_defocus=_number(src, "image.defocus", image.get("defocus", 0.0)),
+        image_clear_radius=(None if image.get("clear_semi_diameter") is None
+                            else _number(src, "image.clear_semi_diameter", image["clear_semi_diameter"])),
+        name=str(data.get("name", "")),
+        source=source,
+        notes=notes,
+    )
+    return lens
+
+
+def _material_spec(m: Material):
+    if isinstance(m, Air):
+        return "air"
+    return m.spec()
+
+
+def lens_to_dict(lens: Lens) -> dict:
+    """The native-format mapping of a lens (round-trips through lens_from_dict)."""
+    surfaces = []
+    for s in lens.surfaces:
+        d: dict[str, Any] = {"radius": "infinity" if s.curvature == 0 else 1.0 / s.curvature, "thickness": s.thickness}
+        if not isinstance(s.material, Air) and not s.is_mirror:
+            d["material"] = _material_spec(s.material)
+        if s.conic:
+            d["conic"] = s.conic
+        if s.asphere:
+            d["asphere"] = {f"r{p}": v for p, v in sorted(s.asphere.items()) if v}
+        if s.clear_radius is not None:
+            d["clear_semi_diameter"] = s.clear_radius
+        if s.obscuration_radius is not None:
+            d["obscuration"] = s.obscuration_radius
+        if s.semi_diameter is not None:
+            d["semi_diameter"] = s.semi_diameter
+        if s.is_stop:
+            d["stop"] = True
+        if s.is_mirror:
+            d["mirror"] = True
+        if s.comment:
+            d["comment"] = s.comment
+        surfaces.append(d)
+    out: dict[str, Any] = {
+        "name": lens.name,
+        "units": "mm",
+        "object": {"distance": "infinity" if lens.infinite_object else lens.object_distance},
+        "aperture": {"type": lens.aperture_type, "value": lens.aperture_value},
+        "fields": {"type": lens.field_type, "values": list(lens.fields)},
+        "wavelengths": {"nm": [round(w * 1000.0, 6) for w in lens.wavelengths_um],
+                        "weights": list(lens.wavelength_weights), "primary": lens.primary},
+        "surfaces": surfaces,
+        "image": {"defocus": lens.image_defocus},
+    }
+    if not isinstance(lens.object_material, Air):
+        out["object"]["material"] = _material_spec(lens.object_material)
+    if lens.image_clear_radius is not None:
+        out["image"]["clear_semi_diameter"] = lens.image_clear_radius
+    if lens.notes:
+        out["notes"] = list(lens.notes)
+    return out
+
+
+def atomic_write_text(path: str | Path, text: str) -> None:
+    """Write a text file under a temporary name in the same folder, then rename it."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def save_lens(lens: Lens, path: str | Path) -> None:
+    """Write a lens in the native format (.json, or .yaml/.yml), atomically."""
+    path = Path(path)
+    data = lens_to_dict(lens)
+    if path.suffix.lower() in (".yaml", ".yml"):
+        import yaml
+
+        text = yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=100)
+    elif path.suffix.lower() == ".json":
+        text = json.dumps(data, indent=2) + "\n"
+    else:
+        raise InputError(str(path), "path", "expected a .json, .yaml or .yml file name for a native lens file")
+    atomic_write_text(path, text)
+
+
+def _read_native(path: Path) -> dict:
+    text = path.read_text(encoding="utf-8")
+    try:
+        if path.suffix.lower() == ".json":
+            return json.loads(text)
+        import yaml
+
+        return yaml.safe_load(text)
+    except (json.JSONDecodeError, Exception) as e:  # yaml.YAMLError and friends
+        if isinstance(e, LensimError):
+            raise
+        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise InputError(str(path), "syntax", f"not valid {path.suffix[1:].upper()}: {msg}") from None
+
+
+def load_lens(path: str | Path, warn: bool = True) -> Lens:
+    """Load a lens from a native .json/.yaml file, a Zemax .zmx or a CODE V .seq file,
+    or a built-in lens by name (see lensim.assets). Glass substitutions are reported as
+    GlassSubstitutionWarning (and kept in lens.notes)."""
+    from lensim import assets
+
+    p = Path(path)
+    if not p.exists():
+        builtin = assets.lens_path(str(path))
+        if builtin is None:
+            raise InputError(str(path), None, f"no such file, and not a built-in lens (built-ins: {', '.join(assets.lens_names())})")
+        p = builtin
+    suffix = p.suffix.lower()
+    if suffix in (".json", ".yaml", ".yml"):
+        data = _read_native(p)
+        if not isinstance(data, dict):
+            raise InputError(str(p), "lens", "expected a mapping at the top level")
+        lens = lens_from_dict(data, source=str(p))
+    elif suffix == ".zmx":
+        from lensim.optics.zemax import read_zmx
+
+        lens = read_zmx(p)
+    elif suffix == ".seq":
+        from lensim.optics.codev import read_seq
+
+        lens = read_seq(p)
+    else:
+        raise InputError(str(p), None, "unknown lens file type; expected .json, .yaml, .yml, .zmx or .seq")
+    if warn:
+        for note in lens.notes:
+            warnings.warn(f"{p}: {note}", GlassSubstitutionWarning, stacklevel=2)
+    return lens

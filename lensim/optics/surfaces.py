@@ -1,0 +1,130 @@
+"""Rotationally symmetric surfaces: sag, normals and ray intersection (float64 torch).
+
+Even asphere (the paper's Eq. 2; Zemax EVENASPH):
+    z(r) = c r^2 / (1 + sqrt(1 - (1+k) c^2 r^2)) + A2 r^2 + A4 r^4 + ... + A20 r^20
+Lengths in mm, all coordinates local to the surface vertex.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import torch
+
+from lensim.optics.materials import Air, Material
+
+NEWTON_MAX_ITER = 30
+NEWTON_TOL_MM = 1e-12
+
+
+@dataclass
+class Surface:
+    """One surface and the medium after it.
+
+    curvature: 1/R (1/mm), 0 for a plane. thickness: signed distance (mm) to the next
+    surface vertex (negative after a mirror, as in Zemax). asphere: {power: coefficient}
+    with even powers 2..20 (coefficients in mm^(1-power)). clear_radius: semi-diameter of
+    the clear aperture that vignettes rays (None: unlimited). obscuration_radius: central
+    obscuration (rays with r below it are blocked). semi_diameter: drawn size only.
+    """
+
+    curvature: float = 0.0
+    thickness: float = 0.0
+    material: Material = field(default_factory=Air)
+    conic: float = 0.0
+    asphere: dict[int, float] = field(default_factory=dict)
+    clear_radius: float | None = None
+    obscuration_radius: float | None = None
+    semi_diameter: float | None = None
+    is_stop: bool = False
+    is_mirror: bool = False
+    comment: str = ""
+
+    @property
+    def radius(self) -> float:
+        return math.inf if self.curvature == 0 else 1.0 / self.curvature
+
+    @property
+    def is_aspheric(self) -> bool:
+        return any(v != 0.0 for v in self.asphere.values())
+
+    def sag(self, r2: torch.Tensor) -> torch.Tensor:
+        """Sag z (mm) at squared radius r2 (mm^2). NaN-free: outside the conic's domain
+        the square root is clamped (callers mask such rays)."""
+        c, k = self.curvature, self.conic
+        root = torch.sqrt(torch.clamp(1.0 - (1.0 + k) * c * c * r2, min=0.0))
+        z = c * r2 / (1.0 + root)
+        for power, coef in self.asphere.items():
+            if coef:
+                z = z + coef * r2 ** (power // 2)
+        return z
+
+    def sag_slope_over_r(self, r2: torch.Tensor) -> torch.Tensor:
+        """(dz/dr) / r, so that dz/dx = x * this and dz/dy = y * this."""
+        c, k = self.curvature, self.conic
+        root = torch.sqrt(torch.clamp(1.0 - (1.0 + k) * c * c * r2, min=1e-30))
+        g = c / root
+        for power, coef in self.asphere.items():
+            if coef:
+                g = g + coef * power * r2 ** (power // 2 - 1)
+        return g
+
+    def in_domain(self, r2: torch.Tensor) -> torch.Tensor:
+        """True where the conic sag is defined (the square root's argument is >= 0)."""
+        c, k = self.curvature, self.conic
+        return 1.0 - (1.0 + k) * c * c * r2 >= 0.0
+
+    def normal(self, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+        """Unit surface normal (..., 3) pointing along +z at the vertex."""
+        g = self.sag_slope_over_r(x * x + y * y)
+        n = torch.stack([-x * g, -y * g, torch.ones_like(x)], dim=-1)
+        return n / torch.linalg.norm(n, dim=-1, keepdim=True)
+
+    def intersect(self, pos: torch.Tensor, dirs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Path parameter t (mm) from pos along unit dirs to this surface (local coordinates,
+        pos already on the vertex plane z=0 or near it) and a validity mask.
+
+        Conic part in closed form, aspheric terms by Newton iteration from the conic root,
+        with a convergence test; rays that miss or do not converge are marked invalid.
+        """
+        px, py, pz = pos.unbind(-1)
+        dx, dy, dz = dirs.unbind(-1)
+        c, k = self.curvature, self.conic
+        a = c * (dx * dx + dy * dy + (1.0 + k) * dz * dz)
+        b = c * (px * dx + py * dy + (1.0 + k) * pz * dz) - dz
+        cc = c * (px * px + py * py + (1.0 + k) * pz * pz) - 2.0 * pz
+        disc = b * b - a * cc
+        valid = disc >= 0.0
+        sq = torch.sqrt(torch.clamp(disc, min=0.0))
+        denom = b + torch.where(b >= 0, sq, -sq)
+        valid = valid & (denom.abs() > 1e-300)
+        t = -cc / torch.where(valid, denom, torch.ones_like(denom))
+        if self.is_aspheric:
+            converged = torch.zeros_like(valid)
+            for _ in range(NEWTON_MAX_ITER):
+                x, y, z = px + t * dx, py + t * dy, pz + t * dz
+                r2 = x * x + y * y
+                f = z - self.sag(r2)
+                g = self.sag_slope_over_r(r2)
+                fp = dz - g * (x * dx + y * dy)
+                step = f / torch.where(fp.abs() > 1e-12, fp, torch.ones_like(fp))
+                t = t - step
+                converged = step.abs() < NEWTON_TOL_MM
+                if bool(converged[valid].all()):
+                    break
+            valid = valid & converged & (fp.abs() > 1e-12)
+        r2 = (px + t * dx) ** 2 + (py + t * dy) ** 2
+        valid = valid & self.in_domain(r2) & torch.isfinite(t)
+        t = torch.where(valid, t, torch.zeros_like(t))
+        return t, valid
+
+    def passes_aperture(self, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+        """True where a ray at (x, y) on this surface is inside the clear aperture and
+        outside the central obscuration."""
+        r2 = x * x + y * y
+        ok = torch.ones_like(r2, dtype=torch.bool)
+        if self.clear_radius is not None:
+            ok = ok & (r2 <= self.clear_radius**2 * (1 + 1e-12))
+        if self.obscuration_radius is not None:
+            ok = ok & (r2 >= self.obscuration_radius**2)
+        return ok
