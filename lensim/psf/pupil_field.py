@@ -1,0 +1,178 @@
+"""The exit-pupil field of one object point at one wavelength.
+
+A uniform grid over the (aimed) pupil is traced to the image space and carried on to the
+exit-pupil reference sphere: centred on the real chief-ray image point, through the
+chief ray's crossing of the paraxial exit-pupil plane. Each ray becomes a secondary
+source with its position, direction, optical path length and power; the power of a ray
+is the object-space étendue of its grid cell (so energy is conserved) and its area on
+the sphere comes from the grid neighbours (so ray density sets the amplitude).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import torch
+
+from lensim.errors import InputError, RayTraceError
+from lensim.optics.aiming import Aiming, describe_failure, generate_rays, object_field
+from lensim.optics.lens import Lens
+from lensim.optics.paraxial import ParaxialData, paraxial_data, paraxial_image_height
+from lensim.optics.pupil import square_grid_full
+from lensim.optics.trace import DTYPE, trace
+
+
+@dataclass
+class PupilField:
+    """Secondary sources on the exit-pupil reference sphere (valid rays only).
+
+    points (N, 3) mm on the sphere; directions (N, 3) unit ray directions there;
+    opl (N,) mm total optical path from the object wavefront to the sphere, minus the
+    chief ray's; power (N,) fraction of the unvignetted beam's power carried by each ray
+    (sums to the transmitted fraction); area (N,) mm^2 of sphere per ray; pupil_xy (N, 2)
+    normalized pupil coordinates; chief (3,) the chief-ray image point (sphere centre) and
+    radius the sphere radius (mm); n_image the image-space index; wavelength_um.
+    """
+
+    points: torch.Tensor
+    directions: torch.Tensor
+    opl: torch.Tensor
+    power: torch.Tensor
+    area: torch.Tensor
+    pupil_xy: torch.Tensor
+    chief: torch.Tensor
+    radius: float
+    n_image: float
+    wavelength_um: float
+    transmission: float
+    samples: int
+    image_xy: torch.Tensor  # (N, 2) ray intercepts on the image plane (mm)
+
+    @property
+    def wavelength_mm(self) -> float:
+        return self.wavelength_um * 1e-3
+
+    def working_fno(self) -> float:
+        """Effective image-space F-number from the beam's extent on the sphere."""
+        u = (self.chief.unsqueeze(0) - self.points) / self.radius
+        axis = -u.mean(0)
+        axis = axis / torch.linalg.norm(axis)
+        sin_max = torch.linalg.norm(torch.cross(u, axis.expand_as(u), dim=-1), dim=-1).max().item()
+        return 1.0 / (2.0 * self.n_image * max(sin_max, 1e-12))
+
+
+def _cell_measure(grid_vals: torch.Tensor, ok: torch.Tensor, h: float, cross_with: torch.Tensor | None = None) -> torch.Tensor:
+    """|d/dpx x d/dpy| * h^2 on an (n, n, 3) grid by central (or one-sided) differences
+    between valid neighbours; cross_with projects onto a direction (étendue) instead.
+    Returns NaN where no neighbour pair is valid."""
+    def deriv(axis: int) -> torch.Tensor:
+        v = grid_vals
+        okf = ok
+        fwd = torch.roll(v, -1, dims=axis) - v
+        bwd = v - torch.roll(v, 1, dims=axis)
+        okf_f = okf & torch.roll(okf, -1, dims=axis)
+        okf_b = okf & torch.roll(okf, 1, dims=axis)
+        n = v.shape[axis]
+        idx = torch.arange(n)
+        edge_hi = (idx == n - 1).reshape([-1 if a == axis else 1 for a in range(2)])
+        edge_lo = (idx == 0).reshape([-1 if a == axis else 1 for a in range(2)])
+        okf_f = okf_f & ~edge_hi
+        okf_b = okf_b & ~edge_lo
+        both = okf_f & okf_b
+        d = torch.where(both.unsqueeze(-1), 0.5 * (fwd + bwd), torch.where(okf_f.unsqueeze(-1), fwd, bwd))
+        has = okf_f | okf_b
+        return torch.where(has.unsqueeze(-1), d, torch.full_like(d, float("nan")))
+
+    # grid axis 0 is y (rows), axis 1 is x (columns)
+    dx = deriv(1)
+    dy = deriv(0)
+    c = torch.cross(dx, dy, dim=-1)
+    if cross_with is not None:
+        return (c * cross_with).sum(-1).abs()
+    return torch.linalg.norm(c, dim=-1)
+
+
+def _fill(values: torch.Tensor, ok: torch.Tensor) -> torch.Tensor:
+    """Replace NaN entries among ok cells by the median of the finite ones."""
+    finite = ok & torch.isfinite(values)
+    if not bool(finite.any()):
+        raise RayTraceError("pupil sampling too coarse: no two neighbouring rays traced; increase the pupil samples")
+    med = values[finite].median()
+    return torch.where(finite, values, med)
+
+
+def pupil_field(
+    lens: Lens,
+    field: float,
+    wavelength_um: float,
+    samples: int = 128,
+    aiming: Aiming = "real",
+    para: ParaxialData | None = None,
+) -> PupilField:
+    """Trace a samples x samples pupil grid for one field (in the lens's field unit) and
+    wavelength (um) to the exit-pupil reference sphere."""
+    if samples < 8:
+        raise InputError(lens.source, "pupil_samples", f"expected at least 8 pupil samples across, got {samples}")
+    para = para or paraxial_data(lens)
+    launch = object_field(lens, field, aiming, para)
+    pts, inside = square_grid_full(samples)
+    all_pts = torch.cat([torch.zeros(1, 2, dtype=DTYPE), pts])
+    rays, wl = generate_rays(lens, [launch], all_pts, [wavelength_um], aiming, para)
+    start_pos, start_dir = rays.position[0, 0, 1:].clone(), rays.direction[0, 0, 1:].clone()
+    res = trace(lens, rays, wl)
+    out = res.rays
+    if not bool(out.valid[0, 0, 0]):
+        fail = res.first_failure(mask=torch.zeros_like(out.valid).index_fill_(2, torch.tensor([0]), True))
+        raise RayTraceError(describe_failure(lens, field, fail, "chief ray"))
+    n_img = float(lens.indices([wavelength_um])[-1, 0])
+    chief = out.position[0, 0, 0]
+    chief_dir = out.direction[0, 0, 0]
+    chief_opl = out.opl[0, 0, 0]
+    pos, dirs, opl = out.position[0, 0, 1:], out.direction[0, 0, 1:], out.opl[0, 0, 1:]
+    valid = out.valid[0, 0, 1:] & inside
+    # reference sphere: centre at the chief-ray image point, through the chief ray's
+    # crossing of the paraxial exit-pupil plane
+    z_xp = para.exit_pupil_z_mm
+    dz = chief_dir[2].item()
+    if not math.isfinite(z_xp) or abs(dz) < 1e-12:
+        radius = 1e3 * max(para.efl_mm, 1.0)  # telecentric: a large sphere
+    else:
+        t_xp = (z_xp - chief[2].item()) / dz
+        radius = abs(t_xp)
+    # carry every ray from the image plane back/forward to the sphere: |p + t d - C| = R,
+    # root on the pupil side of the focus
+    w = pos - chief
+    b = (w * dirs).sum(-1)
+    c = (w * w).sum(-1) - radius * radius
+    disc = b * b - c
+    valid = valid & (disc >= 0)
+    t = -b - torch.sqrt(torch.clamp(disc, min=0.0))
+    q = pos + t.unsqueeze(-1) * dirs
+    opl_sphere = opl + n_img * t
+    # the chief ray's own path to the sphere (t = -R along it)
+    opl_ref = chief_opl - n_img * radius
+    n = samples
+    h = 2.0 / n
+    ok_grid = valid.reshape(n, n)
+    area = _cell_measure(q.reshape(n, n, 3), ok_grid, h)
+    # object-space power per cell: plane wave -> area perpendicular to the beam;
+    # point source -> solid angle of the cell's directions
+    launch_ok = inside.reshape(n, n)
+    if lens.infinite_object:
+        etendue = _cell_measure(start_pos.reshape(n, n, 3), launch_ok, h, cross_with=start_dir.reshape(n, n, 3))
+    else:
+        etendue = _cell_measure(start_dir.reshape(n, n, 3), launch_ok, h, cross_with=start_dir.reshape(n, n, 3))
+    etendue = _fill(etendue, launch_ok).reshape(-1)
+    total = etendue[inside].sum()
+    power = etendue / total
+    area = _fill(area, ok_grid).reshape(-1)
+    sel = valid
+    transmission = float(power[sel].sum())
+    if int(sel.sum()) < 16:
+        raise RayTraceError(f"{lens.source}: fields: fewer than 16 rays of field {field:g} reach the image; "
+                            "expected an unvignetted pupil (or raise the pupil samples)")
+    return PupilField(
+        points=q[sel], directions=dirs[sel], opl=(opl_sphere - opl_ref)[sel], power=power[sel], area=area[sel],
+        pupil_xy=pts[sel], chief=chief.clone(), radius=radius, n_image=n_img, wavelength_um=wavelength_um,
+        transmission=transmission, samples=samples, image_xy=pos[sel][:, :2],
+    )
