@@ -1,0 +1,371 @@
+"""Import CODE V sequence (.seq) lens files.
+
+The supported subset is what CODE V writes for plain rotationally symmetric lenses:
+
+    RDM [Y|N]       radius mode: surfaces give radii (Y, the default) or curvatures (N)
+    LEN ["title"]   start of the lens;  TITLE 'text'
+    DIM M           millimetres (the only unit accepted)
+    EPD d | FNO f   entrance-pupil diameter (mm) or image-space F/# (EFL / EPD)
+    WL nm...        wavelengths (nm);  REF k (1-based primary);  WTW weights
+    YAN | YOB | YIM | YRI values   fields: angle (deg), object height, paraxial or real
+                    image height (mm); the X counterparts must be zero;  WTF ignored
+    VUX VLX VUY VLY vignetting factors: not applied (a note says so)
+    SO c t          object surface (t >= 1e10 is infinity)
+    S c t [glass]   a surface: radius or curvature, thickness, glass (NAME_CATALOG such as
+                    NSSK2_SCHOTT, a bare name searched in every catalogue, or REFL = mirror)
+    STO             the current surface is the stop;  SI c t: image surface, t = defocus
+    K k; ASP; A..H, J coefficients (r^4..r^20);  CIR r (clear semi-diameter)
+    PIM             paraxial image solve: the last thickness is set to the paraxial focus
+    CCY/THC/CCX codes, INI, DER, GO: ignored
+
+Several commands may share a line, separated by ';'; '!' starts a comment. Anything
+else raises InputError naming the line and the command. Lengths in mm.
+"""
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from lensim.errors import InputError, UnknownGlassError
+from lensim.optics.lens import Lens
+from lensim.optics.materials import CATALOGS, Air, Material, resolve_glass
+from lensim.optics.surfaces import Surface
+
+INFINITE_THICKNESS_MM = 1e10
+_TOKEN = re.compile(r"'[^']*'|\"[^\"]*\"|[^\s,]+")
+_FIELD_KEYS = {"YAN": "angle", "YOB": "object_height", "YIM": "paraxial_image_height", "YRI": "real_image_height"}
+_X_FIELD_KEYS = {"XAN", "XOB", "XIM", "XRI"}
+_ASPHERE_LETTERS = {"A": 4, "B": 6, "C": 8, "D": 10, "E": 12, "F": 14, "G": 16, "H": 18, "J": 20}
+_IGNORED = {"INI", "DER", "WTF", "CCY", "THC", "CCX"}
+_CATALOG_SUFFIX = {c.upper(): c for c in CATALOGS}
+
+
+@dataclass
+class _SurfaceData:
+    number: int
+    line: int
+    value: float  # radius or curvature as written
+    thickness: float
+    glass: str | None
+    is_stop: bool = False
+    conic: float = 0.0
+    asphere: dict[int, float] = field(default_factory=dict)
+    clear_radius: float | None = None
+    pim: bool = False
+
+
+def _split_commands(text: str) -> list[tuple[int, list[str]]]:
+    """(line number, tokens) for every command; ';' separates commands, '!' starts a
+    comment (both only outside quotes)."""
+    out = []
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        parts, buf, quote = [], [], None
+        for ch in line:
+            if quote:
+                buf.append(ch)
+                if ch == quote:
+                    quote = None
+            elif ch in "'\"":
+                quote = ch
+                buf.append(ch)
+            elif ch == ";":
+                parts.append("".join(buf))
+                buf = []
+            elif ch == "!":
+                break
+            else:
+                buf.append(ch)
+        parts.append("".join(buf))
+        for part in parts:
+            tokens = _TOKEN.findall(part)
+            if tokens:
+                out.append((lineno, tokens))
+    return out
+
+
+class _Reader:
+    def __init__(self, path: Path):
+        self.src = str(path)
+        self.notes: list[str] = []
+        self.radius_mode = True
+        self.title = ""
+        self.aperture: tuple[str, float] | None = None
+        self.wavelengths_nm: list[float] = []
+        self.weights: list[float] | None = None
+        self.ref: int | None = None
+        self.field_type: str | None = None
+        self.fields: list[float] | None = None
+        self.x_fields: list[float] = []
+        self.vignetting: dict[str, list[float]] = {}
+        self.object: tuple[int, float, float, str | None] | None = None
+        self.surfaces: list[_SurfaceData] = []
+        self.image: tuple[int, float, float] | None = None
+        self.done = False
+
+    # ---- helpers -----------------------------------------------------------------
+    def err(self, lineno: int, what: str, msg: str) -> InputError:
+        return InputError(self.src, f"line {lineno} ({what})", msg)
+
+    def num(self, lineno: int, what: str, token: str) -> float:
+        try:
+            x = float(token)
+        except ValueError:
+            raise self.err(lineno, what, f"expected a number, got {token!r}") from None
+        if not math.isfinite(x):
+            raise self.err(lineno, what, f"expected a finite number, got {token!r}")
+        return x
+
+    def nums(self, lineno: int, cmd: str, args: list[str], min_count: int = 1) -> list[float]:
+        if len(args) < min_count:
+            raise self.err(lineno, cmd, f"expected at least {min_count} number(s), got {len(args)}")
+        return [self.num(lineno, cmd, a) for a in args]
+
+    def current(self, lineno: int, cmd: str) -> _SurfaceData:
+        if not self.surfaces:
+            raise self.err(lineno, cmd, "expected after an S surface line")
+        return self.surfaces[-1]
+
+    # ---- commands ----------------------------------------------------------------
+    def command(self, lineno: int, tokens: list[str]) -> None:
+        cmd, args = tokens[0].upper(), tokens[1:]
+        if self.done:
+            raise self.err(lineno, cmd, "expected nothing after GO")
+        if cmd == "GO":
+            self.done = True
+        elif cmd in _IGNORED:
+            return
+        elif cmd == "RDM":
+            flag = args[0].upper() if args else "Y"
+            if flag not in ("Y", "N", "YES", "NO"):
+                raise self.err(lineno, cmd, f"expected Y or N, got {args[0]!r}")
+            self.radius_mode = flag.startswith("Y")
+        elif cmd == "LEN":
+            if self.surfaces or self.object:
+                raise self.err(lineno, cmd, "expected one lens per file (LEN after surfaces)")
+            if args:
+                self.title = self.title or args[0].strip("'\"")
+        elif cmd == "TITLE":
+            self.title = " ".join(a.strip("'\"") for a in args).strip()
+        elif cmd == "DIM":
+            unit = args[0].upper() if args else ""
+            if unit != "M":
+                raise self.err(lineno, cmd, f"expected DIM M (millimetres), got {' '.join(args) or 'nothing'}; "
+                                            "convert the lens to millimetres")
+        elif cmd == "EPD":
+            self.aperture = ("epd", self.nums(lineno, cmd, args)[0])
+        elif cmd == "FNO":
+            self.aperture = ("fno", self.nums(lineno, cmd, args)[0])
+        elif cmd in ("NAO", "NA"):
+            raise self.err(lineno, cmd, "numerical-aperture system apertures are not supported; expected EPD or FNO")
+        elif cmd == "WL":
+            self.wavelengths_nm = self.nums(lineno, cmd, args)
+        elif cmd == "REF":
+            ref = self.nums(lineno, cmd, args)[0]
+            if ref != int(ref):
+                raise self.err(lineno, cmd, f"expected a whole wavelength number, got {args[0]}")
+            self.ref = int(ref)
+        elif cmd == "WTW":
+            self.weights = self.nums(lineno, cmd, args)
+        elif cmd in _FIELD_KEYS:
+            if self.field_type is not None and self.field_type != _FIELD_KEYS[cmd]:
+                raise self.err(lineno, cmd, f"expected one field type, got both {self.field_type} and {_FIELD_KEYS[cmd]}")
+            self.field_type = _FIELD_KEYS[cmd]
+            self.fields = self.nums(lineno, cmd, args)
+        elif cmd in _X_FIELD_KEYS:
+            xs = self.nums(lineno, cmd, args)
+            if any(x != 0.0 for x in xs):
+                raise self.err(lineno, cmd, "expected zero x fields: lensim models rotationally symmetric lenses "
+                                            "with fields along y (give the radial field as Y values)")
+            self.x_fields = xs
+        elif cmd in ("VUX", "VLX", "VUY", "VLY"):
+            self.vignetting[cmd] = self.nums(lineno, cmd, args)
+        elif cmd == "SO":
+            if self.object is not None or self.surfaces:
+                raise self.err(lineno, cmd, "expected one SO line before the surfaces")
+            vals = self.nums(lineno, cmd, args[:2], 2)
+            glass = args[2] if len(args) > 2 else None
+            self.object = (lineno, vals[0], vals[1], glass)
+        elif cmd == "S":
+            if self.object is None:
+                raise self.err(lineno, cmd, "expected the object surface (SO) first")
+            if self.image is not None:
+                raise self.err(lineno, cmd, "expected no surface after the image surface (SI)")
+            n = len(self.surfaces) + 1
+            vals = self.nums(lineno, f"S {n}", args[:2], 2)
+            if len(args) > 3:
+                raise self.err(lineno, f"S {n}", f"expected 'S curvature thickness [glass]', got {' '.join(args)}")
+            self.surfaces.append(_SurfaceData(n, lineno, vals[0], vals[1], args[2] if len(args) > 2 else None))
+        elif cmd == "SI":
+            if not self.surfaces:
+                raise self.err(lineno, cmd, "expected surfaces (S) before the image surface")
+            vals = self.nums(lineno, cmd, args[:2], 1)
+            self.image = (lineno, vals[0], vals[1] if len(vals) > 1 else 0.0)
+        elif cmd == "STO":
+            s = self.current(lineno, cmd)
+            if self.image is not None:
+                raise self.err(lineno, cmd, "expected the stop on a lens surface, not the image")
+            if any(t.is_stop for t in self.surfaces):
+                raise self.err(lineno, cmd, "expected one stop, found a second STO")
+            s.is_stop = True
+        elif cmd == "PIM":
+            if self.image is not None:
+                raise self.err(lineno, cmd, "expected PIM on the last lens surface, not after SI")
+            self.current(lineno, cmd).pim = True
+        elif cmd == "K":
+            self.current(lineno, cmd).conic = self.nums(lineno, cmd, args)[0]
+        elif cmd == "ASP":
+            self.current(lineno, cmd)
+        elif cmd in _ASPHERE_LETTERS:
+            s = self.current(lineno, cmd)
+            s.asphere[_ASPHERE_LETTERS[cmd]] = self.nums(lineno, f"S {s.number} {cmd}", args)[0]
+        elif cmd == "CIR":
+            s = self.current(lineno, cmd)
+            r = self.nums(lineno, f"S {s.number} CIR", args)[0]
+            if r <= 0:
+                raise self.err(lineno, f"S {s.number} CIR", f"expected a positive clear semi-diameter, got {r}")
+            s.clear_radius = r
+        else:
+            raise self.err(lineno, cmd, f"unsupported CODE V command {tokens[0]!r}")
+
+    # ---- building ----------------------------------------------------------------
+    def curvature(self, value: float) -> float:
+        """Curvature (1/mm) from a number written as a radius (RDM Y) or curvature (RDM N)."""
+        if not self.radius_mode:
+            return value
+        if value == 0.0:
+            return 0.0  # CODE V writes a plane as radius 0
+        return 1.0 / value
+
+    def material(self, lineno: int, what: str, token: str, notes: list[str]) -> Material:
+        name = token.strip("'\"")
+        catalogs: list[str] | None = None
+        if "_" in name:
+            base, suffix = name.rsplit("_", 1)
+            if suffix.upper() in _CATALOG_SUFFIX:
+                name, catalogs = base, [_CATALOG_SUFFIX[suffix.upper()]]
+            elif suffix.upper() != "MOLD":
+                notes.append(f"glass catalogue {suffix} of {token} is not available in lensim; searching every catalogue")
+                name = base
+        try:
+            glass, note = resolve_glass(name, catalogs)
+        except UnknownGlassError as e:
+            raise self.err(lineno, what, e.message) from None
+        if note:
+            notes.append(note)
+        return glass
+
+    def build(self) -> Lens:
+        if self.object is None:
+            raise InputError(self.src, "SO", "missing the object surface (SO curvature thickness)")
+        if not self.surfaces:
+            raise InputError(self.src, "S", "expected at least one lens surface (S)")
+        if self.image is None:
+            raise InputError(self.src, "SI", "missing the image surface (SI)")
+        if self.aperture is None:
+            raise InputError(self.src, "EPD", "missing the system aperture; expected EPD (mm) or FNO")
+        if not self.wavelengths_nm:
+            raise InputError(self.src, "WL", "missing the wavelengths (WL, nm)")
+        if not any(s.is_stop for s in self.surfaces):
+            raise InputError(self.src, "STO", "missing the aperture stop (STO after one of the S lines)")
+        notes = self.notes
+        w = len(self.wavelengths_nm)
+        weights = self.weights if self.weights is not None else [1.0] * w
+        if len(weights) != w:
+            raise InputError(self.src, "WTW", f"expected {w} weights (one per WL), got {len(weights)}")
+        ref = self.ref if self.ref is not None else (w + 1) // 2
+        if not 1 <= ref <= w:
+            raise InputError(self.src, "REF", f"expected a wavelength number 1..{w}, got {ref}")
+        fields = self.fields if self.fields is not None else [0.0]
+        field_type = self.field_type or "angle"
+        vig = [f"{key} {' '.join(f'{v:g}' for v in vals)}" for key, vals in self.vignetting.items()
+               if any(v != 0.0 for v in vals)]
+        if vig:
+            notes.append(f"vignetting factors ({'; '.join(vig)}) are not applied; "
+                         "lensim vignettes rays with the real surface apertures")
+        # object
+        lineno, obj_c, obj_t, obj_glass = self.object
+        object_distance = math.inf if abs(obj_t) >= INFINITE_THICKNESS_MM else obj_t
+        if not (object_distance > 0):
+            raise self.err(lineno, "SO thickness", f"expected a positive object distance, got {obj_t}")
+        if math.isfinite(object_distance) and self.curvature(obj_c) != 0.0:
+            raise self.err(lineno, "SO curvature", "expected a flat object surface")
+        object_material: Material = Air()
+        if obj_glass is not None:
+            object_material = self.material(lineno, "SO glass", obj_glass, notes)
+        # surfaces
+        surfaces: list[Surface] = []
+        medium = object_material
+        for sd in self.surfaces:
+            what = f"S {sd.number}"
+            mirror = sd.glass is not None and sd.glass.upper() == "REFL"
+            if mirror:
+                material = medium
+            elif sd.glass is None:
+                material = Air()
+            else:
+                material = self.material(sd.line, f"{what} glass", sd.glass, notes)
+            medium = material
+            surfaces.append(Surface(
+                curvature=self.curvature(sd.value),
+                thickness=sd.thickness,
+                material=material,
+                conic=sd.conic,
+                asphere=dict(sd.asphere),
+                clear_radius=sd.clear_radius,
+                is_stop=sd.is_stop,
+                is_mirror=mirror,
+            ))
+        img_line, img_c, img_t = self.image
+        if self.curvature(img_c) != 0.0:
+            raise self.err(img_line, "SI curvature", "expected a flat image surface")
+        lens = Lens(
+            surfaces=surfaces,
+            aperture_type=self.aperture[0],
+            aperture_value=self.aperture[1],
+            field_type=field_type,
+            fields=fields,
+            wavelengths_um=[v / 1000.0 for v in self.wavelengths_nm],
+            wavelength_weights=weights,
+            primary=ref - 1,
+            object_distance=object_distance,
+            object_material=object_material,
+            image_defocus=img_t,
+            name=self.title or Path(self.src).stem,
+            source=self.src,
+            notes=notes,
+        )
+        pim = [s for s in self.surfaces if s.pim]
+        if pim:
+            if pim[-1] is not self.surfaces[-1]:
+                raise self.err(pim[-1].line, f"S {pim[-1].number} PIM", "expected PIM on the last surface before SI")
+            _apply_paraxial_image_solve(lens)
+        return lens
+
+
+def _apply_paraxial_image_solve(lens: Lens) -> None:
+    """Set the last thickness so the image plane (before defocus) is at the paraxial focus
+    of the primary wavelength: where the paraxial marginal ray crosses the axis."""
+    from lensim.optics.paraxial import paraxial_data
+
+    para = paraxial_data(lens)
+    z_last = float(lens.vertex_z()[lens.num_surfaces - 1])
+    distance = para.paraxial_image_z_mm - z_last
+    if not math.isfinite(distance):
+        raise InputError(lens.source, "PIM", "the lens has no finite paraxial image (afocal); remove the PIM solve")
+    lens.surfaces[-1].thickness = float(distance)
+
+
+def read_seq(path: str | Path) -> Lens:
+    """Read a CODE V .seq file into a Lens (see the module docstring for the subset)."""
+    path = Path(path)
+    raw = path.read_bytes()
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        text = raw.decode("latin-1")
+    reader = _Reader(path)
+    for lineno, tokens in _split_commands(text):
+        reader.command(lineno, tokens)
+    return reader.build()
