@@ -8,6 +8,7 @@ import typer
 
 from lensim.cli.common import console, err_console, run_guarded
 from lensim.cli.lens_cmd import lens_app
+from lensim.cli.psf_cmd import psf_app
 
 app = typer.Typer(
     name="lensim",
@@ -17,6 +18,7 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
 )
 app.add_typer(lens_app, name="lens")
+app.add_typer(psf_app, name="psf")
 
 
 def main() -> None:

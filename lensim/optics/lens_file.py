@@ -215,19 +215,25 @@ def lens_to_dict(lens: Lens) -> dict:
     return out
 
 
-def atomic_write_text(path: str | Path, text: str) -> None:
-    """Write a text file under a temporary name in the same folder, then rename it."""
+def atomic_write_bytes(path: str | Path, data: bytes) -> None:
+    """Write a file under a temporary name in the same folder, then rename it, so a
+    killed job never leaves a half-written file."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
     try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+
+
+def atomic_write_text(path: str | Path, text: str) -> None:
+    """atomic_write_bytes for UTF-8 text."""
+    atomic_write_bytes(path, text.encode("utf-8"))
 
 
 def save_lens(lens: Lens, path: str | Path) -> None:
