@@ -40,7 +40,12 @@ SURFACE_KEYS = {"radius", "curvature", "thickness", "material", "conic", "aspher
                 "obscuration", "semi_diameter", "stop", "mirror", "comment"}
 
 
-class GlassSubstitutionWarning(UserWarning):
+class LensNoteWarning(UserWarning):
+    """Something about a loaded lens file the user must know (a setting not applied,
+    an assumption made)."""
+
+
+class GlassSubstitutionWarning(LensNoteWarning):
     """A glass was not found exactly as named and a stated substitute was used."""
 
 
@@ -268,8 +273,8 @@ def _read_native(path: Path) -> dict:
 
 def load_lens(path: str | Path, warn: bool = True) -> Lens:
     """Load a lens from a native .json/.yaml file, a Zemax .zmx or a CODE V .seq file,
-    or a built-in lens by name (see lensim.assets). Glass substitutions are reported as
-    GlassSubstitutionWarning (and kept in lens.notes)."""
+    or a built-in lens by name (see lensim.assets). Every note (kept in lens.notes) is
+    also issued as a LensNoteWarning; glass substitutions as GlassSubstitutionWarning."""
     from lensim import assets
 
     p = Path(path)
@@ -296,5 +301,6 @@ def load_lens(path: str | Path, warn: bool = True) -> Lens:
         raise InputError(str(p), None, "unknown lens file type; expected .json, .yaml, .yml, .zmx or .seq")
     if warn:
         for note in lens.notes:
-            warnings.warn(f"{p}: {note}", GlassSubstitutionWarning, stacklevel=2)
+            category = GlassSubstitutionWarning if note.startswith("glass ") else LensNoteWarning
+            warnings.warn(f"{p}: {note}", category, stacklevel=2)
     return lens

@@ -124,9 +124,14 @@ def _normalize(name: str) -> str:
 @functools.lru_cache(maxsize=None)
 def _catalog_names(catalog: str) -> dict[str, str]:
     """Normalized name -> vendor name for one catalogue (loaded lazily, ~0.1-0.8 s each)."""
+    import warnings
+
     from opticalglass import glassfactory
 
-    cat = glassfactory.get_glass_catalog(catalog)
+    with warnings.catch_warnings():
+        # opticalglass's spreadsheet loading emits pandas deprecation noise
+        warnings.simplefilter("ignore")
+        cat = glassfactory.get_glass_catalog(catalog)
     return {_normalize(n): n for n in cat.get_glass_names()}
 
 
