@@ -1,0 +1,1 @@
+"""Spatially-variant rendering of images through a PSF bank."""
