@@ -1,0 +1,122 @@
+"""Reading and writing photos: 8/16-bit PNG, TIFF and JPEG in; PNG and TIFF out.
+
+Images are float32 tensors (3, H, W) in [0, 1] (sRGB-encoded values as stored in the
+file). Grayscale is expanded to three equal channels; an alpha channel is refused unless
+it is fully opaque (then dropped), since transparent pixels have no defined colour.
+Writes are atomic (temporary name, then rename).
+"""
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from lensim.errors import InputError
+from lensim.optics.lens_file import atomic_write_bytes
+
+READ_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg")
+WRITE_SUFFIXES = (".png", ".tif", ".tiff")
+
+
+def read_image(path: str | Path) -> tuple[torch.Tensor, int]:
+    """(image (3, H, W) float32 in [0, 1], bit depth 8 or 16) from a PNG/TIFF/JPEG file."""
+    path = Path(path)
+    src = str(path)
+    if path.suffix.lower() not in READ_SUFFIXES:
+        raise InputError(src, "format", f"expected one of {', '.join(READ_SUFFIXES)}")
+    if not path.is_file():
+        raise InputError(src, None, "no such file")
+    try:
+        if path.suffix.lower() in (".tif", ".tiff"):
+            import tifffile
+
+            arr = tifffile.imread(path)
+        else:
+            from PIL import Image
+
+            if _png_bit_depth(path) == 16:
+                arr = _read_png16(path)
+            else:
+                with Image.open(path) as im:
+                    if im.mode in ("I;16", "I;16B", "I;16L", "I"):
+                        arr = np.array(im).astype(np.uint16)
+                    elif im.mode in ("P", "PA"):
+                        arr = np.array(im.convert("RGBA"))
+                    elif im.mode in ("1", "L", "LA", "RGB", "RGBA"):
+                        arr = np.array(im)
+                    else:
+                        raise InputError(src, "mode", f"unsupported pixel mode {im.mode}; expected grayscale, RGB or RGBA")
+    except InputError:
+        raise
+    except Exception as e:  # a corrupt or truncated file
+        raise InputError(src, None, f"cannot be decoded as an image ({type(e).__name__}: {e})") from None
+    arr = np.asarray(arr)
+    if arr.dtype == np.bool_:
+        arr = arr.astype(np.uint8) * 255
+    if arr.dtype == np.uint8:
+        bits, scale = 8, 255.0
+    elif arr.dtype == np.uint16:
+        bits, scale = 16, 65535.0
+    else:
+        raise InputError(src, "bit depth", f"expected 8- or 16-bit integer samples, got {arr.dtype}")
+    if arr.ndim == 2:
+        arr = np.repeat(arr[..., None], 3, axis=2)
+    if arr.ndim != 3 or arr.shape[2] not in (2, 3, 4):
+        raise InputError(src, "channels", f"expected 1 (gray), 3 (RGB) or 4 (RGBA) channels, got shape {arr.shape}")
+    if arr.shape[2] in (2, 4):
+        alpha = arr[..., -1]
+        if alpha.min() < (255 if bits == 8 else 65535):
+            raise InputError(src, "alpha", "has transparent pixels; expected an opaque image (flatten it first)")
+        arr = arr[..., :-1]
+        if arr.shape[2] == 1:
+            arr = np.repeat(arr, 3, axis=2)
+    if min(arr.shape[:2]) < 16:
+        raise InputError(src, "size", f"image is {arr.shape[1]}x{arr.shape[0]}; expected at least 16x16 pixels")
+    img = torch.from_numpy(np.ascontiguousarray(arr.transpose(2, 0, 1)).astype(np.float32) / scale)
+    return img, bits
+
+
+def _png_bit_depth(path: Path) -> int:
+    """Bit depth from the PNG header (byte 24 of the IHDR chunk)."""
+    with open(path, "rb") as fh:
+        head = fh.read(25)
+    return head[24] if len(head) == 25 and head[:8] == b"\x89PNG\r\n\x1a\n" else 8
+
+
+def _read_png16(path: Path) -> np.ndarray:
+    """A 16-bit PNG as uint16 (H, W, C) via pypng (Pillow truncates 16-bit RGB to 8 bits)."""
+    import png
+
+    w, h, rows, info = png.Reader(filename=str(path)).asDirect()
+    arr = np.vstack([np.asarray(r, dtype=np.uint16) for r in rows]).reshape(h, w, info["planes"])
+    return arr[..., 0] if info["planes"] == 1 else arr
+
+
+def write_image(path: str | Path, image: torch.Tensor, bits: int = 8) -> None:
+    """Write a (3, H, W) float image in [0, 1] as 8- or 16-bit PNG or TIFF, atomically."""
+    path = Path(path)
+    if path.suffix.lower() not in WRITE_SUFFIXES:
+        raise InputError(str(path), "format", f"expected one of {', '.join(WRITE_SUFFIXES)} for output")
+    if bits not in (8, 16):
+        raise InputError(str(path), "bit depth", f"expected 8 or 16, got {bits}")
+    arr = image.detach().cpu().clamp(0, 1).numpy().transpose(1, 2, 0)
+    maxv = 255 if bits == 8 else 65535
+    q = np.round(arr * maxv).astype(np.uint8 if bits == 8 else np.uint16)
+    buf = io.BytesIO()
+    if path.suffix.lower() == ".png":
+        if bits == 8:
+            from PIL import Image
+
+            Image.fromarray(q, "RGB").save(buf, format="PNG")
+        else:
+            import png  # pypng: 16-bit RGB PNG (Pillow cannot write it)
+
+            h, w, _ = q.shape
+            png.Writer(w, h, greyscale=False, bitdepth=16).write(buf, q.reshape(h, w * 3).tolist())
+    else:
+        import tifffile
+
+        tifffile.imwrite(buf, q, photometric="rgb")
+    atomic_write_bytes(path, buf.getvalue())

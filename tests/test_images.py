@@ -1,0 +1,55 @@
+"""Image I/O: bit depths, channels, refusals."""
+import numpy as np
+import pytest
+import torch
+from PIL import Image
+
+from lensim.errors import InputError
+from lensim.images import read_image, write_image
+
+
+@pytest.mark.parametrize("suffix,bits", [(".png", 8), (".png", 16), (".tif", 8), (".tif", 16)])
+def test_round_trip(tmp_path, suffix, bits):
+    torch.manual_seed(0)
+    img = torch.rand(3, 20, 33)
+    p = tmp_path / f"x{suffix}"
+    write_image(p, img, bits)
+    back, b = read_image(p)
+    assert b == bits
+    assert back.shape == (3, 20, 33)
+    assert (back - img).abs().max().item() <= 0.5 / (2**bits - 1) + 1e-6
+
+
+def test_grayscale_is_expanded(tmp_path):
+    p = tmp_path / "g.png"
+    Image.fromarray(np.full((20, 20), 100, np.uint8), "L").save(p)
+    img, bits = read_image(p)
+    assert img.shape == (3, 20, 20) and bits == 8
+    assert torch.allclose(img[0], img[2])
+
+
+def test_opaque_alpha_dropped_transparent_refused(tmp_path):
+    a = np.full((20, 20, 4), 255, np.uint8)
+    Image.fromarray(a, "RGBA").save(tmp_path / "o.png")
+    assert read_image(tmp_path / "o.png")[0].shape == (3, 20, 20)
+    a[0, 0, 3] = 0
+    Image.fromarray(a, "RGBA").save(tmp_path / "t.png")
+    with pytest.raises(InputError, match=r"t\.png: alpha"):
+        read_image(tmp_path / "t.png")
+
+
+def test_bad_files_give_one_line_errors(tmp_path):
+    (tmp_path / "bad.png").write_bytes(b"not a png")
+    with pytest.raises(InputError, match="cannot be decoded") as e:
+        read_image(tmp_path / "bad.png")
+    assert "\n" not in str(e.value)
+    with pytest.raises(InputError, match="expected one of"):
+        read_image(tmp_path / "x.bmp")
+    import tifffile
+
+    tifffile.imwrite(tmp_path / "f.tif", np.zeros((20, 20, 3), np.float32))
+    with pytest.raises(InputError, match="bit depth"):
+        read_image(tmp_path / "f.tif")
+    tifffile.imwrite(tmp_path / "c.tif", np.zeros((20, 20, 5), np.uint8))
+    with pytest.raises(InputError, match="channels"):
+        read_image(tmp_path / "c.tif")
