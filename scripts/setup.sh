@@ -13,4 +13,6 @@ PIP=(.venv/bin/python -m pip install -q --disable-pip-version-check)
 # torch first and pinned: on these machines 2.13.0 is the CPU wheel on local disk.
 "${PIP[@]}" "torch==2.13.0"
 "${PIP[@]}" -e ".[test]"
+# sample photos (Kodak, Waterloo BragZone) ship inside sporco; its own dependencies are not needed
+"${PIP[@]}" --no-deps "sporco==0.2.2.post1"
 .venv/bin/python -c "import lensim, torch; print('lensim ready (torch', torch.__version__ + ')')"
