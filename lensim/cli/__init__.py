@@ -7,6 +7,7 @@ import warnings
 import typer
 
 from lensim.cli.common import console, err_console, run_guarded
+from lensim.cli.assets_cmd import assets_command
 from lensim.cli.lens_cmd import lens_app
 from lensim.cli.psf_cmd import psf_app
 
@@ -19,6 +20,7 @@ app = typer.Typer(
 )
 app.add_typer(lens_app, name="lens")
 app.add_typer(psf_app, name="psf")
+app.command("assets")(assets_command)
 
 
 def main() -> None:

@@ -1,0 +1,34 @@
+"""`lensim assets`: list the built-in lenses, sensors and sample photos."""
+from __future__ import annotations
+
+import typer
+from rich.table import Table
+
+from lensim import assets
+from lensim.assets.images import SAMPLE_IMAGES, available_sample_images
+from lensim.cli.common import console, print_json
+
+
+def assets_command(json_out: bool = typer.Option(False, "--json", help="Print a JSON object.")) -> None:
+    """List built-in lenses, sensor profiles and sample photos (with licences).
+
+    Example: lensim assets --json
+    """
+    lenses = assets.lens_names()
+    sensors = sorted(p.stem for p in (assets.ASSETS_DIR / "sensors").glob("*.yaml"))
+    have = {i.name for i in available_sample_images()}
+    images = [{"name": i.name, "licence": i.licence, "credit": i.credit, "installed": i.name in have} for i in SAMPLE_IMAGES]
+    if json_out:
+        print_json({"lenses": lenses, "default_lens": assets.DEFAULT_LENS, "sensors": sensors, "images": images})
+        return
+    t = Table(title="Built-in assets")
+    t.add_column("kind")
+    t.add_column("name")
+    t.add_column("details")
+    for name in lenses:
+        t.add_row("lens", name, "default" if name == assets.DEFAULT_LENS else "")
+    for name in sensors:
+        t.add_row("sensor", name, "")
+    for img in images:
+        t.add_row("image", img["name"], f"{img['licence']}; {img['credit']}" + ("" if img["installed"] else " (not installed)"))
+    console.print(t)
