@@ -1,0 +1,507 @@
+"""Lens plots: 2-D layout (y-z cross-section with meridional ray fans) and spot diagrams.
+
+Matplotlib figures built without pyplot (an Agg canvas each), so nothing global is
+touched and nothing is shown. Every function returns the Figure; given a path it also
+saves it atomically (temporary name in the same folder, then os.replace), in the format
+the file name's extension names (png, pdf, svg, ...).
+
+Units: lengths in mm on the layout, um on spot diagrams; wavelengths in um in arguments,
+nm on the plots.
+"""
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Circle
+
+from lensim.errors import InputError, RayTraceError
+from lensim.optics.aiming import Aiming, describe_failure, generate_rays, object_field
+from lensim.optics.lens import Lens
+from lensim.optics.materials import Air
+from lensim.optics.paraxial import ParaxialData, paraxial_data
+from lensim.optics.pupil import hexapolar
+from lensim.optics.spot import SpotDiagram, spot_diagram
+from lensim.optics.surfaces import Surface
+from lensim.optics.trace import DTYPE, MISSED, OK, VIGNETTED, Rays, media_indices, trace_surface
+
+FIELD_COLORS = ("tab:blue", "tab:green", "tab:red", "tab:orange", "tab:purple", "tab:brown", "tab:pink",
+                "tab:olive", "tab:cyan", "tab:gray")
+SPOT_RINGS = 8  # hexapolar rings in spot diagrams: 217 rays per field and wavelength
+
+
+# ---- shared helpers -------------------------------------------------------------------
+def lens_title(lens: Lens) -> str:
+    """The lens's name, or its file's stem."""
+    return lens.name or Path(lens.source).stem or "lens"
+
+
+def field_label(lens: Lens, value: float) -> str:
+    """A field value with its unit (deg for angles, mm for heights)."""
+    if lens.field_type == "angle":
+        return f"{value:g}\N{DEGREE SIGN}"
+    return f"{value:g} mm"
+
+
+def save_figure(fig: Figure, path: str | Path, dpi: int = 150) -> None:
+    """Save a figure atomically; the format comes from the file name's extension."""
+    path = Path(path)
+    fmt = path.suffix[1:].lower()
+    supported = fig.canvas.get_supported_filetypes()
+    if fmt not in supported:
+        raise InputError(str(path), "output", f"expected a file name ending in one of "
+                         f"{', '.join('.' + k for k in sorted(supported))}")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fig.savefig(fh, format=fmt, dpi=dpi)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def _new_figure(figsize: tuple[float, float]) -> Figure:
+    fig = Figure(figsize=figsize, layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def wavelength_color(wavelength_um: float) -> tuple[float, float, float]:
+    """An RGB colour for a wavelength: the spectral hue between 380 and 780 nm (darkened
+    a little for a white background), violet below and dark red above."""
+    nm = wavelength_um * 1000.0
+    if nm < 380:
+        return (0.45, 0.0, 0.55)
+    if nm > 780:
+        return (0.45, 0.0, 0.0)
+    if nm < 440:
+        r, g, b = (440 - nm) / 60, 0.0, 1.0
+    elif nm < 490:
+        r, g, b = 0.0, (nm - 440) / 50, 1.0
+    elif nm < 510:
+        r, g, b = 0.0, 1.0, (510 - nm) / 20
+    elif nm < 580:
+        r, g, b = (nm - 510) / 70, 1.0, 0.0
+    elif nm < 645:
+        r, g, b = 1.0, (645 - nm) / 65, 0.0
+    else:
+        r, g, b = 1.0, 0.0, 0.0
+    # fade towards the ends of the visible range, then darken for contrast on white
+    fade = 0.4 + 0.6 * (nm - 380) / 40 if nm < 420 else (0.4 + 0.6 * (780 - nm) / 80 if nm > 700 else 1.0)
+    k = 0.8 * fade
+    return (r * k, g * k * 0.85, b * k)
+
+
+def _wavelength_colors(wavelengths_um: list[float]) -> list:
+    cols = [wavelength_color(w) for w in wavelengths_um]
+    if len(set(cols)) < len(cols):  # outside the visible range several would look alike
+        from matplotlib import colormaps
+
+        cmap = colormaps["viridis"]
+        order = np.argsort(wavelengths_um)
+        cols = [None] * len(wavelengths_um)
+        for rank, i in enumerate(order):
+            cols[i] = cmap(rank / max(1, len(order) - 1) * 0.9)
+    return cols
+
+
+# ---- layout ---------------------------------------------------------------------------
+@dataclass
+class RayPaths:
+    """Meridional ray paths for a layout.
+
+    points: (F, P, S+3, 2) (z, y) in mm: the start point, the intercept with every surface,
+    the image-plane intercept; reached: (F, P, S+3) which of those points the ray reaches
+    (a ray blocked by a clear aperture or reflected internally reaches the surface it is
+    stopped at; a ray that misses a surface ends at the surface before).
+    """
+
+    points: np.ndarray
+    reached: np.ndarray
+
+
+def _launch_start(lens: Lens, rays: Rays, z_start: float | None) -> torch.Tensor:
+    """The points rays are drawn from: the object point for a finite object drawn in full,
+    else where each ray crosses the plane z = z_start."""
+    pos, d = rays.position, rays.direction
+    if z_start is None:
+        return pos
+    t = (z_start - pos[..., 2]) / d[..., 2]
+    return pos + t.unsqueeze(-1) * d
+
+
+def trace_ray_paths(lens: Lens, launch_fields: list[float], pupil_y: np.ndarray, aiming: Aiming,
+                    para: ParaxialData, z_start: float | None) -> tuple[RayPaths, Rays, torch.Tensor, torch.Tensor]:
+    """Trace meridional rays (pupil points (0, py)) at the primary wavelength surface by
+    surface, keeping the point where each failing ray is stopped.
+
+    Returns the paths, the final rays, the per-ray status and the surface each failed at
+    (the image plane is index S).
+    """
+    wl_um = lens.primary_wavelength_um
+    pupil = torch.zeros(len(pupil_y), 2, dtype=DTYPE)
+    pupil[:, 1] = torch.as_tensor(pupil_y, dtype=DTYPE)
+    rays, wl = generate_rays(lens, launch_fields, pupil, [wl_um], aiming, para)
+    n = media_indices(lens, wl)
+    zv = lens.vertex_z()
+    start = _launch_start(lens, rays, z_start)
+    pts = [start[0, ..., 1:3].flip(-1)]
+    reached = [rays.valid[0].clone()]
+    status = torch.zeros(rays.shape, dtype=torch.int8)
+    failed_at = torch.full(rays.shape, -1, dtype=torch.int16)
+    surfaces = list(lens.surfaces) + [Surface(clear_radius=lens.image_clear_radius)]
+    for i, surf in enumerate(surfaces):
+        is_image = i == lens.num_surfaces
+        n1, n2 = (n[-1], n[-1]) if is_image else (n[i], n[i + 1])
+        # where each live ray meets the surface, ignoring apertures and refraction
+        geo, _ = trace_surface(surf, float(zv[i]), rays, n1, n2, allow_backwards=(i == 0), apertures=False,
+                               interact=False)
+        rays_after, st = trace_surface(surf, float(zv[i]), rays, n1, n2, allow_backwards=(i == 0),
+                                       interact=not is_image)
+        newly = (st != OK) & (status == OK)
+        status = torch.where(newly, st.to(status.dtype), status)
+        failed_at = torch.where(newly, torch.as_tensor(i, dtype=failed_at.dtype), failed_at)
+        pts.append(geo.position[0, ..., 1:3].flip(-1))
+        reached.append((rays_after.valid | (newly & (st != MISSED) & geo.valid))[0])
+        rays = rays_after
+    points = torch.stack(pts, dim=2).numpy()
+    return RayPaths(points, torch.stack(reached, dim=2).numpy()), rays, status, failed_at
+
+
+def _profile(surf: Surface, z0: float, sd: float, num: int = 161) -> tuple[np.ndarray, np.ndarray]:
+    """(z, y) of a surface's meridional profile from -sd to +sd (mm)."""
+    y = np.linspace(-sd, sd, num)
+    z = z0 + surf.sag(torch.as_tensor(y * y, dtype=DTYPE)).numpy()
+    return z, y
+
+
+def _domain_limit(surf: Surface) -> float:
+    """Largest radius (mm) where the conic sag is defined."""
+    q = (1.0 + surf.conic) * surf.curvature**2
+    return math.inf if q <= 0 else 1.0 / math.sqrt(q)
+
+
+def _sag_at(surf: Surface, r: float) -> float:
+    return float(surf.sag(torch.tensor([r * r], dtype=DTYPE))[0])
+
+
+def plot_layout(
+    lens: Lens,
+    fields: list[float] | None = None,
+    rays_per_field: int = 7,
+    aiming: Aiming = "real",
+    path: str | Path | None = None,
+) -> Figure:
+    """2-D layout: the y-z cross-section with meridional ray fans.
+
+    Every surface is drawn as its sag profile out to its semi-diameter (semi_diameter if
+    set, else clear_radius, else 5% beyond the highest traced ray); glass elements are
+    closed with flat edges; the stop is marked, mirrors are drawn bold and hatched on the
+    back, the image plane is drawn. Each field (lens units; default the lens's fields)
+    gets a fan of rays_per_field rays across the pupil (primary wavelength) in its own
+    colour; a ray blocked by an aperture (or totally internally reflected) ends on the
+    surface that stops it, a ray that misses a surface ends at the surface before. A plane
+    between air and air bends no ray: a stop there is drawn only as its diaphragm, any
+    other such (dummy) surface dashed grey. Raises RayTraceError if a chief ray does not
+    reach the image, unless a central obscuration blocks it. Lengths in mm.
+    """
+    if rays_per_field < 1:
+        raise InputError(None, "rays_per_field", f"expected at least 1 ray per field, got {rays_per_field}")
+    para = paraxial_data(lens)
+    fields = list(lens.fields) if fields is None else [float(f) for f in fields]
+    if not fields:
+        raise InputError(lens.source, "fields", "expected at least one field to draw")
+    launch = [object_field(lens, f, aiming, para) for f in fields]
+    zv = lens.vertex_z()
+    S = lens.num_surfaces
+    pupil_y = np.linspace(-1.0, 1.0, rays_per_field) if rays_per_field > 1 else np.zeros(1)
+    pupil_y = np.concatenate([[0.0], pupil_y])  # index 0: the chief ray, checked, not drawn
+
+    # First pass (rays from their launch points) to size the surfaces and the plot.
+    paths, _, status, failed_at = trace_ray_paths(lens, launch, pupil_y, aiming, para, None)
+    chief_ok = torch.as_tensor(paths.reached[:, 0, -1]).clone()  # the chief ray reaches the image
+    for fi in torch.nonzero(~chief_ok).flatten().tolist():
+        # a chief ray blocked by a central obscuration (a Cassegrain's secondary) is fine
+        k = int(failed_at[0, fi, 0])
+        obsc = lens.surfaces[k].obscuration_radius if k < S else None
+        if int(status[0, fi, 0]) == VIGNETTED and obsc and abs(paths.points[fi, 0, k + 1, 1]) <= obsc:
+            chief_ok[fi] = True
+    if not bool(chief_ok.all()):
+        fi = int(torch.nonzero(~chief_ok)[0, 0])
+        st, surf = int(status[0, fi, 0]), int(failed_at[0, fi, 0])
+        raise RayTraceError(describe_failure(lens, fields[fi], None if st == OK else (st, surf), "chief ray"))
+    if not bool(paths.reached[:, :, 0].any()):
+        raise RayTraceError(f"{lens.source}: aperture: no ray could be aimed through the stop")
+
+    heights = np.zeros(S + 1)
+    for i in range(S + 1):
+        ok = paths.reached[:, :, i + 1]
+        if ok.any():
+            heights[i] = np.abs(paths.points[:, :, i + 1, 1][ok]).max()
+    stop_r = para.stop_semi_diameter_mm  # the opening the aperture setting gives the stop
+    stop_clear = lens.surfaces[lens.stop_index].clear_radius
+    if stop_clear is not None:
+        stop_r = min(stop_r, stop_clear)
+    sds = []
+    for i, s in enumerate(lens.surfaces):
+        sd = s.semi_diameter or s.clear_radius
+        if sd is None:
+            sd = 1.05 * max(heights[i], stop_r if s.is_stop else 0.0)
+            sd = sd if sd > 0 else 0.05 * max(1.0, float(np.max(heights)))
+        sds.append(min(sd, _domain_limit(s) * (1 - 1e-9)))
+    image_h = lens.image_clear_radius or 1.05 * heights[S]
+    ymax = max(max(sds), image_h, 1e-3)
+
+    # where rays are drawn from
+    z_surf = [float(zv[i]) + _sag_at(s, sds[i]) for i, s in enumerate(lens.surfaces)] + list(zv)
+    z_lo, z_hi = min(z_surf), max(z_surf)
+    extent = max(z_hi - z_lo, 2 * ymax)
+    z_start: float | None = z_lo - 0.15 * extent
+    if not lens.infinite_object and lens.object_distance <= 1.5 * extent:
+        z_start = None  # draw the rays from the object point
+    paths, _, _, _ = trace_ray_paths(lens, launch, pupil_y, aiming, para, z_start)
+
+    z_all = [z_lo, z_hi, float(np.nanmin(paths.points[..., 0][paths.reached])),
+             float(np.nanmax(paths.points[..., 0][paths.reached]))]
+    width = max(z_all) - min(z_all)
+    height = 2 * ymax
+    fig_w = 11.0
+    fig_h = float(np.clip(fig_w * height / max(width, 1e-9) + 1.6, 3.2, 9.0))
+    fig = _new_figure((fig_w, fig_h))
+    ax = fig.add_subplot(1, 1, 1)
+
+    # rays
+    handles = []
+    for fi, f in enumerate(fields):
+        color = FIELD_COLORS[fi % len(FIELD_COLORS)]
+        for p in range(1, len(pupil_y)):
+            r = paths.reached[fi, p]
+            if not r[0]:
+                continue
+            upto = np.argmin(r) if not r.all() else r.size  # first point not reached
+            seg = paths.points[fi, p, :upto]
+            ax.plot(seg[:, 0], seg[:, 1], color=color, lw=0.8, alpha=0.9, zorder=2)
+        handles.append(Line2D([], [], color=color, lw=1.5, label=field_label(lens, f)))
+
+    # surfaces
+    media = lens.media()
+    dirs = lens.directions()
+    for i, s in enumerate(lens.surfaces):
+        z, y = _profile(s, float(zv[i]), sds[i])
+        if s.is_mirror:
+            ax.plot(z, y, color="black", lw=2.2, zorder=4, solid_capstyle="butt")
+            # hatch the back: the side light would reach if it went on
+            back = float(dirs[i])
+            k = np.linspace(0, len(z) - 1, 15).astype(int)
+            hl = 0.045 * ymax
+            for j in k:
+                ax.plot([z[j], z[j] + back * hl], [y[j], y[j] + hl], color="black", lw=0.8, zorder=4)
+        elif isinstance(media[i], Air) and isinstance(media[i + 1], Air) and s.curvature == 0 and not s.is_aspheric:
+            # a plane between air and air bends no ray: a stop or a dummy surface
+            if not s.is_stop:
+                ax.plot(z, y, color="0.6", lw=0.7, ls=(0, (3, 3)), zorder=3)
+        else:
+            ax.plot(z, y, color="black", lw=1.2, zorder=3)
+
+    # glass elements: runs of surfaces with glass between them, closed at a common edge
+    i = 0
+    while i < S:
+        if isinstance(media[i + 1], Air) or i + 1 >= S:
+            i += 1
+            continue
+        j = i + 1
+        while j < S - 1 and not isinstance(media[j + 1], Air):
+            j += 1
+        group = list(range(i, j + 1))
+        edge = max(sds[k] for k in group)
+        ends = []
+        for k in group:
+            zk = float(zv[k]) + _sag_at(lens.surfaces[k], sds[k])
+            if sds[k] < edge:
+                for sgn in (1, -1):
+                    ax.plot([zk, zk], [sgn * sds[k], sgn * edge], color="black", lw=1.2, zorder=3)
+            ends.append(zk)
+        for a, b in zip(ends[:-1], ends[1:]):
+            for sgn in (1, -1):
+                ax.plot([a, b], [sgn * edge, sgn * edge], color="black", lw=1.2, zorder=3)
+        i = j + 1
+
+    # stop
+    s = lens.surfaces[lens.stop_index]
+    zs = float(zv[lens.stop_index]) + _sag_at(s, min(stop_r, _domain_limit(s) * (1 - 1e-9)))
+    outer = stop_r + max(0.25 * stop_r, 0.08 * ymax)
+    for sgn in (1, -1):
+        ax.plot([zs, zs], [sgn * stop_r, sgn * outer], color="black", lw=3.0, zorder=5, solid_capstyle="butt")
+    ax.annotate("STOP", (zs, outer), xytext=(0, 3), textcoords="offset points", ha="center", va="bottom",
+                fontsize=8)
+
+    # image plane
+    ax.plot([zv[-1], zv[-1]], [-image_h, image_h], color="black", lw=1.6, zorder=3)
+    ax.annotate("IMAGE", (zv[-1], image_h), xytext=(0, 3), textcoords="offset points", ha="center",
+                va="bottom", fontsize=8)
+
+    ax.axhline(0.0, color="0.6", lw=0.6, ls=(0, (8, 3, 2, 3)), zorder=1)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("z (mm)")
+    ax.set_ylabel("y (mm)")
+    unit = "field angle" if lens.field_type == "angle" else lens.field_type.replace("_", " ")
+    ax.legend(handles=handles, title=unit, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8,
+              title_fontsize=8, frameon=False)
+    efl = para.efl_mm
+    efl_text = "afocal" if not math.isfinite(efl) else f"EFL {efl:.4g} mm"
+    ax.set_title(f"{lens_title(lens)}\n{efl_text}, F/{para.fno:.3g}, {aiming} ray aiming, "
+                 f"{lens.primary_wavelength_um * 1000:.1f} nm", fontsize=10)
+    ax.grid(True, color="0.92", lw=0.5, zorder=0)
+    if path is not None:
+        save_figure(fig, path)
+    return fig
+
+
+# ---- spot diagrams --------------------------------------------------------------------
+def airy_radius_um(lens: Lens, para: ParaxialData | None = None) -> float:
+    """Airy-disk radius 1.22 lambda N (um) at the primary wavelength, N the working F/#."""
+    para = para or paraxial_data(lens)
+    return 1.22 * lens.primary_wavelength_um * para.working_fno
+
+
+def spot_summary(lens: Lens, spots: SpotDiagram, reference: str = "chief") -> list[dict]:
+    """Per field: polychromatic RMS radius (um) and, per wavelength, the RMS radius (um),
+    the chief-ray position on the image plane (mm) and how many rays reach the image.
+
+    reference: 'chief' (the primary-wavelength chief ray for the polychromatic radius,
+    each wavelength's own chief ray per wavelength) or 'centroid'.
+    """
+    if reference not in ("chief", "centroid"):
+        raise InputError(None, "reference", f"expected 'chief' or 'centroid', got {reference!r}")
+    poly = spots.rms_radius(reference, polychromatic=True) * 1000.0
+    mono = spots.rms_radius(reference, polychromatic=False) * 1000.0
+    out = []
+    for fi, f in enumerate(spots.fields):
+        per_wl = []
+        for wi, w in enumerate(spots.wavelengths_um):
+            n_valid = int(spots.valid[wi, fi].sum())
+            per_wl.append({
+                "wavelength_nm": round(w * 1000.0, 6),
+                "rms_radius_um": float(mono[wi, fi]) if n_valid else None,
+                "chief_x_mm": float(spots.chief[wi, fi, 0]),
+                "chief_y_mm": float(spots.chief[wi, fi, 1]),
+                "rays": int(spots.valid.shape[-1]),
+                "rays_reaching_image": n_valid,
+            })
+        out.append({
+            "field": float(f),
+            "field_unit": "deg" if lens.field_type == "angle" else "mm",
+            "rms_radius_um": float(poly[fi]) if bool(spots.valid[:, fi].any()) else None,
+            "wavelengths": per_wl,
+        })
+    return out
+
+
+def plot_spots(
+    lens: Lens,
+    fields: list[float] | None = None,
+    aiming: Aiming = "paraxial",
+    path: str | Path | None = None,
+    reference: str = "chief",
+    rings: int = SPOT_RINGS,
+    spots: SpotDiagram | None = None,
+) -> Figure:
+    """Spot diagrams: one panel per field (lens units; default the lens's fields), every
+    wavelength in its own colour (legend in nm), axes in um centred on the
+    primary-wavelength chief ray (reference='chief') or on the polychromatic centroid
+    (reference='centroid'), one common scale for all panels. Each panel shows the
+    Airy-disk radius 1.22 lambda N at the primary wavelength (dashed circle) and the
+    polychromatic RMS spot radius about the same reference. Hexapolar pupil sampling with
+    `rings` rings, unless `spots` (a spot diagram already traced for this lens with this
+    aiming) is given: then it is drawn as it is and `fields` and `rings` are not used.
+    """
+    if reference not in ("chief", "centroid"):
+        raise InputError(None, "reference", f"expected 'chief' or 'centroid', got {reference!r}")
+    para = paraxial_data(lens)
+    if spots is None:
+        spots = spot_diagram(lens, fields, None, hexapolar(rings), aiming, para)
+    summary = spot_summary(lens, spots, reference)
+    xy = spots.xy.numpy() * 1000.0  # um
+    valid = spots.valid.numpy()
+    w = np.asarray(spots.weights, dtype=np.float64)[:, None, None] * valid
+    if reference == "chief":
+        centre = spots.chief[spots.primary].numpy() * 1000.0  # (F, 2)
+        centre_text = "centred on the primary-wavelength chief ray"
+    else:
+        centre = (xy * w[..., None]).sum((0, 2)) / np.maximum(w.sum((0, 2)), 1e-300)[:, None]
+        centre_text = "centred on the polychromatic centroid"
+    rel = xy - centre[None, :, None, :]
+    airy = airy_radius_um(lens, para)
+    reach = [np.abs(rel[:, fi][valid[:, fi]]).max() if valid[:, fi].any() else 0.0 for fi in range(len(spots.fields))]
+    half = 1.12 * max(max(reach), airy)
+    half = float(_nice_ceiling(half))
+
+    F = len(spots.fields)
+    ncols = min(F, 3)
+    nrows = math.ceil(F / ncols)
+    fig = _new_figure((3.6 * ncols + 0.4, 3.6 * nrows + 1.1))
+    colors = _wavelength_colors(spots.wavelengths_um)
+    axes = fig.subplots(nrows, ncols, squeeze=False)
+    for fi in range(F):
+        ax = axes[fi // ncols][fi % ncols]
+        for wi in range(len(spots.wavelengths_um)):
+            m = valid[wi, fi]
+            ax.scatter(rel[wi, fi, m, 0], rel[wi, fi, m, 1], s=3, color=colors[wi], linewidths=0, zorder=3)
+        ax.add_patch(Circle((0.0, 0.0), airy, fill=False, ls="--", lw=0.9, color="black", zorder=4))
+        ax.set_xlim(-half, half)
+        ax.set_ylim(-half, half)
+        ax.set_aspect("equal")
+        ax.axhline(0, color="0.85", lw=0.5, zorder=1)
+        ax.axvline(0, color="0.85", lw=0.5, zorder=1)
+        ax.set_xlabel("x (um)")
+        ax.set_ylabel("y (um)")
+        chief_y = summary[fi]["wavelengths"][spots.primary]["chief_y_mm"]
+        ax.set_title(f"field {field_label(lens, spots.fields[fi])}   (chief y = {chief_y:.4g} mm)", fontsize=9)
+        rms = summary[fi]["rms_radius_um"]
+        lines = [f"RMS radius {_fmt_um(rms)} um" if rms is not None else "no ray reaches the image"]
+        total = valid.shape[-1] * valid.shape[0]
+        got = int(valid[:, fi].sum())
+        if got < total:
+            lines.append(f"vignetted {100.0 * (total - got) / total:.0f}%")
+        ax.text(0.03, 0.97, "\n".join(lines), transform=ax.transAxes, ha="left", va="top", fontsize=8,
+                bbox={"boxstyle": "round,pad=0.25", "fc": "white", "ec": "0.8", "alpha": 0.9}, zorder=5)
+    for k in range(F, nrows * ncols):
+        axes[k // ncols][k % ncols].set_visible(False)
+    handles = [Line2D([], [], ls="", marker="o", ms=5, color=colors[wi],
+                      label=f"{w_ * 1000:.1f} nm" + (" (primary)" if wi == spots.primary else ""))
+               for wi, w_ in enumerate(spots.wavelengths_um)]
+    handles.append(Line2D([], [], ls="--", color="black", lw=0.9,
+                          label=f"Airy radius {airy:.3g} um (1.22 \N{GREEK SMALL LETTER LAMDA} N)"))
+    fig.legend(handles=handles, loc="outside lower center", ncol=min(len(handles), 4), fontsize=8, frameon=False)
+    fig.suptitle(f"{lens_title(lens)}: spot diagrams, {centre_text}\n"
+                 f"{aiming} ray aiming, F/{para.working_fno:.3g}, scale \u00b1{half:g} um", fontsize=10)
+    if path is not None:
+        save_figure(fig, path)
+    return fig
+
+
+def _nice_ceiling(x: float) -> float:
+    """The smallest of 1, 1.5, 2, 2.5, 3, 4, 5, 6, 8 x 10^k that is >= x."""
+    if x <= 0 or not math.isfinite(x):
+        return 1.0
+    e = 10.0 ** math.floor(math.log10(x))
+    for m in (1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0):
+        if m * e >= x * (1 - 1e-12):
+            return m * e
+    return 10.0 * e
+
+
+def _fmt_um(x: float) -> str:
+    """Three significant digits, without an exponent for large values."""
+    return f"{x:.3g}" if abs(x) < 1000 else f"{x:.0f}"
