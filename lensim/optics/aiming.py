@@ -168,7 +168,10 @@ def _aim(lens, fld, guess, target, wl, n, para):
         limit = 0.5 * scale
         norm = torch.linalg.norm(step, dim=-1, keepdim=True)
         step = torch.where(norm > limit, step * limit / norm, step)
-        x = torch.where((ok & ~converged).unsqueeze(-1), x - step, x)
+        active = ok & ~converged
+        if not bool(active.any()):
+            break  # the rest cannot move: a ray that fails at its guess or its probes keeps it
+        x = torch.where(active.unsqueeze(-1), x - step, x)
     return x, converged
 
 
@@ -237,8 +240,9 @@ def describe_failure(lens: Lens, field_value: float, fail, what: str) -> str:
     """One line: which ray failed, where and how."""
     unit = "deg" if (lens.infinite_object or lens.field_type == "angle") else "mm"
     if fail is None:
-        return f"{lens.source}: fields: the {what} at field {field_value:g} {unit} could not be aimed through the stop"
+        return (f"{lens.source}: fields: the {what} at field {field_value:g} {unit} could not be aimed through the stop; "
+                f"expected a field inside the lens's coverage")
     status, surf = fail
-    where = "the image plane" if surf >= lens.num_surfaces else f"surface {surf}"
+    where = "the image plane" if surf >= lens.num_surfaces else f"surfaces[{surf}] (surface {surf + 1} in lens info)"
     return (f"{lens.source}: fields: the {what} at field {field_value:g} {unit} {STATUS_TEXT[status]} at {where}; "
             f"expected a field inside the lens's coverage")

@@ -79,8 +79,9 @@ class Lens:
             raise self._err("fields.values", "field angles must be below 90 degrees")
         if not self.wavelengths_um:
             raise self._err("wavelengths", "expected at least one wavelength")
-        if any(not (0.2 <= w <= 15.0) for w in self.wavelengths_um):
-            raise self._err("wavelengths", f"expected wavelengths between 200 nm and 15000 nm, got {[w * 1000 for w in self.wavelengths_um]} nm")
+        for i, w in enumerate(self.wavelengths_um):
+            if not (0.2 <= w <= 15.0):
+                raise self._err(f"wavelengths.nm[{i}]", f"expected a wavelength between 200 and 15000 nm, got {w * 1000:g} nm")
         if len(self.wavelength_weights) != len(self.wavelengths_um) or any(w < 0 for w in self.wavelength_weights):
             raise self._err("wavelengths.weights", "expected one non-negative weight per wavelength")
         if not (0 <= self.primary < len(self.wavelengths_um)):
@@ -89,7 +90,8 @@ class Lens:
             raise self._err("object.distance", f"expected a positive distance (mm) or infinity, got {self.object_distance}")
         stops = [i for i, s in enumerate(self.surfaces) if s.is_stop]
         if len(stops) != 1:
-            raise self._err("surfaces", f"expected exactly one stop surface, found {len(stops)}")
+            found = f"{len(stops)} (surfaces {', '.join(f'[{i}]' for i in stops)})" if stops else "0"
+            raise self._err("surfaces", f"expected exactly one stop surface, found {found}")
         direction = 1.0
         for i, s in enumerate(self.surfaces):
             if s.is_mirror:

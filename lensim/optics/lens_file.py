@@ -30,7 +30,7 @@ import warnings
 from pathlib import Path
 from typing import Any
 
-from lensim.errors import InputError, LensimError
+from lensim.errors import InputError
 from lensim.optics.lens import Lens
 from lensim.optics.materials import Air, CatalogGlass, ConstantIndex, Material, ModelGlass, material_from_spec
 from lensim.optics.surfaces import Surface
@@ -257,18 +257,23 @@ def save_lens(lens: Lens, path: str | Path) -> None:
 
 
 def _read_native(path: Path) -> dict:
+    """Parse a native JSON/YAML file; syntax errors name the line and what was expected."""
+    import yaml
+
     text = path.read_text(encoding="utf-8")
     try:
         if path.suffix.lower() == ".json":
             return json.loads(text)
-        import yaml
-
         return yaml.safe_load(text)
-    except (json.JSONDecodeError, Exception) as e:  # yaml.YAMLError and friends
-        if isinstance(e, LensimError):
-            raise
-        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
-        raise InputError(str(path), "syntax", f"not valid {path.suffix[1:].upper()}: {msg}") from None
+    except json.JSONDecodeError as e:
+        raise InputError(str(path), f"line {e.lineno} column {e.colno}", f"not valid JSON: {e.msg}") from None
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        where = f"line {mark.line + 1} column {mark.column + 1}" if mark is not None else "syntax"
+        problem = getattr(e, "problem", None) or str(e).splitlines()[0]
+        context = getattr(e, "context", None)
+        msg = f"not valid YAML: {problem}" + (f" ({context})" if context else "")
+        raise InputError(str(path), where, msg) from None
 
 
 def load_lens(path: str | Path, warn: bool = True) -> Lens:

@@ -1,0 +1,4 @@
+"""`python -m lensim.cli` runs the command line."""
+from lensim.cli import main
+
+main()
