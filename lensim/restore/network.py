@@ -1,0 +1,331 @@
+"""The field-aware restoration UNet (the paper's "Aberrations Image Recovery" section).
+
+Architecture (scales s = 0 .. depth-1 with widths[s] channels, s = 0 at full resolution):
+
+* input: aberrated RGB (B, 3, H, W) plus, when ``use_fov``, the 2 FOV channels of
+  :func:`lensim.restore.fov.fov_channels` (each pixel's absolute sensor position divided by
+  the sensor half-diagonal), concatenated to 5 channels;
+* encoder: a 3x3 head conv and one residual block (conv3x3-ReLU-conv3x3 + skip) at scale 0;
+  at each further scale a stride-2 3x3 conv (+ReLU) and one residual block;
+* bottleneck (smallest scale), when ``use_context``: a context block: four parallel 3x3
+  convs with dilations 1, 2, 4, 8 (widths[-1] -> widths[-1] // 4 each, ReLU), concatenated,
+  fused by a 1x1 conv, added to its input. Without it the bottleneck is the identity;
+* decoder, scales depth-2 .. 0: 2x2 stride-2 transposed conv up, concatenation with the
+  encoder skip, 1x1 fusion conv, then one *deformable residual block* when
+  ``use_deformable`` (else a plain residual block): a 3x3 conv over [features, 2x upsampled
+  offsets of the coarser decoder scale (in that scale's pixels, so multiplied by 2)] predicts
+  offsets (2*G*9 channels, pixels) and mask logits (G*9, sigmoid) for a modulated deformable
+  3x3 conv (DCNv2) followed by ReLU and a 3x3 conv, added to the block's input. The coarsest
+  decoder scale has no coarser offsets and predicts them from its features alone. The
+  offset/mask conv is zero-initialised (offsets 0, masks 0.5 at init, as in DCNv2);
+* tail: a 3x3 conv to 3 channels, **zero-initialised** (``zero_init_tail=True``), whose
+  output is added to the input RGB: restored = rgb + residual, so the untrained network is
+  exactly the identity.
+
+Inputs of any size are padded on the bottom/right to a multiple of 2**(depth-1) (RGB by
+edge replication, FOV channels by linear continuation, which is exact for the affine FOV
+map) and the output is cropped back. Runs in the dtype of its parameters (float32 by
+default).
+
+Tiling: the strided convs make the network shift-equivariant only for shifts that are
+multiples of ``size_multiple`` (a tile starting one pixel off the grid differed from the
+whole-image result by about 1e-2 in a test), so tiles must start at multiples of it. The
+receptive field radius with zero offsets is about 58 px for the default configuration and
+about 118 px for the paper's 4-scale one (measured by back-propagating from one output
+pixel), plus whatever the learned offsets add; tile margins must exceed it.
+
+With ``use_fov=use_deformable=use_context=False`` this is a plain UNet;
+:func:`plain_unet_matching` picks the width giving the same parameter count (within 10%)
+as a given field-aware configuration, for the paper's ablation/baseline.
+"""
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import torch
+import torch.nn as nn
+import torch.nn.functional as F
+
+from lensim.restore.deform import ModulatedDeformConv2d
+
+KERNEL_TAPS = 9  # 3x3 deformable kernels
+
+
+def count_parameters(model: nn.Module) -> int:
+    """Number of trainable scalars in ``model``."""
+    return sum(p.numel() for p in model.parameters() if p.requires_grad)
+
+
+def _conv3(cin: int, cout: int, stride: int = 1, dilation: int = 1) -> nn.Conv2d:
+    return nn.Conv2d(cin, cout, 3, stride=stride, padding=dilation, dilation=dilation)
+
+
+class ResBlock(nn.Module):
+    """x + conv3x3(ReLU(conv3x3(x))); (B, C, H, W) -> (B, C, H, W)."""
+
+    def __init__(self, ch: int) -> None:
+        super().__init__()
+        self.conv1 = _conv3(ch, ch)
+        self.conv2 = _conv3(ch, ch)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return x + self.conv2(F.relu(self.conv1(x)))
+
+
+class ContextBlock(nn.Module):
+    """Parallel dilated 3x3 convs (dilations 1, 2, 4, 8; ch -> ch // 4 each, ReLU),
+    concatenated, fused by a 1x1 conv, residual. (B, ch, H, W) -> (B, ch, H, W)."""
+
+    DILATIONS: tuple[int, ...] = (1, 2, 4, 8)
+
+    def __init__(self, ch: int) -> None:
+        super().__init__()
+        branch = max(1, ch // len(self.DILATIONS))
+        self.branches = nn.ModuleList(_conv3(ch, branch, dilation=d) for d in self.DILATIONS)
+        self.fuse = nn.Conv2d(branch * len(self.DILATIONS), ch, 1)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        y = torch.cat([F.relu(b(x)) for b in self.branches], dim=1)
+        return x + self.fuse(y)
+
+
+class DeformResBlock(nn.Module):
+    """Residual block whose first conv is a modulated deformable 3x3 conv.
+
+    forward(x (B, ch, H, W), coarse_offset (B, 2*G*9, H/2, W/2) or None) ->
+    (x + conv3x3(ReLU(DCN(x))) (B, ch, H, W), offset (B, 2*G*9, H, W) in pixels of this
+    scale). Offsets and mask logits come from one 3x3 conv over the features concatenated
+    with the coarser offsets upsampled 2x (bilinear) and doubled (pixel units halve).
+    """
+
+    def __init__(self, ch: int, deformable_groups: int, coarse_offsets: bool, backend: str = "auto") -> None:
+        super().__init__()
+        self.groups = deformable_groups
+        self.coarse_offsets = coarse_offsets
+        n_off = 2 * deformable_groups * KERNEL_TAPS
+        n_mask = deformable_groups * KERNEL_TAPS
+        self.offset_conv = _conv3(ch + (n_off if coarse_offsets else 0), n_off + n_mask)
+        nn.init.zeros_(self.offset_conv.weight)
+        nn.init.zeros_(self.offset_conv.bias)
+        self.dcn = ModulatedDeformConv2d(ch, ch, 3, deformable_groups, backend=backend)
+        self.conv2 = _conv3(ch, ch)
+
+    def forward(self, x: torch.Tensor, coarse_offset: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor]:
+        if self.coarse_offsets:
+            if coarse_offset is None:
+                raise ValueError("this block expects the offsets of the coarser scale")
+            up = 2.0 * F.interpolate(coarse_offset, size=x.shape[-2:], mode="bilinear", align_corners=False)
+            inp = torch.cat((x, up), dim=1)
+        else:
+            inp = x
+        om = self.offset_conv(inp)
+        n_off = 2 * self.groups * KERNEL_TAPS
+        offset = om[:, :n_off]
+        mask = torch.sigmoid(om[:, n_off:])
+        y = self.conv2(F.relu(self.dcn(x, offset, mask)))
+        return x + y, offset
+
+
+def _pad_bottom_right(x: torch.Tensor, ph: int, pw: int, linear: bool) -> torch.Tensor:
+    """Pad (B, C, H, W) by ph rows / pw columns at the bottom / right: edge replication, or
+    linear continuation from the last two rows/columns when ``linear`` (replication where
+    the size is 1)."""
+    if ph:
+        if linear and x.shape[-2] >= 2:
+            step = x[..., -1:, :] - x[..., -2:-1, :]
+            k = torch.arange(1, ph + 1, dtype=x.dtype, device=x.device).view(ph, 1)
+            x = torch.cat((x, x[..., -1:, :] + k * step), dim=-2)
+        else:
+            x = torch.cat((x, x[..., -1:, :].expand(*x.shape[:-2], ph, x.shape[-1])), dim=-2)
+    if pw:
+        if linear and x.shape[-1] >= 2:
+            step = x[..., :, -1:] - x[..., :, -2:-1]
+            k = torch.arange(1, pw + 1, dtype=x.dtype, device=x.device).view(1, pw)
+            x = torch.cat((x, x[..., :, -1:] + k * step), dim=-1)
+        else:
+            x = torch.cat((x, x[..., :, -1:].expand(*x.shape[:-1], pw)), dim=-1)
+    return x
+
+
+class FieldAwareUNet(nn.Module):
+    """Field-aware restoration UNet; see the module docstring for the architecture.
+
+    Args:
+        width: channels at full resolution; scale s has width * 2**s (ignored if ``widths``).
+        depth: number of scales (>= 2); depth - 1 stride-2 downsamplings.
+        use_fov: take the 2 FOV channels as extra input.
+        use_deformable: deformable residual blocks in the decoder (plain ones otherwise).
+        use_context: context block at the smallest scale (identity otherwise).
+        deformable_groups: G, offset/mask groups of each DCN; must divide the decoder widths.
+            The offset/mask conv has 27G outputs at every decoder scale (full resolution
+            included), so G drives the cost: on 2 CPU cores a training step of the default
+            net took about 1.4x as long with G=4 as with G=2 (G=1 and G=2 cost about the
+            same). Default 2; the paper used 8.
+        widths: explicit per-scale channel counts (overrides width/depth), e.g. the paper's
+            (32, 64, 128, 256) with deformable_groups=8.
+        zero_init_tail: zero the last conv so the untrained network is the identity.
+        dcn_backend: "auto", "grid_sample" or "torchvision" (see lensim.restore.deform).
+
+    forward(rgb (B, 3, H, W), fov (B, 2, H, W) or (2, H, W), required iff use_fov) ->
+    restored (B, 3, H, W), same dtype as rgb. Values are whatever range the caller trains
+    with (the network adds a residual; nothing is clamped).
+    """
+
+    def __init__(
+        self,
+        width: int = 32,
+        depth: int = 3,
+        use_fov: bool = True,
+        use_deformable: bool = True,
+        use_context: bool = True,
+        deformable_groups: int = 2,
+        widths: Sequence[int] | None = None,
+        zero_init_tail: bool = True,
+        dcn_backend: str = "auto",
+    ) -> None:
+        super().__init__()
+        ws = tuple(int(w) for w in widths) if widths is not None else tuple(width * 2**s for s in range(depth))
+        if len(ws) < 2:
+            raise ValueError(f"need at least 2 scales, got widths {ws}")
+        if any(w < 1 for w in ws):
+            raise ValueError(f"widths must be positive, got {ws}")
+        if use_deformable:
+            bad = [w for w in ws[:-1] if w % deformable_groups]
+            if deformable_groups < 1 or bad:
+                raise ValueError(f"deformable_groups={deformable_groups} must divide decoder widths {ws[:-1]}")
+        self.widths = ws
+        self.depth = len(ws)
+        self.use_fov = use_fov
+        self.use_deformable = use_deformable
+        self.use_context = use_context
+        self.deformable_groups = deformable_groups
+        self.zero_init_tail = zero_init_tail
+        self.dcn_backend = dcn_backend
+
+        self.head = _conv3(5 if use_fov else 3, ws[0])
+        self.enc0 = ResBlock(ws[0])
+        self.down = nn.ModuleList(
+            nn.Sequential(_conv3(ws[s - 1], ws[s], stride=2), nn.ReLU(), ResBlock(ws[s])) for s in range(1, len(ws))
+        )
+        self.context: nn.Module = ContextBlock(ws[-1]) if use_context else nn.Identity()
+        # Decoder modules are listed coarse to fine: index i works at scale depth-2-i.
+        dec_scales = list(range(len(ws) - 2, -1, -1))
+        self.up = nn.ModuleList(nn.ConvTranspose2d(ws[s + 1], ws[s], 2, stride=2) for s in dec_scales)
+        self.fuse = nn.ModuleList(nn.Conv2d(2 * ws[s], ws[s], 1) for s in dec_scales)
+        if use_deformable:
+            self.dec = nn.ModuleList(
+                DeformResBlock(ws[s], deformable_groups, coarse_offsets=i > 0, backend=dcn_backend)
+                for i, s in enumerate(dec_scales)
+            )
+        else:
+            self.dec = nn.ModuleList(ResBlock(ws[s]) for s in dec_scales)
+        self.tail = _conv3(ws[0], 3)
+        if zero_init_tail:
+            nn.init.zeros_(self.tail.weight)
+            nn.init.zeros_(self.tail.bias)
+
+    @property
+    def size_multiple(self) -> int:
+        """Inputs are padded internally to a multiple of this (2**(depth-1))."""
+        return 2 ** (self.depth - 1)
+
+    @property
+    def config(self) -> dict[str, Any]:
+        """Constructor arguments that rebuild this architecture (for checkpoints)."""
+        return {
+            "widths": list(self.widths),
+            "use_fov": self.use_fov,
+            "use_deformable": self.use_deformable,
+            "use_context": self.use_context,
+            "deformable_groups": self.deformable_groups,
+            "zero_init_tail": self.zero_init_tail,
+            "dcn_backend": self.dcn_backend,
+        }
+
+    def forward(self, rgb: torch.Tensor, fov: torch.Tensor | None = None) -> torch.Tensor:
+        """(B, 3, H, W) [+ FOV (B, 2, H, W) or (2, H, W)] -> (B, 3, H, W)."""
+        if rgb.dim() != 4 or rgb.shape[1] != 3:
+            raise ValueError(f"rgb must be (B, 3, H, W), got {tuple(rgb.shape)}")
+        b, _, h, w = rgb.shape
+        m = self.size_multiple
+        ph, pw = (-h) % m, (-w) % m
+        x = _pad_bottom_right(rgb, ph, pw, linear=False)
+        if self.use_fov:
+            if fov is None:
+                raise ValueError("this model was built with use_fov=True: pass the FOV channels (fov_channels)")
+            if fov.dim() == 3:
+                fov = fov.unsqueeze(0).expand(b, -1, -1, -1)
+            if fov.dim() != 4 or fov.shape[0] != b or fov.shape[1] != 2 or fov.shape[-2:] != rgb.shape[-2:]:
+                raise ValueError(f"fov must be (B, 2, H, W) or (2, H, W) matching rgb {tuple(rgb.shape)}, "
+                                 f"got {tuple(fov.shape)}")
+            x = torch.cat((x, _pad_bottom_right(fov.to(rgb.dtype), ph, pw, linear=True)), dim=1)
+
+        feat = self.enc0(self.head(x))
+        skips = [feat]
+        for down in self.down:
+            feat = down(feat)
+            skips.append(feat)
+        feat = self.context(skips.pop())
+        offset: torch.Tensor | None = None
+        for up, fuse, dec in zip(self.up, self.fuse, self.dec):
+            feat = fuse(torch.cat((up(feat), skips.pop()), dim=1))
+            if self.use_deformable:
+                feat, offset = dec(feat, offset)
+            else:
+                feat = dec(feat)
+        residual = self.tail(feat)
+        return rgb + residual[..., :h, :w]
+
+
+def _plain_count(width: int, depth: int) -> int:
+    with torch.device("meta"):
+        model = FieldAwareUNet(width, depth, use_fov=False, use_deformable=False, use_context=False)
+    return count_parameters(model)
+
+
+def plain_unet_width(target_params: int, depth: int = 3) -> int:
+    """Width of the plain UNet (all switches off, ``depth`` scales) whose parameter count is
+    closest to ``target_params``. Raises ValueError if even the best is more than 10% off."""
+    if target_params < 1:
+        raise ValueError(f"target_params must be positive, got {target_params}")
+    # The plain count is an exact quadratic a w^2 + b w + c in the width: fit, solve, refine.
+    n1, n2, n3 = (_plain_count(w, depth) for w in (1, 2, 3))
+    a = (n3 - 2 * n2 + n1) / 2.0
+    bq = n2 - n1 - 3 * a
+    c = n1 - a - bq
+    disc = bq * bq - 4 * a * (c - target_params)
+    guess = max(1, round((-bq + max(disc, 0.0) ** 0.5) / (2 * a)))
+    candidates = {w: _plain_count(w, depth) for w in range(max(1, guess - 2), guess + 3)}
+    best = min(candidates, key=lambda w: abs(candidates[w] - target_params))
+    if abs(candidates[best] - target_params) > 0.1 * target_params:
+        raise ValueError(
+            f"no plain UNet width within 10% of {target_params} parameters "
+            f"(closest: width {best}, {candidates[best]})"
+        )
+    return best
+
+
+def plain_unet_matching(reference: nn.Module | int, depth: int | None = None) -> FieldAwareUNet:
+    """A plain UNet (use_fov=use_deformable=use_context=False) with the parameter count of
+    ``reference`` (a model or a count) within 10%, and the same number of scales as the
+    reference model (or ``depth``, default 3, when a count is given)."""
+    if isinstance(reference, nn.Module):
+        target = count_parameters(reference)
+        if depth is None:
+            depth = int(getattr(reference, "depth", 3))
+    else:
+        target = int(reference)
+        depth = 3 if depth is None else depth
+    width = plain_unet_width(target, depth)
+    return FieldAwareUNet(width, depth, use_fov=False, use_deformable=False, use_context=False)
+
+
+__all__ = [
+    "ContextBlock",
+    "DeformResBlock",
+    "FieldAwareUNet",
+    "ResBlock",
+    "count_parameters",
+    "plain_unet_matching",
+    "plain_unet_width",
+]

@@ -1,0 +1,206 @@
+"""The field-aware UNet (lensim.restore.network): shapes, dtypes, identity at init, the
+three ablation switches, the parameter-matched plain UNet. Tiny widths and images."""
+from __future__ import annotations
+
+import pytest
+import torch
+import torch.nn.functional as F
+
+from lensim.restore.fov import fov_channels
+from lensim.restore.network import (
+    ContextBlock,
+    DeformResBlock,
+    FieldAwareUNet,
+    count_parameters,
+    plain_unet_matching,
+    plain_unet_width,
+)
+
+W0, DEPTH, G = 8, 3, 2  # tiny test network: widths 8/16/32
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _one_thread():  # type: ignore[no-untyped-def]
+    """Tiny tensors: OpenMP threads only add contention on a busy 2-core machine."""
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
+def _net(**kw: object) -> FieldAwareUNet:
+    torch.manual_seed(0)
+    args: dict[str, object] = {"width": W0, "depth": DEPTH, "deformable_groups": G}
+    args.update(kw)
+    return FieldAwareUNet(**args)  # type: ignore[arg-type]
+
+
+def _randomise_tail(net: FieldAwareUNet) -> None:
+    with torch.no_grad():
+        net.tail.weight.normal_(0.0, 0.1)
+        net.tail.bias.normal_(0.0, 0.1)
+
+
+def _inputs(b: int, h: int, w: int, dtype: torch.dtype = torch.float32) -> tuple[torch.Tensor, torch.Tensor]:
+    gen = torch.Generator().manual_seed(h * 100 + w)
+    rgb = torch.rand(b, 3, h, w, generator=gen, dtype=dtype)
+    fov = fov_channels(h, w, 3, 5, 40, 60, dtype=dtype)
+    return rgb, fov
+
+
+@pytest.mark.parametrize("size", [(13, 10), (16, 12), (1, 7), (9, 9)])
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64], ids=["float32", "float64"])
+def test_output_shape_and_dtype(size: tuple[int, int], dtype: torch.dtype) -> None:
+    """Odd and even sizes (padded internally to a multiple of 4, cropped back), batch 2."""
+    net = _net(zero_init_tail=False).to(dtype)
+    rgb, fov = _inputs(2, *size, dtype=dtype)
+    out = net(rgb, fov)
+    assert out.shape == rgb.shape and out.dtype == dtype
+    assert torch.isfinite(out).all()
+    assert (out - rgb).abs().max().item() > 1e-4  # the residual is really added
+
+
+def test_identity_at_init_with_zero_tail() -> None:
+    """The last conv is zero-initialised (zero_init_tail=True, the default): the untrained
+    network returns its input exactly; with zero_init_tail=False it does not."""
+    rgb, fov = _inputs(2, 11, 14)
+    assert torch.equal(_net()(rgb, fov), rgb)
+    assert not torch.allclose(_net(zero_init_tail=False)(rgb, fov), rgb, atol=1e-3)
+
+
+def test_padding_continues_fov_linearly() -> None:
+    """A 13x10 input (padded to 16x12) gives the top-left 13x10 of the output of the 16x12
+    input built by edge-replicating the RGB and taking the FOV of the larger crop
+    (float64, 1e-12): the padded FOV channels are the true continued coordinates."""
+    net = _net(zero_init_tail=False).double()
+    rgb, _ = _inputs(1, 13, 10, dtype=torch.float64)
+    fov = fov_channels(13, 10, 4, 2, 30, 20, dtype=torch.float64)
+    big_rgb = F.pad(rgb, (0, 2, 0, 3), mode="replicate")
+    big_fov = fov_channels(16, 12, 4, 2, 30, 20, dtype=torch.float64)
+    torch.testing.assert_close(net(rgb, fov), net(big_rgb, big_fov)[..., :13, :10], atol=1e-12, rtol=0)
+
+
+def _conv3_params(cin: int, cout: int) -> int:
+    return cout * (9 * cin + 1)
+
+
+def test_switches_change_parameter_count_as_expected() -> None:
+    """Exact differences: FOV input adds 2 head input channels (2*9*w0 weights); the context
+    block adds 4 dilated convs (C -> C/4) and a 1x1 fusion (4*C/4 -> C); deformable blocks
+    add one offset/mask conv per decoder scale (coarsest: C -> 27G; finer: C + 18G -> 27G);
+    the DCN itself has exactly the weights of the plain conv it replaces."""
+    full = count_parameters(_net())
+    c_last = W0 * 2 ** (DEPTH - 1)
+    assert full - count_parameters(_net(use_fov=False)) == 2 * 9 * W0
+    b = c_last // 4
+    assert full - count_parameters(_net(use_context=False)) == 4 * _conv3_params(c_last, b) + (4 * b * c_last + c_last)
+    assert count_parameters(ContextBlock(c_last)) == 4 * _conv3_params(c_last, b) + (4 * b * c_last + c_last)
+    dec = [W0 * 2**s for s in range(DEPTH - 2, -1, -1)]  # coarse to fine
+    offsets = _conv3_params(dec[0], 27 * G) + sum(_conv3_params(c + 18 * G, 27 * G) for c in dec[1:])
+    assert full - count_parameters(_net(use_deformable=False)) == offsets
+    plain = _net(use_fov=False, use_deformable=False, use_context=False)
+    assert full - count_parameters(plain) == 2 * 9 * W0 + offsets + count_parameters(ContextBlock(c_last))
+
+
+def test_default_and_paper_sizes() -> None:
+    """Default (32/64/128, G=2) is about 0.85M parameters (trainable on 2 CPU cores); the paper
+    configuration (32/64/128/256, G=8) is constructible and has the paper's 4.2M (+-1.5%)."""
+    with torch.device("meta"):
+        default = FieldAwareUNet()
+        paper = FieldAwareUNet(widths=(32, 64, 128, 256), deformable_groups=8)
+    assert default.widths == (32, 64, 128) and default.depth == 3
+    assert 0.8e6 < count_parameters(default) < 1.2e6
+    assert abs(count_parameters(paper) - 4.2e6) < 0.015 * 4.2e6
+
+
+@pytest.mark.parametrize("ref", ["tiny", "default", "paper"])
+def test_plain_unet_matches_parameter_count(ref: str) -> None:
+    """plain_unet_matching: all switches off, same number of scales, count within 10%."""
+    with torch.device("meta"):
+        model = {
+            "tiny": lambda: _net(),
+            "default": lambda: FieldAwareUNet(),
+            "paper": lambda: FieldAwareUNet(widths=(32, 64, 128, 256), deformable_groups=8),
+        }[ref]()
+        plain = plain_unet_matching(model)
+    target = count_parameters(model)
+    assert not (plain.use_fov or plain.use_deformable or plain.use_context)
+    assert plain.depth == model.depth
+    assert abs(count_parameters(plain) - target) <= 0.1 * target
+    # the chosen width is the best integer width
+    w = plain.widths[0]
+    with torch.device("meta"):
+        for other in (w - 1, w + 1):
+            n = count_parameters(FieldAwareUNet(other, model.depth, False, False, False))
+            assert abs(n - target) >= abs(count_parameters(plain) - target)
+    assert plain_unet_width(target, model.depth) == w
+
+
+def test_fov_channels_are_used_only_when_enabled() -> None:
+    rgb, fov = _inputs(1, 8, 8)
+    other = fov_channels(8, 8, 30, 50, 40, 60)
+    net = _net()
+    _randomise_tail(net)
+    assert (net(rgb, fov) - net(rgb, other)).abs().max().item() > 1e-5
+    with pytest.raises(ValueError, match="use_fov"):
+        net(rgb)
+    blind = _net(use_fov=False)
+    _randomise_tail(blind)
+    assert torch.equal(blind(rgb, fov), blind(rgb, other))
+    assert torch.equal(blind(rgb), blind(rgb, fov))
+
+
+def test_gradients_reach_every_parameter() -> None:
+    """With a non-zero tail, one MSE backward gives every parameter a non-zero gradient
+    (including the zero-initialised offset/mask convs and the FOV head weights)."""
+    net = _net()
+    _randomise_tail(net)
+    rgb, fov = _inputs(2, 12, 12)
+    F.mse_loss(net(rgb, fov), torch.rand_like(rgb)).backward()
+    dead = [n for n, p in net.named_parameters() if p.grad is None or p.grad.abs().max().item() == 0.0]
+    assert not dead
+
+
+def test_offsets_change_the_output() -> None:
+    """A non-zero bias on the (zero-initialised) offset conv moves the sampling points and
+    changes the output: the deformable path is live."""
+    net = _net()
+    _randomise_tail(net)
+    rgb, fov = _inputs(1, 8, 12)
+    before = net(rgb, fov)
+    with torch.no_grad():
+        net.dec[-1].offset_conv.bias[: 2 * G * 9].fill_(0.7)
+    assert (net(rgb, fov) - before).abs().max().item() > 1e-5
+
+
+def test_coarse_offsets_are_upsampled_and_doubled() -> None:
+    """A decoder block sees the coarser scale's offsets, upsampled 2x and doubled (pixel
+    units halve): with the offset conv set to pass those input channels through (centre
+    tap = 1), a constant coarse offset field c gives offsets 2c at the finer scale (1e-6),
+    and the block's output then differs from the zero-offset case."""
+    ch, g = 4, 1
+    n_off = 18 * g
+    block = DeformResBlock(ch, g, coarse_offsets=True)
+    with torch.no_grad():
+        for k in range(n_off):
+            block.offset_conv.weight[k, ch + k, 1, 1] = 1.0
+    x = torch.rand(1, ch, 6, 8)
+    coarse = torch.linspace(-0.8, 0.9, n_off).view(1, n_off, 1, 1).expand(1, n_off, 3, 4).contiguous()
+    out, offset = block(x, coarse)
+    torch.testing.assert_close(offset, 2.0 * coarse[:, :, :1, :1].expand(1, n_off, 6, 8), atol=1e-6, rtol=0)
+    out0, offset0 = block(x, torch.zeros_like(coarse))
+    assert offset0.abs().max().item() == 0.0
+    assert (out - out0).abs().max().item() > 1e-4
+    with pytest.raises(ValueError, match="coarser"):
+        block(x, None)
+
+
+def test_config_rebuilds_and_bad_groups_refused() -> None:
+    net = _net()
+    clone = FieldAwareUNet(**net.config)
+    clone.load_state_dict(net.state_dict())
+    assert count_parameters(clone) == count_parameters(net)
+    with pytest.raises(ValueError, match="deformable_groups"):
+        FieldAwareUNet(width=6, depth=2, deformable_groups=4)
+    with pytest.raises(ValueError, match="scales"):
+        FieldAwareUNet(width=8, depth=1)
