@@ -44,6 +44,7 @@ def test_builtin_colour_numbers_reproduce_from_their_sources():
     from lensim.sensor.calibration import ccm_from_dng_color_matrix, wb_table
 
     dng = {"fullframe_dslr": [5271, -712, -347, -6153, 13653, 2763, -1601, 2366, 7242],  # Sony ILCE-7
+           "apsc_mirrorless": [5271, -712, -347, -6153, 13653, 2763, -1601, 2366, 7242],  # ILCE-7 colour, stated
            "phone": [6596, -2079, -562, -4782, 13016, 1933, -970, 1581, 5181]}  # Sony DSC-RX100M
     for name, m in dng.items():
         p = load_sensor(name)
@@ -186,7 +187,7 @@ def test_syntax_errors_unknown_names_and_csv_response(tmp_path: Path):
     f.write_text("name: [unclosed\n")
     with pytest.raises(InputError, match=r"broken.yaml: syntax: not valid YAML"):
         load_sensor(f)
-    with pytest.raises(InputError, match=r"not a built-in sensor \(built-ins: fullframe_dslr, phone"):
+    with pytest.raises(InputError, match=r"not a built-in sensor \(built-ins: apsc_mirrorless, fullframe_dslr, phone"):
         load_sensor("no_such_sensor")
     # a CSV response is resolved relative to the profile's folder and checked
     (tmp_path / "resp.csv").write_text("wavelength_nm,r,g,b\n400,0.1,0.2,0.9\n700,0.9,0.1,0.0\n")

@@ -54,7 +54,7 @@ import torch
 from lensim.errors import InputError, LensimError
 
 BAYER_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
-DEFAULT_SENSOR = "fullframe_dslr"
+DEFAULT_SENSOR = "apsc_mirrorless"  # fits inside the default lens's image circle
 SENSOR_DIR = Path(__file__).resolve().parents[1] / "assets" / "sensors"
 
 TOP_KEYS = {"name", "source", "description", "notes", "pixel_pitch_um", "resolution", "bayer_pattern",
