@@ -10,6 +10,7 @@ from lensim.cli.common import console, err_console, run_guarded
 from lensim.cli.assets_cmd import assets_command
 from lensim.cli.lens_cmd import lens_app
 from lensim.cli.psf_cmd import psf_app
+from lensim.cli.simulate_cmd import simulate_command
 
 app = typer.Typer(
     name="lensim",
@@ -21,6 +22,7 @@ app = typer.Typer(
 app.add_typer(lens_app, name="lens")
 app.add_typer(psf_app, name="psf")
 app.command("assets")(assets_command)
+app.command("simulate")(simulate_command)
 
 
 def main() -> None:
