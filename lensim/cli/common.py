@@ -44,3 +44,33 @@ def _jsonable(x):
 def print_json(data) -> None:
     """Print a JSON document on stdout (non-finite numbers become null)."""
     sys.stdout.write(json.dumps(_jsonable(data), indent=2) + "\n")
+
+
+def progress_bar(label: str, unit: str, quiet: bool):
+    """A rich progress bar and its callback(done, total); (None, None) when quiet."""
+    if quiet:
+        return None, None
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    prog = Progress(TextColumn(label), BarColumn(), TextColumn("{task.completed}/{task.total} " + unit),
+                    TimeElapsedColumn(), TimeRemainingColumn(), console=console, transient=True)
+    task = prog.add_task(label, total=None)
+
+    def callback(done: int, total: int) -> None:
+        prog.update(task, completed=done, total=total)
+    return prog, callback
+
+
+def parse_wavelengths(text: str) -> list[float]:
+    """'start:stop:step' (nm) or a comma list -> wavelengths in nm."""
+    from lensim.errors import InputError
+
+    try:
+        if ":" in text:
+            start, stop, step = (float(v) for v in text.split(":"))
+            if step <= 0 or stop < start:
+                raise ValueError
+            return [start + i * step for i in range(int(round((stop - start) / step)) + 1)]
+        return [float(v) for v in text.split(",")]
+    except ValueError:
+        raise InputError("--wavelengths-nm", None, f"expected start:stop:step or a comma list in nm, got {text!r}") from None

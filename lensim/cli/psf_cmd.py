@@ -49,3 +49,72 @@ def compute(
         console.print(f"{k:22s} {v}", highlight=False)
     if output is not None:
         console.print(f"wrote {output}")
+
+
+@psf_app.command("bank")
+def bank(
+    lens_file: str = typer.Argument(..., help="Lens file or built-in lens name."),
+    pixel_um: float = typer.Option(..., "--pixel-um", help="Sensor pixel pitch in um."),
+    kernel: int = typer.Option(21, "--kernel", help="Kernel size in pixels (odd)."),
+    fields: int = typer.Option(64, "--fields", help="Number of radial fields 0..1 (sqrt-spaced, denser towards the edge)."),
+    wavelengths_nm: str = typer.Option("400:700:10", "--wavelengths-nm", help="START:STOP:STEP or a comma list, in nm."),
+    response: str = typer.Option("Nikon 5100 (NPL)", "--response",
+                                 help="Camera spectral sensitivities: a colour-science camera name or a CSV file (wavelength_nm,r,g,b)."),
+    illuminant: str = typer.Option("E", "--illuminant", help="E (equal energy), D65, A, ... (colour-science names)."),
+    method: str = typer.Option("huygens", "--method", help=f"One of {', '.join(METHODS)}."),
+    pupil_samples: int = typer.Option(64, "--pupil-samples", help="Pupil grid samples across the diameter."),
+    max_spacing_um: float = typer.Option(None, "--max-spacing-um",
+                                         help="Largest fine PSF spacing in um (default: half the Airy radius at the shortest wavelength)."),
+    aiming: str = typer.Option("real", "--aiming", help="Ray aiming: real or paraxial."),
+    workers: int = typer.Option(1, "--workers", help="Worker processes (one torch thread each)."),
+    output: Path = typer.Option(..., "-o", "--output", help="Bank directory (created; an existing bank with the same settings is resumed)."),
+) -> None:
+    """A PSF bank: RGB pixel kernels at radial fields, weighted by the camera's spectral
+    response and the lens's relative illumination, stored as OUTPUT/manifest.json and one
+    OUTPUT/field_XXXX.npz per field. Rerun the same command to resume after an interruption.
+
+    Example: lensim psf bank cooke_triplet --pixel-um 4 --kernel 21 --fields 64 --workers 2 -o bank/
+    """
+    import time
+
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    from lensim.psf.bank import compute_bank, default_fields
+    from lensim.psf.spectral import parse_wavelengths_nm
+
+    lens = load_lens(lens_file)
+    wl = parse_wavelengths_nm(wavelengths_nm)
+    t0 = time.time()
+    with Progress(TextColumn("[bold]PSF bank[/bold]"), BarColumn(), MofNCompleteColumn(), TextColumn("fields"),
+                  TimeElapsedColumn(), TimeRemainingColumn(), console=console, transient=False) as bar:
+        task = bar.add_task("fields", total=None)
+
+        def report(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=total)
+
+        result = compute_bank(lens, pixel_um, kernel, fields=default_fields(fields), wavelengths_nm=wl, response=response,
+                              method=method, pupil_samples=pupil_samples, max_spacing_um=max_spacing_um, aiming=aiming,
+                              workers=workers, out_dir=output, progress=report, illuminant=illuminant)
+    m = result.manifest
+    console.print(f"wrote {output}: {len(m['fields'])} fields x {len(m['wavelengths_nm'])} wavelengths, "
+                  f"{m['kernel_pixels']}x{m['kernel_pixels']} px of {m['pixel_pitch_um']:g} um, fine grid {m['oversampling']}x per pixel "
+                  f"({m['fine_spacing_um']:.4g} um), response {m['response']['name']} under {m['response']['illuminant']}, "
+                  f"{time.time() - t0:.1f} s", highlight=False)
+
+
+@psf_app.command("show")
+def show(
+    bank_dir: Path = typer.Argument(..., help="A bank directory written by `lensim psf bank`."),
+    output: Path = typer.Option(..., "-o", "--output", help="Folder for the PNG figures."),
+    gamma: float = typer.Option(0.5, "--gamma", help="Display gamma of the kernel pictures (smaller shows fainter tails)."),
+) -> None:
+    """Figures of a PSF bank: psf_map.png (kernels over the sensor), strehl.png,
+    mtf.png (sagittal/tangential at four fields) and relative_illumination.png.
+
+    Example: lensim psf show bank/ -o bank_figures/
+    """
+    from lensim.psf.bank import PSFBank, write_bank_figures
+
+    paths = write_bank_figures(PSFBank.load(bank_dir), output, gamma=gamma)
+    for p in paths:
+        console.print(f"wrote {p}", highlight=False)

@@ -7,11 +7,8 @@ from pathlib import Path
 
 import torch
 import typer
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
-
 from lensim import assets
-from lensim.cli.common import console, print_json
-from lensim.errors import InputError
+from lensim.cli.common import console, parse_wavelengths, print_json, progress_bar
 from lensim.images import read_image, write_image
 from lensim.optics.lens_file import atomic_write_text, load_lens
 from lensim.psf.bank import PSFBank
@@ -24,17 +21,20 @@ def default_cache_dir() -> Path:
     return Path(os.environ.get("LENSIM_CACHE", Path.home() / ".cache" / "lensim"))
 
 
-def bank_progress(quiet: bool):
-    """A rich progress bar for bank computation (None when quiet)."""
-    if quiet:
-        return None, None
-    prog = Progress(TextColumn("PSF bank"), BarColumn(), TextColumn("{task.completed}/{task.total} fields"),
-                    TimeElapsedColumn(), TimeRemainingColumn(), console=console, transient=True)
-    task = prog.add_task("bank", total=None)
-
-    def callback(done: int, total: int) -> None:
-        prog.update(task, completed=done, total=total)
-    return prog, callback
+def cached_bank(lens, pitch_um: float, sensor, fields: int, wavelengths_nm: list[float], pupil_samples: int,
+                workers: int, cache: Path | None, quiet: bool) -> PSFBank:
+    """The lens's bank at this pitch with the sensor's spectral response, from the cache or
+    computed into it, with a progress bar."""
+    prog, cb = progress_bar("PSF bank", "fields", quiet)
+    if prog:
+        prog.start()
+    try:
+        return ensure_bank(lens, pitch_um, cache or default_cache_dir(), progress=cb,
+                           fields=[(k / (fields - 1)) ** 0.5 for k in range(fields)], wavelengths_nm=wavelengths_nm,
+                           response=sensor.spectral_response, pupil_samples=pupil_samples, workers=workers)
+    finally:
+        if prog:
+            prog.stop()
 
 
 def simulate_command(
@@ -68,11 +68,7 @@ def simulate_command(
     """
     lens = load_lens(lens_file)
     sensor = load_sensor(sensor_file)
-    try:
-        start, stop, step = (float(v) for v in wavelengths.split(":"))
-        wls = [start + i * step for i in range(int(round((stop - start) / step)) + 1)]
-    except ValueError:
-        raise InputError("--wavelengths-nm", None, f"expected start:stop:step in nm, got {wavelengths!r}") from None
+    wls = parse_wavelengths(wavelengths)
     banks: dict[tuple[int, int], PSFBank] = {}
     results = []
     for i, path in enumerate(images):
@@ -85,17 +81,8 @@ def simulate_command(
                 bank = banks.setdefault((h, w), PSFBank.load(bank_dir))
                 check_bank_fits(bank, mapping, str(bank_dir))
             elif (h, w) not in banks:
-                prog, cb = bank_progress(quiet)
-                if prog:
-                    prog.start()
-                try:
-                    banks[(h, w)] = ensure_bank(lens, mapping.pitch_um, cache or default_cache_dir(), progress=cb,
-                                                fields=[(k / (fields - 1)) ** 0.5 for k in range(fields)],
-                                                wavelengths_nm=wls, response=sensor.spectral_response,
-                                                pupil_samples=pupil_samples, workers=workers)
-                finally:
-                    if prog:
-                        prog.stop()
+                banks[(h, w)] = cached_bank(lens, mapping.pitch_um, sensor, fields, wls, pupil_samples, workers, cache,
+                                            quiet)
             bank = banks.get((h, w), bank)
         gen = torch.Generator().manual_seed(seed + i)
         out, params = simulate(img, bank, sensor, gen, blur=blur, noise=noise, relative_illumination=shading,

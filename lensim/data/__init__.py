@@ -1,0 +1,1 @@
+"""Training data: aligned (aberrated, sharp) pairs with their sensor positions."""

@@ -1,0 +1,190 @@
+"""Training-pair generation (the paper's "Simulate Training Data").
+
+Each sharp photo is placed on the sensor at its native scale (one image pixel = one sensor
+pixel) at a seeded random position (a random crop of it if it is larger than the sensor),
+simulated through the lens and sensor (lensim.simulate), and cut into `crops` aligned
+pairs of size x size pixels: the simulated camera image (network input) and the original
+(target), each with the absolute sensor position of its top-left pixel, so a network can
+be fed field-of-view channels.
+
+Determinism: image i's random stream is seeded from (seed, i, file name); results do not
+depend on worker count or order. Resumability: an image is done when its JSON record
+exists; it is written last, atomically, after its PNGs (also atomic), so a killed job is
+re-run from the first unfinished image. The manifest (settings + every record) is
+rewritten at the end.
+
+Parallelism: `workers > 1` starts a local dask.distributed cluster (one thread per
+worker process); `scheduler` connects to an existing Dask cluster instead.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import torch
+
+from lensim.errors import InputError
+from lensim.images import READ_SUFFIXES, read_image, write_image
+from lensim.optics.lens_file import atomic_write_text, lens_to_dict
+from lensim.psf.bank import PSFBank
+from lensim.sensor.profile import SensorProfile, load_sensor
+from lensim.simulate import native_mapping, simulate
+
+MANIFEST = "manifest.json"
+FORMAT = "lensim-pairs"
+
+
+@dataclass
+class PairJob:
+    """Everything one worker needs for one image (picklable)."""
+
+    index: int
+    path: str
+    out_dir: str
+    bank_dir: str
+    sensor: str
+    seed: int
+    crops: int
+    size: int
+    noise: bool
+    demosaic: str
+
+
+def image_seed(seed: int, index: int, name: str) -> int:
+    """A 63-bit seed for one image, stable across runs and machines."""
+    h = hashlib.sha256(f"{seed}:{index}:{name}".encode()).digest()
+    return int.from_bytes(h[:8], "little") >> 1
+
+
+def list_images(folder: str | Path) -> list[Path]:
+    """Photos in a folder (sorted by name); a clear error if there are none."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise InputError(str(folder), None, "no such folder; expected a folder of sharp photos")
+    files = sorted(p for p in folder.iterdir() if p.suffix.lower() in READ_SUFFIXES)
+    if not files:
+        raise InputError(str(folder), None, f"holds no images; expected {', '.join(READ_SUFFIXES)} files")
+    return files
+
+
+def record_path(out_dir: Path, index: int) -> Path:
+    return out_dir / "records" / f"{index:06d}.json"
+
+
+def make_pairs_for_image(job: PairJob) -> dict:
+    """Simulate one photo and write its crops; returns (and writes) its record."""
+    torch.set_num_threads(1)
+    out = Path(job.out_dir)
+    sensor = load_sensor(job.sensor)
+    bank = PSFBank.load(job.bank_dir)
+    img, bits = read_image(job.path)
+    gen = torch.Generator().manual_seed(job.seed)
+    _, h, w = img.shape
+    if h < job.size or w < job.size:
+        raise InputError(job.path, "size", f"image is {w}x{h}; expected at least {job.size}x{job.size} pixels for "
+                         f"{job.size}-pixel crops")
+    # a random crop of the photo if it is larger than the sensor
+    h2, w2 = min(h, sensor.height), min(w, sensor.width)
+    y = int(torch.randint(0, h - h2 + 1, (1,), generator=gen))
+    x = int(torch.randint(0, w - w2 + 1, (1,), generator=gen))
+    img = img[:, y:y + h2, x:x + w2]
+    # place it on the sensor (even offsets keep the Bayer phase)
+    top = 2 * int(torch.randint(0, (sensor.height - h2) // 2 + 1, (1,), generator=gen))
+    left = 2 * int(torch.randint(0, (sensor.width - w2) // 2 + 1, (1,), generator=gen))
+    mapping = native_mapping(h2, w2, sensor, top, left)
+    sim, params = simulate(img, bank, sensor, gen, noise=job.noise, demosaic=job.demosaic, mapping=mapping)
+    crops = []
+    stem = f"{job.index:06d}"
+    for k in range(job.crops):
+        cy = int(torch.randint(0, h2 - job.size + 1, (1,), generator=gen))
+        cx = int(torch.randint(0, w2 - job.size + 1, (1,), generator=gen))
+        name_in = f"pairs/{stem}_{k:03d}_input.png"
+        name_gt = f"pairs/{stem}_{k:03d}_target.png"
+        write_image(out / name_in, sim[:, cy:cy + job.size, cx:cx + job.size], 8)
+        write_image(out / name_gt, img[:, cy:cy + job.size, cx:cx + job.size], 8)
+        crops.append({"input": name_in, "target": name_gt, "sensor_top": top + cy, "sensor_left": left + cx})
+    record = {"index": job.index, "source": job.path, "seed": job.seed, "source_crop": [y, x, h2, w2],
+              "sensor_top": top, "sensor_left": left, "capture": params.to_dict(), "crops": crops}
+    atomic_write_text(record_path(out, job.index), json.dumps(record, indent=1, default=str) + "\n")
+    return record
+
+
+def make_dataset(
+    sharp_dir: str | Path,
+    out_dir: str | Path,
+    bank: PSFBank,
+    sensor_name: str,
+    sensor: SensorProfile,
+    crops: int = 8,
+    size: int = 256,
+    seed: int = 0,
+    noise: bool = True,
+    demosaic: str = "ahd",
+    workers: int = 1,
+    scheduler: str | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> dict:
+    """Generate pairs for every photo in sharp_dir into out_dir (resumable); returns the
+    manifest. The bank must be at the sensor's native pitch and cover its diagonal."""
+    if size < 16 or size % 2:
+        raise InputError(None, "size", f"expected an even crop size of at least 16 pixels, got {size}")
+    if crops < 1:
+        raise InputError(None, "crops", f"expected at least one crop per image, got {crops}")
+    if bank.directory is None:
+        raise InputError(None, "bank", "expected a bank stored on disk (workers load it)")
+    if abs(bank.pixel_pitch_um / sensor.pixel_pitch_um - 1) > 1e-6:
+        raise InputError(str(bank.directory), "pixel_pitch_um", f"the bank is at {bank.pixel_pitch_um:g} um; expected "
+                         f"the sensor's pitch {sensor.pixel_pitch_um:g} um")
+    files = list_images(sharp_dir)
+    out = Path(out_dir)
+    settings = {"format": FORMAT, "seed": seed, "crops": crops, "size": size, "noise": noise, "demosaic": demosaic,
+                "sensor": sensor.to_dict(), "sensor_name": sensor_name, "lens": bank.manifest.get("lens"),
+                "bank": str(bank.directory), "sources": [str(p) for p in files]}
+    old = out / "settings.json"
+    if old.exists():
+        prev = json.loads(old.read_text())
+        diff = sorted(k for k in settings if k != "bank" and prev.get(k) != settings[k])
+        if diff:
+            raise InputError(str(out), ", ".join(diff), "differs from the dataset already in this folder; expected the "
+                             "same settings to resume, or a new output folder")
+    else:
+        atomic_write_text(old, json.dumps(settings, indent=1, default=str) + "\n")
+    jobs = [PairJob(i, str(p), str(out), str(bank.directory), sensor_name, image_seed(seed, i, p.name), crops, size,
+                    noise, demosaic) for i, p in enumerate(files)]
+    todo = [j for j in jobs if not record_path(out, j.index).exists()]
+    done = len(jobs) - len(todo)
+    if progress:
+        progress(done, len(jobs))
+    if workers <= 1 and scheduler is None:
+        threads = torch.get_num_threads()
+        try:
+            for j in todo:
+                make_pairs_for_image(j)
+                done += 1
+                if progress:
+                    progress(done, len(jobs))
+        finally:
+            torch.set_num_threads(threads)
+    else:
+        from distributed import Client, LocalCluster, as_completed
+
+        cluster = None if scheduler else LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                                      dashboard_address=None)
+        try:
+            with Client(scheduler or cluster) as client:
+                futures = client.map(make_pairs_for_image, todo, pure=False)
+                for fut in as_completed(futures):
+                    fut.result()
+                    done += 1
+                    if progress:
+                        progress(done, len(jobs))
+        finally:
+            if cluster is not None:
+                cluster.close()
+    records = [json.loads(record_path(out, j.index).read_text()) for j in jobs]
+    manifest = {**settings, "records": records, "pairs": sum(len(r["crops"]) for r in records)}
+    atomic_write_text(out / MANIFEST, json.dumps(manifest, indent=1, default=str) + "\n")
+    return manifest
