@@ -178,6 +178,22 @@ def test_rotation_keeps_sum_and_centre(bank):
     assert ry == pytest.approx(cx * math.sin(a) + cy * math.cos(a), abs=0.05)
 
 
+def test_rotation_by_45_degrees_keeps_the_on_axis_kernel_sharp(bank):
+    # the on-axis kernel is rotationally symmetric: a 45 degree turn should leave it as it
+    # is. Cubic-spline rotation keeps its MTF area within 1 % (measured 0.6 %) and the
+    # round trip within 2 % of the peak (measured 1.0 %); bilinear would lose 4 % and 11 %.
+    k = bank.fields[0].rgb[1].astype(np.float64)
+
+    def area(x):
+        o = np.abs(np.fft.fft2(x))
+        return (o / o[0, 0]).mean()
+
+    turned = rotate_kernel(k, 45.0)
+    assert area(turned) / area(k) == pytest.approx(1.0, abs=0.01)
+    assert np.abs(rotate_kernel(turned, -45.0) - k).max() < 0.02 * k.max()
+    assert np.all(turned >= 0)
+
+
 def test_psf_at_interpolates_linearly_between_radial_fields(bank):
     r1, r2 = bank.radii_mm[1], bank.radii_mm[2]
     k1, k2 = (bank.fields[i].rgb.astype(np.float64) for i in (1, 2))

@@ -1,0 +1,230 @@
+"""Field-dependent analyses: distortion and relative illumination.
+
+Fields are given in the lens's field unit (degrees for angle fields, mm for object or
+image heights) and default to 21 equal steps from 0 to the lens's maximum field.
+Lengths in mm, wavelengths in um.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+from lensim.errors import InputError, RayTraceError
+from lensim.optics.aiming import Aiming, chief_ray_image_height, describe_failure, generate_rays, object_field
+from lensim.optics.lens import Lens
+from lensim.optics.paraxial import ParaxialData, paraxial_data, paraxial_image_height
+from lensim.optics.trace import DTYPE, Rays, trace
+
+DEFAULT_FIELD_STEPS = 21
+
+
+def _default_fields(lens: Lens, fields) -> list[float]:
+    if fields is None:
+        return [float(f) for f in np.linspace(0.0, lens.max_field, DEFAULT_FIELD_STEPS)]
+    out = [float(f) for f in np.atleast_1d(np.asarray(fields, dtype=np.float64))]
+    if not out:
+        raise InputError(lens.source, "fields", "expected at least one field value")
+    return out
+
+
+def _launch_lens(lens: Lens) -> Lens:
+    """The lens with its field type set to what rays are launched with (angle or object
+    height), so launch values from object_field() are read the right way."""
+    if lens.field_type in ("angle", "object_height"):
+        return lens
+    return lens.with_changes(field_type="angle" if lens.infinite_object else "object_height")
+
+
+def _field_unit(lens: Lens) -> str:
+    return "deg" if lens.field_type == "angle" else "mm"
+
+
+def distortion(
+    lens: Lens,
+    fields: list[float] | np.ndarray | None = None,
+    aiming: Aiming = "real",
+    wavelength_um: float | None = None,
+) -> dict:
+    """Distortion of the real chief ray against the paraxial chief ray on the image plane.
+
+    distortion_percent = (real - paraxial) / paraxial * 100, defined as 0 at zero field
+    (its limit). The real chief ray is aimed as `aiming` says ('real': through the centre
+    of the stop; 'paraxial': through the centre of the paraxial entrance pupil). The
+    paraxial height is the paraxial chief ray's height on the same (possibly defocused)
+    image plane, so it is linear in tan(field angle) or object height. Wavelength: the
+    primary unless given (um).
+
+    Returns a dict: fields (lens unit), field_unit, launch (deg or mm: what rays start
+    with), real_height_mm, paraxial_height_mm, distortion_percent, wavelength_um, aiming.
+    """
+    flds = _default_fields(lens, fields)
+    para = paraxial_data(lens)
+    wl = lens.primary_wavelength_um if wavelength_um is None else float(wavelength_um)
+    para_wl = para if wl == para.wavelength_um else paraxial_data(lens, wl)
+    probe = _launch_lens(lens)
+    launch, real, parax, dist = [], [], [], []
+    for f in flds:
+        lv = object_field(lens, f, aiming, para)
+        y_real = chief_ray_image_height(probe, lv, aiming=aiming, para=para, wavelength_um=wl)
+        y_par = paraxial_image_height(probe, lv, para_wl)
+        launch.append(lv)
+        real.append(y_real)
+        parax.append(y_par)
+        dist.append(0.0 if lv == 0 or y_par == 0 else (y_real - y_par) / y_par * 100.0)
+    return {
+        "fields": flds,
+        "field_unit": _field_unit(lens),
+        "launch": launch,
+        "real_height_mm": real,
+        "paraxial_height_mm": parax,
+        "distortion_percent": dist,
+        "wavelength_um": wl,
+        "aiming": aiming,
+    }
+
+
+def _slice(rays: Rays, idx: slice) -> Rays:
+    return Rays(rays.position[:, :, idx], rays.direction[:, :, idx], rays.opl[:, :, idx], rays.valid[:, :, idx])
+
+
+def _disc_fraction(edges: torch.Tensor, fine: int = 16) -> torch.Tensor:
+    """Fraction of each grid cell (n, n) lying inside the unit disc, by fine x fine
+    point sampling of each cell (geometry only; error below 1/fine^2 of a cell)."""
+    n = edges.numel() - 1
+    h = float(edges[1] - edges[0])
+    sub = (torch.arange(fine, dtype=DTYPE) + 0.5) / fine * h
+    cx = edges[:-1].reshape(1, n, 1, 1) + sub.reshape(1, 1, 1, fine)
+    cy = edges[:-1].reshape(n, 1, 1, 1) + sub.reshape(1, 1, fine, 1)
+    return ((cx * cx + cy * cy) <= 1.0).to(DTYPE).mean((-1, -2))
+
+
+def _quad_areas(u: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+    """Areas of the quadrilaterals spanned by neighbouring nodes of (..., n+1, n+1) maps."""
+    a, b, c, d = (u[..., :-1, :-1], u[..., :-1, 1:], u[..., 1:, 1:], u[..., 1:, :-1])
+    A, B, C, D = (v[..., :-1, :-1], v[..., :-1, 1:], v[..., 1:, 1:], v[..., 1:, :-1])
+    return 0.5 * ((a * B - b * A) + (b * C - c * B) + (c * D - d * C) + (d * A - a * D)).abs()
+
+
+def relative_illumination(
+    lens: Lens,
+    fields: list[float] | np.ndarray | None = None,
+    wavelength_um: float | None = None,
+    samples: int = 64,
+    aiming: Aiming = "real",
+    subsamples: int = 2,
+    para: ParaxialData | None = None,
+) -> dict:
+    """Relative illumination: image irradiance at each field relative to the axis, for a
+    Lambertian (uniform radiance) object, with vignetting.
+
+    Method (Zemax's definition): n'^2 times the projected solid angle of the exit pupil
+    as seen from the image point, i.e. the area it covers in image-space direction-cosine
+    space (L, M). A samples x samples grid of cells over the (aimed) pupil is traced; each
+    ray's image-space line meets the paraxial exit-pupil plane at X, and the unit vector
+    from X to the chief ray's image point P gives its (L, M). Each cell's area is the
+    quadrilateral spanned by its four corner rays (traced without apertures, so the map is
+    smooth), weighted by the fraction of the cell inside the unit pupil disc and by the
+    fraction of subsamples x subsamples points in the cell that pass every clear aperture
+    (points outside the disc are moved radially onto its rim). For an aberration-free
+    beam this is exactly the area of the beam's ray directions; for an aberrated one it
+    is the cone P actually receives light from (the beam of a single object point is not
+    what lights P when the image is astigmatic). An exit pupil at infinity (image-space
+    telecentric) uses the ray directions themselves.
+
+    fields: lens units (default 0..max in 21 steps); wavelength_um: default the primary.
+    Returns a dict: fields, field_unit, wavelength_um, aiming, relative_illumination
+    (1 on axis), projected_solid_angle_sr (area in (L, M) space), n2_projected_solid_angle_sr
+    (times the image-space index squared), unvignetted_fraction (the fraction of the pupil
+    disc whose rays reach the image) and image_height_mm (chief ray).
+    """
+    if samples < 4:
+        raise InputError(lens.source, "samples", f"expected at least 4 pupil samples across, got {samples}")
+    if subsamples < 1:
+        raise InputError(lens.source, "subsamples", f"expected a positive number, got {subsamples}")
+    flds = _default_fields(lens, fields)
+    para = para or paraxial_data(lens)
+    wl = lens.primary_wavelength_um if wavelength_um is None else float(wavelength_um)
+    launch = [object_field(lens, f, aiming, para) for f in flds]
+    off = 0 if 0.0 in launch else 1  # the on-axis beam is traced once, for the normalization
+    all_launch = [0.0] * off + launch
+    axis_index = all_launch.index(0.0)
+
+    n = samples
+    edges = torch.linspace(-1.0, 1.0, n + 1, dtype=DTYPE)
+    gy, gx = torch.meshgrid(edges, edges, indexing="ij")
+    nodes = torch.stack([gx.reshape(-1), gy.reshape(-1)], -1)  # (n+1)^2, row = y
+    s = subsamples
+    h = 2.0 / n
+    fine = (torch.arange(n * s, dtype=DTYPE) + 0.5) * (h / s) - 1.0
+    fy, fx = torch.meshgrid(fine, fine, indexing="ij")
+    sub = torch.stack([fx.reshape(-1), fy.reshape(-1)], -1)
+    r = torch.linalg.norm(sub, dim=-1, keepdim=True)
+    sub = torch.where(r > 1.0, sub * ((1.0 - 1e-12) / r), sub)
+    disc = _disc_fraction(edges)
+    used = disc > 0
+    # only the subsample points of cells that touch the disc are traced
+    cell_of_sub = (torch.arange(n * s).reshape(-1, 1) // s * n + torch.arange(n * s).reshape(1, -1) // s).reshape(-1)
+    keep = used.reshape(-1)[cell_of_sub]
+    sub, cell_of_sub = sub[keep], cell_of_sub[keep]
+
+    # only the corners of those cells are traced (the far corners of the square need not aim)
+    node_used = torch.zeros(n + 1, n + 1, dtype=torch.bool)
+    for dy in (0, 1):
+        for dx in (0, 1):
+            node_used[dy:dy + n, dx:dx + n] |= used
+    node_idx = torch.nonzero(node_used.reshape(-1))[:, 0]
+    n_nodes = node_idx.numel()
+    pupil = torch.cat([torch.zeros(1, 2, dtype=DTYPE), nodes[node_idx], sub])
+    rays, wlt = generate_rays(lens, all_launch, pupil, [wl], aiming, para)
+    free = trace(lens, _slice(rays, slice(0, 1 + n_nodes)), wlt, apertures=False)
+    blocked = trace(lens, _slice(rays, slice(1 + n_nodes, None)), wlt)
+
+    chief_ok = free.rays.valid[0, :, 0]
+    if not bool(chief_ok.all()):
+        fi = int(torch.nonzero(~chief_ok)[0, 0])
+        mask = torch.zeros_like(free.rays.valid)
+        mask[0, fi, 0] = True
+        raise RayTraceError(describe_failure(lens, all_launch[fi], free.first_failure(mask), "chief ray"))
+    pos = free.rays.position[0]  # (F, 1 + nodes, 3)
+    dirs = free.rays.direction[0]
+    P = pos[:, :1, :]
+    X, D = pos[:, 1:], dirs[:, 1:]
+    z_xp = para.exit_pupil_z_mm
+    if math.isfinite(z_xp):
+        t = (z_xp - X[..., 2]) / torch.where(D[..., 2].abs() > 1e-300, D[..., 2], torch.ones_like(D[..., 2]))
+        to_image = P - (X + t.unsqueeze(-1) * D)
+        u = to_image / torch.linalg.norm(to_image, dim=-1, keepdim=True).clamp_min(1e-300)
+    else:
+        u = D
+    F = len(all_launch)
+    L = torch.zeros(F, (n + 1) ** 2, dtype=DTYPE)
+    M = torch.zeros(F, (n + 1) ** 2, dtype=DTYPE)
+    node_ok = torch.zeros(F, (n + 1) ** 2, dtype=torch.bool)
+    L[:, node_idx], M[:, node_idx], node_ok[:, node_idx] = u[..., 0], u[..., 1], free.rays.valid[0, :, 1:]
+    L, M, node_ok = (v.reshape(F, n + 1, n + 1) for v in (L, M, node_ok))
+    cell_ok = node_ok[:, :-1, :-1] & node_ok[:, :-1, 1:] & node_ok[:, 1:, 1:] & node_ok[:, 1:, :-1]
+    area = torch.where(cell_ok, _quad_areas(L, M), torch.zeros((), dtype=DTYPE))
+
+    passed = blocked.rays.valid[0].to(DTYPE)  # (F, n_sub)
+    counts = torch.zeros(n * n, dtype=DTYPE).index_add_(0, cell_of_sub, torch.ones(cell_of_sub.shape[0], dtype=DTYPE))
+    frac = torch.zeros(F, n * n, dtype=DTYPE).index_add_(1, cell_of_sub, passed)
+    frac = (frac / counts.clamp_min(1.0)).reshape(F, n, n)
+    weight = disc.unsqueeze(0) * frac
+    solid = (area * weight).sum((-1, -2))
+    n_img = float(lens.indices([wl])[-1, 0])
+    unvignetted = (weight.sum((-1, -2)) / disc.sum()).tolist()
+    ri = (solid / solid[axis_index]).tolist()
+    pick = slice(off, off + len(launch))
+    return {
+        "fields": flds,
+        "field_unit": _field_unit(lens),
+        "wavelength_um": wl,
+        "aiming": aiming,
+        "relative_illumination": ri[pick],
+        "projected_solid_angle_sr": solid.tolist()[pick],
+        "n2_projected_solid_angle_sr": (solid * n_img * n_img).tolist()[pick],
+        "unvignetted_fraction": unvignetted[pick],
+        "image_height_mm": P[:, 0, 1].tolist()[pick],
+    }
