@@ -355,6 +355,34 @@ def _launch_lens(lens: Lens) -> Lens:
     return lens.with_changes(field_type="angle" if lens.infinite_object or lens.field_type == "angle" else "object_height")
 
 
+def alias_free_pixels(pf, kernel_pixels: int, pixel_pitch_um: float, method: str) -> int:
+    """The odd number of kernel pixels (<= kernel_pixels) whose window the pupil sampling
+    resolves without wrap-around: a pupil grid of N samples repeats a diffraction PSF every
+    lambda / (n' du) um (du: direction-cosine step between samples). Outside that central
+    window the kernel is left at zero; check_sampling then makes sure the spot fits in it."""
+    if method == "geometric":
+        return kernel_pixels
+    from lensim.psf.fourier import direction_scale
+
+    ax, ay = direction_scale(pf)
+    du = max(abs(ax), abs(ay)) * 2.0 / pf.samples
+    period_um = pf.wavelength_um / pf.n_image / du
+    m = int(0.95 * period_um / pixel_pitch_um)
+    m = m if m % 2 else m - 1
+    return max(1, min(kernel_pixels, m))
+
+
+def embed_centred(small: np.ndarray, size: int) -> np.ndarray:
+    """A (size, size) array with `small` (odd-sized) in its centre and zeros around it."""
+    n = small.shape[-1]
+    if n == size:
+        return small
+    out = np.zeros(small.shape[:-2] + (size, size), dtype=small.dtype)
+    a = (size - n) // 2
+    out[..., a:a + n, a:a + n] = small
+    return out
+
+
 def _compute_field(job: _Job, index: int, fld: float, para: ParaxialData | None = None) -> BankField:
     """Compute one bank field (see the module docstring)."""
     from lensim.optics.aiming import object_field
@@ -374,11 +402,11 @@ def _compute_field(job: _Job, index: int, fld: float, para: ParaxialData | None 
         except InputError as e:
             raise InputError(lens.source, f"field {fld:g} ({value:g}) at {wl_um * 1e3:g} nm", e.message) from None
 
-    def checked(pf, wl_um: float) -> None:
+    def checked(pf, wl_um: float, sub_grid: int) -> None:
         with warnings.catch_warnings(record=True) as rec:
             warnings.simplefilter("always")
             try:
-                check_sampling(lens, pf, grid, spacing, job.method)
+                check_sampling(lens, pf, sub_grid, spacing, job.method)
             except InputError as e:
                 raise InputError(lens.source, f"field {fld:g} at {wl_um * 1e3:g} nm",
                                  f"{e.message} (kernel {job.kernel_pixels} px of {job.pixel_pitch_um:g} um)") from None
@@ -406,10 +434,12 @@ def _compute_field(job: _Job, index: int, fld: float, para: ParaxialData | None 
     for w, wl in enumerate(job.wavelengths_um):
         is_primary = abs(wl - job.primary_um) < 1e-9
         pf = primary_pf if is_primary else trace_field(wl)
-        checked(pf, wl)
+        m = alias_free_pixels(pf, P, job.pixel_pitch_um, job.method)
+        checked(pf, wl, m * job.k)
         off = (ref - pf.chief[:2]).tolist()
-        fine_t = fn(pf, grid, spacing, (off[0], off[1]))
-        fine = fine_t.numpy()
+        fine_t = fn(pf, m * job.k, spacing, (off[0], off[1]))
+        fine = embed_centred(fine_t.numpy(), grid)
+        fine_t = torch.from_numpy(fine)
         pix = integrate_pixels(fine, job.k)
         total = float(pix.sum())
         if not total > 0:
@@ -427,9 +457,10 @@ def _compute_field(job: _Job, index: int, fld: float, para: ParaxialData | None 
             if job.method != "geometric":
                 strehl = strehl_ratio(fine_t, pf, spacing)
     if primary_fine is None:  # the primary wavelength is not a bank wavelength: one more PSF
-        checked(primary_pf, job.primary_um)
-        fine_t = fn(primary_pf, grid, spacing, (0.0, 0.0))
-        primary_fine = fine_t.numpy()
+        m = alias_free_pixels(primary_pf, P, job.pixel_pitch_um, job.method)
+        checked(primary_pf, job.primary_um, m * job.k)
+        primary_fine = embed_centred(fn(primary_pf, m * job.k, spacing, (0.0, 0.0)).numpy(), grid)
+        fine_t = torch.from_numpy(primary_fine)
         if job.method != "geometric":
             strehl = strehl_ratio(fine_t, primary_pf, spacing)
     return BankField(
