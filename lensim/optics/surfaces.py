@@ -17,6 +17,26 @@ NEWTON_MAX_ITER = 30
 NEWTON_TOL_MM = 1e-12
 
 
+def sqrt_nonneg(u: torch.Tensor) -> torch.Tensor:
+    """Square root of u >= 0, computed as u * rsqrt(u): torch's CPU sqrt kernel splits any
+    tensor above 2048 elements across threads (its rsqrt does not), and on a busy 2-core
+    machine every such parallel region waits milliseconds for a descheduled thread."""
+    return u * torch.rsqrt(torch.clamp(u, min=1e-300))
+
+
+def _power_series(r2: torch.Tensor, terms: dict[int, float]) -> torch.Tensor:
+    """sum(a_m * r2**m) for {m: a_m} with m >= 0, by Horner's rule."""
+    low, high = min(terms), max(terms)
+    acc = torch.full_like(r2, terms[high])
+    for m in range(high - 1, low - 1, -1):
+        acc.mul_(r2)
+        if terms.get(m):
+            acc.add_(terms[m])
+    for _ in range(low):
+        acc.mul_(r2)
+    return acc
+
+
 @dataclass
 class Surface:
     """One surface and the medium after it.
@@ -52,21 +72,20 @@ class Surface:
         """Sag z (mm) at squared radius r2 (mm^2). NaN-free: outside the conic's domain
         the square root is clamped (callers mask such rays)."""
         c, k = self.curvature, self.conic
-        root = torch.sqrt(torch.clamp(1.0 - (1.0 + k) * c * c * r2, min=0.0))
+        root = sqrt_nonneg(torch.clamp(1.0 - (1.0 + k) * c * c * r2, min=0.0))
         z = c * r2 / (1.0 + root)
-        for power, coef in self.asphere.items():
-            if coef:
-                z = z + coef * r2 ** (power // 2)
+        terms = {p // 2: coef for p, coef in self.asphere.items() if coef}
+        if terms:
+            z = z + _power_series(r2, terms)
         return z
 
     def sag_slope_over_r(self, r2: torch.Tensor) -> torch.Tensor:
         """(dz/dr) / r, so that dz/dx = x * this and dz/dy = y * this."""
         c, k = self.curvature, self.conic
-        root = torch.sqrt(torch.clamp(1.0 - (1.0 + k) * c * c * r2, min=1e-30))
-        g = c / root
-        for power, coef in self.asphere.items():
-            if coef:
-                g = g + coef * power * r2 ** (power // 2 - 1)
+        g = c * torch.rsqrt(torch.clamp(1.0 - (1.0 + k) * c * c * r2, min=1e-30))
+        terms = {p // 2 - 1: coef * p for p, coef in self.asphere.items() if coef}
+        if terms:
+            g = g + _power_series(r2, terms)
         return g
 
     def in_domain(self, r2: torch.Tensor) -> torch.Tensor:

@@ -14,7 +14,7 @@ import numpy as np
 import torch
 
 from lensim.optics.lens import Lens
-from lensim.optics.surfaces import Surface
+from lensim.optics.surfaces import Surface, sqrt_nonneg
 
 DTYPE = torch.float64
 
@@ -143,7 +143,7 @@ def trace_surface(
     return Rays(new_pos, new_d, opl, valid), status
 
 
-def trace(
+def trace_reference(
     lens: Lens,
     rays: Rays,
     wavelength_um: torch.Tensor,
@@ -154,11 +154,8 @@ def trace(
     apertures: bool = True,
     indices: torch.Tensor | None = None,
 ) -> TraceResult:
-    """Trace rays (in the medium before surface `start`) through surfaces start..end-1 and,
-    if to_image and end is the last surface, on to the image plane.
-
-    wavelength_um must broadcast against the rays' batch shape.
-    """
+    """trace(), one surface at a time over the whole batch with trace_surface(): the
+    plain reference implementation (also used when gradients are needed)."""
     end = lens.num_surfaces if end is None else end
     n = media_indices(lens, wavelength_um) if indices is None else indices
     zv = lens.vertex_z()
@@ -184,3 +181,379 @@ def trace(
             positions.append(rays.position)
     surface_positions = torch.stack(positions) if record and positions else None
     return TraceResult(rays, status, failed_at, surface_positions)
+
+
+# ---------------------------------------------------------------------------------------
+# The fast path. Rays are flattened and cut into chunks of CHUNK_RAYS; each chunk runs
+# through every surface as separate contiguous x, y, z, L, M, N, OPL vectors with in-place
+# operations, so its working set stays in cache and no large temporaries are allocated.
+# Chunks are smaller than torch's intra-op grain size, so each operation runs on one core,
+# and the chunks run in parallel threads (torch releases the GIL inside its kernels), one
+# per torch thread. Surfaces of each kind use their shortest exact formulas: planes a
+# transfer, spheres and conics a closed-form root and an analytic normal, aspheres Newton.
+# Per-ray failures are recorded as (surface index + 1) * 4 + status code.
+
+CHUNK_RAYS = 32767  # just below torch's GRAIN_SIZE (32768): each operation stays on one core
+_EXECUTORS: dict[int, "ThreadPoolExecutor"] = {}
+
+
+@dataclass(frozen=True)
+class _Step:
+    """One surface (or the image plane) as the fast tracer sees it."""
+
+    index: int  # surface index; lens.num_surfaces for the image plane
+    shift: float  # mm from the previous vertex (subtracted from the local z)
+    kind: str  # 'plane', 'sphere', 'conic' or 'asphere'
+    surface: Surface
+    r2_max: float | None
+    r2_min: float | None
+    interact: bool
+    backwards_ok: bool
+
+
+def _kind(s: Surface) -> str:
+    if s.is_aspheric:
+        return "asphere"
+    if s.curvature == 0.0:
+        return "plane"
+    return "sphere" if s.conic == 0.0 else "conic"
+
+
+def _steps(lens: Lens, start: int, end: int, to_image: bool, apertures: bool) -> list[_Step]:
+    zv = lens.vertex_z()
+    steps = []
+    surfaces = [(i, lens.surfaces[i], True) for i in range(start, end)]
+    if to_image and end == lens.num_surfaces:
+        surfaces.append((end, Surface(clear_radius=lens.image_clear_radius), False))
+    for j, (i, s, interact) in enumerate(surfaces):
+        r2_max = s.clear_radius**2 * (1 + 1e-12) if (apertures and s.clear_radius is not None) else None
+        r2_min = s.obscuration_radius**2 if (apertures and s.obscuration_radius is not None) else None
+        shift = 0.0 if j == 0 else float(zv[i] - zv[surfaces[j - 1][0]])
+        steps.append(_Step(i, shift, _kind(s), s, r2_max, r2_min, interact, j == 0))
+    return steps
+
+
+def _intersect(st: _Step, x, y, z, L, M, N, valid):
+    """Path length t (mm) from the current point (z local to this surface's vertex) to the
+    surface, and the hit mask (before the backwards test)."""
+    s = st.surface
+    t = torch.div(z, N).neg_()  # to the vertex plane
+    ok_dir = N.abs() > 1e-12
+    if st.kind == "plane":
+        return t, ok_dir
+    c, k = s.curvature, s.conic
+    x1 = torch.addcmul(x, t, L)
+    y1 = torch.addcmul(y, t, M)
+    r2 = x1 * x1
+    r2.addcmul_(y1, y1)
+    b = x1 * L
+    b.addcmul_(y1, M).mul_(c).sub_(N)
+    disc = b * b
+    if k == 0.0:
+        disc.add_(r2, alpha=-c * c)
+    else:
+        a = N * N
+        a.mul_(c * k).add_(c)
+        disc.addcmul_(a, r2, value=-c)
+    hit = disc >= 0.0
+    hit &= ok_dir
+    denom = sqrt_nonneg(disc.clamp_(min=0.0)).copysign_(b).add_(b)
+    t1 = r2.mul_(-c).div_(denom)  # conic root measured from the vertex plane
+    if st.kind == "asphere":
+        from lensim.optics.surfaces import NEWTON_MAX_ITER, NEWTON_TOL_MM
+
+        t1 = torch.where(torch.isfinite(t1), t1, torch.zeros_like(t1))
+        live = valid & hit
+        for _ in range(NEWTON_MAX_ITER):
+            xx = torch.addcmul(x1, t1, L)
+            yy = torch.addcmul(y1, t1, M)
+            rr = xx * xx
+            rr.addcmul_(yy, yy)
+            f = t1 * N
+            f.sub_(s.sag(rr))
+            fp = xx.mul_(L).addcmul_(yy, M).mul_(s.sag_slope_over_r(rr)).neg_().add_(N)
+            fp_ok = fp.abs() > 1e-12
+            step = f.div_(torch.where(fp_ok, fp, torch.ones_like(fp)))
+            t1 = t1 - step
+            converged = step.abs() < NEWTON_TOL_MM
+            if bool(converged[live].all()):
+                break
+        hit &= converged & fp_ok
+    t.add_(t1)
+    hit &= torch.isfinite(t)
+    if st.kind != "sphere" and (k > -1.0 or st.kind == "asphere"):
+        xn = torch.addcmul(x, t, L)
+        yn = torch.addcmul(y, t, M)
+        rn = xn * xn
+        rn.addcmul_(yn, yn)
+        hit &= s.in_domain(rn)
+    return t, hit
+
+
+def _normal(st: _Step, x, y, z):
+    """Unit normal (nx, ny, nz) pointing along +z at the vertex; None for a plane."""
+    s = st.surface
+    if st.kind == "plane":
+        return None
+    c, k = s.curvature, s.conic
+    if st.kind == "sphere":  # on the sphere (-c x, -c y, 1 - c z) is a unit vector
+        return x * -c, y * -c, torch.mul(z, -c).add_(1.0)
+    if st.kind == "conic":
+        nx, ny, nz = x * -c, y * -c, torch.mul(z, -c * (1.0 + k)).add_(1.0)
+    else:
+        r2 = x * x
+        r2.addcmul_(y, y)
+        g = s.sag_slope_over_r(r2)
+        nx, ny, nz = (x * g).neg_(), (y * g).neg_(), torch.ones_like(x)
+    inv = nx * nx
+    inv.addcmul_(ny, ny).addcmul_(nz, nz).rsqrt_()
+    return nx.mul_(inv), ny.mul_(inv), nz.mul_(inv)
+
+
+def _trace_chunk(steps: list[_Step], comps: list[torch.Tensor], n: list, fail: torch.Tensor,
+                 record: list[torch.Tensor] | None, zv: np.ndarray) -> None:
+    """Trace one chunk in place: comps = [x, y, z (local to steps[0]'s vertex), L, M, N,
+    opl, valid]; n: index of every medium (floats or per-ray tensors); fail: int16 codes.
+    While every ray of the chunk is valid the masking steps are skipped."""
+    x, y, z, L, M, N, opl, valid = comps
+    all_valid = bool(valid.all())
+    for j, st in enumerate(steps):
+        if st.shift:
+            z.sub_(st.shift)
+        n1 = n[st.index]
+        t, hit = _intersect(st, x, y, z, L, M, N, valid)
+        if not st.backwards_ok:
+            hit &= t > -1e-9
+        code = (st.index + 1) * 4
+        if not (all_valid and bool(hit.all())):
+            miss = valid & ~hit
+            fail.masked_fill_(miss, code + MISSED)
+            valid ^= miss
+            t = torch.where(valid, t, 0.0)
+            all_valid = False
+        x.addcmul_(t, L)
+        y.addcmul_(t, M)
+        z.addcmul_(t, N)
+        if isinstance(n1, torch.Tensor):
+            opl.addcmul_(t, n1)
+        else:
+            opl.add_(t, alpha=n1)
+        if st.r2_max is not None or st.r2_min is not None:
+            rr = x * x
+            rr.addcmul_(y, y)
+            out = rr > st.r2_max if st.r2_max is not None else torch.zeros_like(valid)
+            if st.r2_min is not None:
+                out |= rr < st.r2_min
+            if not (all_valid and not bool(out.any())):
+                out &= valid
+                fail.masked_fill_(out, code + VIGNETTED)
+                valid ^= out
+                all_valid = False
+        if record is not None:
+            record[j][:, 0].copy_(x)
+            record[j][:, 1].copy_(y)
+            torch.add(z, float(zv[st.index]), out=record[j][:, 2])
+        if not st.interact:
+            continue
+        n2 = n[st.index + 1]
+        s = st.surface
+        if s.is_mirror:
+            nrm = _normal(st, x, y, z)
+            if nrm is None:
+                if all_valid:
+                    N.neg_()
+                else:
+                    N.copy_(torch.where(valid, -N, N))
+                continue
+            nx, ny, nz = nrm
+            dn = L * nx
+            dn.addcmul_(M, ny).addcmul_(N, nz).mul_(-2.0)
+            if not all_valid:
+                dn = torch.where(valid, dn, 0.0)
+            L.addcmul_(dn, nx)
+            M.addcmul_(dn, ny)
+            N.addcmul_(dn, nz)
+            continue
+        scalar = not isinstance(n1, torch.Tensor) and not isinstance(n2, torch.Tensor)
+        if scalar and n1 == n2:
+            continue  # no refraction (air to air, a dummy or stop surface)
+        mu = n1 / n2
+        c = s.curvature
+        if st.kind == "sphere":
+            # the unit normal on a sphere is (-c x, -c y, 1 - c z): never stored
+            nrm = None
+            cos_i = x * L
+            cos_i.addcmul_(y, M).addcmul_(z, N).mul_(-c).add_(N)
+        else:
+            nrm = _normal(st, x, y, z)
+            cos_i = N.clone() if nrm is None else torch.mul(L, nrm[0]).addcmul_(M, nrm[1]).addcmul_(N, nrm[2])
+        ct = cos_i * cos_i
+        if scalar:
+            ct.mul_(mu * mu).add_(1.0 - mu * mu)
+        else:
+            mu2 = mu * mu
+            ct.mul_(mu2).sub_(mu2).add_(1.0)
+        if not (scalar and mu <= 1.0):  # TIR needs n1 > n2
+            tir = ct < 0.0
+            if not (all_valid and not bool(tir.any())):
+                tir &= valid
+                fail.masked_fill_(tir, code + TIR)
+                valid ^= tir
+                all_valid = False
+        kk = sqrt_nonneg(ct.clamp_(min=0.0)).copysign_(cos_i).sub_(cos_i.mul_(mu))
+        if all_valid:
+            scale = mu
+        else:
+            kk = torch.where(valid, kk, 0.0)
+            scale = valid.to(x.dtype).mul_(mu - 1.0).add_(1.0)  # 1 for invalid rays: they keep their direction
+        L.mul_(scale)
+        M.mul_(scale)
+        N.mul_(scale)
+        if st.kind == "sphere":
+            L.addcmul_(kk, x, value=-c)
+            M.addcmul_(kk, y, value=-c)
+            N.add_(kk).addcmul_(kk, z, value=-c)
+        elif nrm is None:
+            N.add_(kk)
+        else:
+            L.addcmul_(kk, nrm[0])
+            M.addcmul_(kk, nrm[1])
+            N.addcmul_(kk, nrm[2])
+
+
+def _index_groups(n: torch.Tensor, wavelength_um: torch.Tensor, batch: torch.Size) -> list[tuple[int, int, list | torch.Tensor]]:
+    """Split the flattened batch into (start, stop, media indices) with one wavelength per
+    block where the layout allows it (indices as Python floats), else per-ray tensors."""
+    S1 = n.shape[0]
+    B = int(np.prod(batch)) if len(batch) else 1
+    wl_shape = tuple(wavelength_um.shape)
+    if wavelength_um.numel() == 1:
+        return [(0, B, [float(v) for v in n.reshape(S1, -1)[:, 0]])]
+    if len(wl_shape) <= len(batch):
+        ws = (1,) * (len(batch) - len(wl_shape)) + wl_shape
+        a = max(i for i, v in enumerate(ws) if v > 1)
+        if all(ws[i] == batch[i] for i in range(a + 1)):
+            block = int(np.prod(batch[a + 1:])) if a + 1 < len(batch) else 1
+            if block >= 256:
+                cols = n.reshape(S1, -1).detach().cpu().numpy()
+                return [(b * block, (b + 1) * block, [float(v) for v in cols[:, b]]) for b in range(B // block)]
+    full = n.reshape((S1,) + (1,) * (len(batch) - len(wl_shape)) + wl_shape).expand((S1,) + tuple(batch))
+    return [(0, B, full.reshape(S1, B))]
+
+
+class _ChunkSource:
+    """Read [a, b) of a tensor's flattened batch without copying the whole batch: a flat
+    view when the (expanded) tensor allows one, else one row of its last batch dimension at
+    a time (rays expanded over wavelengths or fields), or, for short rows, one copy."""
+
+    def __init__(self, t: torch.Tensor, batch: tuple, tail: tuple):
+        e = t.expand(batch + tail)
+        B = int(np.prod(batch)) if batch else 1
+        self.rows = None
+        try:
+            self.flat = e.view((B,) + tail)
+        except RuntimeError:
+            if len(batch) > 1 and batch[-1] >= 1024:
+                self.rows, self.e, self.lead = batch[-1], e, batch[:-1]
+            else:
+                self.flat = e.reshape((B,) + tail)
+
+    def get(self, a: int, b: int) -> torch.Tensor:
+        if self.rows is None:
+            return self.flat[a:b]
+        r, off = divmod(a, self.rows)
+        return self.e[tuple(int(i) for i in np.unravel_index(r, self.lead))][off:off + (b - a)]
+
+
+def _executor(workers: int):
+    from concurrent.futures import ThreadPoolExecutor
+
+    if workers not in _EXECUTORS:
+        _EXECUTORS[workers] = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="lensim-trace")
+    return _EXECUTORS[workers]
+
+
+def trace(
+    lens: Lens,
+    rays: Rays,
+    wavelength_um: torch.Tensor,
+    start: int = 0,
+    end: int | None = None,
+    to_image: bool = True,
+    record: bool = False,
+    apertures: bool = True,
+    indices: torch.Tensor | None = None,
+) -> TraceResult:
+    """Trace rays (in the medium before surface `start`) through surfaces start..end-1 and,
+    if to_image and end is the last surface, on to the image plane.
+
+    wavelength_um must broadcast against the rays' batch shape. Rays that fail stay finite
+    and stop: one that misses a surface keeps its state from before that surface, one that
+    is vignetted or totally internally reflected stops on the surface (direction unchanged).
+    Runs the chunked fast path below; trace_reference() is the plain one (same results for
+    valid rays to rounding) and is used when an input requires gradients.
+    """
+    end = lens.num_surfaces if end is None else end
+    if any(t.requires_grad for t in (rays.position, rays.direction, rays.opl)):
+        return trace_reference(lens, rays, wavelength_um, start, end, to_image, record, apertures, indices)
+    n = media_indices(lens, wavelength_um) if indices is None else indices
+    zv = lens.vertex_z()
+    steps = _steps(lens, start, end, to_image, apertures)
+    batch = tuple(rays.shape)
+    device = rays.opl.device
+    B = int(np.prod(batch)) if len(batch) else 1
+    P = batch[-1] if batch else 1
+    sources = [_ChunkSource(t, batch, tail) for t, tail in
+               ((rays.position, (3,)), (rays.direction, (3,)), (rays.opl, ()), (rays.valid, ()))]
+    by_rows = any(src.rows is not None for src in sources)
+    out_pos = torch.empty(B, 3, dtype=DTYPE, device=device)
+    out_dir = torch.empty(B, 3, dtype=DTYPE, device=device)
+    out_opl = torch.empty(B, dtype=DTYPE, device=device)
+    out_valid = torch.empty(B, dtype=torch.bool, device=device)
+    status = torch.empty(B, dtype=torch.int8, device=device)
+    failed_at = torch.empty(B, dtype=torch.int16, device=device)
+    rec = torch.empty(len(steps), B, 3, dtype=DTYPE, device=device) if record and steps else None
+    z0, z_last = float(zv[start]) if start < len(zv) else 0.0, float(zv[steps[-1].index]) if steps else 0.0
+
+    def run(task) -> None:
+        a, b, nv = task
+        p, d, o, v = (src.get(a, b) for src in sources)
+        comps = [p[:, 0].clone(), p[:, 1].clone(), p[:, 2] - z0, d[:, 0].clone(), d[:, 1].clone(), d[:, 2].clone(),
+                 o.clone(), v.clone()]
+        nn = nv if isinstance(nv, list) else [nv[i, a:b] for i in range(nv.shape[0])]
+        chunk_rec = [rec[j, a:b] for j in range(len(steps))] if rec is not None else None
+        fail = torch.zeros(b - a, dtype=torch.int16, device=device)
+        if steps:
+            _trace_chunk(steps, comps, nn, fail, chunk_rec, zv)
+            comps[2].add_(z_last)
+        else:
+            comps[2].add_(z0)
+        for k in range(3):
+            out_pos[a:b, k].copy_(comps[k])
+            out_dir[a:b, k].copy_(comps[3 + k])
+        out_opl[a:b].copy_(comps[6])
+        out_valid[a:b].copy_(comps[7])
+        status[a:b].copy_(fail % 4)
+        failed_at[a:b].copy_(torch.div(fail, 4, rounding_mode="floor").sub_(1))
+
+    chunk = CHUNK_RAYS if device.type == "cpu" else max(B, 1)
+    tasks = []
+    for g0, g1, nv in _index_groups(n, wavelength_um, batch):
+        a = g0
+        while a < g1:  # chunks never cross a row of the last batch dimension when read by rows
+            b = min(a + chunk, g1, (a // P + 1) * P if by_rows else g1)
+            tasks.append((a, b, nv))  # a tensor nv spans the whole batch (g0 = 0)
+            a = b
+    workers = torch.get_num_threads() if device.type == "cpu" else 1
+    if workers > 1 and len(tasks) >= 4 * workers:  # fewer chunks: the pool costs more than it gains
+        for f in [_executor(workers).submit(run, t) for t in tasks]:
+            f.result()
+    else:
+        for t in tasks:
+            run(t)
+    status = status.reshape(batch)
+    failed_at = failed_at.reshape(batch)
+    out = Rays(out_pos.reshape(tuple(batch) + (3,)), out_dir.reshape(tuple(batch) + (3,)), out_opl.reshape(batch),
+               out_valid.reshape(batch))
+    surface_positions = rec.reshape((len(steps),) + tuple(batch) + (3,)) if rec is not None else None
+    return TraceResult(out, status, failed_at, surface_positions)
