@@ -121,10 +121,12 @@ def simulate(
     kelvin: float | None = None,
     tile: int = 64,
     mapping: SensorMapping | None = None,
+    raw_path: str | Path | None = None,
 ) -> tuple[torch.Tensor, CaptureParams]:
     """What the camera would deliver for a sharp sRGB image (3, H, W) in [0, 1].
 
     mapping: where the image lies on the sensor (default: fitted to the whole sensor).
+    raw_path: also write the noisy, quantized Bayer mosaic there (16-bit TIFF + JSON).
     Returns the simulated sRGB image (3, H, W) float32 and every random draw (colour
     temperature, noise levels) in CaptureParams; the same generator state gives the same
     result."""
@@ -133,8 +135,23 @@ def simulate(
     if blur:
         check_bank_fits(bank, mapping, str(bank.directory or "<bank>"))
     hook = (lambda cam: blur_energy_image(cam, bank, mapping, relative_illumination, tile)) if blur else None
-    out, params = simulate_capture(image, sensor, generator, blur=hook, noise=noise, kelvin=kelvin, method=demosaic,
-                                   bits=bits)
+    if raw_path is None:
+        out, params = simulate_capture(image, sensor, generator, blur=hook, noise=noise, kelvin=kelvin,
+                                       method=demosaic, bits=bits)
+    else:
+        from lensim.sensor.isp import add_noise, mosaic, quantize_raw, raw_to_srgb, unprocess, write_raw_tiff
+
+        # the same stages and draw order as simulate_capture, keeping the mosaic
+        cam, params = unprocess(image, sensor, generator, kelvin)
+        if hook is not None:
+            cam = hook(cam)
+        raw = mosaic(cam, sensor.bayer_pattern)
+        if noise:
+            params.shot, params.read = sensor.sample_noise(generator)
+            raw = add_noise(raw, params.shot, params.read, generator)
+        raw = quantize_raw(raw, sensor)
+        write_raw_tiff(raw_path, raw, sensor, params)
+        out = raw_to_srgb(raw, params, method=demosaic, bits=bits)
     params.extra.update({"pitch_um": mapping.pitch_um, "x0_mm": mapping.x0_mm, "y0_mm": mapping.y0_mm,
                          "relative_illumination": relative_illumination,
                          "blur": blur, "demosaic": demosaic})

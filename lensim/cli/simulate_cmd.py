@@ -9,6 +9,7 @@ import torch
 import typer
 from lensim import assets
 from lensim.cli.common import console, parse_wavelengths, print_json, progress_bar
+from lensim.errors import InputError
 from lensim.images import read_image, write_image
 from lensim.optics.lens_file import atomic_write_text, load_lens
 from lensim.psf.bank import PSFBank
@@ -48,7 +49,9 @@ def simulate_command(
     blur: bool = typer.Option(True, "--blur/--no-blur", help="Apply the lens's PSFs."),
     shading: bool = typer.Option(True, "--relative-illumination/--no-relative-illumination", help="Apply lens shading."),
     demosaic: str = typer.Option("ahd", "--demosaic", help="ahd, malvar, menon or bilinear."),
-    bits: int = typer.Option(8, "--bits", help="Output bit depth: 8 (PNG) or 16 (16-bit PNG)."),
+    bits: int = typer.Option(8, "--bits", help="Output bit depth: 8 or 16."),
+    fmt: str = typer.Option("png", "--format", help="Output file type: png or tif."),
+    raw: bool = typer.Option(False, "--raw", help="Also write the noisy Bayer mosaic as a 16-bit TIFF (+ JSON metadata)."),
     fields: int = typer.Option(32, "--fields", help="Radial fields of a computed bank."),
     wavelengths: str = typer.Option("400:700:20", "--wavelengths-nm", help="Bank wavelengths, start:stop:step in nm."),
     pupil_samples: int = typer.Option(64, "--pupil-samples", help="Pupil samples of a computed bank."),
@@ -85,9 +88,12 @@ def simulate_command(
                                             quiet)
             bank = banks.get((h, w), bank)
         gen = torch.Generator().manual_seed(seed + i)
+        raw_path = output / (path.stem + "_raw.tif") if raw else None
         out, params = simulate(img, bank, sensor, gen, blur=blur, noise=noise, relative_illumination=shading,
-                               demosaic=demosaic, bits=bits)
-        target = output / (path.stem + ".png")
+                               demosaic=demosaic, bits=bits, raw_path=raw_path)
+        if fmt not in ("png", "tif"):
+            raise InputError("--format", None, f"expected png or tif, got {fmt!r}")
+        target = output / f"{path.stem}.{fmt}"
         write_image(target, out, bits)
         info = {"input": str(path), "output": str(target), "seed": seed + i, "lens": lens.source, "sensor": sensor.name,
                 "bank": None if bank is None else str(bank.directory), **params.to_dict()}
