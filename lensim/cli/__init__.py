@@ -9,6 +9,7 @@ import typer
 from lensim.cli.common import console, err_console, run_guarded
 from lensim.cli.assets_cmd import assets_command
 from lensim.cli.dataset_cmd import dataset_app
+from lensim.cli.evaluate_cmd import evaluate_command
 from lensim.cli.lens_cmd import lens_app
 from lensim.cli.psf_cmd import psf_app
 from lensim.cli.simulate_cmd import simulate_command
@@ -25,6 +26,7 @@ app.add_typer(psf_app, name="psf")
 app.command("assets")(assets_command)
 app.command("simulate")(simulate_command)
 app.add_typer(dataset_app, name="dataset")
+app.command("evaluate")(evaluate_command)
 
 
 def main() -> None:

@@ -1,0 +1,325 @@
+"""Evaluation harness: PSNR / SSIM of restoration methods on a pairs dataset, overall and
+per field zone (issue 5, `lensim evaluate`).
+
+A pairs dataset (lensim.data.pairs) holds aligned crops: the simulated camera image
+(``input``) and the sharp original (``target``), each with the absolute sensor position of
+its top-left pixel. Every method restores every input crop; the result is scored against
+the target with lensim.evaluate.metrics (sRGB values, data range 1; zones by each
+pixel's normalized radius on the sensor: centre < 1/3, middle 1/3..2/3, edge >= 2/3 of the
+sensor half-diagonal). The method ``input`` (the aberrated crop itself) is always
+evaluated first, as the reference every gain is measured from.
+
+A method is a callable ``method(image, ctx) -> image``: image (3, H, W) float32 sRGB in
+[0, 1]; ctx a :class:`CropContext` (sensor mapping, sensor, PSF bank, capture record, the
+crop's sensor offset). Outputs are clipped to [0, 1] before scoring. Built-in methods:
+``input``, ``wiener``, ``rl``, ``unsharp`` (lensim.evaluate.baselines; the first two are
+oracles using the true bank), and ``model`` / ``plain-unet`` from `lensim train`
+checkpoints (:func:`checkpoint_method`, via lensim.restore.infer).
+
+Aggregation (the summary JSON):
+  * ``psnr_db``, ``ssim``: mean over crops of each crop's PSNR (dB) and mean SSIM;
+  * per zone: ``psnr_db`` is the mean of the per-crop zone PSNRs weighted by each crop's
+    pixel count in that zone (crops with no pixel there do not count); ``ssim`` is the
+    mean of the SSIM map over all the zone's valid SSIM pixels of all crops (pixels at
+    least 5 px from a crop border). A zone with no pixel in the whole dataset scores NaN
+    (``null`` in the CLI's JSON).
+
+Summary shape (exactly): ``{"methods": {NAME: {"psnr_db": x, "ssim": x, "zones":
+{"centre": {"psnr_db": x, "ssim": x}, "middle": {...}, "edge": {...}}}}}``.
+Per-crop rows (:func:`evaluate_rows`, :func:`write_csv`) hold every score and the zone
+pixel counts; :func:`markdown_table` renders the summary.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+import torch
+
+from lensim.errors import InputError
+from lensim.evaluate import baselines
+from lensim.evaluate.metrics import ZONES, image_scores, normalized_radius
+from lensim.images import read_image
+from lensim.optics.lens_file import atomic_write_text
+from lensim.psf.bank import PSFBank
+from lensim.sensor.profile import SensorProfile, sensor_from_dict
+from lensim.simulate import SensorMapping, native_mapping
+
+MANIFEST = "manifest.json"
+#: Method names understood by :func:`builtin_method` (``model`` and ``plain-unet`` need a
+#: checkpoint: :func:`checkpoint_method`).
+BUILTIN_METHODS: tuple[str, ...] = ("input", "wiener", "rl", "unsharp")
+CHECKPOINT_METHODS: tuple[str, ...] = ("model", "plain-unet")
+
+
+@dataclass(frozen=True)
+class CropContext:
+    """What a method may know about a crop besides its pixels.
+
+    mapping: the crop's pixels on the sensor (pitch um, corner position mm); sensor: the
+    dataset's sensor profile; bank: the PSF bank the pairs were simulated with (None when
+    it could not be found); capture: the record's capture draw (ccm, white-balance gains,
+    noise), or None; top, left: sensor pixel of the crop's top-left pixel; record, crop:
+    indices in the manifest."""
+
+    mapping: SensorMapping
+    sensor: SensorProfile
+    bank: PSFBank | None
+    capture: Mapping[str, Any] | None
+    top: int
+    left: int
+    record: int
+    crop: int
+
+
+Method = Callable[[torch.Tensor, CropContext], torch.Tensor]
+
+
+# ---------------------------------------------------------------------------------------
+# methods
+
+
+def _need_bank(ctx: CropContext, name: str) -> PSFBank:
+    if ctx.bank is None:
+        raise InputError(None, "bank", f"method {name!r} needs the dataset's PSF bank; it was not found (pass its folder "
+                         "with --bank)")
+    return ctx.bank
+
+
+def builtin_method(name: str, **options: Any) -> Method:
+    """A built-in method by name: ``input`` (identity), ``wiener``, ``rl``, ``unsharp``;
+    options go to the baseline (e.g. ``iterations`` for rl, ``sigma_px`` for unsharp)."""
+    if name == "input":
+        return lambda image, ctx: image
+    if name == "wiener":
+        return lambda image, ctx: baselines.wiener(image, ctx.mapping, _need_bank(ctx, name), ctx.capture, **options)
+    if name == "rl":
+        return lambda image, ctx: baselines.richardson_lucy(image, ctx.mapping, _need_bank(ctx, name), ctx.capture,
+                                                            **options)
+    if name == "unsharp":
+        return lambda image, ctx: baselines.unsharp_mask(image, ctx.mapping, ctx.bank, ctx.capture, **options)
+    raise InputError(None, "methods", f"unknown method {name!r}; expected one of "
+                     f"{', '.join(BUILTIN_METHODS + CHECKPOINT_METHODS)}")
+
+
+def checkpoint_method(run: str | Path, lens: Mapping[str, Any] | None = None, sensor: Mapping[str, Any] | None = None,
+                      device: str = "cpu", tile: int = 512, overlap: int = 192) -> Method:
+    """A trained network (`lensim train` run folder or checkpoint) as a method: each crop is
+    restored by lensim.restore.infer.restore_image with its absolute sensor offset (native
+    scale) and the sensor's size in pixels. lens / sensor (dataset settings) make
+    load_checkpoint warn when the checkpoint was trained for another camera."""
+    from lensim.restore.infer import load_checkpoint, restore_image
+
+    model, _ = load_checkpoint(run, lens=dict(lens) if lens else None, sensor=dict(sensor) if sensor else None,
+                               device=device)
+
+    def restore(image: torch.Tensor, ctx: CropContext) -> torch.Tensor:
+        return restore_image(model, image, (float(ctx.top), float(ctx.left)),
+                             (float(ctx.sensor.height), float(ctx.sensor.width)), tile=tile, overlap=overlap)
+    return restore
+
+
+# ---------------------------------------------------------------------------------------
+# dataset
+
+
+def load_pairs_manifest(pairs_dir: str | Path) -> dict:
+    """The manifest of a pairs dataset; a one-line InputError naming the file otherwise."""
+    p = Path(pairs_dir) / MANIFEST
+    if not p.is_file():
+        raise InputError(str(p), None, "missing; expected a pairs dataset folder written by `lensim dataset make`")
+    try:
+        m = json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError) as e:
+        raise InputError(str(p), None, f"not valid JSON: {e}") from None
+    if not isinstance(m, dict) or m.get("format") != "lensim-pairs":
+        raise InputError(str(p), "format", "expected 'lensim-pairs'; not a pairs dataset manifest")
+    if not isinstance(m.get("records"), list) or not isinstance(m.get("sensor"), dict):
+        raise InputError(str(p), "records", "missing; expected the records and sensor of a finished dataset")
+    return m
+
+
+def _load_bank(manifest: Mapping[str, Any], pairs_dir: Path, bank: PSFBank | str | Path | None) -> PSFBank | None:
+    if isinstance(bank, PSFBank):
+        return bank
+    if bank is not None:
+        return PSFBank.load(bank)
+    path = manifest.get("bank")
+    if not path:
+        return None
+    for cand in (Path(path), pairs_dir / path):
+        if (cand / "manifest.json").is_file():
+            return PSFBank.load(cand)
+    return None
+
+
+def evaluate_rows(
+    pairs_dir: str | Path,
+    methods: Mapping[str, Method],
+    bank: PSFBank | str | Path | None = None,
+    sources: Sequence[str] | None = None,
+    max_crops: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> list[dict]:
+    """Score every method on every crop of a pairs dataset; one row per (crop, method).
+
+    methods: name -> method (``input`` is added first when absent). bank: the PSF bank
+    (object or folder; default the one the manifest names, if it exists). sources: keep
+    only records whose source photo's file name (or full path) is listed (e.g. the
+    held-out photos of a training run). max_crops: stop after this many crops.
+    progress(done, total) counts crops. Rows: record, crop, source, input, sensor_top,
+    sensor_left, method, psnr_db, ssim, mse and per zone <zone>_psnr_db, <zone>_ssim,
+    <zone>_pixels, <zone>_ssim_pixels."""
+    pairs_dir = Path(pairs_dir)
+    manifest = load_pairs_manifest(pairs_dir)
+    sensor = sensor_from_dict(manifest["sensor"], str(pairs_dir / MANIFEST))
+    the_bank = _load_bank(manifest, pairs_dir, bank)
+    all_methods: dict[str, Method] = {"input": builtin_method("input")}
+    all_methods.update(methods)
+    keep = set(sources) if sources is not None else None
+    crops = []
+    for ri, rec in enumerate(manifest["records"]):
+        src = str(rec.get("source", ""))
+        if keep is not None and src not in keep and Path(src).name not in keep:
+            continue
+        for ci, cr in enumerate(rec.get("crops", [])):
+            crops.append((ri, ci, rec, cr))
+    if max_crops is not None:
+        crops = crops[:max_crops]
+    if not crops:
+        raise InputError(str(pairs_dir), "records", "no crops to evaluate (check --sources)")
+    rows: list[dict] = []
+    if progress:
+        progress(0, len(crops))
+    for done, (ri, ci, rec, cr) in enumerate(crops, 1):
+        x, _ = read_image(pairs_dir / cr["input"])
+        y, _ = read_image(pairs_dir / cr["target"])
+        if x.shape != y.shape:
+            raise InputError(str(pairs_dir / cr["input"]), "size", f"is {tuple(x.shape)}; its target is {tuple(y.shape)}")
+        _, h, w = x.shape
+        top, left = int(cr["sensor_top"]), int(cr["sensor_left"])
+        ctx = CropContext(native_mapping(h, w, sensor, top, left), sensor, the_bank, rec.get("capture"), top, left,
+                          ri, ci)
+        rho = normalized_radius(h, w, top, left, sensor.height, sensor.width)
+        for name, method in all_methods.items():
+            out = method(x, ctx)
+            if tuple(out.shape) != tuple(x.shape):
+                raise ValueError(f"method {name!r} returned shape {tuple(out.shape)}; expected {tuple(x.shape)}")
+            s = image_scores(out.detach().float().cpu().clamp(0.0, 1.0), y, rho)
+            row = {"record": ri, "crop": ci, "source": rec.get("source", ""), "input": cr["input"], "sensor_top": top,
+                   "sensor_left": left, "method": name, "psnr_db": s["psnr_db"], "ssim": s["ssim"], "mse": s["mse"]}
+            for z in ZONES:
+                for k in ("psnr_db", "ssim", "pixels", "ssim_pixels"):
+                    row[f"{z}_{k}"] = s["zones"][z][k]
+            rows.append(row)
+        if progress:
+            progress(done, len(crops))
+    return rows
+
+
+def _mean(values: list[float], weights: list[float] | None = None) -> float:
+    v = np.asarray(values, dtype=np.float64)
+    wt = np.ones_like(v) if weights is None else np.asarray(weights, dtype=np.float64)
+    ok = np.isfinite(v) & (wt > 0)
+    if not ok.any():
+        return math.nan
+    return float(np.sum(v[ok] * wt[ok]) / np.sum(wt[ok]))
+
+
+def summarize(rows: Sequence[Mapping[str, Any]]) -> dict:
+    """The summary JSON of per-crop rows (shape and aggregation: module docstring). Method
+    order is that of first appearance in the rows."""
+    names: list[str] = []
+    for r in rows:
+        if r["method"] not in names:
+            names.append(r["method"])
+    out: dict = {"methods": {}}
+    for name in names:
+        rs = [r for r in rows if r["method"] == name]
+        zones = {}
+        for z in ZONES:
+            zones[z] = {"psnr_db": _mean([r[f"{z}_psnr_db"] for r in rs], [r[f"{z}_pixels"] for r in rs]),
+                        "ssim": _mean([r[f"{z}_ssim"] for r in rs], [r[f"{z}_ssim_pixels"] for r in rs])}
+        out["methods"][name] = {"psnr_db": _mean([r["psnr_db"] for r in rs]), "ssim": _mean([r["ssim"] for r in rs]),
+                                "zones": zones}
+    return out
+
+
+def evaluate(
+    pairs_dir: str | Path,
+    methods: Mapping[str, Method],
+    bank: PSFBank | str | Path | None = None,
+    sources: Sequence[str] | None = None,
+    max_crops: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    rows: list | None = None,
+) -> dict:
+    """PSNR / SSIM of each method (and ``input``) on a pairs dataset, overall and per zone,
+    as ``{"methods": {NAME: {"psnr_db", "ssim", "zones": {zone: {"psnr_db", "ssim"}}}}}``.
+    Arguments as :func:`evaluate_rows`; when ``rows`` is a list the per-crop rows are
+    appended to it."""
+    got = evaluate_rows(pairs_dir, methods, bank=bank, sources=sources, max_crops=max_crops, progress=progress)
+    if rows is not None:
+        rows.extend(got)
+    return summarize(got)
+
+
+# ---------------------------------------------------------------------------------------
+# writers
+
+
+def csv_text(rows: Sequence[Mapping[str, Any]]) -> str:
+    """Per-crop rows as CSV text (header from the first row; floats with 6 decimals,
+    NaN as empty)."""
+    if not rows:
+        return ""
+    buf = io.StringIO()
+    wr = csv.DictWriter(buf, fieldnames=list(rows[0].keys()), lineterminator="\n")
+    wr.writeheader()
+    for r in rows:
+        wr.writerow({k: ("" if isinstance(v, float) and not math.isfinite(v) else
+                         f"{v:.6f}" if isinstance(v, float) else v) for k, v in r.items()})
+    return buf.getvalue()
+
+
+def write_csv(rows: Sequence[Mapping[str, Any]], path: str | Path) -> Path:
+    """Write per-crop rows as CSV (atomically); returns the path."""
+    path = Path(path)
+    atomic_write_text(path, csv_text(rows))
+    return path
+
+
+def _fmt(x: float, digits: int) -> str:
+    return "–" if x is None or not math.isfinite(x) else f"{x:.{digits}f}"
+
+
+def markdown_table(summary: Mapping[str, Any]) -> str:
+    """The summary as a markdown table: one row per method, PSNR (dB) and SSIM overall and
+    per zone, and the PSNR gain over ``input`` (dB) when it is present."""
+    methods = summary["methods"]
+    base = methods.get("input")
+    head = ["method", "PSNR (dB)", "gain (dB)", "SSIM"]
+    for z in ZONES:
+        head += [f"{z} PSNR", f"{z} SSIM"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "|".join(["---"] + ["---:"] * (len(head) - 1)) + "|"]
+    for name, m in methods.items():
+        gain = m["psnr_db"] - base["psnr_db"] if base is not None else math.nan
+        cells = [name, _fmt(m["psnr_db"], 2), _fmt(gain, 2), _fmt(m["ssim"], 4)]
+        for z in ZONES:
+            cells += [_fmt(m["zones"][z]["psnr_db"], 2), _fmt(m["zones"][z]["ssim"], 4)]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def write_markdown(summary: Mapping[str, Any], path: str | Path, title: str | None = None) -> Path:
+    """Write the markdown table (with an optional heading) atomically; returns the path."""
+    path = Path(path)
+    text = (f"# {title}\n\n" if title else "") + markdown_table(summary)
+    atomic_write_text(path, text)
+    return path
