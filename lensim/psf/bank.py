@@ -402,11 +402,11 @@ def _compute_field(job: _Job, index: int, fld: float, para: ParaxialData | None 
         except InputError as e:
             raise InputError(lens.source, f"field {fld:g} ({value:g}) at {wl_um * 1e3:g} nm", e.message) from None
 
-    def checked(pf, wl_um: float, sub_grid: int) -> None:
+    def checked(pf, wl_um: float, sub_grid: int, offset: tuple[float, float] = (0.0, 0.0)) -> None:
         with warnings.catch_warnings(record=True) as rec:
             warnings.simplefilter("always")
             try:
-                check_sampling(lens, pf, sub_grid, spacing, job.method)
+                check_sampling(lens, pf, sub_grid, spacing, job.method, offset)
             except InputError as e:
                 raise InputError(lens.source, f"field {fld:g} at {wl_um * 1e3:g} nm",
                                  f"{e.message} (kernel {job.kernel_pixels} px of {job.pixel_pitch_um:g} um)") from None
@@ -435,8 +435,8 @@ def _compute_field(job: _Job, index: int, fld: float, para: ParaxialData | None 
         is_primary = abs(wl - job.primary_um) < 1e-9
         pf = primary_pf if is_primary else trace_field(wl)
         m = alias_free_pixels(pf, P, job.pixel_pitch_um, job.method)
-        checked(pf, wl, m * job.k)
         off = (ref - pf.chief[:2]).tolist()
+        checked(pf, wl, m * job.k, (off[0], off[1]))
         fine_t = fn(pf, m * job.k, spacing, (off[0], off[1]))
         fine = embed_centred(fine_t.numpy(), grid)
         fine_t = torch.from_numpy(fine)

@@ -47,8 +47,10 @@ class PSF:
     figures: dict = field(default_factory=dict)
 
 
-def check_sampling(lens: Lens, pf: PupilField, grid: int, spacing_um: float, method: str) -> None:
-    """Refuse sampling that would alias; warn, with the figures, when it is marginal."""
+def check_sampling(lens: Lens, pf: PupilField, grid: int, spacing_um: float, method: str,
+                   offset_mm: tuple[float, float] = (0.0, 0.0)) -> None:
+    """Refuse sampling that would alias; warn, with the figures, when it is marginal.
+    The window is centred on the chief-ray point plus offset_mm, as the PSF's."""
     src = lens.source
     window_um = grid * spacing_um
     lam_um = pf.wavelength_um / pf.n_image
@@ -66,7 +68,7 @@ def check_sampling(lens: Lens, pf: PupilField, grid: int, spacing_um: float, met
             warnings.warn(f"{src}: spacing {spacing_um:g} um exceeds the Airy radius {airy_um:.2f} um: the PSF is "
                           "undersampled; use a finer spacing (pixel integration bins it to pixels exactly)",
                           PSFSamplingWarning, stacklevel=3)
-    rel = (pf.image_xy - pf.chief[:2]) * 1e3
+    rel = (pf.image_xy - pf.chief[:2] - torch.tensor(offset_mm, dtype=pf.image_xy.dtype)) * 1e3
     half = window_um / 2.0
     inside = ((rel.abs() <= half).all(-1).to(torch.float64) * pf.power).sum().item() / pf.power.sum().item()
     if inside < 0.5:
@@ -104,7 +106,7 @@ def compute_psf(
     para = paraxial_data(lens)
     value = field_in_lens_units(lens, field)
     pf = pupil_field(lens, value, wavelength_um, pupil_samples, aiming, para)
-    check_sampling(lens, pf, grid, spacing_um, method)
+    check_sampling(lens, pf, grid, spacing_um, method, offset_mm)
     fn = {"huygens": huygens_psf, "fft": fft_psf, "geometric": geometric_psf}[method]
     data = fn(pf, grid, spacing_um, offset_mm)
     launch = object_field(lens, value, aiming, para)
