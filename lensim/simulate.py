@@ -102,6 +102,30 @@ def check_bank_fits(bank: PSFBank, mapping: SensorMapping, source: str = "<bank>
                          f"(the lens's field) reaches {r_max:.4g} mm; expected a lens covering the sensor diagonal")
 
 
+def apply_distortion(cam: torch.Tensor, bank: PSFBank, mapping: SensorMapping) -> torch.Tensor:
+    """Warp an image (C, H, W) as the lens distorts it: the pixel at real image radius r
+    shows the scene point whose paraxial (undistorted) image radius r' has its real chief
+    ray at r. r(r') comes from the bank's stored chief-ray and paraxial points (primary
+    wavelength; lateral colour stays in the kernels). Bilinear resampling, edge values
+    repeated outside the image."""
+    import torch.nn.functional as F
+
+    r_real = np.array([float(np.hypot(*f.reference_xy_mm)) for f in bank.fields])
+    r_par = np.array([float(np.hypot(*f.paraxial_xy_mm)) for f in bank.fields])
+    c, h, w = cam.shape
+    rows = torch.arange(h, dtype=torch.float64).unsqueeze(1).expand(h, w)
+    cols = torch.arange(w, dtype=torch.float64).unsqueeze(0).expand(h, w)
+    x, y = mapping.pixel_to_mm(rows, cols)
+    r = torch.sqrt(x * x + y * y)
+    r_src = torch.from_numpy(np.interp(r.numpy().ravel(), r_real, r_par).reshape(h, w))
+    scale = torch.where(r > 0, r_src / r.clamp_min(1e-12), torch.ones_like(r))
+    p = mapping.pitch_um * 1e-3
+    src_col = (x * scale - mapping.x0_mm) / p - 0.5
+    src_row = (y * scale - mapping.y0_mm) / p - 0.5
+    grid = torch.stack([src_col / (w - 1) * 2 - 1, src_row / (h - 1) * 2 - 1], -1).unsqueeze(0).to(cam.dtype)
+    return F.grid_sample(cam.unsqueeze(0), grid, mode="bilinear", padding_mode="border", align_corners=True)[0]
+
+
 def blur_energy_image(cam: torch.Tensor, bank: PSFBank, mapping: SensorMapping, relative_illumination: bool = True,
                       tile: int = 64) -> torch.Tensor:
     """Spatially-variant blur of an energy-domain (3, H, W) image with the bank."""
@@ -122,29 +146,39 @@ def simulate(
     tile: int = 64,
     mapping: SensorMapping | None = None,
     raw_path: str | Path | None = None,
+    distortion: bool = False,
 ) -> tuple[torch.Tensor, CaptureParams]:
     """What the camera would deliver for a sharp sRGB image (3, H, W) in [0, 1].
 
     mapping: where the image lies on the sensor (default: fitted to the whole sensor).
     raw_path: also write the noisy, quantized Bayer mosaic there (16-bit TIFF + JSON).
+    distortion: also warp the image by the lens's distortion (off by default, so training
+    pairs stay pixel-aligned with their targets).
     Returns the simulated sRGB image (3, H, W) float32 and every random draw (colour
     temperature, noise levels) in CaptureParams; the same generator state gives the same
     result."""
     _, h, w = image.shape
     mapping = mapping or map_to_sensor(h, w, sensor)
-    if blur:
+    if blur or distortion:
+        if bank is None:
+            raise InputError("<simulate>", "bank", "blur and distortion need a PSF bank")
         check_bank_fits(bank, mapping, str(bank.directory or "<bank>"))
-    hook = (lambda cam: blur_energy_image(cam, bank, mapping, relative_illumination, tile)) if blur else None
+
+    def hook(cam: torch.Tensor) -> torch.Tensor:
+        if distortion:
+            cam = apply_distortion(cam, bank, mapping)
+        return blur_energy_image(cam, bank, mapping, relative_illumination, tile) if blur else cam
+
     if raw_path is None:
-        out, params = simulate_capture(image, sensor, generator, blur=hook, noise=noise, kelvin=kelvin,
+        out, params = simulate_capture(image, sensor, generator, blur=hook if (blur or distortion) else None, noise=noise,
+                                       kelvin=kelvin,
                                        method=demosaic, bits=bits)
     else:
         from lensim.sensor.isp import add_noise, mosaic, quantize_raw, raw_to_srgb, unprocess, write_raw_tiff
 
         # the same stages and draw order as simulate_capture, keeping the mosaic
         cam, params = unprocess(image, sensor, generator, kelvin)
-        if hook is not None:
-            cam = hook(cam)
+        cam = hook(cam)
         raw = mosaic(cam, sensor.bayer_pattern)
         if noise:
             params.shot, params.read = sensor.sample_noise(generator)
@@ -153,6 +187,7 @@ def simulate(
         write_raw_tiff(raw_path, raw, sensor, params)
         out = raw_to_srgb(raw, params, method=demosaic, bits=bits)
     params.extra.update({"pitch_um": mapping.pitch_um, "x0_mm": mapping.x0_mm, "y0_mm": mapping.y0_mm,
+                         "distortion": distortion,
                          "relative_illumination": relative_illumination,
                          "blur": blur, "demosaic": demosaic})
     return out, params

@@ -48,6 +48,7 @@ def simulate_command(
     noise: bool = typer.Option(True, "--noise/--no-noise", help="Add shot and read noise."),
     blur: bool = typer.Option(True, "--blur/--no-blur", help="Apply the lens's PSFs."),
     shading: bool = typer.Option(True, "--relative-illumination/--no-relative-illumination", help="Apply lens shading."),
+    distortion: bool = typer.Option(False, "--distortion/--no-distortion", help="Also warp by the lens's distortion."),
     demosaic: str = typer.Option("ahd", "--demosaic", help="ahd, malvar, menon or bilinear."),
     bits: int = typer.Option(8, "--bits", help="Output bit depth: 8 or 16."),
     fmt: str = typer.Option("png", "--format", help="Output file type: png or tif."),
@@ -79,7 +80,7 @@ def simulate_command(
         h, w = img.shape[1:]
         mapping = map_to_sensor(h, w, sensor)
         bank = None
-        if blur:
+        if blur or distortion:
             if bank_dir is not None:
                 bank = banks.setdefault((h, w), PSFBank.load(bank_dir))
                 check_bank_fits(bank, mapping, str(bank_dir))
@@ -90,7 +91,7 @@ def simulate_command(
         gen = torch.Generator().manual_seed(seed + i)
         raw_path = output / (path.stem + "_raw.tif") if raw else None
         out, params = simulate(img, bank, sensor, gen, blur=blur, noise=noise, relative_illumination=shading,
-                               demosaic=demosaic, bits=bits, raw_path=raw_path)
+                               demosaic=demosaic, bits=bits, raw_path=raw_path, distortion=distortion)
         if fmt not in ("png", "tif"):
             raise InputError("--format", None, f"expected png or tif, got {fmt!r}")
         target = output / f"{path.stem}.{fmt}"
