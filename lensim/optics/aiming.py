@@ -177,47 +177,39 @@ def _aim(lens, fld, guess, target, wl, n, para):
 
 def object_field(lens: Lens, value: float, aiming: Aiming = "paraxial", para: ParaxialData | None = None) -> float:
     """Convert a field in the lens's unit to what rays are launched with: an angle (deg)
-    for an object at infinity, an object height (mm) or angle for a finite object.
+    for an object at infinity, an object height (mm) for a finite object (or the angle,
+    for angle fields).
 
-    Image-height fields are solved for: paraxial image height linearly, real image height
-    by secant iteration on the real chief ray (primary wavelength).
+    Image-height fields are solved for: paraxial image height exactly (it is linear in
+    tan(angle), or in object height), real image height by secant iteration on the real
+    chief ray (primary wavelength) from the paraxial solution.
     """
     para = para or paraxial_data(lens)
     if lens.field_type in ("angle", "object_height"):
         return float(value)
     if value == 0:
         return 0.0
-    # the launch quantity: angle for infinite objects, object height otherwise
     probe_lens = lens.with_changes(field_type="angle" if lens.infinite_object else "object_height")
-    unit = 1e-3 if lens.infinite_object else 1e-3 * lens.object_distance
-    slope = paraxial_image_height(probe_lens, unit, para) / unit
-    if slope == 0:
+    # paraxial image height per unit of tan(angle) (infinite object) or object height
+    unit = 1e-3
+    probe = math.degrees(math.atan(unit)) if lens.infinite_object else unit
+    per_unit = paraxial_image_height(probe_lens, probe, para) / unit
+    if per_unit == 0:
         raise InputError(lens.source, "fields", "the lens forms no image (zero paraxial image height per field)")
-    if not lens.infinite_object and abs(slope) > 0:
-        pass
-    guess = value / slope
-    if lens.infinite_object and abs(guess) >= 89.0:
-        # paraxial slope is per degree only near the axis: use tan mapping
-        guess = math.degrees(math.atan(value / (slope * 180 / math.pi)))
+    guess = math.degrees(math.atan(value / per_unit)) if lens.infinite_object else value / per_unit
     if lens.field_type == "paraxial_image_height":
-        if lens.infinite_object:
-            # paraxial image height is linear in tan(angle)
-            tan_slope = paraxial_image_height(probe_lens, math.degrees(math.atan(1e-3)), para) / 1e-3
-            return math.degrees(math.atan(value / tan_slope))
         return guess
-    # real image height: secant on the real chief ray
-    def height(f: float) -> float:
-        return chief_ray_image_height(probe_lens, f, aiming=aiming, para=para)
+
+    def miss(f: float) -> float:
+        return chief_ray_image_height(probe_lens, f, aiming=aiming, para=para) - value
 
     x0, x1 = guess * 0.95, guess
-    f0, f1 = height(x0) - value, height(x1) - value
+    f0, f1 = miss(x0), miss(x1)
     for _ in range(50):
-        if abs(f1) < 1e-10:
-            return x1
-        if f1 == f0:
+        if abs(f1) < 1e-10 or f1 == f0:
             break
         x0, x1, f0 = x1, x1 - f1 * (x1 - x0) / (f1 - f0), f1
-        f1 = height(x1) - value
+        f1 = miss(x1)
     if abs(f1) < 1e-8:
         return x1
     raise RayTraceError(f"{lens.source}: fields: no real chief ray reaches image height {value} mm")

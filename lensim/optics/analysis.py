@@ -1,8 +1,6 @@
 """Lens analyses: first-order summary, spot diagrams, distortion, relative illumination."""
 from __future__ import annotations
 
-import math
-
 from lensim.optics.aiming import Aiming, chief_ray_image_height, object_field
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import paraxial_data
@@ -47,7 +45,3 @@ def first_order_summary(lens: Lens, aiming: Aiming = "real") -> dict:
         "aiming": aiming,
         "notes": list(lens.notes),
     }
-
-
-def _finite(x: float) -> float | None:
-    return float(x) if math.isfinite(x) else None

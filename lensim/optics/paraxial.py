@@ -39,16 +39,6 @@ def trace_yu(lens: Lens, y: float, nu: float, wavelength_um: float, start: int =
     return np.asarray(heights), nu
 
 
-def _linear_map(lens: Lens, wl: float, start: int, end: int, before_first_transfer: float = 0.0):
-    """2x2 map of (y, nu) at surface `start`'s vertex plane to (y, nu) just after surface end-1,
-    with y measured at surface end-1."""
-    cols = []
-    for y0, nu0 in ((1.0, 0.0), (0.0, 1.0)):
-        ys, nu = trace_yu(lens, y0, nu0, wl, start, end)
-        cols.append((ys[-1], nu))
-    return np.array([[cols[0][0], cols[1][0]], [cols[0][1], cols[1][1]]])
-
-
 @dataclass
 class ParaxialData:
     """First-order properties at one wavelength (mm; z global, first vertex at 0)."""

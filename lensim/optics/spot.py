@@ -76,9 +76,10 @@ def spot_diagram(
     res = trace(lens, rays, wl)
     chief_ok = res.rays.valid[:, :, 0]
     if not bool(chief_ok.all()):
-        wi, fi = torch.nonzero(~chief_ok)[0].tolist()
-        fail = res.first_failure(mask=torch.zeros_like(res.rays.valid).index_put_((torch.tensor([wi]), torch.tensor([fi]), torch.tensor([0])), torch.tensor(True)))
-        raise RayTraceError(describe_failure(lens, fields[fi], fail, "chief ray"))
+        fi = int(torch.nonzero(~chief_ok)[0, 1])
+        chief_mask = torch.zeros_like(res.rays.valid)
+        chief_mask[:, fi, 0] = True
+        raise RayTraceError(describe_failure(lens, fields[fi], res.first_failure(mask=chief_mask), "chief ray"))
     xy = res.rays.position[..., 1:, :2]
     return SpotDiagram(xy=xy, valid=res.rays.valid[..., 1:], chief=res.rays.position[..., 0, :2], fields=fields,
                        wavelengths_um=wls, weights=weights, primary=primary)
