@@ -114,7 +114,7 @@ def write_image(path: str | Path, image: torch.Tensor, bits: int = 8) -> None:
             import png  # pypng: 16-bit RGB PNG (Pillow cannot write it)
 
             h, w, _ = q.shape
-            png.Writer(w, h, greyscale=False, bitdepth=16).write(buf, q.reshape(h, w * 3).tolist())
+            png.Writer(w, h, greyscale=False, bitdepth=16).write(buf, iter(q.reshape(h, w * 3)))  # rows, no list copy
     else:
         import tifffile
 

@@ -13,6 +13,7 @@ from lensim.cli.evaluate_cmd import evaluate_command
 from lensim.cli.lens_cmd import lens_app
 from lensim.cli.psf_cmd import psf_app
 from lensim.cli.simulate_cmd import simulate_command
+from lensim.cli.train_cmd import restore_command, train_command
 
 app = typer.Typer(
     name="lensim",
@@ -27,6 +28,8 @@ app.command("assets")(assets_command)
 app.command("simulate")(simulate_command)
 app.add_typer(dataset_app, name="dataset")
 app.command("evaluate")(evaluate_command)
+app.command("train")(train_command)
+app.command("restore")(restore_command)
 
 
 def main() -> None:

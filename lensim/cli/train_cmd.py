@@ -1,0 +1,183 @@
+"""`lensim train` and `lensim restore`: train the field-aware network, restore photos.
+
+Register in lensim/cli/__init__.py with
+    app.command("train")(train_command)
+    app.command("restore")(restore_command)
+"""
+from __future__ import annotations
+
+import math
+import warnings
+from pathlib import Path
+
+import torch
+import typer
+
+from lensim.cli.common import console, print_json
+from lensim.errors import InputError
+
+
+def _parse_pair(text: str, option: str) -> tuple[int, int]:
+    try:
+        a, b = (int(v) for v in text.replace("x", ",").split(","))
+        return a, b
+    except ValueError:
+        raise InputError(option, None, f"expected two integers TOP,LEFT, got {text!r}") from None
+
+
+def train_command(
+    dataset: Path = typer.Argument(..., help="Pairs folder from `lensim dataset make`."),
+    output: Path = typer.Option(..., "-o", "--output", help="Run folder (checkpoints, logs)."),
+    epochs: int = typer.Option(30, "--epochs", help="Epochs in total (paper: 30)."),
+    batch_size: int = typer.Option(4, "--batch-size", help="Crops per step (per GPU under torchrun)."),
+    lr: float = typer.Option(1e-4, "--lr", help="Initial Adam learning rate (paper: 1e-4)."),
+    lr_halve_every: int = typer.Option(5, "--lr-halve-every", help="Halve the learning rate every N epochs (paper: 5)."),
+    crop: int = typer.Option(128, "--crop", help="Training sub-crop size in pixels (0: the stored crops)."),
+    width: int = typer.Option(32, "--width", help="Channels at full resolution (doubled at each scale)."),
+    depth: int = typer.Option(3, "--depth", help="Number of scales."),
+    deformable_groups: int = typer.Option(2, "--deformable-groups", help="Offset groups of each deformable conv."),
+    no_fov: bool = typer.Option(False, "--no-fov", help="Ablation: no field-of-view input channels."),
+    no_deformable: bool = typer.Option(False, "--no-deformable", help="Ablation: plain residual decoder blocks."),
+    no_context: bool = typer.Option(False, "--no-context", help="Ablation: no context block."),
+    val_fraction: float = typer.Option(0.2, "--val-fraction", help="Share of source photos held out for validation."),
+    steps_per_epoch: int = typer.Option(0, "--steps-per-epoch", help="Cap on steps per epoch (0: whole epochs)."),
+    time_budget: float = typer.Option(0.0, "--time-budget", help="Stop cleanly after this many minutes (0: none)."),
+    resume: bool = typer.Option(False, "--resume", help="Continue the run in OUTPUT from last.pt."),
+    seed: int = typer.Option(0, "--seed", help="Seed of initialisation, data order, crops and augmentation."),
+    device: str = typer.Option("cpu", "--device", help="cpu, cuda or cuda:N (mixed precision on CUDA)."),
+    no_amp: bool = typer.Option(False, "--no-amp", help="Full float32 on CUDA."),
+    threads: int = typer.Option(0, "--threads", help="CPU threads for PyTorch (0: PyTorch's default)."),
+    quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
+    json_out: bool = typer.Option(False, "--json", help="Print a summary as JSON (no progress output)."),
+) -> None:
+    """Train the field-aware restoration network (Adam, MSE, halving learning rate,
+    FOV-consistent augmentation, validation PSNR/SSIM per epoch; RUN/log.csv, steps.csv,
+    last.pt, best.pt). Multi-GPU: torchrun --nproc_per_node N -m lensim train ... --device cuda
+
+    Example: lensim train data/ -o runs/a --epochs 30 --crop 128 --time-budget 30
+    """
+    from lensim.restore.train import TrainConfig, TrainProgress, train
+
+    if threads > 0:
+        torch.set_num_threads(threads)
+    overrides = dict(
+        epochs=epochs, batch_size=batch_size, lr=lr, lr_halve_every=lr_halve_every, crop=crop or None, width=width,
+        depth=depth, deformable_groups=deformable_groups, use_fov=not no_fov, use_deformable=not no_deformable,
+        use_context=not no_context, val_fraction=val_fraction, max_steps_per_epoch=steps_per_epoch or None,
+        time_budget_s=time_budget * 60.0 if time_budget > 0 else None, seed=seed, device=device, amp=not no_amp,
+    )
+    if resume:  # architecture/recipe come from the checkpoint; pass only what the user may change
+        overrides = {k: overrides[k] for k in ("epochs", "time_budget_s", "device", "amp")}
+    prog = None
+    callback = None
+    if not quiet and not json_out:
+        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+        prog = Progress(TextColumn("epoch {task.fields[epoch]}/{task.fields[epochs]}"), BarColumn(),
+                        TextColumn("{task.completed}/{task.total} steps"), TextColumn("loss {task.fields[loss]}"),
+                        TextColumn("{task.fields[val]}"), TimeElapsedColumn(), console=console, transient=False)
+        task = prog.add_task("train", total=None, epoch=0, epochs=epochs, loss="-", val="")
+
+        def callback(p: TrainProgress) -> None:
+            if p.kind == "step":
+                prog.update(task, completed=p.batch, total=p.batches, epoch=p.epoch + 1, epochs=p.epochs,
+                            loss=f"{p.loss:.3e}")
+            else:
+                val = "" if p.val_psnr is None or math.isnan(p.val_psnr) else \
+                    f"val {p.val_psnr:.2f} dB / SSIM {p.val_ssim:.4f}"
+                prog.update(task, val=val)
+                console.print(f"epoch {p.epoch + 1}/{p.epochs} step {p.step}: loss {p.loss:.4e}"
+                              + (f", {val}" if val else "") + (" (time budget reached)" if p.kind == "stop" else ""),
+                              highlight=False)
+        prog.start()
+    try:
+        result = train(dataset, output, TrainConfig(), resume=resume, progress=callback, **overrides)
+    finally:
+        if prog:
+            prog.stop()
+    summary = {"run": result.run_dir, "epochs_done": result.epochs_done, "steps": result.step,
+               "stopped_early": result.stopped_early, "seconds": result.seconds, "val_psnr_db": result.val_psnr,
+               "val_ssim": result.val_ssim, "val_input_psnr_db": result.val_input_psnr,
+               "best_val_psnr_db": result.best_val_psnr}
+    if json_out:
+        print_json(summary)
+    elif not quiet:
+        vp = "n/a" if result.val_psnr is None else f"{result.val_psnr:.2f} dB (input {result.val_input_psnr:.2f} dB)"
+        console.print(f"trained {result.step} steps in {result.seconds:.0f} s; validation PSNR {vp}; "
+                      f"checkpoints in {result.run_dir}", highlight=False)
+
+
+def restore_command(
+    checkpoint: Path = typer.Argument(..., help="Run folder (best.pt, else last.pt) or checkpoint file."),
+    images: list[Path] = typer.Argument(..., help="Photos to restore (8/16-bit PNG, TIFF or JPEG)."),
+    output: Path = typer.Option(..., "-o", "--output", help="Output folder."),
+    sensor_file: str = typer.Option(None, "--sensor", help="Sensor profile of the photos (default: the one trained for)."),
+    lens_file: str = typer.Option(None, "--lens", help="Lens of the photos (only checked against the checkpoint's)."),
+    sensor_offset: str = typer.Option(None, "--sensor-offset", help="TOP,LEFT sensor pixel of the image's top-left "
+                                      "pixel at native scale (default: the image is a full frame)."),
+    tile: int = typer.Option(512, "--tile", help="Largest tile side in pixels."),
+    overlap: int = typer.Option(192, "--overlap", help="Least overlap of neighbouring tiles in pixels."),
+    bits: int = typer.Option(0, "--bits", help="Output bit depth 8 or 16 (0: that of the input)."),
+    device: str = typer.Option("cpu", "--device", help="cpu, cuda or cuda:N."),
+    threads: int = typer.Option(0, "--threads", help="CPU threads for PyTorch (0: PyTorch's default)."),
+    quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
+    json_out: bool = typer.Option(False, "--json", help="Print what was written as JSON."),
+) -> None:
+    """Restore photos with a trained network: tiled (any resolution), each tile fed its
+    absolute field-of-view coordinates; writes OUT/<name>.png (or .tif for TIFF input).
+
+    Example: lensim restore runs/a photo.png -o restored/
+    """
+    from lensim.images import read_image, write_image
+    from lensim.restore.infer import image_sensor_geometry, load_checkpoint, restore_image
+    from lensim.sensor.profile import load_sensor
+
+    if threads > 0:
+        torch.set_num_threads(threads)
+    if bits not in (0, 8, 16):
+        raise InputError("--bits", None, f"expected 8 or 16, got {bits}")
+    if tile < 16 or not 0 <= overlap < tile:
+        raise InputError("--tile/--overlap", None, f"expected a tile of at least 16 pixels and 0 <= overlap < tile, got "
+                         f"tile {tile}, overlap {overlap}")
+    lens_dict = None
+    if lens_file is not None:
+        from lensim.optics.lens_file import lens_to_dict, load_lens
+
+        lens_dict = lens_to_dict(load_lens(lens_file))
+    sensor_dict = load_sensor(sensor_file).to_dict() if sensor_file is not None else None
+    model, info = load_checkpoint(checkpoint, lens=lens_dict, sensor=sensor_dict, device=device)
+    sensor_data = sensor_dict or info.get("sensor") or {}
+    res = sensor_data.get("resolution") if isinstance(sensor_data, dict) else None
+    if not (isinstance(res, (list, tuple)) and len(res) == 2 and all(isinstance(v, int) and v > 0 for v in res)):
+        raise InputError(info["path"], "sensor", "records no sensor resolution; expected --sensor")
+    sensor_w, sensor_h = int(res[0]), int(res[1])
+    offset = _parse_pair(sensor_offset, "--sensor-offset") if sensor_offset else None
+    output.mkdir(parents=True, exist_ok=True)
+    written = []
+    for path in images:
+        img, in_bits = read_image(path)
+        _, h, w = img.shape
+        if offset is None:
+            scale = min(sensor_w / w, sensor_h / h)
+            if abs(scale - 1.0) > 0.01:
+                warnings.warn(f"{path}: {w}x{h} pixels mapped onto the {sensor_w}x{sensor_h} sensor at "
+                              f"{scale:.3g} sensor pixels per image pixel; the network was trained at native scale "
+                              f"(1), so blur sizes differ (give --sensor-offset for a native-scale crop)", UserWarning)
+        elif not (0 <= offset[0] <= sensor_h - h and 0 <= offset[1] <= sensor_w - w):
+            raise InputError(str(path), "--sensor-offset", f"a {w}x{h} image at (top, left) {offset} does not fit on "
+                             f"the {sensor_w}x{sensor_h} sensor")
+        top_left, size = image_sensor_geometry(h, w, (sensor_w, sensor_h), offset)
+        out = restore_image(model, img, top_left, size, tile=tile, overlap=overlap)
+        del img  # bound peak memory: only the output lives while it is encoded
+        out.clamp_(0, 1)
+        suffix = ".tif" if path.suffix.lower() in (".tif", ".tiff") else ".png"
+        dest = output / (path.stem + suffix)
+        write_image(dest, out, bits or in_bits)
+        written.append({"input": str(path), "output": str(dest), "bits": bits or in_bits, "width": w, "height": h})
+        if not quiet and not json_out:
+            console.print(f"restored {path} -> {dest}", highlight=False)
+    if json_out:
+        print_json({"checkpoint": info["path"], "images": written})
+
+
+__all__ = ["restore_command", "train_command"]

@@ -1,0 +1,278 @@
+"""Inference: loading checkpoints and tiled restoration of images of any size.
+
+Tiling (:func:`restore_image`): the image is cut into a grid of tiles of at most ``tile``
+pixels a side whose top-left corners lie at multiples of ``model.size_multiple`` (the
+network is shift-equivariant only for such shifts; see lensim.restore.network). Each tile
+is fed the FOV channels of its *absolute* sensor position (fov_channels at the image's
+sensor offset plus the tile's offset), so a tile sees exactly what the whole image would
+show it. Neighbouring tiles overlap by at least ``overlap`` pixels. In an overlap, each
+tile's blending weight is 0 over the ``margin`` pixels next to its inner edge (context
+only: these outputs miss part of their receptive field), rises linearly to 1 over the
+remaining overlap - 2 * margin pixels, and is 1 beyond; the weights are separable
+(w_y(r) * w_x(c)) and normalised to sum to 1 at every pixel, so no (H, W) weight buffer is
+needed. Tile edges on the image border get weight 1 up to the border (the whole-image pass
+pads there exactly as a border tile does). When ``margin`` exceeds the receptive-field
+radius (about 58 px for the default network with zero offsets, plus what learned offsets
+add) the result equals whole-image inference up to float rounding.
+
+Memory: the input, the (3, H, W) float32 output and one tile's activations. Measured on
+CPU: a 512-pixel tile of the default network peaks at about 1.3 GB (the full-resolution
+deformable conv lays its 9 samples out as a (C, 3H, 3W) image), a width-8 network at about
+0.4 GB; a 24-megapixel image takes 0.29 GB each for input and output. Smaller tiles cut
+the tile term (roughly with the tile area) at the cost of more overlap work: with the
+default tile 512 / overlap 192 each pixel is computed about 2.6 times.
+
+Sensor mapping (:func:`image_sensor_geometry`): a photo is assumed to be a full sensor
+frame mapped like lensim.simulate.map_to_sensor (fitted inside the sensor, centred, the
+limiting side spanning it) unless an explicit offset of its top-left pixel on the sensor
+is given (then it is at the sensor's native pixel scale, like lensim.simulate.native_mapping).
+"""
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+from typing import Any, Callable
+
+import torch
+
+from lensim.errors import InputError
+from lensim.restore.fov import fov_channels
+from lensim.restore.network import FieldAwareUNet
+
+CHECKPOINT_FORMAT = "lensim-restore-checkpoint"
+_REQUIRED = ("format", "model_config", "model_state")
+
+
+# ----------------------------------------------------------------------------- checkpoints
+
+
+def read_checkpoint(path: str | Path) -> dict[str, Any]:
+    """The dict stored in a lensim checkpoint (loaded with weights_only=True on CPU);
+    one-line InputError naming the file when it is missing, corrupt or not ours."""
+    path = Path(path)
+    src = str(path)
+    if not path.is_file():
+        raise InputError(src, None, "no such file; expected a lensim training checkpoint (.pt)")
+    try:
+        data = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as e:  # truncated zip, pickle garbage, foreign objects
+        msg = str(e).strip().splitlines()[0] if str(e).strip() else ""
+        raise InputError(src, None, f"is corrupt or not a lensim checkpoint ({type(e).__name__}: {msg[:200]})") from None
+    if not isinstance(data, dict) or data.get("format") != CHECKPOINT_FORMAT:
+        raise InputError(src, "format", f"expected a {CHECKPOINT_FORMAT!r} dict from `lensim train`")
+    missing = [k for k in _REQUIRED if k not in data]
+    if missing:
+        raise InputError(src, ", ".join(missing), "missing; expected a complete lensim checkpoint")
+    return data
+
+
+def resolve_checkpoint(path: str | Path) -> Path:
+    """A checkpoint file, or RUN/best.pt (else RUN/last.pt) for a run folder."""
+    path = Path(path)
+    if path.is_dir():
+        for name in ("best.pt", "last.pt"):
+            if (path / name).is_file():
+                return path / name
+        raise InputError(str(path), None, "holds no best.pt or last.pt; expected a `lensim train` run folder")
+    return path
+
+
+def _describe_lens(lens: Any) -> str:
+    return str(lens.get("name") or "unnamed lens") if isinstance(lens, dict) else str(lens)
+
+
+def _describe_sensor(sensor: Any) -> str:
+    if isinstance(sensor, dict):
+        res = sensor.get("resolution")
+        return f"{sensor.get('name', 'unnamed sensor')} {res[0]}x{res[1]}" if res else str(sensor.get("name"))
+    return str(sensor)
+
+
+def _canonical(d: Any) -> str:
+    return json.dumps(d, sort_keys=True, default=str)
+
+
+def load_checkpoint(
+    path: str | Path,
+    lens: dict[str, Any] | None = None,
+    sensor: dict[str, Any] | None = None,
+    device: str | torch.device = "cpu",
+) -> tuple[FieldAwareUNet, dict[str, Any]]:
+    """Rebuild the trained network from a checkpoint (or run folder).
+
+    Args:
+        path: a checkpoint file, or a run folder (best.pt, else last.pt).
+        lens: the lens the user will restore photos of (lensim.optics.lens_file.lens_to_dict),
+            or None. A UserWarning is issued when it differs from the checkpoint's lens.
+        sensor: the sensor profile dict (SensorProfile.to_dict()), or None; warned likewise.
+        device: where the model is put.
+
+    Returns:
+        (model in eval mode, the checkpoint dict without optimizer/RNG state).
+    Raises:
+        InputError (one line, naming the file) for a missing, corrupt, foreign or
+        mismatched checkpoint (state not matching its model config).
+    """
+    path = resolve_checkpoint(path)
+    data = read_checkpoint(path)
+    cfg = data["model_config"]
+    try:
+        model = FieldAwareUNet(**cfg)
+    except (TypeError, ValueError) as e:
+        raise InputError(str(path), "model_config", f"cannot build the network ({e})") from None
+    try:
+        model.load_state_dict(data["model_state"])
+    except (RuntimeError, KeyError, TypeError) as e:
+        first = str(e).strip().splitlines()
+        detail = " ".join(line.strip() for line in first[:3])[:300]
+        raise InputError(str(path), "model_state", f"does not match the model config it records ({detail})") from None
+    model.to(device).eval()
+    if lens is not None and data.get("lens") is not None and _canonical(lens) != _canonical(data["lens"]):
+        warnings.warn(f"{path}: trained for lens {_describe_lens(data['lens'])!r}, used for lens "
+                      f"{_describe_lens(lens)!r}; the restoration may be wrong", UserWarning, stacklevel=2)
+    if sensor is not None and data.get("sensor") is not None and _canonical(sensor) != _canonical(data["sensor"]):
+        warnings.warn(f"{path}: trained for sensor {_describe_sensor(data['sensor'])!r}, used for sensor "
+                      f"{_describe_sensor(sensor)!r}; the restoration may be wrong", UserWarning, stacklevel=2)
+    info = {k: v for k, v in data.items() if k not in ("model_state", "optimizer", "scheduler", "scaler", "rng")}
+    info["path"] = str(path)
+    return model, info
+
+
+# ----------------------------------------------------------------------------- geometry
+
+
+def image_sensor_geometry(
+    height: int,
+    width: int,
+    sensor_resolution: tuple[int, int],
+    offset: tuple[int | float, int | float] | None = None,
+) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Sensor geometry of an image, in the image's own pixel units, for fov_channels.
+
+    Args:
+        height, width: image size in pixels.
+        sensor_resolution: (width, height) of the sensor in pixels (square pixels).
+        offset: (top, left) sensor pixel of the image's top-left pixel at native scale, or
+            None for a full frame fitted like lensim.simulate.map_to_sensor.
+
+    Returns:
+        ((top, left), (sensor_height, sensor_width)) in image pixels: the image's top-left
+        corner relative to the sensor's and the sensor size (floats when scaled).
+    """
+    sw, sh = float(sensor_resolution[0]), float(sensor_resolution[1])
+    if offset is not None:
+        return (float(offset[0]), float(offset[1])), (sh, sw)
+    scale = min(sw / width, sh / height)  # sensor pixels per image pixel
+    hs, ws = sh / scale, sw / scale
+    return ((hs - height) / 2.0, (ws - width) / 2.0), (hs, ws)
+
+
+def tile_starts(length: int, tile: int, overlap: int, multiple: int) -> list[int]:
+    """Start offsets (multiples of ``multiple``) of tiles of size ``tile`` covering
+    [0, length), consecutive tiles overlapping by at least ``overlap`` pixels; the last
+    tile ends at ``length`` (and may be shorter than ``tile``)."""
+    if length <= tile:
+        return [0]
+    step = max(multiple, (tile - overlap) // multiple * multiple)
+    last = -(-(length - tile) // multiple) * multiple  # ceil to a multiple
+    starts = [0]
+    while starts[-1] + tile < length:
+        starts.append(min(starts[-1] + step, last))
+    return starts
+
+
+def _axis_weights(length: int, starts: list[int], tile: int, overlap: int, margin: int) -> list[torch.Tensor]:
+    """Per-tile 1-D blending weights along one axis, normalised to sum to 1 per pixel."""
+    ramp = overlap - 2 * margin
+    ws = []
+    for s in starts:
+        e = min(s + tile, length)
+        x = torch.arange(s, e, dtype=torch.float64) + 0.5
+        w = torch.ones(e - s, dtype=torch.float64)
+        if s > 0:
+            w = torch.minimum(w, ((x - s - margin) / ramp).clamp(0, 1))
+        if e < length:
+            w = torch.minimum(w, ((e - margin - x) / ramp).clamp(0, 1))
+        ws.append(w)
+    total = torch.zeros(length, dtype=torch.float64)
+    for s, w in zip(starts, ws):
+        total[s:s + len(w)] += w
+    if bool((total <= 0).any()):
+        raise ValueError(f"tiles do not cover every pixel with positive weight (tile {tile}, overlap {overlap}, "
+                         f"margin {margin})")
+    return [(w / total[s:s + len(w)]).to(torch.float32) for s, w in zip(starts, ws)]
+
+
+# ----------------------------------------------------------------------------- restore
+
+
+@torch.no_grad()
+def restore_image(
+    model: FieldAwareUNet,
+    image: torch.Tensor,
+    sensor_top_left: tuple[float, float],
+    sensor_size: tuple[float, float],
+    tile: int = 512,
+    overlap: int = 192,
+    margin: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> torch.Tensor:
+    """Restore a (3, H, W) image of any size, tile by tile (see the module docstring).
+
+    Args:
+        model: the network (its device and dtype are used for the tiles).
+        image: (3, H, W) float in [0, 1] (any device; the output is on the CPU).
+        sensor_top_left: (top, left) of the image's top-left pixel on the sensor, in image
+            pixels (image_sensor_geometry).
+        sensor_size: (height, width) of the sensor in image pixels.
+        tile: largest tile side in pixels (rounded down to a multiple of model.size_multiple).
+        overlap: least overlap of neighbouring tiles in pixels (< tile).
+        margin: pixels next to an inner tile edge given weight 0 (default
+            (overlap - overlap // 4) // 2, i.e. a linear ramp over the middle quarter).
+        progress: called with (tiles done, tiles total).
+
+    Returns:
+        (3, H, W) float32 restored image on the CPU (not clamped).
+    """
+    if image.dim() != 3 or image.shape[0] != 3:
+        raise ValueError(f"image must be (3, H, W), got {tuple(image.shape)}")
+    m = int(getattr(model, "size_multiple", 1))
+    tile = max(m, tile // m * m)
+    if not 0 <= overlap < tile:
+        raise ValueError(f"overlap must be in [0, tile={tile}), got {overlap}")
+    if margin is None:
+        margin = (overlap - overlap // 4) // 2
+    if overlap - 2 * margin < 1 and overlap > 0:
+        raise ValueError(f"overlap ({overlap}) must exceed 2 * margin ({margin})")
+    overlap_eff = max(overlap, 2 * margin + 1)
+    _, h, w = image.shape
+    param = next(model.parameters())
+    ys = tile_starts(h, tile, overlap_eff, m)
+    xs = tile_starts(w, tile, overlap_eff, m)
+    wy = _axis_weights(h, ys, tile, overlap_eff, margin)
+    wx = _axis_weights(w, xs, tile, overlap_eff, margin)
+    out = torch.zeros(3, h, w, dtype=torch.float32)
+    top, left = float(sensor_top_left[0]), float(sensor_top_left[1])
+    sh, sw = float(sensor_size[0]), float(sensor_size[1])
+    total, done = len(ys) * len(xs), 0
+    use_fov = bool(getattr(model, "use_fov", True))
+    for y0, wyy in zip(ys, wy):
+        th = len(wyy)
+        for x0, wxx in zip(xs, wx):
+            tw = len(wxx)
+            rgb = image[:, y0:y0 + th, x0:x0 + tw].to(device=param.device, dtype=param.dtype).unsqueeze(0)
+            fov = None
+            if use_fov:
+                fov = fov_channels(th, tw, top + y0, left + x0, sh, sw, dtype=param.dtype, device=param.device)
+                fov = fov.unsqueeze(0)
+            res = model(rgb, fov)[0].float().cpu()
+            out[:, y0:y0 + th, x0:x0 + tw] += res * (wyy.view(1, th, 1) * wxx.view(1, 1, tw))
+            done += 1
+            if progress is not None:
+                progress(done, total)
+    return out
+
+
+__all__ = ["image_sensor_geometry", "load_checkpoint", "read_checkpoint", "resolve_checkpoint", "restore_image",
+           "tile_starts"]

@@ -1,0 +1,207 @@
+"""Inference: tiled == whole-image restoration, absolute FOV per tile, sensor geometry,
+checkpoint loading errors and warnings, and the train/restore commands end to end."""
+from __future__ import annotations
+
+import json
+import math
+import warnings
+from pathlib import Path
+
+import pytest
+import torch
+import typer
+from typer.testing import CliRunner
+
+from lensim.errors import InputError
+from lensim.images import read_image, write_image
+from lensim.restore.fov import fov_channels
+from lensim.restore.infer import image_sensor_geometry, load_checkpoint, restore_image, tile_starts
+from lensim.restore.network import FieldAwareUNet
+from lensim.restore.train import train
+from test_train import LENS, SENSOR, TINY, make_pairs
+
+
+@pytest.fixture(autouse=True)
+def one_thread():
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
+def random_model(depth: int = 2, use_fov: bool = True) -> FieldAwareUNet:
+    """A tiny network that is far from the identity and has non-zero deformable offsets."""
+    torch.manual_seed(0)
+    m = FieldAwareUNet(8, depth, use_fov=use_fov, zero_init_tail=False)
+    with torch.no_grad():
+        for blk in m.dec:
+            torch.nn.init.normal_(blk.offset_conv.weight, std=0.05)
+    return m.eval()
+
+
+def test_tile_grid_starts_on_the_multiple_and_covers_the_image():
+    for length, tile, overlap, mult in [(230, 96, 80, 2), (1000, 512, 192, 4), (97, 64, 16, 8), (50, 64, 16, 4)]:
+        s = tile_starts(length, tile, overlap, mult)
+        assert s[0] == 0 and all(v % mult == 0 for v in s) and s == sorted(set(s))
+        assert s[-1] + tile >= length and s[-1] < length
+        assert all(b - a <= tile - overlap for a, b in zip(s, s[1:]))  # neighbours overlap by >= overlap
+
+
+def test_tiled_equals_whole_image_inference():
+    model = random_model(depth=2)  # receptive-field radius about 28 px with these offsets
+    gen = torch.Generator().manual_seed(1)
+    img = torch.rand(3, 150, 230, generator=gen)
+    top_left, size = (37.0, 211.0), (480.0, 640.0)
+    with torch.no_grad():
+        whole = model(img[None], fov_channels(150, 230, *top_left, *size)[None])[0]
+    assert (whole - img).abs().max() > 0.05  # the model really changes the image
+    tiled = restore_image(model, img, top_left, size, tile=96, overlap=80, margin=32)
+    err = (tiled - whole).abs().max().item()
+    assert err < 1e-4, err
+    # tiles whose outputs are used right up to their edges do differ: the margin matters
+    naive = restore_image(model, img, top_left, size, tile=96, overlap=2, margin=0)
+    assert (naive - whole).abs().max().item() > 1e-3
+    # one tile covering everything is the whole-image pass
+    one = restore_image(model, img, top_left, size, tile=256, overlap=16)
+    assert (one - whole).abs().max().item() < 1e-6
+
+
+class Recorder(torch.nn.Module):
+    """Wraps a model and records every (rgb, fov) it is fed."""
+
+    def __init__(self, model: FieldAwareUNet) -> None:
+        super().__init__()
+        self.model = model
+        self.calls: list[tuple[torch.Tensor, torch.Tensor]] = []
+        self.size_multiple = model.size_multiple
+        self.use_fov = model.use_fov
+
+    def forward(self, rgb: torch.Tensor, fov: torch.Tensor) -> torch.Tensor:
+        self.calls.append((rgb.clone(), fov.clone()))
+        return self.model(rgb, fov)
+
+
+def test_each_tile_gets_its_absolute_fov_channels():
+    rec = Recorder(random_model(depth=3))
+    img = torch.rand(3, 90, 130, generator=torch.Generator().manual_seed(2))
+    top_left, size = (12.0, 300.0), (400.0, 600.0)
+    restore_image(rec, img, top_left, size, tile=48, overlap=24, margin=8)
+    ys, xs = tile_starts(90, 48, 24, 4), tile_starts(130, 48, 24, 4)
+    assert len(rec.calls) == len(ys) * len(xs) > 4
+    whole_fov = fov_channels(90, 130, *top_left, *size)
+    k = 0
+    for y0 in ys:
+        for x0 in xs:
+            rgb, fov = rec.calls[k]
+            h, w = rgb.shape[-2:]
+            assert y0 % 4 == 0 and x0 % 4 == 0
+            assert torch.equal(rgb[0], img[:, y0:y0 + h, x0:x0 + w])
+            assert torch.allclose(fov[0], whole_fov[:, y0:y0 + h, x0:x0 + w], atol=1e-7), (y0, x0)
+            k += 1
+
+
+def test_full_frame_geometry_matches_map_to_sensor():
+    from lensim.sensor.profile import load_sensor
+    from lensim.simulate import map_to_sensor
+
+    sensor = load_sensor("apsc_mirrorless")
+    for h, w in [(400, 600), (300, 600), (500, 500)]:
+        top_left, size = image_sensor_geometry(h, w, sensor.resolution)
+        fov = fov_channels(h, w, *top_left, *size, dtype=torch.float64)
+        mp = map_to_sensor(h, w, sensor)
+        rows = torch.tensor([0.0, h - 1.0, h / 2]).view(3, 1)
+        cols = torch.tensor([0.0, w - 1.0, 7.0]).view(1, 3)
+        x_mm, y_mm = mp.pixel_to_mm(rows.expand(3, 3), cols.expand(3, 3))
+        half_diag_mm = 0.5 * math.hypot(*sensor.sensor_size_mm)
+        r_idx, c_idx = rows.long().expand(3, 3), cols.long().expand(3, 3)
+        assert torch.allclose(fov[0][r_idx, c_idx], x_mm.double() / half_diag_mm, atol=1e-9)
+        assert torch.allclose(fov[1][r_idx, c_idx], y_mm.double() / half_diag_mm, atol=1e-9)
+    # native-scale offset: the sensor's own pixel grid
+    assert image_sensor_geometry(64, 64, (6000, 4000), offset=(100, 200)) == ((100.0, 200.0), (4000.0, 6000.0))
+
+
+# ----------------------------------------------------------------------------- checkpoints
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    with torch.random.fork_rng():
+        torch.set_num_threads(1)
+        pairs = make_pairs(tmp_path_factory.mktemp("pairs"), photos=3, crops=2, size=32)
+        run = tmp_path_factory.mktemp("run") / "run"
+        train(pairs, run, epochs=1, max_steps_per_epoch=2, **{**TINY, "crop": 32})
+    return run
+
+
+def test_load_checkpoint_rebuilds_the_trained_model(run_dir: Path):
+    model, info = load_checkpoint(run_dir)
+    assert info["path"].endswith("best.pt") and info["model_config"]["widths"] == [8, 16]
+    ck = torch.load(run_dir / "best.pt", weights_only=True)
+    assert all(torch.equal(v, ck["model_state"][k]) for k, v in model.state_dict().items())
+    assert not model.training
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        load_checkpoint(run_dir / "last.pt", lens=json.loads(json.dumps(LENS)), sensor=dict(SENSOR))
+
+
+def test_other_lens_or_sensor_warns(run_dir: Path):
+    with pytest.warns(UserWarning, match="trained for lens 'test lens', used for lens 'other'"):
+        load_checkpoint(run_dir, lens={"name": "other"})
+    with pytest.warns(UserWarning, match="trained for sensor 'test sensor 640x480'"):
+        load_checkpoint(run_dir, sensor={"name": "test sensor", "resolution": [320, 240]})
+
+
+def test_corrupt_and_mismatched_checkpoints_are_one_line_errors(run_dir: Path, tmp_path: Path):
+    good = (run_dir / "last.pt").read_bytes()
+    cases = {}
+    (tmp_path / "garbage.pt").write_bytes(b"not a checkpoint at all\n" * 10)
+    cases["garbage.pt"] = "corrupt or not a lensim checkpoint"
+    (tmp_path / "truncated.pt").write_bytes(good[: len(good) // 2])
+    cases["truncated.pt"] = "corrupt or not a lensim checkpoint"
+    torch.save({"state_dict": {}}, tmp_path / "foreign.pt")
+    cases["foreign.pt"] = "format: expected a 'lensim-restore-checkpoint'"
+    ck = torch.load(run_dir / "last.pt", weights_only=True)
+    torch.save({**ck, "model_config": {**ck["model_config"], "widths": [16, 32]}}, tmp_path / "mismatch.pt")
+    cases["mismatch.pt"] = "model_state: does not match the model config"
+    torch.save({**ck, "model_config": {**ck["model_config"], "bogus": 1}}, tmp_path / "badconfig.pt")
+    cases["badconfig.pt"] = "model_config: cannot build the network"
+    cases["missing.pt"] = "no such file"
+    for name, msg in cases.items():
+        with pytest.raises(InputError) as err:
+            load_checkpoint(tmp_path / name)
+        text = str(err.value)
+        assert text.startswith(str(tmp_path / name)) and msg in text and "\n" not in text, text
+
+
+# ----------------------------------------------------------------------------- commands
+
+
+def test_train_and_restore_commands(tmp_path: Path):
+    from lensim.cli.train_cmd import restore_command, train_command
+
+    app = typer.Typer()
+    app.command("train")(train_command)
+    app.command("restore")(restore_command)
+    pairs = make_pairs(tmp_path / "pairs", photos=2, crops=2, size=32)
+    runner = CliRunner()
+    res = runner.invoke(app, ["train", str(pairs), "-o", str(tmp_path / "run"), "--epochs", "1", "--crop", "32",
+                              "--width", "8", "--depth", "2", "--steps-per-epoch", "1", "--batch-size", "2",
+                              "--val-fraction", "0.5", "--json", "--threads", "1"])
+    assert res.exit_code == 0, res.output
+    summary = json.loads(res.output)
+    assert summary["steps"] == 1 and summary["epochs_done"] == 1
+    img = torch.rand(3, 40, 56, generator=torch.Generator().manual_seed(0))
+    write_image(tmp_path / "a.png", img, 16)
+    res = runner.invoke(app, ["restore", str(tmp_path / "run"), str(tmp_path / "a.png"), "-o", str(tmp_path / "out"),
+                              "--sensor-offset", "100,200", "--tile", "32", "--overlap", "16", "--json"])
+    assert res.exit_code == 0, res.output
+    out, bits = read_image(tmp_path / "out" / "a.png")
+    assert bits == 16 and out.shape == (3, 40, 56)
+    model, _ = load_checkpoint(tmp_path / "run")
+    expected = restore_image(model, read_image(tmp_path / "a.png")[0], (100.0, 200.0), (480.0, 640.0), tile=32,
+                             overlap=16).clamp(0, 1)
+    assert (out - expected).abs().max() <= 0.5 / 65535 + 1e-6  # 16-bit quantisation only
+    res = runner.invoke(app, ["restore", str(tmp_path / "run"), str(tmp_path / "a.png"), "-o", str(tmp_path / "o8"),
+                              "--bits", "8", "--sensor-offset", "100,200"])
+    assert res.exit_code == 0, res.output
+    assert read_image(tmp_path / "o8" / "a.png")[1] == 8
