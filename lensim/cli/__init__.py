@@ -9,6 +9,7 @@ import typer
 from lensim.cli.common import console, err_console, run_guarded
 from lensim.cli.assets_cmd import assets_command
 from lensim.cli.dataset_cmd import dataset_app
+from lensim.cli.demo_cmd import demo_command
 from lensim.cli.evaluate_cmd import evaluate_command
 from lensim.cli.lens_cmd import lens_app
 from lensim.cli.psf_cmd import psf_app
@@ -30,6 +31,7 @@ app.add_typer(dataset_app, name="dataset")
 app.command("evaluate")(evaluate_command)
 app.command("train")(train_command)
 app.command("restore")(restore_command)
+app.command("demo")(demo_command)
 
 
 def main() -> None:
