@@ -7,6 +7,7 @@ import warnings
 import typer
 
 from lensim.cli.common import console, err_console, run_guarded
+from lensim.cli.ablation_cmd import ablation_command
 from lensim.cli.assets_cmd import assets_command
 from lensim.cli.dataset_cmd import dataset_app
 from lensim.cli.demo_cmd import demo_command
@@ -32,6 +33,7 @@ app.command("evaluate")(evaluate_command)
 app.command("train")(train_command)
 app.command("restore")(restore_command)
 app.command("demo")(demo_command)
+app.command("ablation")(ablation_command)
 
 
 def main() -> None:

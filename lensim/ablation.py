@@ -1,0 +1,59 @@
+"""The paper's ablation (Table 2): the field-aware network with each idea switched off in
+turn (FOV input, deformable decoder, context block), and a plain UNet of about the same
+parameter count, trained on the same pairs with the same time budget and evaluated on the
+same held-out photos."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Callable
+
+from lensim.optics.lens_file import atomic_write_text
+
+VARIANTS: dict[str, dict] = {
+    "full": {},
+    "no-fov": {"use_fov": False},
+    "no-deformable": {"use_deformable": False},
+    "no-context": {"use_context": False},
+    "plain-unet": {"use_fov": False, "use_deformable": False, "use_context": False},
+}
+
+
+def run_ablation(pairs_dir: str | Path, out_dir: str | Path, minutes: float, width: int = 32, crop: int = 128,
+                 seed: int = 0, variants: list[str] | None = None, say: Callable[[str], None] | None = None) -> dict:
+    """Train every variant (cached: a finished run is reused) and evaluate it on the held-out
+    photos of the first run's split; returns {"variants": {name: {params, train, metrics}}}."""
+    from lensim.evaluate.harness import checkpoint_method, evaluate
+    from lensim.restore.network import FieldAwareUNet, count_parameters, plain_unet_width
+    from lensim.restore.train import train
+
+    say = say or (lambda m: None)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    names = variants or list(VARIANTS)
+    full_params = count_parameters(FieldAwareUNet(width=width))
+    manifest = json.loads((Path(pairs_dir) / "manifest.json").read_text())
+    results: dict[str, dict] = {}
+    held_out = None
+    for name in names:
+        switches = dict(VARIANTS[name])
+        w = plain_unet_width(full_params, 3) if name == "plain-unet" else width
+        run = out / name
+        marker = run / "done.json"
+        if not marker.exists():
+            say(f"training {name} ({minutes:g} min)")
+            res = train(pairs_dir, run, epochs=10_000, width=w, crop=crop, seed=seed, time_budget_s=minutes * 60.0,
+                        **switches)
+            atomic_write_text(marker, json.dumps({"steps": res.step, "seconds": res.seconds}) + "\n")
+        held_out = held_out or json.loads((run / "split.json").read_text())["val"]
+        params = count_parameters(FieldAwareUNet(width=w, **switches))
+        results[name] = {"params": params, "width": w, **switches, "train": json.loads(marker.read_text())}
+    say("evaluating on the held-out photos")
+    methods = {name: checkpoint_method(out / name, manifest.get("lens"), manifest.get("sensor")) for name in names}
+    metrics = evaluate(pairs_dir, methods, sources=held_out)
+    for name in names:
+        results[name]["metrics"] = metrics["methods"][name]
+    summary = {"held_out_photos": held_out, "minutes": minutes, "input": metrics["methods"]["input"],
+               "variants": results}
+    atomic_write_text(out / "ablation.json", json.dumps(summary, indent=1, default=str) + "\n")
+    return summary
