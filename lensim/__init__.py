@@ -7,3 +7,38 @@ import os as _os
 _os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 __version__ = "0.1.0"
+
+# The Python API mirrors the CLI; names load lazily so `import lensim` stays light.
+_API = {
+    "load_lens": "lensim.optics.lens_file",
+    "save_lens": "lensim.optics.lens_file",
+    "first_order_summary": "lensim.optics.analysis",
+    "spot_diagram": "lensim.optics.spot",
+    "compute_psf": "lensim.psf.compute",
+    "compute_bank": "lensim.psf.bank",
+    "PSFBank": "lensim.psf.bank",
+    "load_sensor": "lensim.sensor.profile",
+    "read_image": "lensim.images",
+    "write_image": "lensim.images",
+    "simulate": "lensim.simulate",
+    "ensure_bank": "lensim.simulate",
+    "map_to_sensor": "lensim.simulate",
+    "make_dataset": "lensim.data.pairs",
+    "train": "lensim.restore.train",
+    "load_checkpoint": "lensim.restore.infer",
+    "restore_image": "lensim.restore.infer",
+    "evaluate": "lensim.evaluate.harness",
+    "run_ablation": "lensim.ablation",
+    "run_demo": "lensim.demo",
+}
+
+
+def __getattr__(name: str):
+    if name in _API:
+        import importlib
+
+        return getattr(importlib.import_module(_API[name]), name)
+    raise AttributeError(f"module 'lensim' has no attribute {name!r}")
+
+
+__all__ = sorted(_API)

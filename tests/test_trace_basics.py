@@ -142,3 +142,10 @@ def test_opl_is_constant_for_perfect_focus_of_a_paraboloid():
     assert xy.abs().max().item() < 1e-11
     opl = res.rays.opl
     assert (opl - opl.mean()).abs().max().item() < 1e-11
+
+
+def test_top_level_api_names_resolve():
+    import lensim
+
+    for name in lensim.__all__:
+        assert callable(getattr(lensim, name)), name
