@@ -20,7 +20,7 @@ _API = {
     "load_sensor": "lensim.sensor.profile",
     "read_image": "lensim.images",
     "write_image": "lensim.images",
-    "simulate": "lensim.simulate",
+    "simulate_photo": "lensim.simulate:simulate",  # `lensim.simulate` is the module
     "ensure_bank": "lensim.simulate",
     "map_to_sensor": "lensim.simulate",
     "make_dataset": "lensim.data.pairs",
@@ -37,7 +37,8 @@ def __getattr__(name: str):
     if name in _API:
         import importlib
 
-        return getattr(importlib.import_module(_API[name]), name)
+        module, _, attr = _API[name].partition(":")
+        return getattr(importlib.import_module(module), attr or name)
     raise AttributeError(f"module 'lensim' has no attribute {name!r}")
 
 
