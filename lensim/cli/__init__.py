@@ -10,7 +10,7 @@ from lensim.cli.common import console, err_console, run_guarded
 from lensim.cli.ablation_cmd import ablation_command
 from lensim.cli.assets_cmd import assets_command
 from lensim.cli.dataset_cmd import dataset_app
-from lensim.cli.demo_cmd import demo_command
+from lensim.cli.demo_cmd import demo_command, report_command
 from lensim.cli.evaluate_cmd import evaluate_command
 from lensim.cli.lens_cmd import lens_app
 from lensim.cli.psf_cmd import psf_app
@@ -34,6 +34,7 @@ app.command("train")(train_command)
 app.command("restore")(restore_command)
 app.command("demo")(demo_command)
 app.command("ablation")(ablation_command)
+app.command("report")(report_command)
 
 
 def main() -> None:

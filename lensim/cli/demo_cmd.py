@@ -37,3 +37,26 @@ def demo_command(
         print_json({"metrics": report["metrics"], "report": str(output / "report.html")})
     elif not quiet:
         console.print(f"wrote {output / 'report.html'} and {output / 'report.json'}", highlight=False)
+
+
+def report_command(
+    demo_dir: Path = typer.Argument(..., help="A folder written by `lensim demo` (report.json + figures/)."),
+) -> None:
+    """Rebuild DIR/report.html from DIR/report.json and DIR/figures/ (after editing or
+    re-running a stage).
+
+    Example: lensim report lensim-demo/
+    """
+    import json
+
+    from lensim.errors import InputError
+    from lensim.report import write_report
+
+    path = demo_dir / "report.json"
+    if not path.is_file():
+        raise InputError(str(path), None, "missing; expected a folder written by `lensim demo`")
+    try:
+        report = json.loads(path.read_text())
+    except ValueError as e:
+        raise InputError(str(path), None, f"not valid JSON: {e}") from None
+    console.print(f"wrote {write_report(demo_dir, report, demo_dir / 'figures')}", highlight=False)
