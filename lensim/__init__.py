@@ -27,7 +27,7 @@ _API = {
     "train": "lensim.restore.train",
     "load_checkpoint": "lensim.restore.infer",
     "restore_image": "lensim.restore.infer",
-    "evaluate": "lensim.evaluate.harness",
+    "evaluate_methods": "lensim.evaluate.harness:evaluate",  # `lensim.evaluate` is the package
     "run_ablation": "lensim.ablation",
     "run_demo": "lensim.demo",
 }

@@ -149,3 +149,11 @@ def test_top_level_api_names_resolve():
 
     for name in lensim.__all__:
         assert callable(getattr(lensim, name)), name
+
+
+def test_top_level_api_names_do_not_shadow_submodules():
+    import pkgutil
+
+    import lensim
+
+    assert not set(lensim.__all__) & {m.name for m in pkgutil.iter_modules(lensim.__path__)}
