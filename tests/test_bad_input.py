@@ -7,29 +7,15 @@ import copy
 import json
 import subprocess
 import sys
-import warnings
 from pathlib import Path
 
 import pytest
 import yaml
 
-from lensim.cli import main
+from cli_runner import run_cli
 
 COOKE = yaml.safe_load((Path(__file__).resolve().parents[1] / "lensim" / "assets" / "lenses" / "cooke_triplet.yaml")
                        .read_text())
-
-
-def run_cli(args: list[str], capsys, monkeypatch) -> tuple[int, str, str]:
-    """Run `lensim ARGS` in this process exactly as the console script does; returns
-    (exit status, stdout, stderr)."""
-    monkeypatch.setattr(sys, "argv", ["lensim", *args])
-    monkeypatch.setattr(warnings, "showwarning", warnings.showwarning)  # run_guarded replaces it
-    capsys.readouterr()
-    with pytest.raises(SystemExit) as exc:
-        main()
-    out, err = capsys.readouterr()
-    code = exc.value.code
-    return (0 if code is None else int(code)), out, err
 
 
 def one_error_line(err: str) -> str:

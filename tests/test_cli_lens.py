@@ -5,7 +5,6 @@ import json
 import math
 import subprocess
 import sys
-import warnings
 from pathlib import Path
 
 import matplotlib.image
@@ -14,7 +13,7 @@ import pytest
 import torch
 import yaml
 
-from lensim.cli import main
+from cli_runner import run_cli
 from lensim.errors import RayTraceError
 from lensim.optics.aiming import object_field
 from lensim.optics.lens import Lens
@@ -28,19 +27,6 @@ from lensim.optics.surfaces import Surface
 from lensim.optics.trace import VIGNETTED
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
-
-
-def run_cli(args: list[str], capsys, monkeypatch) -> tuple[int, str, str]:
-    """Run `lensim ARGS` in this process exactly as the console script does; returns
-    (exit status, stdout, stderr)."""
-    monkeypatch.setattr(sys, "argv", ["lensim", *args])
-    monkeypatch.setattr(warnings, "showwarning", warnings.showwarning)  # run_guarded replaces it
-    capsys.readouterr()
-    with pytest.raises(SystemExit) as exc:
-        main()
-    out, err = capsys.readouterr()
-    code = exc.value.code
-    return (0 if code is None else int(code)), out, err
 
 
 def assert_png(path: Path, min_bytes: int = 10_000) -> np.ndarray:
