@@ -16,9 +16,6 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Callable
 
-import numpy as np
-import torch
-
 from lensim.assets import DEFAULT_LENS
 from lensim.assets.images import available_sample_images, sample_image_path
 from lensim.images import read_image, write_image
@@ -149,7 +146,7 @@ def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: i
                "plain-unet": checkpoint_method(out / "run-plain", manifest.get("lens"), manifest.get("sensor")),
                "wiener": builtin_method("wiener")}
     metrics = evaluate(out / "pairs", methods, bank=bank, sources=held_out)
-    crops = sample_crops(out / "pairs", manifest, held_out, methods["model"], bank, figs)
+    samples = sample_crops(out / "pairs", manifest, held_out, methods["model"], bank, figs)
     edges = edge_study(bank, sensor, methods["model"], figs, seed=seed)
     timings["evaluation"] = time.perf_counter() - t
 
@@ -163,6 +160,7 @@ def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: i
                  "relative_illumination_green": [float(f.rgb[1].sum()) for f in bank.fields]},
         "training": {"model": model_info, "plain-unet": plain_info},
         "held_out_photos": held_out,
+        "sample_crops": samples,
         "metrics": metrics,
         "slanted_edge": edges["slanted_edge"],
         "lateral_colour": edges["lateral_colour"],

@@ -1,12 +1,9 @@
 """The `lensim` command line. Each subcommand group lives in its own module."""
 from __future__ import annotations
 
-import sys
-import warnings
-
 import typer
 
-from lensim.cli.common import console, err_console, run_guarded
+from lensim.cli.common import run_guarded
 from lensim.cli.ablation_cmd import ablation_command
 from lensim.cli.assets_cmd import assets_command
 from lensim.cli.dataset_cmd import dataset_app

@@ -69,7 +69,6 @@ def train_command(
     if resume:  # architecture/recipe come from the checkpoint; pass only what the user may change
         overrides = {k: overrides[k] for k in ("epochs", "time_budget_s", "device", "amp")}
     prog = None
-    callback = None
     if not quiet and not json_out:
         from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
@@ -78,7 +77,7 @@ def train_command(
                         TextColumn("{task.fields[val]}"), TimeElapsedColumn(), console=console, transient=False)
         task = prog.add_task("train", total=None, epoch=0, epochs=epochs, loss="-", val="")
 
-        def callback(p: TrainProgress) -> None:
+        def progress_callback(p: TrainProgress) -> None:
             if p.kind == "step":
                 prog.update(task, completed=p.batch, total=p.batches, epoch=p.epoch + 1, epochs=p.epochs,
                             loss=f"{p.loss:.3e}")
@@ -91,7 +90,8 @@ def train_command(
                               highlight=False)
         prog.start()
     try:
-        result = train(dataset, output, TrainConfig(), resume=resume, progress=callback, **overrides)
+        result = train(dataset, output, TrainConfig(), resume=resume,
+                       progress=progress_callback if prog else None, **overrides)
     finally:
         if prog:
             prog.stop()

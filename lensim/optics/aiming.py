@@ -23,7 +23,7 @@ import torch
 from lensim.errors import InputError, RayTraceError
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import ParaxialData, paraxial_data, paraxial_image_height
-from lensim.optics.trace import DTYPE, OK, STATUS_TEXT, Rays, media_indices, trace
+from lensim.optics.trace import DTYPE, STATUS_TEXT, Rays, media_indices, trace
 
 Aiming = Literal["paraxial", "real"]
 AIM_TOL_MM = 1e-10

@@ -32,7 +32,7 @@ from typing import Any
 
 from lensim.errors import InputError
 from lensim.optics.lens import Lens
-from lensim.optics.materials import Air, CatalogGlass, ConstantIndex, Material, ModelGlass, material_from_spec
+from lensim.optics.materials import Air, Material, material_from_spec
 from lensim.optics.surfaces import Surface
 
 TOP_KEYS = {"name", "description", "units", "object", "aperture", "fields", "wavelengths", "surfaces", "image", "notes", "source"}

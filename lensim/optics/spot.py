@@ -9,7 +9,7 @@ from lensim.errors import RayTraceError
 from lensim.optics.aiming import Aiming, describe_failure, generate_rays, object_field
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import ParaxialData, paraxial_data
-from lensim.optics.pupil import hexapolar, square_grid
+from lensim.optics.pupil import hexapolar
 from lensim.optics.trace import trace
 
 

@@ -8,6 +8,7 @@ with a status code and the surface where they happened; no NaN reaches the calle
 """
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -194,7 +195,7 @@ def trace_reference(
 # Per-ray failures are recorded as (surface index + 1) * 4 + status code.
 
 CHUNK_RAYS = 32767  # just below torch's GRAIN_SIZE (32768): each operation stays on one core
-_EXECUTORS: dict[int, "ThreadPoolExecutor"] = {}
+_EXECUTORS: dict[int, ThreadPoolExecutor] = {}
 
 
 @dataclass(frozen=True)
@@ -466,7 +467,6 @@ class _ChunkSource:
 
 
 def _executor(workers: int):
-    from concurrent.futures import ThreadPoolExecutor
 
     if workers not in _EXECUTORS:
         _EXECUTORS[workers] = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="lensim-trace")

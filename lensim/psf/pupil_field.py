@@ -17,7 +17,7 @@ import torch
 from lensim.errors import InputError, RayTraceError
 from lensim.optics.aiming import Aiming, describe_failure, generate_rays, object_field
 from lensim.optics.lens import Lens
-from lensim.optics.paraxial import ParaxialData, paraxial_data, paraxial_image_height
+from lensim.optics.paraxial import ParaxialData, paraxial_data
 from lensim.optics.pupil import square_grid_full
 from lensim.optics.trace import DTYPE, trace
 
