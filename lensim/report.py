@@ -9,11 +9,11 @@ import math
 from pathlib import Path
 from typing import Any, Mapping
 
-import numpy as np
 import torch
 
 from lensim.evaluate.harness import CropContext, Method, markdown_table
 from lensim.images import read_image
+from lensim.jsonable import jsonable
 from lensim.optics.lens_file import atomic_write_text
 from lensim.psf.bank import PSFBank
 from lensim.sensor.profile import SensorProfile
@@ -156,21 +156,9 @@ def _metrics_html(metrics: Mapping[str, Any]) -> str:
     return "<table>" + "".join(rows) + "</table>"
 
 
-def _finite(x):
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    if isinstance(x, dict):
-        return {k: _finite(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_finite(v) for v in x]
-    if isinstance(x, (np.floating, np.integer)):
-        return _finite(x.item())
-    return x
-
-
 def write_report(out: Path, report: dict, figs: Path) -> Path:
     """report.json (every figure of the report) and report.html (self-contained)."""
-    atomic_write_text(out / "report.json", json.dumps(_finite(report), indent=1, default=str) + "\n")
+    atomic_write_text(out / "report.json", json.dumps(jsonable(report), indent=1, default=str) + "\n")
     lens = report["lens"]
     sections = [
         ("Lens", f"<p>{html.escape(lens['name'])}: EFL {lens['efl_mm']:.2f} mm, F/{lens['fno']:.2f}, image height "
@@ -183,7 +171,7 @@ def write_report(out: Path, report: dict, figs: Path) -> Path:
          "<p>PSNR / SSIM against the sharp originals; zones by normalized sensor radius (centre &lt; 1/3, "
          "middle, edge &gt; 2/3). <code>input</code> is the simulated camera image; <code>wiener</code> is an oracle "
          "given the true PSFs.</p>", ["crops_centre.png", "crops_edge.png"]),
-        ("Slanted edge and lateral colour", "<pre>" + html.escape(json.dumps(_finite(
+        ("Slanted edge and lateral colour", "<pre>" + html.escape(json.dumps(jsonable(
             {"slanted_edge": report["slanted_edge"], "lateral_colour": report["lateral_colour"]}), indent=1)) +
          "</pre>", ["slanted_edge.png"]),
     ]

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import json
-import math
 import sys
 import warnings
 
@@ -10,6 +9,7 @@ import typer
 from rich.console import Console
 
 from lensim.errors import LensimError
+from lensim.jsonable import jsonable
 
 console = Console()
 err_console = Console(stderr=True)
@@ -29,21 +29,9 @@ def run_guarded(app: typer.Typer) -> None:
         sys.exit(2)
 
 
-def _jsonable(x):
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    if isinstance(x, dict):
-        return {k: _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if hasattr(x, "item"):
-        return _jsonable(x.item())
-    return x
-
-
 def print_json(data) -> None:
     """Print a JSON document on stdout (non-finite numbers become null)."""
-    sys.stdout.write(json.dumps(_jsonable(data), indent=2) + "\n")
+    sys.stdout.write(json.dumps(jsonable(data), indent=2) + "\n")
 
 
 def progress_bar(label: str, unit: str, quiet: bool):

@@ -98,7 +98,7 @@ def evaluate_command(
         output.mkdir(parents=True, exist_ok=True)
         harness.write_csv(rows, output / "metrics.csv")
         harness.write_markdown(summary, output / "metrics.md", title=f"lensim evaluate: {pairs}")
-        from lensim.cli.common import _jsonable
+        from lensim.jsonable import jsonable as _jsonable
         from lensim.optics.lens_file import atomic_write_text
 
         atomic_write_text(output / "metrics.json", json.dumps(_jsonable(summary), indent=2) + "\n")
