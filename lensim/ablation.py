@@ -20,7 +20,8 @@ VARIANTS: dict[str, dict] = {
 
 
 def run_ablation(pairs_dir: str | Path, out_dir: str | Path, minutes: float, width: int = 32, crop: int = 128,
-                 seed: int = 0, variants: list[str] | None = None, say: Callable[[str], None] | None = None) -> dict:
+                 seed: int = 0, variants: list[str] | None = None, say: Callable[[str], None] | None = None,
+                 device: str = "cpu") -> dict:
     """Train every variant (cached: a finished run is reused) and evaluate it on the held-out
     photos of the first run's split; returns {"variants": {name: {params, train, metrics}}}."""
     from lensim.evaluate.harness import checkpoint_method, evaluate
@@ -43,13 +44,14 @@ def run_ablation(pairs_dir: str | Path, out_dir: str | Path, minutes: float, wid
         if not marker.exists():
             say(f"training {name} ({minutes:g} min)")
             res = train(pairs_dir, run, epochs=10_000, width=w, crop=crop, seed=seed, time_budget_s=minutes * 60.0,
-                        **switches)
+                        device=device, **switches)
             atomic_write_text(marker, json.dumps({"steps": res.step, "seconds": res.seconds}) + "\n")
         held_out = held_out or json.loads((run / "split.json").read_text())["val"]
         params = count_parameters(FieldAwareUNet(width=w, **switches))
         results[name] = {"params": params, "width": w, **switches, "train": json.loads(marker.read_text())}
     say("evaluating on the held-out photos")
-    methods = {name: checkpoint_method(out / name, manifest.get("lens"), manifest.get("sensor")) for name in names}
+    methods = {name: checkpoint_method(out / name, manifest.get("lens"), manifest.get("sensor"), device=device)
+               for name in names}
     metrics = evaluate(pairs_dir, methods, sources=held_out)
     for name in names:
         results[name]["metrics"] = metrics["methods"][name]

@@ -67,7 +67,7 @@ def _photos(out: Path, size: int) -> Path:
     return d
 
 
-def _train(pairs: Path, run: Path, settings: DemoSettings, plain: bool, seed: int) -> dict:
+def _train(pairs: Path, run: Path, settings: DemoSettings, plain: bool, seed: int, device: str = "cpu") -> dict:
     """Train once (cached by RUN/done.json) on a time budget."""
     from lensim.restore.network import FieldAwareUNet, count_parameters, plain_unet_width
     from lensim.restore.train import train
@@ -78,7 +78,7 @@ def _train(pairs: Path, run: Path, settings: DemoSettings, plain: bool, seed: in
     if run.exists():
         shutil.rmtree(run)  # an unfinished run: start it again (its budget was not spent)
     kw = dict(epochs=1000, batch_size=4, lr=5e-4, lr_halve_every=1000, crop=settings.train_crop, seed=seed,
-              time_budget_s=settings.train_seconds, val_fraction=0.25)
+              time_budget_s=settings.train_seconds, val_fraction=0.25, device=device)
     if plain:
         target = count_parameters(FieldAwareUNet(width=settings.width))
         kw.update(width=plain_unet_width(target, 3), use_fov=False, use_deformable=False, use_context=False)
@@ -90,8 +90,10 @@ def _train(pairs: Path, run: Path, settings: DemoSettings, plain: bool, seed: in
     return info
 
 
-def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: int = 1, say: Say | None = None) -> dict:
-    """Run the demo into out_dir; returns the report's JSON (also written)."""
+def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: int = 1, say: Say | None = None,
+             device: str = "cpu") -> dict:
+    """Run the demo into out_dir; returns the report's JSON (also written). device: where the
+    networks train and run ("cpu", "cuda", "cuda:N")."""
     from lensim.data.pairs import make_dataset
     from lensim.evaluate.harness import builtin_method, checkpoint_method, evaluate
     from lensim.optics.plots import plot_layout, plot_spots
@@ -133,17 +135,18 @@ def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: i
 
     t = time.perf_counter()
     say(f"training the field-aware network ({settings.train_seconds:.0f} s)")
-    model_info = _train(out / "pairs", out / "run-model", settings, plain=False, seed=seed)
+    model_info = _train(out / "pairs", out / "run-model", settings, plain=False, seed=seed, device=device)
     say(f"training the plain UNet ({settings.train_seconds:.0f} s)")
-    plain_info = _train(out / "pairs", out / "run-plain", settings, plain=True, seed=seed)
+    plain_info = _train(out / "pairs", out / "run-plain", settings, plain=True, seed=seed, device=device)
     timings["training"] = time.perf_counter() - t
 
     t = time.perf_counter()
     say("evaluation on held-out photos")
     held_out = json.loads((out / "run-model" / "split.json").read_text())["val"]
     manifest = json.loads((out / "pairs" / "manifest.json").read_text())
-    methods = {"model": checkpoint_method(out / "run-model", manifest.get("lens"), manifest.get("sensor")),
-               "plain-unet": checkpoint_method(out / "run-plain", manifest.get("lens"), manifest.get("sensor")),
+    methods = {"model": checkpoint_method(out / "run-model", manifest.get("lens"), manifest.get("sensor"), device=device),
+               "plain-unet": checkpoint_method(out / "run-plain", manifest.get("lens"), manifest.get("sensor"),
+                                                  device=device),
                "wiener": builtin_method("wiener")}
     metrics = evaluate(out / "pairs", methods, bank=bank, sources=held_out)
     samples = sample_crops(out / "pairs", manifest, held_out, methods["model"], bank, figs)

@@ -15,4 +15,11 @@ PIP=(.venv/bin/python -m pip install -q --disable-pip-version-check)
 "${PIP[@]}" -e ".[test]"
 # sample photos (Kodak, Waterloo BragZone) ship inside sporco; its own dependencies are not needed
 "${PIP[@]}" --no-deps "sporco==0.2.2.post1"
+# 12 more sample photos (GPL-2+) from Debian's mate-backgrounds, where apt and root are available;
+# without them lensim runs on the 8 photos above
+if [ ! -d /usr/share/backgrounds/mate/nature ] && command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
+  (apt-get install -y -qq mate-backgrounds >/dev/null 2>&1 \
+    || (apt-get update -qq >/dev/null 2>&1 && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq mate-backgrounds >/dev/null 2>&1)) \
+    || echo "note: could not install Debian's mate-backgrounds; lensim uses its 8 other sample photos"
+fi
 .venv/bin/python -c "import lensim, torch; print('lensim ready (torch', torch.__version__ + ')')"

@@ -304,6 +304,40 @@ def test_cli_bank_and_show_write_the_files(tmp_path):
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000
 
 
+def test_cli_bank_takes_the_sensor_profile_and_prints_json(tmp_path):
+    """--lens/--sensor spelled as everywhere else: the pitch and spectral response come from
+    the profile, the kernel is sized from the lens; --json prints the summary only."""
+    from typer.testing import CliRunner
+
+    from lensim.cli import app
+    from lensim.sensor.profile import load_sensor
+
+    out = tmp_path / "bank"
+    res = CliRunner().invoke(app, ["psf", "bank", "--lens", "cooke_triplet", "--sensor", "apsc_mirrorless", "--fields",
+                                   "2", "--wavelengths-nm", "550", "--pupil-samples", "48", "-o", str(out), "--json"])
+    assert res.exit_code == 0, res.output
+    info = json.loads(res.output)
+    sensor = load_sensor("apsc_mirrorless")
+    assert info["pixel_pitch_um"] == sensor.pixel_pitch_um and info["response"] == sensor.spectral_response
+    assert info["fields"] == 2 and info["kernel_pixels"] % 2 == 1 and (out / MANIFEST).exists()
+
+
+@pytest.mark.parametrize("args, field", [
+    ([], "--sensor/--pixel-um"),
+    (["--sensor", "phone", "--pixel-um", "4"], "--sensor/--pixel-um"),
+    (["--lens", "double_gauss", "--pixel-um", "4"], "lens"),
+])
+def test_cli_bank_refuses_ambiguous_options(tmp_path, args, field):
+    from typer.testing import CliRunner
+
+    from lensim.cli import app
+
+    res = CliRunner().invoke(app, ["psf", "bank", "cooke_triplet", *args, "-o", str(tmp_path / "b")])
+    assert res.exit_code != 0 and isinstance(res.exception, InputError)
+    assert field in str(res.exception) and "\n" not in str(res.exception)
+    assert not (tmp_path / "b").exists()
+
+
 def test_cli_bad_csv_is_a_one_line_error(tmp_path):
     from typer.testing import CliRunner
 

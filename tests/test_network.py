@@ -204,3 +204,31 @@ def test_config_rebuilds_and_bad_groups_refused() -> None:
         FieldAwareUNet(width=6, depth=2, deformable_groups=4)
     with pytest.raises(ValueError, match="scales"):
         FieldAwareUNet(width=8, depth=1)
+
+
+@pytest.mark.parametrize("scales", [0, 1, 2])
+def test_deformable_scales_pick_the_coarsest_decoder_blocks(scales: int) -> None:
+    """deformable_scales=n: the n coarsest decoder blocks are deformable, the rest plain;
+    the forward pass works, the config rebuilds it, and n=2 (all, depth 3) is the default."""
+    net = _net(deformable_scales=scales)
+    kinds = [isinstance(b, DeformResBlock) for b in net.dec]
+    assert kinds == [i < scales for i in range(DEPTH - 1)]
+    rgb, fov = _inputs(1, 12, 16)
+    assert net(rgb, fov).shape == rgb.shape
+    clone = FieldAwareUNet(**net.config)
+    clone.load_state_dict(net.state_dict())
+    if scales == DEPTH - 1:
+        assert net.config == _net().config
+    with pytest.raises(ValueError, match="deformable_scales"):
+        _net(deformable_scales=DEPTH)
+
+
+def test_deformable_scales_offsets_live_at_the_coarse_scale() -> None:
+    """With only the coarsest decoder scale deformable, its offsets still change the output."""
+    net = _net(deformable_scales=1)
+    _randomise_tail(net)
+    rgb, fov = _inputs(1, 8, 12)
+    before = net(rgb, fov)
+    with torch.no_grad():
+        net.dec[0].offset_conv.bias[: 2 * G * 9].fill_(0.7)
+    assert (net(rgb, fov) - before).abs().max().item() > 1e-5

@@ -1,8 +1,10 @@
 """Built-in natural sample photos that may be redistributed, with their licences.
 
-They are not copied into this repository: they ship inside two packages that the set-up
-command installs from the package registry (scikit-image, and sporco installed without
-its dependencies), and are read from there. No image is downloaded at run time.
+They are not copied into this repository: they ship inside packages that the set-up
+command installs (scikit-image and sporco from the Python package registry; Debian's
+`mate-backgrounds`, 12 nature photos of 1.3-4.1 megapixels, GPL-2+, when the machine
+has apt and root) and are read from there. No image is downloaded at run time. A package
+that is missing only removes its photos from :func:`available_sample_images`.
 """
 from __future__ import annotations
 
@@ -15,11 +17,24 @@ from lensim.errors import InputError
 
 @dataclass(frozen=True)
 class SampleImage:
+    """One photo: ``package`` is an importable Python package, or ``debian:NAME`` for a
+    Debian package whose files lie under :data:`DEBIAN_ROOTS`; ``relative_path`` is the
+    file inside it."""
+
     name: str
     package: str
     relative_path: str
     licence: str
     credit: str
+
+
+DEBIAN_ROOTS = {"mate-backgrounds": Path("/usr/share/backgrounds/mate")}
+_MATE_CREDITS = {
+    "Aqua": "Charles Barbin", "Blinds": "Lennart Poettering, Andrea Cimitan", "Dune": "Marco Cogoni, Hylke Bons",
+    "FreshFlower": "Jens Ansorg", "Garden": "Charles Barbin", "GreenMeadow": "Timothy Schellhase, Lapo Calamandrei",
+    "LadyBird": "Charles Barbin", "RainDrops": "blackcombwhistler07", "Storm": "Sergey Nazarov",
+    "TwoWings": "Charles Barbin, Hylke Bons", "Wood": "Jean-François Fortin Tam", "YellowFlower": "Charles Barbin",
+}
 
 
 SAMPLE_IMAGES: tuple[SampleImage, ...] = (
@@ -36,10 +51,17 @@ SAMPLE_IMAGES: tuple[SampleImage, ...] = (
                 "University of Waterloo (sporco data)"),
     SampleImage("tulips", "sporco", "data/tulips.png", "free of copyright restrictions (Waterloo BragZone)",
                 "University of Waterloo (sporco data)"),
+) + tuple(
+    SampleImage(f"mate-{stem.lower()}", "debian:mate-backgrounds", f"nature/{stem}.jpg", "GPL-2+",
+                f"{who} (Debian mate-backgrounds)")
+    for stem, who in _MATE_CREDITS.items()
 )
 
 
 def _package_dir(package: str) -> Path | None:
+    if package.startswith("debian:"):
+        root = DEBIAN_ROOTS.get(package.split(":", 1)[1])
+        return root if root is not None and root.is_dir() else None
     spec = importlib.util.find_spec(package)
     if spec is None or spec.origin is None:
         return None

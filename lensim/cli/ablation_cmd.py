@@ -18,6 +18,7 @@ def ablation_command(
     seed: int = typer.Option(0, "--seed", help="Seed of every run."),
     variants: str = typer.Option("full,no-fov,no-deformable,no-context,plain-unet", "--variants",
                                  help="Comma-separated subset of the variants."),
+    device: str = typer.Option("cpu", "--device", help="cpu, cuda or cuda:N."),
     quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
     json_out: bool = typer.Option(False, "--json", help="Print ablation.json."),
 ) -> None:
@@ -29,7 +30,8 @@ def ablation_command(
     from lensim.ablation import run_ablation
 
     say = (lambda m: None) if quiet or json_out else (lambda m: console.print(m, highlight=False))
-    summary = run_ablation(dataset, output, minutes, width, crop, seed, [v.strip() for v in variants.split(",")], say)
+    summary = run_ablation(dataset, output, minutes, width, crop, seed, [v.strip() for v in variants.split(",")], say,
+                           device=device)
     if json_out:
         print_json(summary)
         return

@@ -14,6 +14,7 @@ def demo_command(
     quick: bool = typer.Option(False, "--quick", help="A ~3-minute run (CI); the default takes about 15 minutes."),
     seed: int = typer.Option(0, "--seed", help="Seed of every random draw."),
     workers: int = typer.Option(1, "--workers", help="Processes for the PSF bank and the pairs."),
+    device: str = typer.Option("cpu", "--device", help="cpu, cuda or cuda:N: where the networks train and run."),
     quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
     json_out: bool = typer.Option(False, "--json", help="Print report.json's metrics."),
 ) -> None:
@@ -32,7 +33,7 @@ def demo_command(
         if not quiet and not json_out:
             console.print(f"[{time.perf_counter() - start:6.1f} s] {msg}", highlight=False)
 
-    report = run_demo(output, quick=quick, seed=seed, workers=workers, say=say)
+    report = run_demo(output, quick=quick, seed=seed, workers=workers, say=say, device=device)
     if json_out:
         print_json({"metrics": report["metrics"], "report": str(output / "report.html")})
     elif not quiet:

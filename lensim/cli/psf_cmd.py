@@ -6,9 +6,13 @@ from pathlib import Path
 import numpy as np
 import typer
 
-from lensim.cli.common import console, print_json
+import contextlib
+
+from lensim.cli.common import console, print_json, progress_bar
 from lensim.optics.lens_file import atomic_write_bytes, load_lens
 from lensim.psf.compute import METHODS, compute_psf
+
+_nothing = contextlib.nullcontext
 
 psf_app = typer.Typer(help="Point spread functions: single PSFs, banks, pictures.", no_args_is_help=True)
 
@@ -53,13 +57,17 @@ def compute(
 
 @psf_app.command("bank")
 def bank(
-    lens_file: str = typer.Argument(..., help="Lens file or built-in lens name."),
-    pixel_um: float = typer.Option(..., "--pixel-um", help="Sensor pixel pitch in um."),
-    kernel: int = typer.Option(21, "--kernel", help="Kernel size in pixels (odd)."),
+    lens_file: str = typer.Argument(None, help="Lens file or built-in lens name (or use --lens)."),
+    lens_opt: str = typer.Option(None, "--lens", help="Lens file or built-in lens name (same as the argument)."),
+    sensor: str = typer.Option(None, "--sensor", help="Sensor profile (file or built-in name): sets the pixel pitch and "
+                               "the spectral response."),
+    pixel_um: float = typer.Option(None, "--pixel-um", help="Sensor pixel pitch in um (instead of --sensor)."),
+    kernel: int = typer.Option(0, "--kernel", help="Kernel size in pixels (odd; 0: sized from the lens's spots)."),
     fields: int = typer.Option(64, "--fields", help="Number of radial fields 0..1 (sqrt-spaced, denser towards the edge)."),
     wavelengths_nm: str = typer.Option("400:700:10", "--wavelengths-nm", help="START:STOP:STEP or a comma list, in nm."),
-    response: str = typer.Option("Nikon 5100 (NPL)", "--response",
-                                 help="Camera spectral sensitivities: a colour-science camera name or a CSV file (wavelength_nm,r,g,b)."),
+    response: str = typer.Option(None, "--response",
+                                 help="Camera spectral sensitivities: a colour-science camera name or a CSV file "
+                                 "(wavelength_nm,r,g,b). Default: the sensor's, else Nikon 5100 (NPL)."),
     illuminant: str = typer.Option("E", "--illuminant", help="E (equal energy), D65, A, ... (colour-science names)."),
     method: str = typer.Option("huygens", "--method", help=f"One of {', '.join(METHODS)}."),
     pupil_samples: int = typer.Option(64, "--pupil-samples", help="Pupil grid samples across the diameter."),
@@ -68,38 +76,55 @@ def bank(
     aiming: str = typer.Option("real", "--aiming", help="Ray aiming: real or paraxial."),
     workers: int = typer.Option(1, "--workers", help="Worker processes (one torch thread each)."),
     output: Path = typer.Option(..., "-o", "--output", help="Bank directory (created; an existing bank with the same settings is resumed)."),
+    quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
+    json_out: bool = typer.Option(False, "--json", help="Print a summary as JSON (no progress output)."),
 ) -> None:
     """A PSF bank: RGB pixel kernels at radial fields, weighted by the camera's spectral
     response and the lens's relative illumination, stored as OUTPUT/manifest.json and one
     OUTPUT/field_XXXX.npz per field. Rerun the same command to resume after an interruption.
 
-    Example: lensim psf bank cooke_triplet --pixel-um 4 --kernel 21 --fields 64 --workers 2 -o bank/
+    Example: lensim psf bank --lens cooke_triplet --sensor apsc_mirrorless --fields 64 --workers 2 -o bank/
     """
     import time
 
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
-
+    from lensim.errors import InputError
     from lensim.psf.bank import compute_bank, default_fields
-    from lensim.psf.spectral import parse_wavelengths_nm
+    from lensim.psf.spectral import DEFAULT_CAMERA, parse_wavelengths_nm
+    from lensim.sensor.profile import load_sensor
+    from lensim.simulate import suggest_kernel_pixels
 
-    lens = load_lens(lens_file)
+    if lens_file and lens_opt and lens_file != lens_opt:
+        raise InputError("<command line>", "lens", f"given twice ({lens_file!r} and --lens {lens_opt!r}); expected one")
+    name = lens_file or lens_opt
+    if not name:
+        raise InputError("<command line>", "lens", "missing; expected a lens file or built-in name (argument or --lens)")
+    if (sensor is None) == (pixel_um is None):
+        raise InputError("<command line>", "--sensor/--pixel-um", "expected exactly one of them")
+    lens = load_lens(name)
+    profile = load_sensor(sensor) if sensor is not None else None
+    pitch = profile.pixel_pitch_um if profile is not None else float(pixel_um)
+    response = response or (profile.spectral_response if profile is not None else DEFAULT_CAMERA)
+    kernel = kernel or suggest_kernel_pixels(lens, pitch)
     wl = parse_wavelengths_nm(wavelengths_nm)
     t0 = time.time()
-    with Progress(TextColumn("[bold]PSF bank[/bold]"), BarColumn(), MofNCompleteColumn(), TextColumn("fields"),
-                  TimeElapsedColumn(), TimeRemainingColumn(), console=console, transient=False) as bar:
-        task = bar.add_task("fields", total=None)
-
-        def report(done: int, total: int) -> None:
-            bar.update(task, completed=done, total=total)
-
-        result = compute_bank(lens, pixel_um, kernel, fields=default_fields(fields), wavelengths_nm=wl, response=response,
+    prog, report = progress_bar("PSF bank", "fields", quiet or json_out)
+    with prog if prog is not None else _nothing():
+        result = compute_bank(lens, pitch, kernel, fields=default_fields(fields), wavelengths_nm=wl, response=response,
                               method=method, pupil_samples=pupil_samples, max_spacing_um=max_spacing_um, aiming=aiming,
                               workers=workers, out_dir=output, progress=report, illuminant=illuminant)
     m = result.manifest
-    console.print(f"wrote {output}: {len(m['fields'])} fields x {len(m['wavelengths_nm'])} wavelengths, "
-                  f"{m['kernel_pixels']}x{m['kernel_pixels']} px of {m['pixel_pitch_um']:g} um, fine grid {m['oversampling']}x per pixel "
-                  f"({m['fine_spacing_um']:.4g} um), response {m['response']['name']} under {m['response']['illuminant']}, "
-                  f"{time.time() - t0:.1f} s", highlight=False)
+    info = {"bank": str(output), "lens": lens.source, "sensor": sensor, "fields": len(m["fields"]),
+            "wavelengths": len(m["wavelengths_nm"]), "kernel_pixels": m["kernel_pixels"],
+            "pixel_pitch_um": m["pixel_pitch_um"], "oversampling": m["oversampling"],
+            "fine_spacing_um": m["fine_spacing_um"], "response": m["response"]["name"],
+            "illuminant": m["response"]["illuminant"], "seconds": time.time() - t0}
+    if json_out:
+        print_json(info)
+    elif not quiet:
+        console.print(f"wrote {output}: {info['fields']} fields x {info['wavelengths']} wavelengths, "
+                      f"{info['kernel_pixels']}x{info['kernel_pixels']} px of {info['pixel_pitch_um']:g} um, fine grid "
+                      f"{info['oversampling']}x per pixel ({info['fine_spacing_um']:.4g} um), response {info['response']} "
+                      f"under {info['illuminant']}, {info['seconds']:.1f} s", highlight=False)
 
 
 @psf_app.command("show")

@@ -165,6 +165,10 @@ class FieldAwareUNet(nn.Module):
             (32, 64, 128, 256) with deformable_groups=8.
         zero_init_tail: zero the last conv so the untrained network is the identity.
         dcn_backend: "auto", "grid_sample" or "torchvision" (see lensim.restore.deform).
+        deformable_scales: how many decoder scales, coarsest first, use deformable blocks
+            (the rest use plain residual blocks); None: all of them (the paper). On a CPU
+            the full-resolution DCN is most of the cost: 1 (deformable at the coarsest
+            decoder scale only) trains about twice as fast as all.
 
     forward(rgb (B, 3, H, W), fov (B, 2, H, W) or (2, H, W), required iff use_fov) ->
     restored (B, 3, H, W), same dtype as rgb. Values are whatever range the caller trains
@@ -182,6 +186,7 @@ class FieldAwareUNet(nn.Module):
         widths: Sequence[int] | None = None,
         zero_init_tail: bool = True,
         dcn_backend: str = "auto",
+        deformable_scales: int | None = None,
     ) -> None:
         super().__init__()
         ws = tuple(int(w) for w in widths) if widths is not None else tuple(width * 2**s for s in range(depth))
@@ -193,8 +198,12 @@ class FieldAwareUNet(nn.Module):
             bad = [w for w in ws[:-1] if w % deformable_groups]
             if deformable_groups < 1 or bad:
                 raise ValueError(f"deformable_groups={deformable_groups} must divide decoder widths {ws[:-1]}")
+        n_dec = len(ws) - 1
+        if deformable_scales is not None and not 0 <= deformable_scales <= n_dec:
+            raise ValueError(f"deformable_scales={deformable_scales} must be between 0 and {n_dec} (decoder scales)")
         self.widths = ws
         self.depth = len(ws)
+        self.deformable_scales = n_dec if deformable_scales is None or not use_deformable else int(deformable_scales)
         self.use_fov = use_fov
         self.use_deformable = use_deformable
         self.use_context = use_context
@@ -212,13 +221,12 @@ class FieldAwareUNet(nn.Module):
         dec_scales = list(range(len(ws) - 2, -1, -1))
         self.up = nn.ModuleList(nn.ConvTranspose2d(ws[s + 1], ws[s], 2, stride=2) for s in dec_scales)
         self.fuse = nn.ModuleList(nn.Conv2d(2 * ws[s], ws[s], 1) for s in dec_scales)
-        if use_deformable:
-            self.dec = nn.ModuleList(
-                DeformResBlock(ws[s], deformable_groups, coarse_offsets=i > 0, backend=dcn_backend)
-                for i, s in enumerate(dec_scales)
-            )
-        else:
-            self.dec = nn.ModuleList(ResBlock(ws[s]) for s in dec_scales)
+        n_deform = self.deformable_scales if use_deformable else 0
+        self.dec = nn.ModuleList(
+            DeformResBlock(ws[s], deformable_groups, coarse_offsets=i > 0, backend=dcn_backend) if i < n_deform
+            else ResBlock(ws[s])
+            for i, s in enumerate(dec_scales)
+        )
         self.tail = _conv3(ws[0], 3)
         if zero_init_tail:
             nn.init.zeros_(self.tail.weight)
@@ -240,6 +248,7 @@ class FieldAwareUNet(nn.Module):
             "deformable_groups": self.deformable_groups,
             "zero_init_tail": self.zero_init_tail,
             "dcn_backend": self.dcn_backend,
+            "deformable_scales": self.deformable_scales,
         }
 
     def forward(self, rgb: torch.Tensor, fov: torch.Tensor | None = None) -> torch.Tensor:
@@ -269,7 +278,7 @@ class FieldAwareUNet(nn.Module):
         offset: torch.Tensor | None = None
         for up, fuse, dec in zip(self.up, self.fuse, self.dec):
             feat = fuse(torch.cat((up(feat), skips.pop()), dim=1))
-            if self.use_deformable:
+            if isinstance(dec, DeformResBlock):
                 feat, offset = dec(feat, offset)
             else:
                 feat = dec(feat)

@@ -74,8 +74,8 @@ class TrainConfig:
     batch_size: crops per optimizer step (per rank under DDP).
     lr: initial Adam learning rate; halved every ``lr_halve_every`` epochs.
     crop: training sub-crop size in pixels (None: the stored crops).
-    width, depth, use_fov, use_deformable, use_context, deformable_groups: the network
-        (lensim.restore.network.FieldAwareUNet).
+    width, depth, use_fov, use_deformable, use_context, deformable_groups,
+        deformable_scales: the network (lensim.restore.network.FieldAwareUNet).
     seed: seeds model initialisation, data order, crops and augmentation.
     augment: random FOV-consistent dihedral ops.
     val_fraction: share of source photos held out for validation.
@@ -98,6 +98,7 @@ class TrainConfig:
     use_deformable: bool = True
     use_context: bool = True
     deformable_groups: int = 2
+    deformable_scales: int | None = None
     seed: int = 0
     augment: bool = True
     val_fraction: float = 0.2
@@ -110,12 +111,12 @@ class TrainConfig:
     def model_kwargs(self) -> dict[str, Any]:
         return {"width": self.width, "depth": self.depth, "use_fov": self.use_fov,
                 "use_deformable": self.use_deformable, "use_context": self.use_context,
-                "deformable_groups": self.deformable_groups}
+                "deformable_groups": self.deformable_groups, "deformable_scales": self.deformable_scales}
 
 
 # Settings that must not change when resuming (they would change the loss curve's meaning).
 _FROZEN_ON_RESUME = ("batch_size", "lr", "lr_halve_every", "crop", "width", "depth", "use_fov", "use_deformable",
-                     "use_context", "deformable_groups", "seed", "augment", "val_fraction", "max_steps_per_epoch")
+                     "use_context", "deformable_groups", "deformable_scales", "seed", "augment", "val_fraction", "max_steps_per_epoch")
 
 
 @dataclass
