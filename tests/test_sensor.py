@@ -29,7 +29,7 @@ def test_builtins_load_with_stated_geometry_and_sources():
     w, h = ff.sensor_size_mm
     assert abs(w - 35.82) < 1e-9 and abs(h - 23.88) < 1e-9  # 6000 x 4000 at 5.97 um
     ph = load_sensor("phone")
-    assert ph.sensor_size_mm == pytest.approx((4.8, 3.6), abs=1e-12)
+    assert ph.sensor_size_mm == pytest.approx((3.6736, 2.75968), abs=1e-9)  # Sony IMX219: 3280 x 2464 at 1.12 um
     for p in (ff, ph):
         assert p.bayer_pattern in ("RGGB", "BGGR", "GRBG", "GBRG")
         assert np.allclose(np.sum(p.ccm, axis=1), 1.0, atol=1e-5)
