@@ -17,8 +17,8 @@ from pathlib import Path
 from typing import Callable
 
 from lensim.assets import DEFAULT_LENS
-from lensim.assets.images import available_sample_images, sample_image_path
-from lensim.images import read_image, write_image
+from lensim.assets.images import available_sample_images, read_sample_image
+from lensim.images import write_image
 from lensim.optics.analysis import first_order_summary
 from lensim.optics.lens_file import atomic_write_text, load_lens
 from lensim.sensor.profile import DEFAULT_SENSOR, load_sensor
@@ -59,7 +59,7 @@ def _photos(out: Path, size: int) -> Path:
     for img in available_sample_images():
         target = d / f"{img.name}.png"
         if not target.exists():
-            arr, _ = read_image(sample_image_path(img.name))
+            arr = read_sample_image(img.name)
             _, h, w = arr.shape
             s = min(size, h, w)
             y, x = (h - s) // 2, (w - s) // 2

@@ -37,3 +37,23 @@ def test_missing_debian_package_drops_its_photos(monkeypatch: pytest.MonkeyPatch
 def test_unknown_photo_names_the_choices() -> None:
     with pytest.raises(InputError, match="expected one of .*kodim23"):
         sample_image_path("no-such-photo")
+
+
+def test_scaled_photos_are_resampled_and_exported(tmp_path: Path, capsys: pytest.CaptureFixture,
+                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    """read_sample_image applies each photo's scale; `lensim assets --export-photos` writes
+    every installed photo at that scale."""
+    from lensim.assets.images import read_sample_image
+    from cli_runner import run_cli
+
+    have = available_sample_images()
+    for img in have:
+        if img.scale != 1.0:
+            full, _ = read_image(sample_image_path(img.name))
+            small = read_sample_image(img.name)
+            assert small.shape[1] == round(full.shape[1] * img.scale) and small.shape[2] == round(full.shape[2] * img.scale)
+            break
+    code, out, err = run_cli(["assets", "--export-photos", str(tmp_path / "photos")], capsys, monkeypatch)
+    assert code == 0, err
+    files = sorted(p.stem for p in (tmp_path / "photos").glob("*.png"))
+    assert files == sorted(i.name for i in have)

@@ -12,7 +12,11 @@ import importlib.util
 from dataclasses import dataclass
 from pathlib import Path
 
+import torch
+import torch.nn.functional as F
+
 from lensim.errors import InputError
+from lensim.images import read_image
 
 
 @dataclass(frozen=True)
@@ -26,6 +30,7 @@ class SampleImage:
     relative_path: str
     licence: str
     credit: str
+    scale: float = 1.0  # resampling factor read_sample_image applies (the file is left as is)
 
 
 DEBIAN_ROOTS = {"mate-backgrounds": Path("/usr/share/backgrounds/mate")}
@@ -53,7 +58,7 @@ SAMPLE_IMAGES: tuple[SampleImage, ...] = (
                 "University of Waterloo (sporco data)"),
 ) + tuple(
     SampleImage(f"mate-{stem.lower()}", "debian:mate-backgrounds", f"nature/{stem}.jpg", "GPL-2+",
-                f"{who} (Debian mate-backgrounds)")
+                f"{who} (Debian mate-backgrounds)", scale=0.5)
     for stem, who in _MATE_CREDITS.items()
 )
 
@@ -79,6 +84,20 @@ def sample_image_path(name: str) -> Path:
                                  "scripts/setup.sh installs")
             return path
     raise InputError(name, "sample image", f"unknown; expected one of {', '.join(i.name for i in SAMPLE_IMAGES)}")
+
+
+def read_sample_image(name: str) -> torch.Tensor:
+    """A built-in photo as (3, H, W) float32 sRGB in [0, 1], resampled by its ``scale``.
+
+    The Debian wallpapers are JPEGs of 1.3-4.1 megapixels that are soft at full size; they
+    are halved (antialiased bilinear), which makes them sharp at the pixel level, as a
+    ground truth for training pairs should be."""
+    arr, _ = read_image(sample_image_path(name))
+    img = next(i for i in SAMPLE_IMAGES if i.name == name)
+    if img.scale != 1.0:
+        arr = F.interpolate(arr[None], scale_factor=img.scale, mode="bilinear", antialias=True,
+                            align_corners=False)[0].clamp(0.0, 1.0)
+    return arr
 
 
 def available_sample_images() -> list[SampleImage]:

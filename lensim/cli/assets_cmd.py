@@ -1,6 +1,8 @@
 """`lensim assets`: list the built-in lenses, sensors and sample photos."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import typer
 from rich.table import Table
 
@@ -9,11 +11,22 @@ from lensim.assets.images import SAMPLE_IMAGES, available_sample_images
 from lensim.cli.common import console, print_json
 
 
-def assets_command(json_out: bool = typer.Option(False, "--json", help="Print a JSON object.")) -> None:
+def assets_command(
+    export_photos: Path = typer.Option(None, "--export-photos", help="Write every installed sample photo (at its "
+                                       "scale, 8-bit PNG) into this folder, for `lensim dataset make`."),
+    json_out: bool = typer.Option(False, "--json", help="Print a JSON object."),
+) -> None:
     """List built-in lenses, sensor profiles and sample photos (with licences).
 
-    Example: lensim assets --json
+    Example: lensim assets --export-photos photos/ && lensim dataset make photos/ -o pairs/
     """
+    if export_photos is not None:
+        from lensim.assets.images import read_sample_image
+        from lensim.images import write_image
+
+        export_photos.mkdir(parents=True, exist_ok=True)
+        for img in available_sample_images():
+            write_image(export_photos / f"{img.name}.png", read_sample_image(img.name), 8)
     lenses = assets.lens_names()
     sensors = sorted(p.stem for p in (assets.ASSETS_DIR / "sensors").glob("*.yaml"))
     have = {i.name for i in available_sample_images()}
