@@ -37,9 +37,11 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import sys
 import time
 import warnings
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -53,20 +55,16 @@ from lensim.psf.fourier import fft_psf, geometric_psf
 from lensim.psf.huygens import huygens_psf, huygens_psf_direct, ideal_peak
 from lensim.psf.pupil_field import pupil_field
 
+# the optiland model of the Cooke triplet is the tests' (tests/optiland_models.py, which
+# imports optiland only when a model is built)
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from optiland_models import optiland_cooke  # noqa: E402
+
 WAVELENGTH_UM = 0.55
 FIELD = 1.0  # normalized (20 deg)
 PUPIL_SAMPLES = 128
 GRID = 128
 SPACING_UM = 0.5
-COOKE = [  # radius (mm), thickness (mm), glass (name, catalogue) or None for air
-    (22.01359, 3.25896, ("J-SK16", "hikari")),
-    (-435.76044, 6.00755, None),
-    (-22.21328, 0.99997, ("F2", "schott")),
-    (20.29192, 4.75041, None),  # stop
-    (79.68360, 2.95208, ("J-SK16", "hikari")),
-    (-18.39533, 42.20778, None),
-]
-STOP_INDEX = 4
 
 
 def timed(fn: Callable[[], object], repeats: int) -> tuple[float, object]:
@@ -85,30 +83,6 @@ def ncc(a: np.ndarray, b: np.ndarray) -> float:
     a = np.asarray(a, dtype=np.float64) - np.mean(a)
     b = np.asarray(b, dtype=np.float64) - np.mean(b)
     return float((a * b).sum() / math.sqrt((a * a).sum() * (b * b).sum()))
-
-
-def optiland_cooke(aiming: str, stop_semi_diameter_mm: float):
-    """The Cooke triplet in optiland (its own J-SK16/F2 data, equal to lensim's at 0.55 um).
-    'real': iterative aiming at (px, py) x lensim's paraxial stop semi-diameter (mm)."""
-    import optiland.backend as be
-    from optiland.optic import Optic
-
-    o = Optic()
-    o.surfaces.add(index=0, radius=be.inf, thickness=be.inf)
-    for i, (radius, thickness, glass) in enumerate(COOKE, start=1):
-        kwargs = {"material": glass} if glass is not None else {}
-        o.surfaces.add(index=i, radius=radius, thickness=thickness, is_stop=(i == STOP_INDEX), **kwargs)
-    o.surfaces.add(index=len(COOKE) + 1)
-    o.set_aperture(aperture_type="EPD", value=10.0)
-    o.fields.set_type(field_type="angle")
-    for y in (0.0, 14.0, 20.0):
-        o.fields.add(y=y)
-    o.wavelengths.add(value=WAVELENGTH_UM, is_primary=True)
-    if aiming == "real":
-        o.set_aperture(aperture_type="float_by_stop_size", value=2.0 * stop_semi_diameter_mm)
-        o.surfaces[STOP_INDEX].semi_aperture = stop_semi_diameter_mm
-        o.ray_tracer.set_aiming("iterative", max_iter=50, tol=1e-12)
-    return o
 
 
 def lensim_round(lens: Lens, para: ParaxialData, aiming: str, repeats: int, best: dict) -> tuple:

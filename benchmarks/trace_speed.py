@@ -17,8 +17,10 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
+import sys
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -26,9 +28,13 @@ import torch
 from lensim.optics.aiming import generate_rays
 from lensim.optics.lens import Lens
 from lensim.optics.lens_file import load_lens
-from lensim.optics.materials import Air
 from lensim.optics.paraxial import paraxial_data
 from lensim.optics.trace import trace
+
+# the optiland model is built as the tests build theirs (tests/optiland_models.py, which
+# imports optiland only when a model is built)
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from optiland_models import optiland_from_lens  # noqa: E402
 
 FIELD_DEG = 10.0
 
@@ -53,37 +59,9 @@ def pupil_grid(n_rays: int) -> np.ndarray:
 
 
 def optiland_model(lens: Lens):
-    """The same prescription in optiland, with lensim's index functions."""
-    import optiland.backend as be
-    from optiland.materials.base import BaseMaterial
-    from optiland.optic import Optic
-
-    class LensimGlass(BaseMaterial):
-        def __init__(self, material):
-            super().__init__()
-            self.material = material
-
-        def _calculate_n(self, wavelength, **kwargs):
-            return be.array(self.material.index(np.asarray(be.to_numpy(wavelength), dtype=np.float64)))
-
-        def _calculate_k(self, wavelength, **kwargs):
-            return be.zeros_like(be.array(np.asarray(be.to_numpy(wavelength), dtype=np.float64)))
-
-        def _cache_state(self):
-            return ()
-
-    op = Optic()
-    op.surfaces.add(index=0, radius=be.inf, thickness=be.inf)
-    for i, s in enumerate(lens.surfaces, start=1):
-        thickness = s.thickness + (lens.image_defocus if i == len(lens.surfaces) else 0.0)
-        material = "air" if isinstance(s.material, Air) else LensimGlass(s.material)
-        op.surfaces.add(index=i, radius=s.radius, thickness=thickness, material=material, is_stop=s.is_stop)
-    op.surfaces.add(index=len(lens.surfaces) + 1)
-    op.set_aperture(aperture_type="EPD", value=paraxial_data(lens).epd_mm)
-    op.fields.set_type(field_type="angle")
-    op.fields.add(y=FIELD_DEG)
-    op.wavelengths.add(value=lens.primary_wavelength_um, is_primary=True)
-    return op
+    """The same prescription in optiland, with lensim's index functions: one field, the
+    primary wavelength."""
+    return optiland_from_lens(lens, fields_deg=[FIELD_DEG], wavelengths_um=[lens.primary_wavelength_um])
 
 
 def lensim_runner(lens: Lens, pupil: np.ndarray):

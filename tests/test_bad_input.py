@@ -86,8 +86,12 @@ def _mirror(thickness: float) -> dict:
 
 # (case id, file name, lens data (dict) or raw text, command, strings the one line must hold)
 CASES = [
-    ("negative-thickness", "neg.yaml", _surface(1, thickness=-6.0), "info",
-     ["surfaces[1].thickness", "expected a positive thickness", "-6"]),
+    ("negative-thickness-in-glass", "neg.yaml", _surface(0, thickness=-3.0), "info",
+     ["surfaces[0].thickness", "expected a positive thickness inside J-SK16, got -3",
+      "a ray cannot travel backwards inside glass"]),
+    ("overlapping-lens-surfaces", "overlap.yaml", _surface(1, thickness=-6.0), "info",
+     ["surfaces[1].thickness", "expected a positive thickness, got -6", "surfaces[2] would lie behind surfaces[1]",
+      "only a stop or dummy surface may"]),
     ("positive-thickness-after-mirror", "mirror.json", _mirror(100.0), "info",
      ["surfaces[0].thickness", "expected a negative", "after a mirror"]),
     ("zero-thickness-in-glass", "zero.yaml", _surface(0, thickness=0.0), "info",

@@ -17,7 +17,7 @@ What is compared, and how the comparison is made fair:
     lensim and rayoptics use): Hikari SK16 by up to 1.0e-5 in index over 480-650 nm,
     Schott SF11 by 5.8e-5; N-BAK1, N-BALF4, F2, J-LAK14, TAF3, TAFD30 agree exactly.
     For the spot comparisons optiland is given lensim's own index functions
-    (`_LensimGlass`), so both trace identical glass.
+    (`optiland_models.lensim_glass`), so both trace identical glass.
   - Zemax vignetting factors (VDYN/VCXN/VCYN in US00583336-2): optiland's reader
     applies the compression factors to its pupil, lensim ignores them (with a note) and
     vignettes with the real apertures; they are zeroed in optiland.
@@ -45,10 +45,8 @@ import torch
 
 import optiland.backend as be
 from optiland.analysis import SpotDiagram
-from optiland.distribution import HexagonalDistribution
 from optiland.fileio import load_zemax_file
 from optiland.materials import AbbeMaterial
-from optiland.materials.base import BaseMaterial
 from optiland.optic import Optic
 from optiland.rays.ray_aiming.initialization import RealReferenceStrategy
 
@@ -57,8 +55,10 @@ from lensim.optics.lens import Lens
 from lensim.optics.lens_file import GlassSubstitutionWarning, load_lens
 from lensim.optics.materials import Air, CatalogGlass, WAVELENGTH_D_UM
 from lensim.optics.paraxial import paraxial_data
-from lensim.optics.spot import rms_spot_radius, spot_diagram
+from lensim.optics.spot import rms_spot_radius
 from lensim.optics.trace import trace
+
+from optiland_models import COOKE_TABLE, lensim_glass, lensim_rms, optiland_cooke, optiland_pupil, optiland_rms
 
 pytestmark = pytest.mark.filterwarnings("ignore::numba.core.errors.NumbaIRAssumptionWarning")
 
@@ -67,31 +67,10 @@ LENSES = ("cooke_triplet",) + ZMX
 FIELD_FRACTIONS = (0.0, 0.7, 1.0)
 EFL_FNO_RTOL = 1e-3  # 0.1 %, the brief's tolerance
 RMS_RTOL = 0.02  # 2 %, the brief's tolerance; measured agreement is about 1e-5
-COOKE_TABLE = (  # shared/lenses/README.md: radius, thickness, (glass, catalogue)
-    (22.01359, 3.25896, ("SK16", "hikari")),
-    (-435.76044, 6.00755, None),
-    (-22.21328, 0.99997, ("F2", "schott")),
-    (20.29192, 4.75041, None),  # stop
-    (79.68360, 2.95208, ("SK16", "hikari")),
-    (-18.39533, 42.20778, None),
-)
-
-
-class _LensimGlass(BaseMaterial):
-    """An optiland material that returns a lensim material's index (identical glass data)."""
-
-    def __init__(self, material):
-        super().__init__()
-        self.material = material
-
-    def _calculate_n(self, wavelength, **kwargs):
-        return be.array(self.material.index(np.asarray(be.to_numpy(wavelength), dtype=np.float64)))
-
-    def _calculate_k(self, wavelength, **kwargs):
-        return be.zeros_like(be.array(np.asarray(be.to_numpy(wavelength), dtype=np.float64)))
-
-    def _cache_state(self):
-        return ()  # immutable
+# optiland's own glasses for the first-order comparison: its Hikari 'SK16' entry (which
+# differs from opticalglass's J-SK16 by up to 1.0e-5, see above) and Schott F2
+COOKE_NATIVE_GLASSES = (("SK16", "hikari"), ("F2", "schott"), ("SK16", "hikari"))
+COOKE_WAVELENGTHS_UM = (0.48, 0.55, 0.65)
 
 
 def _lens(name: str) -> Lens:
@@ -101,20 +80,11 @@ def _lens(name: str) -> Lens:
 
 def _optiland_cooke(native_glass: bool) -> Optic:
     """The README's Cooke triplet built in optiland (optiland's own SK16/F2, or lensim's)."""
-    lens = _lens("cooke_triplet")
-    op = Optic()
-    op.surfaces.add(index=0, radius=be.inf, thickness=be.inf)
-    for i, (radius, thickness, glass) in enumerate(COOKE_TABLE, start=1):
-        material = "air" if glass is None else (glass if native_glass else _LensimGlass(lens.surfaces[i - 1].material))
-        op.surfaces.add(index=i, radius=radius, thickness=thickness, material=material, is_stop=(i == 4))
-    op.surfaces.add(index=len(COOKE_TABLE) + 1)
-    op.set_aperture(aperture_type="EPD", value=10.0)
-    op.fields.set_type(field_type="angle")
-    for angle in (0.0, 14.0, 20.0):
-        op.fields.add(y=angle)
-    for wl in (0.48, 0.55, 0.65):
-        op.wavelengths.add(value=wl, is_primary=(wl == 0.55))
-    return op
+    if native_glass:
+        materials = COOKE_NATIVE_GLASSES
+    else:
+        materials = [lensim_glass(s.material) for s in _lens("cooke_triplet").surfaces if not isinstance(s.material, Air)]
+    return optiland_cooke("paraxial", materials=materials, wavelengths_um=COOKE_WAVELENGTHS_UM, primary_um=0.55)
 
 
 def _optiland(name: str, native_glass: bool = True) -> Optic:
@@ -125,7 +95,7 @@ def _optiland(name: str, native_glass: bool = True) -> Optic:
     op = load_zemax_file(f"/work/shared/lenses/{name}")
     if not native_glass:
         for i, s in enumerate(_lens(name).surfaces, start=1):
-            op.surfaces[i].material_post = _LensimGlass(s.material)
+            op.surfaces[i].material_post = lensim_glass(s.material)
     return op
 
 
@@ -193,31 +163,6 @@ def test_efl_and_fno_match_rayoptics(name):
 # ---------------------------------------------------------------- RMS spot radius
 
 
-def _optiland_pupil(rings: int = 6) -> torch.Tensor:
-    d = HexagonalDistribution()
-    d.generate_points(rings)
-    return torch.as_tensor(np.stack([be.to_numpy(d.x), be.to_numpy(d.y)], -1), dtype=torch.float64)
-
-
-def _optiland_rms(op: Optic, hy: list[float]) -> tuple[np.ndarray, np.ndarray]:
-    """optiland's RMS spot radii (F, W) in mm and the number of rays it kept (F, W)."""
-    sd = SpotDiagram(op, fields=[(0.0, h) for h in hy], wavelengths="all", num_rings=6)
-    rms = np.array([[float(r) for r in per_field] for per_field in sd.rms_spot_radius()])
-    kept = np.array([[int(np.size(be.to_numpy(w.x))) for w in per_field] for per_field in sd.data])
-    return rms, kept
-
-
-def _lensim_rms_about_primary_chief(lens: Lens, fields: list[float], pupil: torch.Tensor, aiming: str):
-    """optiland's statistic from lensim's spot diagram: (F, W) RMS (mm) about the
-    primary-wavelength chief ray, and the number of unvignetted rays."""
-    sd = spot_diagram(lens, fields, None, pupil, aiming)
-    ref = sd.chief[sd.primary]  # (F, 2)
-    d2 = ((sd.xy - ref[None, :, None, :]) ** 2).sum(-1)
-    v = sd.valid.to(torch.float64)
-    rms = torch.sqrt((d2 * v).sum(-1) / v.sum(-1))
-    return rms.T.numpy(), v.sum(-1).T.numpy().astype(int)
-
-
 @pytest.mark.parametrize("aiming", ["paraxial", "real"])
 @pytest.mark.parametrize("name", LENSES)
 def test_rms_spot_radius_matches_optiland(name, aiming):
@@ -228,11 +173,11 @@ def test_rms_spot_radius_matches_optiland(name, aiming):
     op = _optiland(name, native_glass=False)
     _set_angle_fields(op, [launch[-1]])
     op.ray_tracer.set_aiming("paraxial" if aiming == "paraxial" else "iterative")
-    pupil = _optiland_pupil()
+    pupil = optiland_pupil()
     if aiming == "real":
         pupil = pupil * (RealReferenceStrategy(op).calculate_stop_radius() / para.stop_semi_diameter_mm)
-    ref_rms, ref_kept = _optiland_rms(op, [a / launch[-1] for a in launch])
-    rms, kept = _lensim_rms_about_primary_chief(lens, fields, pupil, aiming)
+    ref_rms, ref_kept = optiland_rms(op, [a / launch[-1] for a in launch])
+    rms, kept = lensim_rms(lens, fields, pupil, aiming)
     # the same rays are vignetted (same apertures, same aiming) ...
     np.testing.assert_array_equal(kept, ref_kept)
     # ... and the spots agree within 2 %
@@ -320,7 +265,7 @@ def test_l_tim28_mold_substitution():
     assert float(op.paraxial.f2()) == pytest.approx(29.194, abs=0.01)
     # with lensim's S-TIM28 on that surface optiland agrees with lensim (to 1e-6: its
     # SF11 still differs from opticalglass's by 5.8e-5 in index, 1.3e-7 in EFL)
-    op.surfaces[3].material_post = _LensimGlass(lens.surfaces[2].material)
+    op.surfaces[3].material_post = lensim_glass(lens.surfaces[2].material)
     assert float(op.paraxial.f2()) == pytest.approx(efl, rel=1e-6)
 
 

@@ -76,7 +76,6 @@ import pytest
 
 import optiland.backend as be
 from optiland.materials import Material
-from optiland.optic import Optic
 from optiland.psf import HuygensPSF
 from optiland.psf.huygens_fresnel import ScalarHuygensPSF, image_vertex_grid
 from optiland.psf.huygens_fresnel_strategies import NumbaSummation
@@ -88,6 +87,8 @@ from lensim.optics.lens_file import load_lens
 from lensim.optics.paraxial import paraxial_data
 from lensim.psf.compute import compute_psf
 
+from optiland_models import COOKE_TABLE, optiland_cooke
+
 WAVELENGTH_UM = 0.55
 PUPIL_SAMPLES = 128
 GRID = 128
@@ -96,18 +97,6 @@ NCC_MIN = 0.99  # the brief's tolerance; measured >= 0.9992 (table above)
 STREHL_REL_TOL = 0.05  # the brief's tolerance; measured <= 2.3 % (table above)
 CHIEF_TOL_MM = 1e-9  # same aiming -> same chief ray; measured 1e-14 mm
 STOP_SEMI_DIAMETER_TOL_MM = 1e-12  # optiland must keep the stop radius it was given
-
-# (stop index in optiland's surface list: object surface 0, then the README's surfaces 1-6)
-_COOKE = [  # radius, thickness, glass (name, catalogue) or None for air
-    (22.01359, 3.25896, ("J-SK16", "hikari")),
-    (-435.76044, 6.00755, None),
-    (-22.21328, 0.99997, ("F2", "schott")),
-    (20.29192, 4.75041, None),  # stop
-    (79.68360, 2.95208, ("J-SK16", "hikari")),
-    (-18.39533, 42.20778, None),
-]
-_STOP_INDEX = 4
-
 
 @pytest.fixture(autouse=True, scope="module")
 def _numpy_backend() -> Iterator[None]:
@@ -123,35 +112,6 @@ def lens() -> Lens:
     return load_lens("cooke_triplet")
 
 
-def optiland_cooke(aiming: str, stop_semi_diameter_mm: float) -> Optic:
-    """The README's Cooke triplet in optiland with optiland's own glass data, primary
-    wavelength 0.55 um, angle fields 0 / 14 / 20 deg (max 20 deg, as lensim's file).
-
-    aiming 'paraxial': optiland's default (EPD 10 mm, rays aimed at the paraxial entrance
-    pupil). aiming 'real': iterative aiming at the stop points (px, py) x
-    stop_semi_diameter_mm (mm), lensim's paraxial stop semi-diameter, via optiland's
-    'float_by_stop_size' aperture (paraxial EPD unchanged at 10 mm).
-    """
-    o = Optic()
-    o.surfaces.add(index=0, radius=be.inf, thickness=be.inf)
-    for i, (radius, thickness, glass) in enumerate(_COOKE, start=1):
-        kwargs = {"material": glass} if glass is not None else {}
-        o.surfaces.add(index=i, radius=radius, thickness=thickness, is_stop=(i == _STOP_INDEX), **kwargs)
-    o.surfaces.add(index=len(_COOKE) + 1)
-    o.set_aperture(aperture_type="EPD", value=10.0)
-    o.fields.set_type(field_type="angle")
-    for y in (0.0, 14.0, 20.0):
-        o.fields.add(y=y)
-    o.wavelengths.add(value=WAVELENGTH_UM, is_primary=True)
-    if aiming == "real":
-        o.set_aperture(aperture_type="float_by_stop_size", value=2.0 * stop_semi_diameter_mm)
-        o.surfaces[_STOP_INDEX].semi_aperture = stop_semi_diameter_mm
-        o.ray_tracer.set_aiming("iterative", max_iter=50, tol=1e-12)
-    elif aiming != "paraxial":
-        raise ValueError(f"expected aiming 'paraxial' or 'real', got {aiming!r}")
-    return o
-
-
 def ncc(a: np.ndarray, b: np.ndarray) -> float:
     """Normalized cross-correlation (Pearson) of two equally framed windows, -1..1."""
     a = np.asarray(a, dtype=np.float64) - np.mean(a)
@@ -163,7 +123,7 @@ def test_optiland_glass_indices_match_lensim(lens: Lens) -> None:
     """optiland's J-SK16 (Hikari) and F2 (Schott) equal lensim's glasses at 0.55 um to
     1e-5 in index (the brief's bound; measured 2e-16), so no substitute is needed."""
     n_lensim = lens.indices([WAVELENGTH_UM])[:, 0]
-    for surface, (_, _, glass) in enumerate(_COOKE, start=1):
+    for surface, (_, _, glass) in enumerate(COOKE_TABLE, start=1):
         if glass is None:
             continue
         n_opt = float(np.asarray(Material(*glass).n(WAVELENGTH_UM)).reshape(-1)[0])

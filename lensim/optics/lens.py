@@ -92,24 +92,91 @@ class Lens:
         if len(stops) != 1:
             found = f"{len(stops)} (surfaces {', '.join(f'[{i}]' for i in stops)})" if stops else "0"
             raise self._err("surfaces", f"expected exactly one stop surface, found {found}")
-        direction = 1.0
+        media, dirs = self.media(), self.directions()
+        last = len(self.surfaces) - 1
         for i, s in enumerate(self.surfaces):
-            if s.is_mirror:
-                direction = -direction
             if not math.isfinite(s.thickness):
                 raise self._err(f"surfaces[{i}].thickness", f"expected a finite number, got {s.thickness}")
             if not math.isfinite(s.curvature) or not math.isfinite(s.conic):
                 raise self._err(f"surfaces[{i}]", "expected finite curvature and conic")
-            if s.thickness * direction < 0:
+            medium, direction = media[i + 1], dirs[i + 1]
+            if not isinstance(medium, Air) and s.thickness * direction < 0:
                 expected = "positive" if direction > 0 else "negative (light travels towards -z after a mirror)"
-                raise self._err(f"surfaces[{i}].thickness", f"expected a {expected} thickness, got {s.thickness}")
-            if s.thickness == 0 and not s.is_mirror and not isinstance(s.material, Air) and i < len(self.surfaces) - 1:
+                raise self._err(f"surfaces[{i}].thickness",
+                                f"expected a {expected} thickness inside {medium.name}, got {s.thickness:g}: a ray "
+                                f"cannot travel backwards inside glass (negative thicknesses are allowed in air only)")
+            if s.thickness == 0 and not s.is_mirror and not isinstance(s.material, Air) and i < last:
                 raise self._err(f"surfaces[{i}].thickness", f"expected a non-zero thickness inside {s.material.name}, got 0")
             if s.clear_radius is not None and s.clear_radius <= 0:
                 raise self._err(f"surfaces[{i}].clear_semi_diameter", f"expected a positive number, got {s.clear_radius}")
             for p in s.asphere:
                 if p % 2 or not (2 <= p <= 20):
                     raise self._err(f"surfaces[{i}].asphere", f"expected even powers r2..r20, got r{p}")
+        self._check_air_gaps(media, dirs)
+
+    def is_dummy(self, i: int, media: list[Material] | None = None) -> bool:
+        """Surface i bends no ray: air on both sides and not a mirror (a stop in air, a
+        dummy surface); propagation to or from it may be virtual. media: self.media()."""
+        media = self.media() if media is None else media
+        return not self.surfaces[i].is_mirror and isinstance(media[i], Air) and isinstance(media[i + 1], Air)
+
+    def _check_air_gaps(self, media: list[Material], dirs: np.ndarray) -> None:
+        """A negative thickness in air may place a stop or dummy surface (the rays reach it
+        virtually, as in Zemax), but the air between two surfaces that bend rays, or between
+        one and the object or the image plane, must not add up to less than zero along the
+        axis: those would overlap, and a real ray would have to travel backwards."""
+        def name(k: int | None) -> str:
+            return "the object" if k is None else ("the image plane" if k > last else f"surfaces[{k}]")
+
+        last = len(self.surfaces) - 1
+        # the open run of air: where it started (None: the object), the axial air
+        # thickness since then (None: not checked) and its gaps
+        start: int | None = None
+        net = self.object_distance if (not self.infinite_object and isinstance(self.object_material, Air)) else None
+        gaps: list[int] = []
+        for i in range(len(self.surfaces) + 1):
+            if i > last or not self.is_dummy(i, media):
+                if net is not None and net < 0:
+                    neg = next(k for k in gaps if self.surfaces[k].thickness * dirs[k + 1] < 0)  # the first one back
+                    t = self.surfaces[neg].thickness
+                    why = "only a stop or dummy surface may (placed by a negative thickness in air, as in Zemax)"
+                    if len(gaps) == 1 and start == neg:
+                        expected = ("a positive thickness" if dirs[neg + 1] > 0
+                                    else "a negative thickness (light travels towards -z after a mirror)")
+                        raise self._err(f"surfaces[{neg}].thickness",
+                                        f"expected {expected}, got {t:g}: {name(i)} would lie behind {name(start)} "
+                                        f"along the light's path, which {why}")
+                    raise self._err(f"surfaces[{neg}].thickness",
+                                    f"expected the air from {name(start)} to {name(i)} to add up to >= 0 mm along "
+                                    f"the light's path, got {net:g} mm with this thickness {t:g}: {name(i)} would lie "
+                                    f"behind {name(start)}, which {why}")
+                if i > last:
+                    break
+                start, gaps = i, []
+                net = 0.0 if isinstance(media[i + 1], Air) else None
+            if net is not None:
+                net += self.surfaces[i].thickness * dirs[i + 1]
+                gaps.append(i)
+
+    def virtual_steps(self) -> np.ndarray:
+        """Where propagation may run backwards along the ray (length N+1: the step onto
+        surface k, then onto the image plane, index N).
+
+        Sequential tracing, as in Zemax: across a zero or negative thickness in air next to
+        a surface that bends no ray (a stop or dummy surface placed behind the next vertex,
+        say) the next surface is intersected whatever the sign of the distance. Everywhere
+        else (inside glass, across a positive air gap, between two lens surfaces) a ray that
+        would have to travel backwards misses the surface. Step 0 is False here: where rays
+        start is the tracer's business (it always lets the first step run backwards).
+        """
+        media, dirs, zv = self.media(), self.directions(), self.vertex_z()
+        n = len(self.surfaces)
+        out = np.zeros(n + 1, dtype=bool)
+        for k in range(1, n + 1):
+            if not isinstance(media[k], Air) or (zv[k] - zv[k - 1]) * dirs[k] > 0:
+                continue
+            out[k] = self.is_dummy(k - 1, media) or (k < n and self.is_dummy(k, media))
+        return out
 
     # ---- geometry ---------------------------------------------------------------
     @property

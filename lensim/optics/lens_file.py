@@ -15,7 +15,8 @@
     image: {defocus: 0.0}
 
 Surface keys: radius (mm, 'infinity' or omitted for a plane) or curvature (1/mm),
-thickness (mm to the next vertex; negative after a mirror), material (glass name,
+thickness (mm to the next vertex; negative after a mirror, or in air to place a stop
+or dummy surface behind the next vertex, as in Zemax), material (glass name,
 name@Catalog, air, {nd, vd} model glass or {n} constant index), conic, asphere
 ({r2..r20: coefficient}), clear_semi_diameter (vignetting), obscuration (central
 obscuration radius), semi_diameter (drawing only), stop, mirror, comment.

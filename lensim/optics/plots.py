@@ -161,13 +161,15 @@ def trace_ray_paths(lens: Lens, launch_fields: list[float], pupil_y: np.ndarray,
     status = torch.zeros(rays.shape, dtype=torch.int8)
     failed_at = torch.full(rays.shape, -1, dtype=torch.int16)
     surfaces = list(lens.surfaces) + [Surface(clear_radius=lens.image_clear_radius)]
+    backwards = lens.virtual_steps()
+    backwards[0] = True  # rays start anywhere
     for i, surf in enumerate(surfaces):
         is_image = i == lens.num_surfaces
         n1, n2 = (n[-1], n[-1]) if is_image else (n[i], n[i + 1])
         # where each live ray meets the surface, ignoring apertures and refraction
-        geo, _ = trace_surface(surf, float(zv[i]), rays, n1, n2, allow_backwards=(i == 0), apertures=False,
+        geo, _ = trace_surface(surf, float(zv[i]), rays, n1, n2, allow_backwards=bool(backwards[i]), apertures=False,
                                interact=False)
-        rays_after, st = trace_surface(surf, float(zv[i]), rays, n1, n2, allow_backwards=(i == 0),
+        rays_after, st = trace_surface(surf, float(zv[i]), rays, n1, n2, allow_backwards=bool(backwards[i]),
                                        interact=not is_image)
         newly = (st != OK) & (status == OK)
         status = torch.where(newly, st.to(status.dtype), status)
@@ -283,6 +285,11 @@ def plot_layout(
 
     # rays
     handles = []
+    media = lens.media()
+    # a ray's point on a surface that bends no ray lies on its straight path, and may lie
+    # behind the next surface (a stop placed by a negative thickness): it is left out of
+    # the drawn path unless the ray ends there
+    bends = np.array([True] + [not lens.is_dummy(k, media) for k in range(S)] + [True])
     for fi, f in enumerate(fields):
         color = FIELD_COLORS[fi % len(FIELD_COLORS)]
         for p in range(1, len(pupil_y)):
@@ -290,12 +297,13 @@ def plot_layout(
             if not r[0]:
                 continue
             upto = np.argmin(r) if not r.all() else r.size  # first point not reached
-            seg = paths.points[fi, p, :upto]
+            keep = bends[:upto].copy()
+            keep[upto - 1] = True
+            seg = paths.points[fi, p, :upto][keep]
             ax.plot(seg[:, 0], seg[:, 1], color=color, lw=0.8, alpha=0.9, zorder=2)
         handles.append(Line2D([], [], color=color, lw=1.5, label=field_label(lens, f)))
 
     # surfaces
-    media = lens.media()
     dirs = lens.directions()
     for i, s in enumerate(lens.surfaces):
         z, y = _profile(s, float(zv[i]), sds[i])

@@ -42,7 +42,8 @@ class Surface:
     """One surface and the medium after it.
 
     curvature: 1/R (1/mm), 0 for a plane. thickness: signed distance (mm) to the next
-    surface vertex (negative after a mirror, as in Zemax). asphere: {power: coefficient}
+    surface vertex (negative after a mirror, as in Zemax; in air also to place a stop or
+    dummy surface behind the next vertex, see Lens.virtual_steps). asphere: {power: coefficient}
     with even powers 2..20 (coefficients in mm^(1-power)). clear_radius: semi-diameter of
     the clear aperture that vignettes rays (None: unlimited). obscuration_radius: central
     obscuration (rays with r below it are blocked). semi_diameter: drawn size only.

@@ -3,6 +3,10 @@
 Rays are tensors of any batch shape (typically wavelengths x fields x pupil samples).
 Each surface: transfer to the vertex plane, exact conic intersection (Newton for
 aspheres), clear-aperture / obscuration test, vector Snell refraction or reflection.
+Tracing is sequential, as in Zemax: the root taken is always the one on the sheet of the
+surface nearest its vertex plane, and across a zero or negative thickness in air next to
+a stop or dummy surface (Lens.virtual_steps) the surface is met whatever the sign of the
+distance along the ray; elsewhere a ray that would travel backwards misses the surface.
 Failures (miss, total internal reflection, vignetting) become per-ray validity masks
 with a status code and the surface where they happened; no NaN reaches the caller.
 """
@@ -21,7 +25,7 @@ DTYPE = torch.float64
 
 # status codes (per ray)
 OK = 0
-MISSED = 1  # the ray does not meet the surface (or travels backwards to it)
+MISSED = 1  # the ray does not meet the surface (or travels backwards to it where that is not allowed)
 TIR = 2  # total internal reflection
 VIGNETTED = 3  # blocked by a clear aperture or obscuration
 STATUS_TEXT = {OK: "ok", MISSED: "misses the surface", TIR: "is totally internally reflected", VIGNETTED: "is vignetted by the aperture"}
@@ -160,12 +164,15 @@ def trace_reference(
     end = lens.num_surfaces if end is None else end
     n = media_indices(lens, wavelength_um) if indices is None else indices
     zv = lens.vertex_z()
+    backwards = lens.virtual_steps()  # where a ray may travel backwards to the surface
+    backwards[min(start, lens.num_surfaces)] = True  # rays start anywhere
     status = torch.zeros(rays.shape, dtype=torch.int8, device=rays.opl.device)
     failed_at = torch.full(rays.shape, -1, dtype=torch.int16, device=rays.opl.device)
     positions = []
     for i in range(start, end):
         rays, st = trace_surface(
-            lens.surfaces[i], float(zv[i]), rays, n[i], n[i + 1], allow_backwards=(i == start), apertures=apertures
+            lens.surfaces[i], float(zv[i]), rays, n[i], n[i + 1], allow_backwards=bool(backwards[i]),
+            apertures=apertures,
         )
         newly = (st != OK) & (status == OK)
         status = torch.where(newly, st.to(status.dtype), status)
@@ -174,7 +181,8 @@ def trace_reference(
             positions.append(rays.position)
     if to_image and end == lens.num_surfaces:
         image = Surface(clear_radius=lens.image_clear_radius)
-        rays, st = trace_surface(image, float(zv[-1]), rays, n[-1], n[-1], apertures=apertures, interact=False)
+        rays, st = trace_surface(image, float(zv[-1]), rays, n[-1], n[-1], allow_backwards=bool(backwards[end]),
+                                 apertures=apertures, interact=False)
         newly = (st != OK) & (status == OK)
         status = torch.where(newly, st.to(status.dtype), status)
         failed_at = torch.where(newly, torch.as_tensor(end, dtype=failed_at.dtype), failed_at)
@@ -209,7 +217,7 @@ class _Step:
     r2_max: float | None
     r2_min: float | None
     interact: bool
-    backwards_ok: bool
+    backwards_ok: bool  # the first step (rays start anywhere) and virtual steps (Lens.virtual_steps)
 
 
 def _kind(s: Surface) -> str:
@@ -222,6 +230,7 @@ def _kind(s: Surface) -> str:
 
 def _steps(lens: Lens, start: int, end: int, to_image: bool, apertures: bool) -> list[_Step]:
     zv = lens.vertex_z()
+    virtual = lens.virtual_steps()
     steps = []
     surfaces = [(i, lens.surfaces[i], True) for i in range(start, end)]
     if to_image and end == lens.num_surfaces:
@@ -230,7 +239,7 @@ def _steps(lens: Lens, start: int, end: int, to_image: bool, apertures: bool) ->
         r2_max = s.clear_radius**2 * (1 + 1e-12) if (apertures and s.clear_radius is not None) else None
         r2_min = s.obscuration_radius**2 if (apertures and s.obscuration_radius is not None) else None
         shift = 0.0 if j == 0 else float(zv[i] - zv[surfaces[j - 1][0]])
-        steps.append(_Step(i, shift, _kind(s), s, r2_max, r2_min, interact, j == 0))
+        steps.append(_Step(i, shift, _kind(s), s, r2_max, r2_min, interact, j == 0 or bool(virtual[i])))
     return steps
 
 
