@@ -73,17 +73,23 @@ def _package_dir(package: str) -> Path | None:
     return Path(spec.origin).parent
 
 
-def sample_image_path(name: str) -> Path:
-    """Path of a built-in sample image; a clear error if its package is not installed."""
+def _sample(name: str) -> SampleImage:
+    """The built-in photo called name; a clear error naming the choices if there is none."""
     for img in SAMPLE_IMAGES:
         if img.name == name:
-            base = _package_dir(img.package)
-            path = None if base is None else base / img.relative_path
-            if path is None or not path.is_file():
-                raise InputError(name, "sample image", f"not found; it ships with the '{img.package}' package, which "
-                                 "scripts/setup.sh installs")
-            return path
+            return img
     raise InputError(name, "sample image", f"unknown; expected one of {', '.join(i.name for i in SAMPLE_IMAGES)}")
+
+
+def sample_image_path(name: str) -> Path:
+    """Path of a built-in sample image; a clear error if its package is not installed."""
+    img = _sample(name)
+    base = _package_dir(img.package)
+    path = None if base is None else base / img.relative_path
+    if path is None or not path.is_file():
+        raise InputError(name, "sample image", f"not found; it ships with the '{img.package}' package, which "
+                         "scripts/setup.sh installs")
+    return path
 
 
 def read_sample_image(name: str) -> torch.Tensor:
@@ -93,9 +99,9 @@ def read_sample_image(name: str) -> torch.Tensor:
     are halved (antialiased bilinear), which makes them sharp at the pixel level, as a
     ground truth for training pairs should be."""
     arr, _ = read_image(sample_image_path(name))
-    img = next(i for i in SAMPLE_IMAGES if i.name == name)
-    if img.scale != 1.0:
-        arr = F.interpolate(arr[None], scale_factor=img.scale, mode="bilinear", antialias=True,
+    scale = _sample(name).scale
+    if scale != 1.0:
+        arr = F.interpolate(arr[None], scale_factor=scale, mode="bilinear", antialias=True,
                             align_corners=False)[0].clamp(0.0, 1.0)
     return arr
 

@@ -1,18 +1,15 @@
 """`lensim psf ...`: compute single PSFs (and PSF banks)."""
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
 import numpy as np
 import typer
 
-import contextlib
-
 from lensim.cli.common import console, print_json, progress_bar
 from lensim.optics.lens_file import atomic_write_bytes, load_lens
 from lensim.psf.compute import METHODS, compute_psf
-
-_nothing = contextlib.nullcontext
 
 psf_app = typer.Typer(help="Point spread functions: single PSFs, banks, pictures.", no_args_is_help=True)
 
@@ -108,7 +105,7 @@ def bank(
     wl = parse_wavelengths_nm(wavelengths_nm)
     t0 = time.time()
     prog, report = progress_bar("PSF bank", "fields", quiet or json_out)
-    with prog if prog is not None else _nothing():
+    with prog or contextlib.nullcontext():
         result = compute_bank(lens, pitch, kernel, fields=default_fields(fields), wavelengths_nm=wl, response=response,
                               method=method, pupil_samples=pupil_samples, max_spacing_um=max_spacing_um, aiming=aiming,
                               workers=workers, out_dir=output, progress=report, illuminant=illuminant)

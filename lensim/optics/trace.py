@@ -476,7 +476,6 @@ class _ChunkSource:
 
 
 def _executor(workers: int):
-
     if workers not in _EXECUTORS:
         _EXECUTORS[workers] = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="lensim-trace")
     return _EXECUTORS[workers]

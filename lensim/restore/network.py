@@ -203,7 +203,7 @@ class FieldAwareUNet(nn.Module):
             raise ValueError(f"deformable_scales={deformable_scales} must be between 0 and {n_dec} (decoder scales)")
         self.widths = ws
         self.depth = len(ws)
-        self.deformable_scales = n_dec if deformable_scales is None or not use_deformable else int(deformable_scales)
+        self.deformable_scales = n_dec if deformable_scales is None else int(deformable_scales)
         self.use_fov = use_fov
         self.use_deformable = use_deformable
         self.use_context = use_context

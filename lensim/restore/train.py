@@ -116,7 +116,8 @@ class TrainConfig:
 
 # Settings that must not change when resuming (they would change the loss curve's meaning).
 _FROZEN_ON_RESUME = ("batch_size", "lr", "lr_halve_every", "crop", "width", "depth", "use_fov", "use_deformable",
-                     "use_context", "deformable_groups", "deformable_scales", "seed", "augment", "val_fraction", "max_steps_per_epoch")
+                     "use_context", "deformable_groups", "deformable_scales", "seed", "augment", "val_fraction",
+                     "max_steps_per_epoch")
 
 
 @dataclass
