@@ -34,6 +34,7 @@ class DemoSettings:
     wavelengths_nm: tuple[float, ...]
     pupil_samples: int
     photo_size: int
+    placements: int
     crops: int
     crop_size: int
     train_seconds: float
@@ -43,8 +44,8 @@ class DemoSettings:
     @classmethod
     def make(cls, quick: bool) -> "DemoSettings":
         if quick:
-            return cls(5, (450.0, 500.0, 550.0, 600.0, 650.0), 96, 256, 6, 96, 35.0, 16, 64)
-        return cls(12, tuple(float(w) for w in range(400, 701, 25)), 128, 512, 12, 128, 300.0, 32, 96)
+            return cls(5, (450.0, 500.0, 550.0, 600.0, 650.0), 96, 256, 3, 2, 96, 35.0, 16, 64)
+        return cls(12, tuple(float(w) for w in range(400, 701, 25)), 128, 512, 3, 4, 128, 300.0, 32, 96)
 
 
 def _stage(out: Path, name: str) -> Path:
@@ -130,7 +131,7 @@ def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: i
     say("training pairs")
     photos = _photos(out, settings.photo_size)
     make_dataset(photos, out / "pairs", bank, DEFAULT_SENSOR, sensor, crops=settings.crops, size=settings.crop_size,
-                 seed=seed, workers=workers)
+                 seed=seed, placements=settings.placements, workers=workers)
     timings["pairs"] = time.perf_counter() - t
 
     t = time.perf_counter()

@@ -11,6 +11,7 @@ from typing import Any, Mapping
 
 import torch
 
+from lensim.data.pairs import crop_capture
 from lensim.evaluate.harness import CropContext, Method, markdown_table
 from lensim.images import read_image
 from lensim.jsonable import jsonable
@@ -41,7 +42,7 @@ def _context(manifest: Mapping[str, Any], rec: Mapping[str, Any], k: int, sensor
     crop = rec["crops"][k]
     size = int(manifest["size"])
     m = native_mapping(size, size, sensor, int(crop["sensor_top"]), int(crop["sensor_left"]))
-    return CropContext(m, sensor, bank, rec.get("capture"), int(crop["sensor_top"]), int(crop["sensor_left"]),
+    return CropContext(m, sensor, bank, crop_capture(rec, crop), int(crop["sensor_top"]), int(crop["sensor_left"]),
                        int(rec["index"]), k), size
 
 

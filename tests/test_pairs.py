@@ -8,7 +8,7 @@ import torch
 
 from lensim.assets.images import sample_image_path
 from lensim.errors import InputError
-from lensim.data.pairs import make_dataset
+from lensim.data.pairs import crop_capture, make_dataset, place_on_sensor
 from lensim.images import read_image, write_image
 from lensim.optics.lens_file import load_lens
 from lensim.psf.bank import compute_bank
@@ -43,8 +43,10 @@ def test_pairs_are_written_with_positions_and_draws(setup):
     assert m["pairs"] == 4 and calls[0] == (0, 2) and calls[-1] == (2, 2)
     sensor = setup[2]
     for rec in m["records"]:
-        assert rec["capture"]["kelvin"] > 0 and rec["capture"]["shot"] is not None
+        capture = rec["placements"][0]["capture"]
+        assert capture["kelvin"] > 0 and capture["shot"] is not None
         for c in rec["crops"]:
+            assert crop_capture(rec, c) == capture
             assert 0 <= c["sensor_top"] <= sensor.height - 64 and 0 <= c["sensor_left"] <= sensor.width - 64
             x, _ = read_image(setup[0] / "a" / c["input"])
             y, _ = read_image(setup[0] / "a" / c["target"])
@@ -84,3 +86,41 @@ def test_dask_workers_give_the_same_pairs(setup):
     for ra, rd in zip(a["records"], d["records"]):
         for ca, cd in zip(ra["crops"], rd["crops"]):
             assert (setup[0] / "a" / ca["input"]).read_bytes() == (setup[0] / "d" / cd["input"]).read_bytes()
+
+
+def test_placements_cover_every_field_zone(setup):
+    """Three placements put each photo's centre in the centre, middle and edge radius bands,
+    each placement with its own capture draw and crops."""
+    m, _ = _run(setup, "p", placements=3)
+    sensor = setup[2]
+    half_diag = np.hypot(sensor.width, sensor.height) / 2
+    assert m["pairs"] == 2 * 2 * 3 and m["placements"] == 3
+    for rec in m["records"]:
+        _, _, h, w = rec["source_crop"]
+        assert len(rec["placements"]) == 3
+        for k, p in enumerate(rec["placements"]):
+            assert p["sensor_top"] % 2 == 0 and p["sensor_left"] % 2 == 0
+            assert 0 <= p["sensor_top"] <= sensor.height - h and 0 <= p["sensor_left"] <= sensor.width - w
+            rho = np.hypot(p["sensor_top"] + h / 2 - sensor.height / 2, p["sensor_left"] + w / 2 - sensor.width / 2)
+            assert k / 3 - 0.002 <= rho / half_diag < (k + 1) / 3 + 0.002
+        assert [c["placement"] for c in rec["crops"]] == [0, 0, 1, 1, 2, 2]
+        kelvins = {p["capture"]["kelvin"] for p in rec["placements"]}
+        assert len(kelvins) == 3  # a fresh capture draw per placement
+
+
+def test_placement_falls_back_to_the_nearest_band():
+    """A photo as large as the sensor has a single position: every band gets it."""
+    sensor = load_sensor(SENSOR)
+    gen = torch.Generator().manual_seed(0)
+    assert place_on_sensor(sensor.height, sensor.width, sensor, 2, 3, gen) == (0, 0)
+    # a 1000-pixel photo reaches rho 0.808 at most, short of the last of 10 bands [0.9, 1):
+    # it goes towards a corner, as far out as the draws allow
+    top, left = place_on_sensor(1000, 1000, sensor, 9, 10, gen)
+    rho = np.hypot(top + 500 - sensor.height / 2, left + 500 - sensor.width / 2) / (np.hypot(6000, 4000) / 2)
+    assert 0.75 < rho <= 0.809
+
+
+def test_zero_placements_are_refused(setup):
+    base, sharp, sensor, bank = setup
+    with pytest.raises(InputError, match="placements"):
+        make_dataset(sharp, base / "z", bank, SENSOR, sensor, crops=1, size=64, placements=0)

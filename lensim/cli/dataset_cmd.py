@@ -22,7 +22,9 @@ def make(
     output: Path = typer.Option(..., "-o", "--output", help="Dataset folder (resumes if it exists with the same settings)."),
     lens_file: str = typer.Option(assets.DEFAULT_LENS, "--lens", help="Lens file or built-in lens name."),
     sensor_file: str = typer.Option(DEFAULT_SENSOR, "--sensor", help="Sensor profile file or built-in name."),
-    crops: int = typer.Option(8, "--crops", help="Crops per photo."),
+    crops: int = typer.Option(8, "--crops", help="Crops per photo and placement."),
+    placements: int = typer.Option(1, "--placements", help="Sensor positions per photo, stratified by field radius "
+                                   "(3: centre, middle and edge zones)."),
     size: int = typer.Option(256, "--size", help="Crop size in pixels (even)."),
     seed: int = typer.Option(0, "--seed", help="Seed of every random draw (placement, colour temperature, noise, crops)."),
     noise: bool = typer.Option(True, "--noise/--no-noise", help="Add shot and read noise."),
@@ -37,12 +39,12 @@ def make(
     quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
     json_out: bool = typer.Option(False, "--json", help="Print a summary as JSON."),
 ) -> None:
-    """Place each photo on the sensor at native scale (seeded random position), simulate
-    the camera, and cut aligned crops: DATASET/pairs/*_input.png (camera) and *_target.png
+    """Place each photo on the sensor at native scale (--placements seeded random positions,
+    stratified by field radius), simulate the camera at each, and cut aligned crops: DATASET/pairs/*_input.png (camera) and *_target.png
     (sharp), with every crop's sensor position and every random draw in
     DATASET/manifest.json.
 
-    Example: lensim dataset make photos/ --lens cooke_triplet --sensor apsc_mirrorless -o data/ --crops 8 --size 256
+    Example: lensim dataset make photos/ --lens cooke_triplet --sensor apsc_mirrorless -o data/ --crops 8 --size 256 --placements 3
     """
     lens = load_lens(lens_file)
     sensor = load_sensor(sensor_file)
@@ -56,7 +58,7 @@ def make(
         prog.start()
     try:
         manifest = make_dataset(sharp_dir, output, bank, sensor_file, sensor, crops=crops, size=size, seed=seed,
-                                noise=noise, demosaic=demosaic, workers=workers, scheduler=scheduler, progress=cb)
+                                placements=placements, noise=noise, demosaic=demosaic, workers=workers, scheduler=scheduler, progress=cb)
     finally:
         if prog:
             prog.stop()

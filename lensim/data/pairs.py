@@ -1,11 +1,18 @@
 """Training-pair generation (the paper's "Simulate Training Data").
 
 Each sharp photo is placed on the sensor at its native scale (one image pixel = one sensor
-pixel) at a seeded random position (a random crop of it if it is larger than the sensor),
-simulated through the lens and sensor (lensim.simulate), and cut into `crops` aligned
-pairs of size x size pixels: the simulated camera image (network input) and the original
-(target), each with the absolute sensor position of its top-left pixel, so a network can
-be fed field-of-view channels.
+pixel; a random crop of it if it is larger than the sensor) at `placements` seeded random
+positions, simulated through the lens and sensor at each (lensim.simulate, a fresh capture
+draw each time), and cut into `crops` aligned pairs of size x size pixels per placement:
+the simulated camera image (network input) and the original (target), each with the
+absolute sensor position of its top-left pixel, so a network can be fed field-of-view
+channels.
+
+Placement k of K is uniformly random among the positions that keep the photo on the
+sensor with its centre at a normalized field radius (1 at the sensor corner) in
+[k/K, (k+1)/K). With K = 3 every photo is seen in the centre, middle and edge zones of
+lensim.evaluate (as far as its size allows), so a held-out photo scores every zone; one
+uniform position leaves small photos on a large sensor mostly in the middle zone.
 
 Determinism: image i's random stream is seeded from (seed, i, file name); results do not
 depend on worker count or order. Resumability: an image is done when its JSON record
@@ -20,6 +27,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -51,6 +59,7 @@ class PairJob:
     size: int
     noise: bool
     demosaic: str
+    placements: int = 1
 
 
 def image_seed(seed: int, index: int, name: str) -> int:
@@ -74,6 +83,30 @@ def record_path(out_dir: Path, index: int) -> Path:
     return out_dir / "records" / f"{index:06d}.json"
 
 
+def crop_capture(record: dict, crop: dict) -> dict | None:
+    """The capture draws (colour temperature, noise levels) behind one crop of a record."""
+    if "placements" in record:
+        return record["placements"][int(crop.get("placement", 0))].get("capture")
+    return record.get("capture")
+
+
+def place_on_sensor(h: int, w: int, sensor: SensorProfile, k: int, placements: int,
+                    gen: torch.Generator, tries: int = 256) -> tuple[int, int]:
+    """Top-left sensor pixel (even, to keep the Bayer phase) of an h x w photo for placement
+    k of `placements`: uniformly random among the positions that keep the photo on the
+    sensor and put its centre at a normalized radius in [k, k + 1) / placements (the
+    position nearest that band when none of `tries` draws falls in it)."""
+    u = torch.rand(tries, 2, generator=gen, dtype=torch.float64)
+    top = u[:, 0] * (sensor.height - h)
+    left = u[:, 1] * (sensor.width - w)
+    half_diag = math.hypot(sensor.width, sensor.height) / 2
+    rho = torch.hypot(top + (h - sensor.height) / 2, left + (w - sensor.width) / 2) / half_diag
+    lo, hi = k / placements, (k + 1) / placements
+    inside = ((rho >= lo) & (rho < hi)).nonzero()
+    i = int(inside[0]) if len(inside) else int((rho - (lo + hi) / 2).abs().argmin())
+    return 2 * int(top[i] / 2), 2 * int(left[i] / 2)
+
+
 def make_pairs_for_image(job: PairJob) -> dict:
     """Simulate one photo and write its crops; returns (and writes) its record."""
     torch.set_num_threads(1)
@@ -91,23 +124,24 @@ def make_pairs_for_image(job: PairJob) -> dict:
     y = int(torch.randint(0, h - h2 + 1, (1,), generator=gen))
     x = int(torch.randint(0, w - w2 + 1, (1,), generator=gen))
     img = img[:, y:y + h2, x:x + w2]
-    # place it on the sensor (even offsets keep the Bayer phase)
-    top = 2 * int(torch.randint(0, (sensor.height - h2) // 2 + 1, (1,), generator=gen))
-    left = 2 * int(torch.randint(0, (sensor.width - w2) // 2 + 1, (1,), generator=gen))
-    mapping = native_mapping(h2, w2, sensor, top, left)
-    sim, params = simulate(img, bank, sensor, gen, noise=job.noise, demosaic=job.demosaic, mapping=mapping)
-    crops = []
+    crops, placed = [], []
     stem = f"{job.index:06d}"
-    for k in range(job.crops):
-        cy = int(torch.randint(0, h2 - job.size + 1, (1,), generator=gen))
-        cx = int(torch.randint(0, w2 - job.size + 1, (1,), generator=gen))
-        name_in = f"pairs/{stem}_{k:03d}_input.png"
-        name_gt = f"pairs/{stem}_{k:03d}_target.png"
-        write_image(out / name_in, sim[:, cy:cy + job.size, cx:cx + job.size], 8)
-        write_image(out / name_gt, img[:, cy:cy + job.size, cx:cx + job.size], 8)
-        crops.append({"input": name_in, "target": name_gt, "sensor_top": top + cy, "sensor_left": left + cx})
+    for p in range(job.placements):
+        top, left = place_on_sensor(h2, w2, sensor, p, job.placements, gen)
+        mapping = native_mapping(h2, w2, sensor, top, left)
+        sim, params = simulate(img, bank, sensor, gen, noise=job.noise, demosaic=job.demosaic, mapping=mapping)
+        placed.append({"sensor_top": top, "sensor_left": left, "capture": params.to_dict()})
+        for _ in range(job.crops):
+            cy = int(torch.randint(0, h2 - job.size + 1, (1,), generator=gen))
+            cx = int(torch.randint(0, w2 - job.size + 1, (1,), generator=gen))
+            name_in = f"pairs/{stem}_{len(crops):03d}_input.png"
+            name_gt = f"pairs/{stem}_{len(crops):03d}_target.png"
+            write_image(out / name_in, sim[:, cy:cy + job.size, cx:cx + job.size], 8)
+            write_image(out / name_gt, img[:, cy:cy + job.size, cx:cx + job.size], 8)
+            crops.append({"input": name_in, "target": name_gt, "sensor_top": top + cy, "sensor_left": left + cx,
+                          "placement": p})
     record = {"index": job.index, "source": job.path, "seed": job.seed, "source_crop": [y, x, h2, w2],
-              "sensor_top": top, "sensor_left": left, "capture": params.to_dict(), "crops": crops}
+              "placements": placed, "crops": crops}
     atomic_write_text(record_path(out, job.index), json.dumps(record, indent=1, default=str) + "\n")
     return record
 
@@ -121,6 +155,7 @@ def make_dataset(
     crops: int = 8,
     size: int = 256,
     seed: int = 0,
+    placements: int = 1,
     noise: bool = True,
     demosaic: str = "ahd",
     workers: int = 1,
@@ -128,11 +163,14 @@ def make_dataset(
     progress: Callable[[int, int], None] | None = None,
 ) -> dict:
     """Generate pairs for every photo in sharp_dir into out_dir (resumable); returns the
-    manifest. The bank must be at the sensor's native pitch and cover its diagonal."""
+    manifest. `crops` crops are cut at each of a photo's `placements` sensor positions.
+    The bank must be at the sensor's native pitch and cover its diagonal."""
     if size < 16 or size % 2:
         raise InputError(None, "size", f"expected an even crop size of at least 16 pixels, got {size}")
     if crops < 1:
         raise InputError(None, "crops", f"expected at least one crop per image, got {crops}")
+    if placements < 1:
+        raise InputError(None, "placements", f"expected at least one placement per image, got {placements}")
     if bank.directory is None:
         raise InputError(None, "bank", "expected a bank stored on disk (workers load it)")
     if abs(bank.pixel_pitch_um / sensor.pixel_pitch_um - 1) > 1e-6:
@@ -140,8 +178,8 @@ def make_dataset(
                          f"the sensor's pitch {sensor.pixel_pitch_um:g} um")
     files = list_images(sharp_dir)
     out = Path(out_dir)
-    settings = {"format": FORMAT, "seed": seed, "crops": crops, "size": size, "noise": noise, "demosaic": demosaic,
-                "sensor": sensor.to_dict(), "sensor_name": sensor_name, "lens": bank.manifest.get("lens"),
+    settings = {"format": FORMAT, "seed": seed, "crops": crops, "placements": placements, "size": size,
+                "noise": noise, "demosaic": demosaic, "sensor": sensor.to_dict(), "sensor_name": sensor_name, "lens": bank.manifest.get("lens"),
                 "bank": str(bank.directory), "sources": [str(p) for p in files]}
     old = out / "settings.json"
     if old.exists():
@@ -153,7 +191,7 @@ def make_dataset(
     else:
         atomic_write_text(old, json.dumps(settings, indent=1, default=str) + "\n")
     jobs = [PairJob(i, str(p), str(out), str(bank.directory), sensor_name, image_seed(seed, i, p.name), crops, size,
-                    noise, demosaic) for i, p in enumerate(files)]
+                    noise, demosaic, placements) for i, p in enumerate(files)]
     todo = [j for j in jobs if not record_path(out, j.index).exists()]
     done = len(jobs) - len(todo)
     if progress:

@@ -42,6 +42,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 import torch
 
+from lensim.data.pairs import crop_capture
 from lensim.errors import InputError
 from lensim.evaluate import baselines
 from lensim.evaluate.metrics import ZONES, image_scores, normalized_radius
@@ -204,7 +205,7 @@ def evaluate_rows(
             raise InputError(str(pairs_dir / cr["input"]), "size", f"is {tuple(x.shape)}; its target is {tuple(y.shape)}")
         _, h, w = x.shape
         top, left = int(cr["sensor_top"]), int(cr["sensor_left"])
-        ctx = CropContext(native_mapping(h, w, sensor, top, left), sensor, the_bank, rec.get("capture"), top, left,
+        ctx = CropContext(native_mapping(h, w, sensor, top, left), sensor, the_bank, crop_capture(rec, cr), top, left,
                           ri, ci)
         rho = normalized_radius(h, w, top, left, sensor.height, sensor.width)
         for name, method in all_methods.items():
