@@ -5,10 +5,10 @@ Each row runs in its own subprocess (peak RSS from getrusage) and restores a syn
 photo with lensim.restore.infer.restore_image at the CLI's defaults (tile 512, overlap
 192), FOV channels at the APS-C sensor's geometry:
 
-* field-aware, the CPU default (DCN at the coarsest decoder scale);
-* field-aware, DCN at every decoder scale (the paper's layout, same width);
-* the plain UNet of the same parameter count (the baseline; ratios are against it);
-* with --big: the CPU default on a 24-megapixel (6000 x 4000) frame, 8-bit output.
+* dcn-coarsest: field-aware, DCN at the coarsest decoder scale only (`--deformable-scales 1`);
+* dcn-all: field-aware, DCN at every decoder scale (the paper's layout, same width);
+* plain-unet: the plain UNet of the paper layout's parameter count (ratios are against it);
+* with --big: dcn-coarsest on a 24-megapixel (6000 x 4000) frame, 8-bit output.
 
 Weights are random (seeded): speed and memory do not depend on training.
 """
@@ -26,15 +26,14 @@ from lensim.restore.infer import restore_image
 from lensim.restore.network import FieldAwareUNet, count_parameters, plain_unet_width
 variant, mp = sys.argv[1], float(sys.argv[3])
 torch.manual_seed(0)
-default = FieldAwareUNet()
+dcn_scales = {"dcn-coarsest": 1, "dcn-all": None, "dcn-coarsest-24mp": 1}
+reference = FieldAwareUNet(deformable_scales=None)
 if variant == "plain-unet":
-    model = FieldAwareUNet(width=plain_unet_width(count_parameters(default)), use_fov=False, use_deformable=False,
+    model = FieldAwareUNet(width=plain_unet_width(count_parameters(reference)), use_fov=False, use_deformable=False,
                            use_context=False)
-elif variant == "all-scales-dcn":
-    model = FieldAwareUNet(deformable_scales=None)
 else:
-    model = default
-if variant == "default-24mp":
+    model = FieldAwareUNet(deformable_scales=dcn_scales[variant])
+if variant.endswith("-24mp"):
     h, w = 4000, 6000
 else:
     w = int(round((mp * 1e6 * 1.5) ** 0.5 / 16)) * 16
@@ -57,9 +56,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--megapixels", type=float, default=4.0, help="Size of the throughput image.")
-    ap.add_argument("--big", action="store_true", help="Also restore a 24-megapixel frame with the default model.")
+    ap.add_argument("--big", action="store_true", help="Also restore a 24-megapixel frame (dcn-coarsest).")
     args = ap.parse_args()
-    variants = ["default", "all-scales-dcn", "plain-unet"] + (["default-24mp"] if args.big else [])
+    variants = ["dcn-coarsest", "dcn-all", "plain-unet"] + (["dcn-coarsest-24mp"] if args.big else [])
     rows = []
     for v in variants:
         res = subprocess.run([sys.executable, "-c", CHILD, v, str(args.threads), str(args.megapixels)],
@@ -67,9 +66,9 @@ def main() -> None:
         rows.append(json.loads(res.stdout.strip().splitlines()[-1]))
     plain = next(r for r in rows if r["variant"] == "plain-unet")["mp_per_s"]
     print(f"restore_image, tile 512 / overlap 192, {args.threads} threads, random weights")
-    print(f"{'variant':<16}{'params':>10}{'image':>12}{'seconds':>10}{'MP/s':>8}{'vs plain':>10}{'peak RSS MB':>13}")
+    print(f"{'variant':<19}{'params':>10}{'image':>12}{'seconds':>10}{'MP/s':>8}{'vs plain':>10}{'peak RSS MB':>13}")
     for r in rows:
-        print(f"{r['variant']:<16}{r['params']:>10,}{r['width']:>7}x{r['height']:<5}{r['seconds']:>9.1f}"
+        print(f"{r['variant']:<19}{r['params']:>10,}{r['width']:>7}x{r['height']:<5}{r['seconds']:>9.1f}"
               f"{r['mp_per_s']:>8.3f}{r['mp_per_s'] / plain:>9.2f}x{r['peak_rss_mb']:>13.0f}")
 
 

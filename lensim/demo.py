@@ -157,7 +157,8 @@ def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: i
     report = {
         "lens": summary,
         "sensor": {"name": sensor.name, "pixel_pitch_um": sensor.pixel_pitch_um, "resolution": list(sensor.resolution)},
-        "settings": {**asdict(settings), "quick": quick, "seed": seed, "kernel_pixels": kernel},
+        "settings": {**asdict(settings), "quick": quick, "seed": seed, "workers": workers, "device": device,
+                     "kernel_pixels": kernel},
         "bank": {"fields": [float(f.field) for f in bank.fields],
                  "image_height_mm": [float(r) for r in bank.radii_mm],
                  "strehl": [float(f.strehl) for f in bank.fields],

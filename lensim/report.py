@@ -170,7 +170,7 @@ def write_report(out: Path, report: dict, figs: Path) -> Path:
          ["psf_map.png", "strehl.png", "mtf.png", "relative_illumination.png"]),
         ("Restoration on held-out photos", _metrics_html(report["metrics"]) +
          "<p>PSNR / SSIM against the sharp originals; zones by normalized sensor radius (centre &lt; 1/3, "
-         "middle, edge &gt; 2/3). <code>input</code> is the simulated camera image; <code>wiener</code> is an oracle "
+         "middle, edge &ge; 2/3 of the half-diagonal). <code>input</code> is the simulated camera image; <code>wiener</code> is an oracle "
          "given the true PSFs.</p>", ["crops_centre.png", "crops_edge.png"]),
         ("Slanted edge and lateral colour", "<pre>" + html.escape(json.dumps(jsonable(
             {"slanted_edge": report["slanted_edge"], "lateral_colour": report["lateral_colour"]}), indent=1)) +
@@ -193,5 +193,5 @@ postprocessing using imaging simulation", ACM TOG 2021. Settings: {html.escape(j
 </body></html>
 """
     atomic_write_text(out / "report.html", page)
-    (figs / "metrics.md").write_text(markdown_table(report["metrics"]))
+    atomic_write_text(figs / "metrics.md", markdown_table(report["metrics"]))
     return out / "report.html"
