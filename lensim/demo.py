@@ -18,6 +18,7 @@ from typing import Callable
 
 from lensim.assets import DEFAULT_LENS
 from lensim.assets.images import available_sample_images, read_sample_image
+from lensim.errors import InputError
 from lensim.images import write_image
 from lensim.optics.analysis import first_order_summary
 from lensim.optics.lens_file import atomic_write_text, load_lens
@@ -52,6 +53,25 @@ def _stage(out: Path, name: str) -> Path:
     d = out / name
     d.mkdir(parents=True, exist_ok=True)
     return d
+
+
+def _claim_folder(out: Path, settings: DemoSettings, quick: bool, seed: int) -> None:
+    """Record the run's settings in out/demo.json; refuse a folder made with others, whose
+    cached stages would not match."""
+    marker = out / "demo.json"
+    mine = json.loads(json.dumps({**asdict(settings), "quick": quick, "seed": seed}))
+    if marker.exists():
+        try:
+            theirs = json.loads(marker.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            theirs = None
+        if theirs != mine:
+            what = "other settings" if not isinstance(theirs, dict) else ", ".join(
+                f"{k}={theirs.get(k)!r}" for k in mine if theirs.get(k) != mine[k])
+            raise InputError(str(marker), "settings", f"this folder holds a demo run with {what}; expected the "
+                             "same options (--quick, --seed) to resume it, or a new output folder")
+    else:
+        atomic_write_text(marker, json.dumps(mine, indent=1) + "\n")
 
 
 def _photos(out: Path, size: int) -> Path:
@@ -106,6 +126,7 @@ def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: i
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     settings = DemoSettings.make(quick)
+    _claim_folder(out, settings, quick, seed)
     timings: dict[str, float] = {}
     figs = _stage(out, "figures")
     lens, sensor = load_lens(DEFAULT_LENS), load_sensor(DEFAULT_SENSOR)

@@ -79,11 +79,11 @@ def sample_crops(pairs_dir: Path, manifest: Mapping[str, Any], held_out: list[st
             ax.imshow(img.permute(1, 2, 0).numpy(), interpolation="nearest")
             ax.set_title(title)
             ax.axis("off")
-        fig.suptitle(f"{label}: normalized field {r:.2f}")
+        fig.suptitle(f"{label}: sensor radius {r:.2f} (1 = corner)")
         fig.tight_layout()
         name = f"crops_{label}.png"
         _save(fig, figs / name)
-        out.append({"zone": label, "normalized_field": r, "figure": name})
+        out.append({"zone": label, "sensor_radius": r, "figure": name})
     return out
 
 

@@ -30,3 +30,18 @@ def test_report_on_a_folder_without_json_is_one_line(tmp_path):
     res = CliRunner().invoke(app, ["report", str(tmp_path)])
     assert res.exit_code != 0
     assert "report.json" in str(res.exception or res.output)
+
+
+def test_demo_refuses_a_folder_made_with_other_settings(tmp_path, capsys, monkeypatch):
+    """A default-size demo folder rerun with --quick stops at once with one line naming the
+    marker and the differing settings (nothing is computed)."""
+    from lensim.demo import DemoSettings, _claim_folder
+    from cli_runner import run_cli
+
+    _claim_folder(tmp_path, DemoSettings.make(False), quick=False, seed=0)
+    _claim_folder(tmp_path, DemoSettings.make(False), quick=False, seed=0)  # the same: resumes
+    code, _, err = run_cli(["demo", "--quick", "-o", str(tmp_path)], capsys, monkeypatch)
+    assert code == 2
+    line = err.strip()
+    assert "\n" not in line and "demo.json" in line and "quick=False" in line and "new output folder" in line
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["demo.json"]
