@@ -41,12 +41,13 @@ class DemoSettings:
     train_seconds: float
     width: int
     train_crop: int
+    deformable_scales: int
 
     @classmethod
     def make(cls, quick: bool) -> "DemoSettings":
         if quick:
-            return cls(5, (450.0, 500.0, 550.0, 600.0, 650.0), 96, 256, 3, 2, 96, 35.0, 16, 64)
-        return cls(12, tuple(float(w) for w in range(400, 701, 25)), 128, 512, 3, 4, 128, 300.0, 32, 96)
+            return cls(5, (450.0, 500.0, 550.0, 600.0, 650.0), 96, 256, 3, 2, 96, 35.0, 16, 64, 1)
+        return cls(12, tuple(float(w) for w in range(400, 701, 25)), 128, 512, 3, 4, 128, 300.0, 32, 96, 1)
 
 
 def _stage(out: Path, name: str) -> Path:
@@ -101,10 +102,10 @@ def _train(pairs: Path, run: Path, settings: DemoSettings, plain: bool, seed: in
     kw = dict(epochs=1000, batch_size=4, lr=5e-4, lr_halve_every=1000, crop=settings.train_crop, seed=seed,
               time_budget_s=settings.train_seconds, val_fraction=0.25, device=device)
     if plain:
-        target = count_parameters(FieldAwareUNet(width=settings.width))
+        target = count_parameters(FieldAwareUNet(width=settings.width, deformable_scales=settings.deformable_scales))
         kw.update(width=plain_unet_width(target, 3), use_fov=False, use_deformable=False, use_context=False)
     else:
-        kw.update(width=settings.width)
+        kw.update(width=settings.width, deformable_scales=settings.deformable_scales)
     res = train(pairs, run, **kw)
     info = {k: v for k, v in asdict(res).items() if k != "history"}
     atomic_write_text(marker, json.dumps(info, indent=1, default=str) + "\n")
