@@ -43,8 +43,8 @@ def run_ablation(pairs_dir: str | Path, out_dir: str | Path, minutes: float, wid
         marker = run / "done.json"
         if not marker.exists():
             say(f"training {name} ({minutes:g} min)")
-            res = train(pairs_dir, run, epochs=10_000, width=w, crop=crop, seed=seed, time_budget_s=minutes * 60.0,
-                        device=device, **switches)
+            res = train(pairs_dir, run, epochs=100_000, width=w, crop=crop, seed=seed, lr=5e-4, lr_schedule="cosine",
+                        time_budget_s=minutes * 60.0, device=device, **switches)
             atomic_write_text(marker, json.dumps({"steps": res.step, "seconds": res.seconds}) + "\n")
         held_out = held_out or json.loads((run / "split.json").read_text())["val"]
         params = count_parameters(FieldAwareUNet(width=w, **switches))

@@ -25,6 +25,9 @@ from lensim.optics.lens_file import atomic_write_text, load_lens
 from lensim.sensor.profile import DEFAULT_SENSOR, load_sensor
 
 Say = Callable[[str], None]
+#: progress(done, total) of the stage last announced by ``say``: PSF fields, photos,
+#: training seconds, held-out crops.
+StageProgress = Callable[[float, float], None]
 
 
 @dataclass(frozen=True)
@@ -89,8 +92,9 @@ def _photos(out: Path, size: int) -> Path:
     return d
 
 
-def _train(pairs: Path, run: Path, settings: DemoSettings, plain: bool, seed: int, device: str = "cpu") -> dict:
-    """Train once (cached by RUN/done.json) on a time budget."""
+def _train(pairs: Path, run: Path, settings: DemoSettings, plain: bool, seed: int, device: str = "cpu",
+           progress: StageProgress | None = None) -> dict:
+    """Train once (cached by RUN/done.json) on a time budget; progress(seconds, budget)."""
     from lensim.restore.network import FieldAwareUNet, count_parameters, plain_unet_width
     from lensim.restore.train import train
 
@@ -99,23 +103,30 @@ def _train(pairs: Path, run: Path, settings: DemoSettings, plain: bool, seed: in
         return json.loads(marker.read_text())
     if run.exists():
         shutil.rmtree(run)  # an unfinished run: start it again (its budget was not spent)
-    kw = dict(epochs=1000, batch_size=4, lr=5e-4, lr_halve_every=1000, crop=settings.train_crop, seed=seed,
+    kw = dict(epochs=100_000, batch_size=4, lr=5e-4, lr_schedule="cosine", crop=settings.train_crop, seed=seed,
               time_budget_s=settings.train_seconds, val_fraction=0.25, device=device)
     if plain:
         target = count_parameters(FieldAwareUNet(width=settings.width, deformable_scales=settings.deformable_scales))
         kw.update(width=plain_unet_width(target, 3), use_fov=False, use_deformable=False, use_context=False)
     else:
         kw.update(width=settings.width, deformable_scales=settings.deformable_scales)
-    res = train(pairs, run, **kw)
+    budget = settings.train_seconds
+
+    def on_step(p) -> None:  # a TrainProgress
+        if progress is not None:
+            progress(min(p.seconds, budget), budget)
+
+    res = train(pairs, run, progress=on_step, **kw)
     info = {k: v for k, v in asdict(res).items() if k != "history"}
     atomic_write_text(marker, json.dumps(info, indent=1, default=str) + "\n")
     return info
 
 
 def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: int = 1, say: Say | None = None,
-             device: str = "cpu") -> dict:
+             device: str = "cpu", progress: StageProgress | None = None) -> dict:
     """Run the demo into out_dir; returns the report's JSON (also written). device: where the
-    networks train and run ("cpu", "cuda", "cuda:N")."""
+    networks train and run ("cpu", "cuda", "cuda:N"). say(stage) announces each stage and
+    progress(done, total) reports within it."""
     from lensim.data.pairs import make_dataset
     from lensim.evaluate.harness import builtin_method, checkpoint_method, evaluate
     from lensim.optics.plots import plot_layout, plot_spots
@@ -124,6 +135,7 @@ def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: i
     from lensim.simulate import suggest_kernel_pixels
 
     say = say or (lambda msg: None)
+    step = progress or (lambda done, total: None)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     settings = DemoSettings.make(quick)
@@ -145,7 +157,7 @@ def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: i
     fields = [(k / (settings.fields - 1)) ** 0.5 for k in range(settings.fields)]
     bank = compute_bank(lens, sensor.pixel_pitch_um, kernel, fields=fields, wavelengths_nm=list(settings.wavelengths_nm),
                         response=sensor.spectral_response, pupil_samples=settings.pupil_samples, workers=workers,
-                        out_dir=out / "bank")
+                        out_dir=out / "bank", progress=step)
     write_bank_figures(bank, figs)
     timings["bank"] = time.perf_counter() - t
 
@@ -153,14 +165,16 @@ def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: i
     say("training pairs")
     photos = _photos(out, settings.photo_size)
     make_dataset(photos, out / "pairs", bank, DEFAULT_SENSOR, sensor, crops=settings.crops, size=settings.crop_size,
-                 seed=seed, placements=settings.placements, workers=workers)
+                 seed=seed, placements=settings.placements, workers=workers, progress=step)
     timings["pairs"] = time.perf_counter() - t
 
     t = time.perf_counter()
     say(f"training the field-aware network ({settings.train_seconds:.0f} s)")
-    model_info = _train(out / "pairs", out / "run-model", settings, plain=False, seed=seed, device=device)
+    model_info = _train(out / "pairs", out / "run-model", settings, plain=False, seed=seed, device=device,
+                        progress=step)
     say(f"training the plain UNet ({settings.train_seconds:.0f} s)")
-    plain_info = _train(out / "pairs", out / "run-plain", settings, plain=True, seed=seed, device=device)
+    plain_info = _train(out / "pairs", out / "run-plain", settings, plain=True, seed=seed, device=device,
+                        progress=step)
     timings["training"] = time.perf_counter() - t
 
     t = time.perf_counter()
@@ -171,7 +185,7 @@ def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: i
                "plain-unet": checkpoint_method(out / "run-plain", manifest.get("lens"), manifest.get("sensor"),
                                                   device=device),
                "wiener": builtin_method("wiener")}
-    metrics = evaluate(out / "pairs", methods, bank=bank, sources=held_out)
+    metrics = evaluate(out / "pairs", methods, bank=bank, sources=held_out, progress=step)
     samples = sample_crops(out / "pairs", manifest, held_out, methods["model"], bank, figs)
     edges = edge_study(bank, sensor, methods["model"], figs, seed=seed)
     timings["evaluation"] = time.perf_counter() - t

@@ -29,13 +29,16 @@ def one_thread():
     torch.set_num_threads(n)
 
 
-def random_model(depth: int = 2, use_fov: bool = True) -> FieldAwareUNet:
-    """A tiny network that is far from the identity and has non-zero deformable offsets."""
+def random_model(depth: int = 2, use_fov: bool = True, field_modulation: bool = False) -> FieldAwareUNet:
+    """A tiny network that is far from the identity and has non-zero deformable offsets
+    (and, with field_modulation, non-zero position-dependent modulations)."""
     torch.manual_seed(0)
-    m = FieldAwareUNet(8, depth, use_fov=use_fov, zero_init_tail=False)
+    m = FieldAwareUNet(8, depth, use_fov=use_fov, zero_init_tail=False, field_modulation=field_modulation)
     with torch.no_grad():
         for blk in m.dec:
             torch.nn.init.normal_(blk.offset_conv.weight, std=0.05)
+        for mod in m.modulate or []:
+            torch.nn.init.normal_(mod.out.weight, std=0.3)
     return m.eval()
 
 
@@ -47,8 +50,9 @@ def test_tile_grid_starts_on_the_multiple_and_covers_the_image():
         assert all(b - a <= tile - overlap for a, b in zip(s, s[1:]))  # neighbours overlap by >= overlap
 
 
-def test_tiled_equals_whole_image_inference():
-    model = random_model(depth=2)  # receptive-field radius about 28 px with these offsets
+@pytest.mark.parametrize("field_modulation", [False, True], ids=["fov-input", "field-modulation"])
+def test_tiled_equals_whole_image_inference(field_modulation: bool):
+    model = random_model(depth=2, field_modulation=field_modulation)  # receptive-field radius about 28 px
     gen = torch.Generator().manual_seed(1)
     img = torch.rand(3, 150, 230, generator=gen)
     top_left, size = (37.0, 211.0), (480.0, 640.0)

@@ -220,6 +220,43 @@ def test_learning_rate_halves_every_k_epochs(pairs: Path, tmp_path: Path):
     assert lrs == [1e-3, 1e-3, 5e-4]
 
 
+def test_cosine_schedule_anneals_over_the_epochs_and_resumes_exactly(pairs: Path, tmp_path: Path):
+    from lensim.restore.train import cosine_lr
+
+    kw = dict(TINY, max_steps_per_epoch=2, lr_schedule="cosine", lr=1e-3)
+    train(pairs, tmp_path / "straight", epochs=3, **kw)
+    got = [r["lr"] for r in read_csv(tmp_path / "straight" / "steps.csv")]
+    # step k of 6 runs at progress k / 6 (2 steps an epoch, 3 epochs)
+    assert got == pytest.approx([1e-3 * 0.5 * (1 + math.cos(math.pi * k / 6)) for k in range(6)], rel=1e-6)
+    assert cosine_lr(1e-3, 0.0) == 1e-3 and cosine_lr(1e-3, 1.5) == 0.0
+    r = train(pairs, tmp_path / "mid", epochs=3, time_budget_s=0.0, **kw)
+    assert r.stopped_early and r.step == 1
+    # a resume without a budget continues the same epoch-based schedule
+    train(pairs, tmp_path / "mid", epochs=3, resume=True)
+    ref = read_csv(tmp_path / "straight" / "steps.csv")
+    mid = read_csv(tmp_path / "mid" / "steps.csv")
+    assert [(g["step"], g["loss"], g["lr"]) for g in mid] == [(e["step"], e["loss"], e["lr"]) for e in ref]
+
+
+def test_time_budget_counts_the_calls_before_a_resume(pairs: Path, tmp_path: Path):
+    kw = dict(TINY, max_steps_per_epoch=2)
+    r = train(pairs, tmp_path / "run", epochs=50, time_budget_s=0.0, **kw)
+    assert r.stopped_early and r.step == 1
+    spent = torch.load(tmp_path / "run" / "last.pt", weights_only=True)["train_seconds"]
+    assert spent > 0
+    # a budget already spent by the first call: one more step, then stop
+    r = train(pairs, tmp_path / "run", epochs=50, resume=True, time_budget_s=spent)
+    assert r.stopped_early and r.step == 2
+    assert torch.load(tmp_path / "run" / "last.pt", weights_only=True)["train_seconds"] > spent
+
+
+def test_unknown_schedule_is_a_clear_error(pairs: Path, tmp_path: Path):
+    from lensim.errors import InputError
+
+    with pytest.raises(InputError, match="lr_schedule: expected one of step, cosine"):
+        train(pairs, tmp_path / "run", epochs=1, max_steps_per_epoch=1, **{**TINY, "lr_schedule": "linear"})
+
+
 def test_checkpoint_save_is_atomic(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
     path = tmp_path / "last.pt"
     atomic_torch_save({"a": torch.arange(3)}, path)

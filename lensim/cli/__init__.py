@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import typer
 
+from lensim.cli.allocator import keep_freed_memory
 from lensim.cli.common import run_guarded
 from lensim.cli.ablation_cmd import ablation_command
 from lensim.cli.assets_cmd import assets_command
@@ -36,6 +37,7 @@ app.command("report")(report_command)
 
 def main() -> None:
     """Console entry point: one-line errors, non-zero exit status on bad input."""
+    keep_freed_memory()
     run_guarded(app)
 
 

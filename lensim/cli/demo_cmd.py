@@ -28,12 +28,36 @@ def demo_command(
     from lensim.demo import run_demo
 
     start = time.perf_counter()
+    show = not quiet and not json_out
+    bars = None
+    if show:
+        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+        bars = Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
+                        TimeElapsedColumn(), TimeRemainingColumn(), console=console, transient=True)
+    task = None
 
     def say(msg: str) -> None:
-        if not quiet and not json_out:
-            console.print(f"[{time.perf_counter() - start:6.1f} s] {msg}", highlight=False)
+        """A stage begins: a line in the log and a fresh bar."""
+        nonlocal task
+        if bars is None:
+            return
+        console.print(f"[{time.perf_counter() - start:6.1f} s] {msg}", highlight=False)
+        if task is not None:
+            bars.remove_task(task)
+        task = bars.add_task(msg, total=None)
 
-    report = run_demo(output, quick=quick, seed=seed, workers=workers, say=say, device=device)
+    def progress(done: float, total: float) -> None:
+        if bars is not None and task is not None:
+            bars.update(task, completed=done, total=total)
+
+    if bars is not None:
+        bars.start()
+    try:
+        report = run_demo(output, quick=quick, seed=seed, workers=workers, say=say, device=device, progress=progress)
+    finally:
+        if bars is not None:
+            bars.stop()
     if json_out:
         print_json({"metrics": report["metrics"], "report": str(output / "report.html")})
     elif not quiet:

@@ -32,18 +32,24 @@ def train_command(
     batch_size: int = typer.Option(4, "--batch-size", help="Crops per step (per GPU under torchrun)."),
     lr: float = typer.Option(1e-4, "--lr", help="Initial Adam learning rate (paper: 1e-4)."),
     lr_halve_every: int = typer.Option(5, "--lr-halve-every", help="Halve the learning rate every N epochs (paper: 5)."),
+    lr_schedule: str = typer.Option("step", "--lr-schedule", help="step (halve every --lr-halve-every epochs) or "
+                                    "cosine (anneal to 0 over the time budget, else over the epochs)."),
     crop: int = typer.Option(128, "--crop", help="Training sub-crop size in pixels (0: the stored crops)."),
     width: int = typer.Option(32, "--width", help="Channels at full resolution (doubled at each scale)."),
     depth: int = typer.Option(3, "--depth", help="Number of scales."),
     deformable_groups: int = typer.Option(2, "--deformable-groups", help="Offset groups of each deformable conv."),
     deformable_scales: int = typer.Option(-1, "--deformable-scales", help="Decoder scales, coarsest first, with "
                                           "deformable blocks (-1: all, the paper; 1 trains about 2x faster on a CPU)."),
+    field_modulation: bool = typer.Option(False, "--field-modulation", help="Scale and shift the features by "
+                                          "functions of the sensor position at every decoder scale (lensim's "
+                                          "extension of the paper's FOV input)."),
     no_fov: bool = typer.Option(False, "--no-fov", help="Ablation: no field-of-view input channels."),
     no_deformable: bool = typer.Option(False, "--no-deformable", help="Ablation: plain residual decoder blocks."),
     no_context: bool = typer.Option(False, "--no-context", help="Ablation: no context block."),
     val_fraction: float = typer.Option(0.2, "--val-fraction", help="Share of source photos held out for validation."),
     steps_per_epoch: int = typer.Option(0, "--steps-per-epoch", help="Cap on steps per epoch (0: whole epochs)."),
-    time_budget: float = typer.Option(0.0, "--time-budget", help="Stop cleanly after this many minutes (0: none)."),
+    time_budget: float = typer.Option(0.0, "--time-budget", help="Stop cleanly once the run has trained this many "
+                                     "minutes in all, resumes included (0: none)."),
     resume: bool = typer.Option(False, "--resume", help="Continue the run in OUTPUT from last.pt."),
     seed: int = typer.Option(0, "--seed", help="Seed of initialisation, data order, crops and augmentation."),
     device: str = typer.Option("cpu", "--device", help="cpu, cuda or cuda:N (mixed precision on CUDA)."),
@@ -63,10 +69,11 @@ def train_command(
     if threads > 0:
         torch.set_num_threads(threads)
     overrides = dict(
-        epochs=epochs, batch_size=batch_size, lr=lr, lr_halve_every=lr_halve_every, crop=crop or None, width=width,
+        epochs=epochs, batch_size=batch_size, lr=lr, lr_halve_every=lr_halve_every, lr_schedule=lr_schedule,
+        crop=crop or None, width=width,
         depth=depth, deformable_groups=deformable_groups,
         deformable_scales=None if deformable_scales < 0 else deformable_scales, use_fov=not no_fov,
-        use_deformable=not no_deformable, use_context=not no_context, val_fraction=val_fraction, max_steps_per_epoch=steps_per_epoch or None,
+        field_modulation=field_modulation, use_deformable=not no_deformable, use_context=not no_context, val_fraction=val_fraction, max_steps_per_epoch=steps_per_epoch or None,
         time_budget_s=time_budget * 60.0 if time_budget > 0 else None, seed=seed, device=device, amp=not no_amp,
     )
     if resume:  # architecture/recipe come from the checkpoint; pass only what the user may change

@@ -18,6 +18,16 @@ Architecture (scales s = 0 .. depth-1 with widths[s] channels, s = 0 at full res
   3x3 conv (DCNv2) followed by ReLU and a 3x3 conv, added to the block's input. The coarsest
   decoder scale has no coarser offsets and predicts them from its features alone. The
   offset/mask conv is zero-initialised (offsets 0, masks 0.5 at init, as in DCNv2);
+* field modulation, when ``field_modulation`` (a lensim extension, not in the paper; needs
+  ``use_fov``): the blur a pixel needs undone is a function of its position, so at the
+  bottleneck and at every decoder scale the features are scaled and shifted per channel
+  by functions of the position: feat * (1 + gamma) + beta, with (gamma, beta) from a small
+  per-pixel MLP (1x1 conv 5 -> 16, ReLU, 1x1 conv 16 -> 2C, last layer zero-initialised)
+  of the field features (x, y, x^2 - y^2, 2xy, x^2 + y^2) of the FOV channels averaged
+  down to that scale. These five are the position's natural basis for a rotationally
+  symmetric lens: the PSF's size follows the radius and its orientation the azimuth
+  (cos 2 theta, sin 2 theta). The deformable blocks see the modulated features, so their
+  offsets can follow the local PSF directly. It adds about 1 % to the parameters;
 * tail: a 3x3 conv to 3 channels, **zero-initialised** (``zero_init_tail=True``), whose
   output is added to the input RGB: restored = rgb + residual, so the untrained network is
   exactly the identity.
@@ -87,6 +97,33 @@ class ContextBlock(nn.Module):
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         y = torch.cat([F.relu(b(x)) for b in self.branches], dim=1)
         return x + self.fuse(y)
+
+
+FIELD_FEATURES = 5
+
+
+def field_features(fov: torch.Tensor) -> torch.Tensor:
+    """(B, 2, H, W) FOV channels (x, y) -> (B, 5, H, W): x, y, x^2 - y^2, 2xy, x^2 + y^2."""
+    x, y = fov[:, 0:1], fov[:, 1:2]
+    return torch.cat((x, y, x * x - y * y, 2 * x * y, x * x + y * y), dim=1)
+
+
+class FieldModulation(nn.Module):
+    """feat * (1 + gamma) + beta, (gamma, beta) = MLP(field features) per pixel; the identity
+    at initialisation. forward(feat (B, ch, H, W), feats (B, 5, H, W)) -> (B, ch, H, W)."""
+
+    HIDDEN = 16
+
+    def __init__(self, ch: int) -> None:
+        super().__init__()
+        self.hidden = nn.Conv2d(FIELD_FEATURES, self.HIDDEN, 1)
+        self.out = nn.Conv2d(self.HIDDEN, 2 * ch, 1)
+        nn.init.zeros_(self.out.weight)
+        nn.init.zeros_(self.out.bias)
+
+    def forward(self, feat: torch.Tensor, feats: torch.Tensor) -> torch.Tensor:
+        gamma, beta = self.out(F.relu(self.hidden(feats))).chunk(2, dim=1)
+        return feat * (1.0 + gamma) + beta
 
 
 class DeformResBlock(nn.Module):
@@ -169,6 +206,8 @@ class FieldAwareUNet(nn.Module):
             (the rest use plain residual blocks); None: all of them (the paper). On a CPU
             the full-resolution DCN is most of the cost: 1 (deformable at the coarsest
             decoder scale only) trains about twice as fast as all.
+        field_modulation: position-dependent feature modulation at the bottleneck and every
+            decoder scale (see the module docstring; requires use_fov).
 
     forward(rgb (B, 3, H, W), fov (B, 2, H, W) or (2, H, W), required iff use_fov) ->
     restored (B, 3, H, W), same dtype as rgb. Values are whatever range the caller trains
@@ -187,8 +226,11 @@ class FieldAwareUNet(nn.Module):
         zero_init_tail: bool = True,
         dcn_backend: str = "auto",
         deformable_scales: int | None = None,
+        field_modulation: bool = False,
     ) -> None:
         super().__init__()
+        if field_modulation and not use_fov:
+            raise ValueError("field_modulation needs use_fov=True (it is computed from the FOV channels)")
         ws = tuple(int(w) for w in widths) if widths is not None else tuple(width * 2**s for s in range(depth))
         if len(ws) < 2:
             raise ValueError(f"need at least 2 scales, got widths {ws}")
@@ -207,6 +249,7 @@ class FieldAwareUNet(nn.Module):
         self.use_fov = use_fov
         self.use_deformable = use_deformable
         self.use_context = use_context
+        self.field_modulation = field_modulation
         self.deformable_groups = deformable_groups
         self.zero_init_tail = zero_init_tail
         self.dcn_backend = dcn_backend
@@ -227,6 +270,9 @@ class FieldAwareUNet(nn.Module):
             else ResBlock(ws[s])
             for i, s in enumerate(dec_scales)
         )
+        # modulations listed coarse to fine: the bottleneck, then the decoder scales
+        self.modulate = nn.ModuleList(FieldModulation(ws[s]) for s in [len(ws) - 1, *dec_scales]) \
+            if field_modulation else None
         self.tail = _conv3(ws[0], 3)
         if zero_init_tail:
             nn.init.zeros_(self.tail.weight)
@@ -249,6 +295,7 @@ class FieldAwareUNet(nn.Module):
             "zero_init_tail": self.zero_init_tail,
             "dcn_backend": self.dcn_backend,
             "deformable_scales": self.deformable_scales,
+            "field_modulation": self.field_modulation,
         }
 
     def forward(self, rgb: torch.Tensor, fov: torch.Tensor | None = None) -> torch.Tensor:
@@ -267,7 +314,8 @@ class FieldAwareUNet(nn.Module):
             if fov.dim() != 4 or fov.shape[0] != b or fov.shape[1] != 2 or fov.shape[-2:] != rgb.shape[-2:]:
                 raise ValueError(f"fov must be (B, 2, H, W) or (2, H, W) matching rgb {tuple(rgb.shape)}, "
                                  f"got {tuple(fov.shape)}")
-            x = torch.cat((x, _pad_bottom_right(fov.to(rgb.dtype), ph, pw, linear=True)), dim=1)
+            fov = _pad_bottom_right(fov.to(rgb.dtype), ph, pw, linear=True)
+            x = torch.cat((x, fov), dim=1)
 
         feat = self.enc0(self.head(x))
         skips = [feat]
@@ -275,9 +323,15 @@ class FieldAwareUNet(nn.Module):
             feat = down(feat)
             skips.append(feat)
         feat = self.context(skips.pop())
+        if self.modulate is not None:
+            feat = self.modulate[0](feat, field_features(F.avg_pool2d(fov, m)))
         offset: torch.Tensor | None = None
-        for up, fuse, dec in zip(self.up, self.fuse, self.dec):
+        for i, (up, fuse, dec) in enumerate(zip(self.up, self.fuse, self.dec)):
             feat = fuse(torch.cat((up(feat), skips.pop()), dim=1))
+            if self.modulate is not None:
+                factor = m // 2 ** (i + 1)
+                pooled = F.avg_pool2d(fov, factor) if factor > 1 else fov
+                feat = self.modulate[i + 1](feat, field_features(pooled))
             if isinstance(dec, DeformResBlock):
                 feat, offset = dec(feat, offset)
             else:
@@ -333,8 +387,10 @@ __all__ = [
     "ContextBlock",
     "DeformResBlock",
     "FieldAwareUNet",
+    "FieldModulation",
     "ResBlock",
     "count_parameters",
+    "field_features",
     "plain_unet_matching",
     "plain_unet_width",
 ]

@@ -1,7 +1,10 @@
 """Training of the field-aware restoration network on a pairs folder.
 
 Recipe (the paper follows Chang et al. 2020): Adam, MSE loss, learning rate ``lr`` halved
-every ``lr_halve_every`` epochs (paper: 1e-4 halved every 5 of 30 epochs), random
+every ``lr_halve_every`` epochs (paper: 1e-4 halved every 5 of 30 epochs; ``lr_schedule=
+"step"``) or annealed to zero along a half cosine over the run (``"cosine"``: over the
+time budget when one is set, else over the epochs; the better choice for a fixed
+wall-clock budget, where a step schedule decays too early or too late), random
 ``crop`` x ``crop`` sub-crops with FOV-consistent dihedral augmentation, validation PSNR
 (dB) and SSIM on whole held-out crops after every epoch. The validation photos are chosen
 by source photo (lensim.restore.dataset.split_sources) and recorded in RUN/split.json and
@@ -72,18 +75,21 @@ class TrainConfig:
 
     epochs: epochs to train in total (a resumed run may raise it).
     batch_size: crops per optimizer step (per rank under DDP).
-    lr: initial Adam learning rate; halved every ``lr_halve_every`` epochs.
+    lr: initial Adam learning rate.
+    lr_schedule: "step" (halve every ``lr_halve_every`` epochs) or "cosine" (lr * (1 +
+        cos(pi p)) / 2 at progress p in [0, 1]: the share of the time budget spent when
+        one is set, else of the epochs; set before every step).
     crop: training sub-crop size in pixels (None: the stored crops).
     width, depth, use_fov, use_deformable, use_context, deformable_groups,
-        deformable_scales: the network (lensim.restore.network.FieldAwareUNet).
+        deformable_scales, field_modulation: the network (lensim.restore.network.FieldAwareUNet).
     seed: seeds model initialisation, data order, crops and augmentation.
     augment: random FOV-consistent dihedral ops.
     val_fraction: share of source photos held out for validation.
     val_batch_size: crops per validation forward pass.
     device: "cpu", "cuda", "cuda:N".
     amp: mixed precision on CUDA (ignored on CPU).
-    time_budget_s: stop cleanly (checkpoint, log row) once training in this call has run
-        this many seconds (None: no limit).
+    time_budget_s: stop cleanly (checkpoint, log row) once the run has trained this many
+        seconds in all, counting the calls before a resume (None: no limit).
     max_steps_per_epoch: cap on steps per epoch (None: the whole epoch), for quick runs.
     """
 
@@ -91,6 +97,7 @@ class TrainConfig:
     batch_size: int = 4
     lr: float = 1e-4
     lr_halve_every: int = 5
+    lr_schedule: str = "step"
     crop: int | None = 128
     width: int = 32
     depth: int = 3
@@ -99,6 +106,7 @@ class TrainConfig:
     use_context: bool = True
     deformable_groups: int = 2
     deformable_scales: int | None = None
+    field_modulation: bool = False
     seed: int = 0
     augment: bool = True
     val_fraction: float = 0.2
@@ -111,12 +119,13 @@ class TrainConfig:
     def model_kwargs(self) -> dict[str, Any]:
         return {"width": self.width, "depth": self.depth, "use_fov": self.use_fov,
                 "use_deformable": self.use_deformable, "use_context": self.use_context,
-                "deformable_groups": self.deformable_groups, "deformable_scales": self.deformable_scales}
+                "deformable_groups": self.deformable_groups, "deformable_scales": self.deformable_scales,
+                "field_modulation": self.field_modulation}
 
 
 # Settings that must not change when resuming (they would change the loss curve's meaning).
-_FROZEN_ON_RESUME = ("batch_size", "lr", "lr_halve_every", "crop", "width", "depth", "use_fov", "use_deformable",
-                     "use_context", "deformable_groups", "deformable_scales", "seed", "augment", "val_fraction",
+_FROZEN_ON_RESUME = ("batch_size", "lr", "lr_halve_every", "lr_schedule", "crop", "width", "depth", "use_fov", "use_deformable",
+                     "use_context", "deformable_groups", "deformable_scales", "field_modulation", "seed", "augment", "val_fraction",
                      "max_steps_per_epoch")
 
 
@@ -246,6 +255,14 @@ def epoch_batches(n: int, batch_size: int, seed: int, epoch: int, rank: int = 0,
 def _collate(items: list[dict[str, Any]]) -> dict[str, torch.Tensor]:
     return {k: torch.stack([it[k] for it in items]) if k != "index" else torch.tensor([it[k] for it in items])
             for k in items[0]}
+
+
+LR_SCHEDULES = ("step", "cosine")
+
+
+def cosine_lr(lr0: float, progress: float) -> float:
+    """Half-cosine annealing: lr0 at progress 0, 0 at progress >= 1."""
+    return lr0 * 0.5 * (1.0 + math.cos(math.pi * min(max(progress, 0.0), 1.0)))
 
 
 def _lr(optimizer: torch.optim.Optimizer) -> float:
@@ -390,6 +407,8 @@ def train(
         raise InputError(None, "config", f"expected epochs, batch_size, lr_halve_every >= 1 and lr > 0, got "
                          f"epochs={cfg.epochs}, batch_size={cfg.batch_size}, lr={cfg.lr}, "
                          f"lr_halve_every={cfg.lr_halve_every}")
+    if cfg.lr_schedule not in LR_SCHEDULES:
+        raise InputError(None, "lr_schedule", f"expected one of {', '.join(LR_SCHEDULES)}, got {cfg.lr_schedule!r}")
 
     dist_info, device_name, created_group = _init_distributed(cfg.device)
     if device_name.startswith("cuda") and not torch.cuda.is_available():
@@ -424,6 +443,7 @@ def train(
 
     epoch, batch_pos, step = 0, 0, 0
     best = -math.inf
+    seconds_before = 0.0  # training seconds of the calls before a resume
     if ckpt is not None:
         try:
             model.load_state_dict(ckpt["model_state"])
@@ -435,6 +455,7 @@ def train(
             scaler.load_state_dict(ckpt["scaler"])
         epoch, batch_pos, step = int(ckpt["epoch"]), int(ckpt["batch_in_epoch"]), int(ckpt["step"])
         best = float(ckpt.get("best_val_psnr") or -math.inf)
+        seconds_before = float(ckpt.get("train_seconds") or 0.0)
         set_rng_state(ckpt["rng"])
 
     net: torch.nn.Module = model
@@ -476,6 +497,7 @@ def train(
             "optimizer": optimizer.state_dict(), "scheduler": scheduler.state_dict(),
             "scaler": scaler.state_dict() if scaler.is_enabled() else None,
             "epoch": epoch, "batch_in_epoch": batch_pos, "step": step, "rng": rng_state(),
+            "train_seconds": seconds_before + time.perf_counter() - start,
             "train_config": asdict(cfg), "split": split, "best_val_psnr": best if math.isfinite(best) else None,
             "val_psnr": metrics.get("psnr"), "val_ssim": metrics.get("ssim"),
             "lens": manifest.get("lens"), "sensor": manifest.get("sensor"), "sensor_name": manifest.get("sensor_name"),
@@ -511,6 +533,13 @@ def train(
         run_sum, run_n = 0.0, 0
         epoch_lr = _lr(optimizer)
         for batch in loader:
+            if cfg.lr_schedule == "cosine":
+                if cfg.time_budget_s:
+                    progress_share = (seconds_before + time.perf_counter() - start) / cfg.time_budget_s
+                else:
+                    progress_share = (epoch + batch_pos / max(len(batches), 1)) / cfg.epochs
+                for group in optimizer.param_groups:
+                    group["lr"] = cosine_lr(cfg.lr, progress_share)
             inp = batch["input"].to(device, non_blocking=True)
             tgt = batch["target"].to(device, non_blocking=True)
             fov = batch["fov"].to(device, non_blocking=True)
@@ -545,7 +574,7 @@ def train(
             if progress is not None and main:
                 progress(TrainProgress("step", epoch, cfg.epochs, step, batch_pos, len(batches), last_loss,
                                        _lr(optimizer), elapsed))
-            over = cfg.time_budget_s is not None and elapsed >= cfg.time_budget_s
+            over = cfg.time_budget_s is not None and seconds_before + elapsed >= cfg.time_budget_s
             if dist_info.world > 1:
                 import torch.distributed as dist
 
@@ -559,7 +588,8 @@ def train(
         if not stopped:
             epoch += 1
             batch_pos = 0
-            scheduler.step()
+            if cfg.lr_schedule == "step":
+                scheduler.step()
         if main:
             validate_and_log(mean_loss, epoch_lr)
             if progress is not None:
@@ -570,7 +600,8 @@ def train(
             import torch.distributed as dist
 
             dist.barrier()
-        if not stopped and cfg.time_budget_s is not None and time.perf_counter() - start >= cfg.time_budget_s \
+        if not stopped and cfg.time_budget_s is not None \
+                and seconds_before + time.perf_counter() - start >= cfg.time_budget_s \
                 and epoch < cfg.epochs:
             stopped = True
     if tb is not None:
