@@ -21,14 +21,21 @@ VARIANTS: dict[str, dict] = {
 
 def run_ablation(pairs_dir: str | Path, out_dir: str | Path, minutes: float, width: int = 32, crop: int = 128,
                  seed: int = 0, variants: list[str] | None = None, say: Callable[[str], None] | None = None,
-                 device: str = "cpu") -> dict:
+                 device: str = "cpu", progress: Callable[[float, float], None] | None = None) -> dict:
     """Train every variant (cached: a finished run is reused) and evaluate it on the held-out
-    photos of the first run's split; returns {"variants": {name: {params, train, metrics}}}."""
+    photos of the first run's split; returns {"variants": {name: {params, train, metrics}}}.
+    say(stage) announces each training and the evaluation; progress(done, total) reports
+    training seconds and evaluated crops within them."""
     from lensim.evaluate.harness import checkpoint_method, evaluate
     from lensim.restore.network import FieldAwareUNet, count_parameters, plain_unet_width
     from lensim.restore.train import train
 
     say = say or (lambda m: None)
+
+    def budget_progress(budget_s: float) -> Callable | None:
+        if progress is None:
+            return None
+        return lambda p: progress(min(p.seconds, budget_s), budget_s)  # p: a TrainProgress
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     names = variants or list(VARIANTS)
@@ -44,7 +51,8 @@ def run_ablation(pairs_dir: str | Path, out_dir: str | Path, minutes: float, wid
         if not marker.exists():
             say(f"training {name} ({minutes:g} min)")
             res = train(pairs_dir, run, epochs=100_000, width=w, crop=crop, seed=seed, lr=5e-4, lr_schedule="cosine",
-                        time_budget_s=minutes * 60.0, device=device, **switches)
+                        time_budget_s=minutes * 60.0, device=device, progress=budget_progress(minutes * 60.0),
+                        **switches)
             atomic_write_text(marker, json.dumps({"steps": res.step, "seconds": res.seconds}) + "\n")
         held_out = held_out or json.loads((run / "split.json").read_text())["val"]
         params = count_parameters(FieldAwareUNet(width=w, **switches))
@@ -52,7 +60,7 @@ def run_ablation(pairs_dir: str | Path, out_dir: str | Path, minutes: float, wid
     say("evaluating on the held-out photos")
     methods = {name: checkpoint_method(out / name, manifest.get("lens"), manifest.get("sensor"), device=device)
                for name in names}
-    metrics = evaluate(pairs_dir, methods, sources=held_out)
+    metrics = evaluate(pairs_dir, methods, sources=held_out, progress=progress)
     for name in names:
         results[name]["metrics"] = metrics["methods"][name]
     summary = {"held_out_photos": held_out, "minutes": minutes, "input": metrics["methods"]["input"],

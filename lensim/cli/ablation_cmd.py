@@ -6,7 +6,7 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
-from lensim.cli.common import console, print_json
+from lensim.cli.common import StageBars, console, print_json
 
 
 def ablation_command(
@@ -29,9 +29,9 @@ def ablation_command(
     """
     from lensim.ablation import run_ablation
 
-    say = (lambda m: None) if quiet or json_out else (lambda m: console.print(m, highlight=False))
-    summary = run_ablation(dataset, output, minutes, width, crop, seed, [v.strip() for v in variants.split(",")], say,
-                           device=device)
+    with StageBars(show=not quiet and not json_out) as bars:
+        summary = run_ablation(dataset, output, minutes, width, crop, seed, [v.strip() for v in variants.split(",")],
+                               bars.say, device=device, progress=bars.progress)
     if json_out:
         print_json(summary)
         return

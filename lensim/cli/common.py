@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import sys
+import time
 import warnings
 
 import typer
@@ -47,6 +48,43 @@ def progress_bar(label: str, unit: str, quiet: bool):
     def callback(done: int, total: int) -> None:
         prog.update(task, completed=done, total=total)
     return prog, callback
+
+
+class StageBars:
+    """Progress for a job of several long stages (demo, ablation): say(stage) prints a
+    timestamped line and starts a fresh bar, progress(done, total) moves it. A context
+    manager; with show=False both are silent."""
+
+    def __init__(self, show: bool) -> None:
+        self.start = time.perf_counter()
+        self.bars = None
+        self.task = None
+        if show:
+            from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+            self.bars = Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
+                                 TimeElapsedColumn(), TimeRemainingColumn(), console=console, transient=True)
+
+    def __enter__(self) -> "StageBars":
+        if self.bars is not None:
+            self.bars.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.bars is not None:
+            self.bars.stop()
+
+    def say(self, stage: str) -> None:
+        if self.bars is None:
+            return
+        console.print(f"[{time.perf_counter() - self.start:6.1f} s] {stage}", highlight=False)
+        if self.task is not None:
+            self.bars.remove_task(self.task)
+        self.task = self.bars.add_task(stage, total=None)
+
+    def progress(self, done: float, total: float) -> None:
+        if self.bars is not None and self.task is not None:
+            self.bars.update(self.task, completed=done, total=total)
 
 
 def parse_wavelengths(text: str) -> list[float]:

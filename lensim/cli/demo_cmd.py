@@ -1,12 +1,11 @@
 """`lensim demo`: the whole pipeline on the built-in camera, with an HTML report."""
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import typer
 
-from lensim.cli.common import console, print_json
+from lensim.cli.common import StageBars, console, print_json
 
 
 def demo_command(
@@ -27,37 +26,9 @@ def demo_command(
     """
     from lensim.demo import run_demo
 
-    start = time.perf_counter()
-    show = not quiet and not json_out
-    bars = None
-    if show:
-        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
-
-        bars = Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
-                        TimeElapsedColumn(), TimeRemainingColumn(), console=console, transient=True)
-    task = None
-
-    def say(msg: str) -> None:
-        """A stage begins: a line in the log and a fresh bar."""
-        nonlocal task
-        if bars is None:
-            return
-        console.print(f"[{time.perf_counter() - start:6.1f} s] {msg}", highlight=False)
-        if task is not None:
-            bars.remove_task(task)
-        task = bars.add_task(msg, total=None)
-
-    def progress(done: float, total: float) -> None:
-        if bars is not None and task is not None:
-            bars.update(task, completed=done, total=total)
-
-    if bars is not None:
-        bars.start()
-    try:
-        report = run_demo(output, quick=quick, seed=seed, workers=workers, say=say, device=device, progress=progress)
-    finally:
-        if bars is not None:
-            bars.stop()
+    with StageBars(show=not quiet and not json_out) as bars:
+        report = run_demo(output, quick=quick, seed=seed, workers=workers, say=bars.say, device=device,
+                          progress=bars.progress)
     if json_out:
         print_json({"metrics": report["metrics"], "report": str(output / "report.html")})
     elif not quiet:

@@ -13,7 +13,7 @@ from pathlib import Path
 import torch
 import typer
 
-from lensim.cli.common import console, print_json
+from lensim.cli.common import console, print_json, progress_bar
 from lensim.errors import InputError
 
 
@@ -177,7 +177,14 @@ def restore_command(
             raise InputError(str(path), "--sensor-offset", f"a {w}x{h} image at (top, left) {offset} does not fit on "
                              f"the {sensor_w}x{sensor_h} sensor")
         top_left, size = image_sensor_geometry(h, w, (sensor_w, sensor_h), offset)
-        out = restore_image(model, img, top_left, size, tile=tile, overlap=overlap)
+        prog, tiles_done = progress_bar(f"restoring {path.name}", "tiles", quiet or json_out)
+        if prog is not None:
+            prog.start()
+        try:
+            out = restore_image(model, img, top_left, size, tile=tile, overlap=overlap, progress=tiles_done)
+        finally:
+            if prog is not None:
+                prog.stop()
         del img  # bound peak memory: only the output lives while it is encoded
         out.clamp_(0, 1)
         suffix = ".tif" if path.suffix.lower() in (".tif", ".tiff") else ".png"
