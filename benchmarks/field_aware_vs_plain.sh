@@ -29,8 +29,9 @@ LENSIM=.venv/bin/lensim
 PY=.venv/bin/python
 mkdir -p "$OUT"
 
-# (a finished bank is loaded, a partial one completed)
-"$PY" - "$OUT/bank" <<'EOF'
+# (a finished bank is loaded, a partial one completed; a script file, not stdin, since the
+# bank's worker processes re-import it)
+cat > "$OUT/make_bank.py" <<'EOF'
 import sys
 from lensim.assets import DEFAULT_LENS
 from lensim.demo import DemoSettings
@@ -47,6 +48,7 @@ if __name__ == "__main__":
     compute_bank(lens, sensor.pixel_pitch_um, kernel, fields=fields, wavelengths_nm=list(s.wavelengths_nm),
                  response=sensor.spectral_response, pupil_samples=s.pupil_samples, workers=2, out_dir=sys.argv[1])
 EOF
+"$PY" "$OUT/make_bank.py" "$OUT/bank"
 
 if [ ! -d "$OUT/photos" ]; then
   "$LENSIM" assets --export-photos "$OUT/photos.tmp" >/dev/null && mv "$OUT/photos.tmp" "$OUT/photos"
