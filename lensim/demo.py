@@ -181,8 +181,10 @@ def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: i
     say("evaluation on held-out photos")
     held_out = json.loads((out / "run-model" / "split.json").read_text())["val"]
     manifest = json.loads((out / "pairs" / "manifest.json").read_text())
-    methods = {"model": checkpoint_method(out / "run-model", manifest.get("lens"), manifest.get("sensor"), device=device),
-               "plain-unet": checkpoint_method(out / "run-plain", manifest.get("lens"), manifest.get("sensor"),
+    # the last checkpoints: best.pt is picked by validation PSNR on these very photos
+    methods = {"model": checkpoint_method(out / "run-model" / "last.pt", manifest.get("lens"), manifest.get("sensor"),
+                                          device=device),
+               "plain-unet": checkpoint_method(out / "run-plain" / "last.pt", manifest.get("lens"), manifest.get("sensor"),
                                                   device=device),
                "wiener": builtin_method("wiener")}
     metrics = evaluate(out / "pairs", methods, bank=bank, sources=held_out, progress=step)
