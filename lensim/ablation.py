@@ -28,14 +28,9 @@ def run_ablation(pairs_dir: str | Path, out_dir: str | Path, minutes: float, wid
     training seconds and evaluated crops within them."""
     from lensim.evaluate.harness import checkpoint_method, evaluate
     from lensim.restore.network import FieldAwareUNet, count_parameters, plain_unet_width
-    from lensim.restore.train import train
+    from lensim.restore.train import budget_progress, train
 
     say = say or (lambda m: None)
-
-    def budget_progress(budget_s: float) -> Callable | None:
-        if progress is None:
-            return None
-        return lambda p: progress(min(p.seconds, budget_s), budget_s)  # p: a TrainProgress
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     names = variants or list(VARIANTS)
@@ -51,8 +46,8 @@ def run_ablation(pairs_dir: str | Path, out_dir: str | Path, minutes: float, wid
         if not marker.exists():
             say(f"training {name} ({minutes:g} min)")
             res = train(pairs_dir, run, epochs=100_000, width=w, crop=crop, seed=seed, lr=5e-4, lr_schedule="cosine",
-                        time_budget_s=minutes * 60.0, device=device, progress=budget_progress(minutes * 60.0),
-                        **switches)
+                        time_budget_s=minutes * 60.0, device=device,
+                        progress=budget_progress(progress, minutes * 60.0), **switches)
             atomic_write_text(marker, json.dumps({"steps": res.step, "seconds": res.seconds}) + "\n")
         held_out = held_out or json.loads((run / "split.json").read_text())["val"]
         params = count_parameters(FieldAwareUNet(width=w, **switches))

@@ -96,7 +96,7 @@ def _train(pairs: Path, run: Path, settings: DemoSettings, plain: bool, seed: in
            progress: StageProgress | None = None) -> dict:
     """Train once (cached by RUN/done.json) on a time budget; progress(seconds, budget)."""
     from lensim.restore.network import FieldAwareUNet, count_parameters, plain_unet_width
-    from lensim.restore.train import train
+    from lensim.restore.train import budget_progress, train
 
     marker = run / "done.json"
     if marker.exists():
@@ -110,13 +110,7 @@ def _train(pairs: Path, run: Path, settings: DemoSettings, plain: bool, seed: in
         kw.update(width=plain_unet_width(target, 3), use_fov=False, use_deformable=False, use_context=False)
     else:
         kw.update(width=settings.width, deformable_scales=settings.deformable_scales)
-    budget = settings.train_seconds
-
-    def on_step(p) -> None:  # a TrainProgress
-        if progress is not None:
-            progress(min(p.seconds, budget), budget)
-
-    res = train(pairs, run, progress=on_step, **kw)
+    res = train(pairs, run, progress=budget_progress(progress, settings.train_seconds), **kw)
     info = {k: v for k, v in asdict(res).items() if k != "history"}
     atomic_write_text(marker, json.dumps(info, indent=1, default=str) + "\n")
     return info

@@ -250,6 +250,16 @@ def test_time_budget_counts_the_calls_before_a_resume(pairs: Path, tmp_path: Pat
     assert torch.load(tmp_path / "run" / "last.pt", weights_only=True)["train_seconds"] > spent
 
 
+def test_budget_progress_reports_seconds_against_the_budget(pairs: Path, tmp_path: Path):
+    from lensim.restore.train import budget_progress
+
+    assert budget_progress(None, 10.0) is None
+    seen: list[tuple[float, float]] = []
+    train(pairs, tmp_path / "run", epochs=1, max_steps_per_epoch=3, progress=budget_progress(
+        lambda done, total: seen.append((done, total)), 1e-9), **TINY)
+    assert len(seen) >= 3 and all(total == 1e-9 and 0 <= done <= total for done, total in seen)
+
+
 def test_unknown_schedule_is_a_clear_error(pairs: Path, tmp_path: Path):
     from lensim.errors import InputError
 

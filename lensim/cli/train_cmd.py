@@ -73,7 +73,8 @@ def train_command(
         crop=crop or None, width=width,
         depth=depth, deformable_groups=deformable_groups,
         deformable_scales=None if deformable_scales < 0 else deformable_scales, use_fov=not no_fov,
-        field_modulation=field_modulation, use_deformable=not no_deformable, use_context=not no_context, val_fraction=val_fraction, max_steps_per_epoch=steps_per_epoch or None,
+        field_modulation=field_modulation, use_deformable=not no_deformable, use_context=not no_context,
+        val_fraction=val_fraction, max_steps_per_epoch=steps_per_epoch or None,
         time_budget_s=time_budget * 60.0 if time_budget > 0 else None, seed=seed, device=device, amp=not no_amp,
     )
     if resume:  # architecture/recipe come from the checkpoint; pass only what the user may change

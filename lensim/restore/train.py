@@ -164,6 +164,15 @@ class TrainResult:
     history: list[dict[str, Any]] = field(default_factory=list)
 
 
+def budget_progress(report: Callable[[float, float], None] | None,
+                    budget_s: float) -> Callable[[TrainProgress], None] | None:
+    """A train() progress callback that passes (seconds trained in this call, capped at
+    budget_s; budget_s) to ``report``, for a progress bar over a time budget."""
+    if report is None:
+        return None
+    return lambda p: report(min(p.seconds, budget_s), budget_s)
+
+
 # ----------------------------------------------------------------------------- helpers
 
 
@@ -621,5 +630,5 @@ def _read_checkpoint(path: Path) -> dict[str, Any]:
     return read_checkpoint(path)
 
 
-__all__ = ["TrainConfig", "TrainProgress", "TrainResult", "atomic_torch_save", "epoch_batches", "epoch_order",
+__all__ = ["TrainConfig", "TrainProgress", "TrainResult", "atomic_torch_save", "budget_progress", "epoch_batches", "epoch_order",
            "evaluate_pairs", "read_csv", "rng_state", "set_rng_state", "train"]
