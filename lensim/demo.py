@@ -178,8 +178,8 @@ def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: i
     # the last checkpoints: best.pt is picked by validation PSNR on these very photos
     methods = {"model": checkpoint_method(out / "run-model" / "last.pt", manifest.get("lens"), manifest.get("sensor"),
                                           device=device),
-               "plain-unet": checkpoint_method(out / "run-plain" / "last.pt", manifest.get("lens"), manifest.get("sensor"),
-                                                  device=device),
+               "plain-unet": checkpoint_method(out / "run-plain" / "last.pt", manifest.get("lens"),
+                                               manifest.get("sensor"), device=device),
                "wiener": builtin_method("wiener")}
     metrics = evaluate(out / "pairs", methods, bank=bank, sources=held_out, progress=step)
     samples = sample_crops(out / "pairs", manifest, held_out, methods["model"], bank, figs)

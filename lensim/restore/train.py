@@ -124,8 +124,9 @@ class TrainConfig:
 
 
 # Settings that must not change when resuming (they would change the loss curve's meaning).
-_FROZEN_ON_RESUME = ("batch_size", "lr", "lr_halve_every", "lr_schedule", "crop", "width", "depth", "use_fov", "use_deformable",
-                     "use_context", "deformable_groups", "deformable_scales", "field_modulation", "seed", "augment", "val_fraction",
+_FROZEN_ON_RESUME = ("batch_size", "lr", "lr_halve_every", "lr_schedule", "crop", "width", "depth", "use_fov",
+                     "use_deformable", "use_context", "deformable_groups", "deformable_scales", "field_modulation",
+                     "seed", "augment", "val_fraction",
                      "max_steps_per_epoch")
 
 
@@ -499,6 +500,10 @@ def train(
     last_loss = math.nan
     metrics: dict[str, float] = {}
 
+    def trained_s() -> float:
+        """Seconds this run has trained, the calls before a resume included."""
+        return seconds_before + time.perf_counter() - start
+
     def save(kind_best: bool = False) -> None:
         state = {
             "format": CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION,
@@ -506,7 +511,7 @@ def train(
             "optimizer": optimizer.state_dict(), "scheduler": scheduler.state_dict(),
             "scaler": scaler.state_dict() if scaler.is_enabled() else None,
             "epoch": epoch, "batch_in_epoch": batch_pos, "step": step, "rng": rng_state(),
-            "train_seconds": seconds_before + time.perf_counter() - start,
+            "train_seconds": trained_s(),
             "train_config": asdict(cfg), "split": split, "best_val_psnr": best if math.isfinite(best) else None,
             "val_psnr": metrics.get("psnr"), "val_ssim": metrics.get("ssim"),
             "lens": manifest.get("lens"), "sensor": manifest.get("sensor"), "sensor_name": manifest.get("sensor_name"),
@@ -544,7 +549,7 @@ def train(
         for batch in loader:
             if cfg.lr_schedule == "cosine":
                 if cfg.time_budget_s:
-                    progress_share = (seconds_before + time.perf_counter() - start) / cfg.time_budget_s
+                    progress_share = trained_s() / cfg.time_budget_s
                 else:
                     progress_share = (epoch + batch_pos / max(len(batches), 1)) / cfg.epochs
                 for group in optimizer.param_groups:
@@ -609,9 +614,7 @@ def train(
             import torch.distributed as dist
 
             dist.barrier()
-        if not stopped and cfg.time_budget_s is not None \
-                and seconds_before + time.perf_counter() - start >= cfg.time_budget_s \
-                and epoch < cfg.epochs:
+        if not stopped and cfg.time_budget_s is not None and trained_s() >= cfg.time_budget_s and epoch < cfg.epochs:
             stopped = True
     if tb is not None:
         tb.close()
@@ -630,5 +633,6 @@ def _read_checkpoint(path: Path) -> dict[str, Any]:
     return read_checkpoint(path)
 
 
-__all__ = ["TrainConfig", "TrainProgress", "TrainResult", "atomic_torch_save", "budget_progress", "epoch_batches", "epoch_order",
+__all__ = ["TrainConfig", "TrainProgress", "TrainResult", "atomic_torch_save", "budget_progress", "epoch_batches",
+           "epoch_order",
            "evaluate_pairs", "read_csv", "rng_state", "set_rng_state", "train"]
