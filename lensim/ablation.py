@@ -8,7 +8,7 @@ import json
 from pathlib import Path
 from typing import Callable
 
-from lensim.optics.lens_file import atomic_write_text
+from lensim.io import atomic_write_text
 
 VARIANTS: dict[str, dict] = {
     "full": {},

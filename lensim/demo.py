@@ -21,7 +21,8 @@ from lensim.assets.images import available_sample_images, read_sample_image
 from lensim.errors import InputError
 from lensim.images import write_image
 from lensim.optics.analysis import first_order_summary
-from lensim.optics.lens_file import atomic_write_text, load_lens
+from lensim.io import atomic_write_text
+from lensim.optics.lens_file import load_lens
 from lensim.sensor.profile import DEFAULT_SENSOR, load_sensor
 
 Say = Callable[[str], None]

@@ -14,7 +14,7 @@ import numpy as np
 import torch
 
 from lensim.errors import InputError
-from lensim.optics.lens_file import atomic_write_bytes
+from lensim.io import atomic_write_bytes
 
 READ_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg")
 WRITE_SUFFIXES = (".png", ".tif", ".tiff")

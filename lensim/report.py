@@ -15,7 +15,7 @@ from lensim.data.pairs import crop_capture
 from lensim.evaluate.harness import CropContext, Method, markdown_table
 from lensim.images import read_image
 from lensim.jsonable import jsonable
-from lensim.optics.lens_file import atomic_write_text
+from lensim.io import atomic_write_text
 from lensim.psf.bank import PSFBank
 from lensim.sensor.profile import SensorProfile
 from lensim.simulate import native_mapping, simulate

@@ -99,7 +99,7 @@ def evaluate_command(
         harness.write_csv(rows, output / "metrics.csv")
         harness.write_markdown(summary, output / "metrics.md", title=f"lensim evaluate: {pairs}")
         from lensim.jsonable import jsonable as _jsonable
-        from lensim.optics.lens_file import atomic_write_text
+        from lensim.io import atomic_write_text
 
         atomic_write_text(output / "metrics.json", json.dumps(_jsonable(summary), indent=2) + "\n")
     if json_out:

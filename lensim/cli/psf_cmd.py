@@ -8,7 +8,8 @@ import numpy as np
 import typer
 
 from lensim.cli.common import console, print_json, progress_bar
-from lensim.optics.lens_file import atomic_write_bytes, load_lens
+from lensim.io import atomic_write_bytes
+from lensim.optics.lens_file import load_lens
 from lensim.psf.compute import METHODS, compute_psf
 
 psf_app = typer.Typer(help="Point spread functions: single PSFs, banks, pictures.", no_args_is_help=True)

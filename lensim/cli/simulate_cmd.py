@@ -11,7 +11,8 @@ from lensim import assets
 from lensim.cli.common import console, parse_wavelengths, print_json, progress_bar
 from lensim.errors import InputError
 from lensim.images import read_image, write_image
-from lensim.optics.lens_file import atomic_write_text, load_lens
+from lensim.io import atomic_write_text
+from lensim.optics.lens_file import load_lens
 from lensim.psf.bank import PSFBank
 from lensim.sensor.profile import load_sensor
 from lensim.simulate import check_bank_fits, ensure_bank, map_to_sensor, simulate

@@ -36,7 +36,7 @@ import torch
 
 from lensim.errors import InputError
 from lensim.images import READ_SUFFIXES, read_image, write_image
-from lensim.optics.lens_file import atomic_write_text
+from lensim.io import atomic_write_text
 from lensim.psf.bank import PSFBank
 from lensim.sensor.profile import SensorProfile, load_sensor
 from lensim.simulate import native_mapping, simulate

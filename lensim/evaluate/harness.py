@@ -47,7 +47,7 @@ from lensim.errors import InputError
 from lensim.evaluate import baselines
 from lensim.evaluate.metrics import ZONES, image_scores, normalized_radius
 from lensim.images import read_image
-from lensim.optics.lens_file import atomic_write_text
+from lensim.io import atomic_write_text
 from lensim.psf.bank import PSFBank
 from lensim.sensor.profile import SensorProfile, sensor_from_dict
 from lensim.simulate import SensorMapping, native_mapping

@@ -25,13 +25,12 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 import warnings
 from pathlib import Path
 from typing import Any
 
 from lensim.errors import InputError
+from lensim.io import atomic_write_text
 from lensim.optics.lens import Lens
 from lensim.optics.materials import Air, Material, material_from_spec
 from lensim.optics.surfaces import Surface
@@ -219,30 +218,6 @@ def lens_to_dict(lens: Lens) -> dict:
     if lens.notes:
         out["notes"] = list(lens.notes)
     return out
-
-
-def atomic_write_bytes(path: str | Path, data: bytes) -> None:
-    """Write a file under a temporary name in the same folder, then rename it, so a
-    killed job never leaves a half-written file."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the usual file mode
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
-def atomic_write_text(path: str | Path, text: str) -> None:
-    """atomic_write_bytes for UTF-8 text."""
-    atomic_write_bytes(path, text.encode("utf-8"))
 
 
 def save_lens(lens: Lens, path: str | Path) -> None:

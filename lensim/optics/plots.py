@@ -2,7 +2,7 @@
 
 Matplotlib figures built without pyplot (an Agg canvas each), so nothing global is
 touched and nothing is shown. Every function returns the Figure; given a path it also
-saves it atomically (temporary name in the same folder, then os.replace), in the format
+saves it atomically (lensim.io.atomic_writer), in the format
 the file name's extension names (png, pdf, svg, ...).
 
 Units: lengths in mm on the layout, um on spot diagrams; wavelengths in um in arguments,
@@ -11,8 +11,6 @@ nm on the plots.
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,6 +22,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Circle
 
 from lensim.errors import InputError, RayTraceError
+from lensim.io import atomic_writer
 from lensim.optics.aiming import Aiming, describe_failure, generate_rays, object_field
 from lensim.optics.lens import Lens
 from lensim.optics.materials import Air
@@ -59,16 +58,8 @@ def save_figure(fig: Figure, path: str | Path, dpi: int = 150) -> None:
     if fmt not in supported:
         raise InputError(str(path), "output", f"expected a file name ending in one of "
                          f"{', '.join('.' + k for k in sorted(supported))}")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fig.savefig(fh, format=fmt, dpi=dpi)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    with atomic_writer(path, suffix=path.suffix) as fh:
+        fig.savefig(fh, format=fmt, dpi=dpi)
 
 
 def _new_figure(figsize: tuple[float, float]) -> Figure:

@@ -42,7 +42,8 @@ import torch
 
 from lensim.errors import InputError
 from lensim.optics.lens import Lens
-from lensim.optics.lens_file import atomic_write_bytes, atomic_write_text, lens_to_dict
+from lensim.io import atomic_write_bytes, atomic_write_text
+from lensim.optics.lens_file import lens_to_dict
 from lensim.optics.paraxial import ParaxialData, paraxial_data, paraxial_image_height
 from lensim.psf.compute import METHODS, PSFSamplingWarning, check_sampling, field_in_lens_units
 from lensim.psf.fourier import fft_psf, geometric_psf

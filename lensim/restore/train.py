@@ -47,7 +47,6 @@ import json
 import math
 import os
 import random
-import tempfile
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -59,6 +58,7 @@ import torch.nn.functional as F
 from torch.utils.data import DataLoader
 
 from lensim.errors import InputError
+from lensim.io import atomic_write_text, atomic_writer
 from lensim.restore.dataset import PairDataset, crop_refs, load_manifest, sensor_hw, split_sources
 from lensim.restore.metrics import psnr, ssim
 from lensim.restore.network import FieldAwareUNet
@@ -177,44 +177,11 @@ def budget_progress(report: Callable[[float, float], None] | None,
 # ----------------------------------------------------------------------------- helpers
 
 
-def _umask_mode() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return 0o666 & ~mask
-
-
 def atomic_torch_save(obj: Any, path: str | Path) -> None:
-    """torch.save to a temporary file beside ``path``, fsync, then os.replace: readers see
-    the old file or the new one, never a partial one; the temporary file is removed when
-    saving fails. The file gets the usual permissions (0666 minus the umask), not mkstemp's
-    0600."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        os.chmod(tmp, _umask_mode())
-        with os.fdopen(fd, "wb") as fh:
-            torch.save(obj, fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
-def _atomic_text(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        os.chmod(tmp, _umask_mode())
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    """torch.save through :func:`lensim.io.atomic_writer`: readers see the old file or
+    the new one, never a partial one."""
+    with atomic_writer(path, suffix=".tmp") as fh:
+        torch.save(obj, fh)
 
 
 def rng_state() -> dict[str, Any]:
@@ -481,8 +448,8 @@ def train(
     if main:
         run.mkdir(parents=True, exist_ok=True)
         cfg_json = {**asdict(cfg), "dataset": str(Path(dataset_dir).resolve())}
-        _atomic_text(run / "config.json", json.dumps(cfg_json, indent=1) + "\n")
-        _atomic_text(run / "split.json", json.dumps(split, indent=1) + "\n")
+        atomic_write_text(run / "config.json", json.dumps(cfg_json, indent=1) + "\n")
+        atomic_write_text(run / "split.json", json.dumps(split, indent=1) + "\n")
         keep = step if ckpt is not None else None
         steps_log = _CsvLog(run / "steps.csv", STEP_FIELDS, keep)
         log = _CsvLog(run / "log.csv", LOG_FIELDS, keep)

@@ -549,7 +549,7 @@ def write_raw_tiff(path: str | Path, raw: torch.Tensor, profile: SensorProfile,
     Written to a temporary name and renamed. Returns the TIFF's path."""
     import tifffile
 
-    from lensim.optics.lens_file import atomic_write_bytes, atomic_write_text
+    from lensim.io import atomic_write_bytes, atomic_write_text
 
     path = Path(path)
     if raw.dim() != 2:
