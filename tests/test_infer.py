@@ -181,7 +181,8 @@ def test_corrupt_and_mismatched_checkpoints_are_one_line_errors(run_dir: Path, t
 
 
 def test_train_and_restore_commands(tmp_path: Path):
-    from lensim.cli.train_cmd import restore_command, train_command
+    from lensim.cli.restore_cmd import restore_command
+    from lensim.cli.train_cmd import train_command
 
     app = typer.Typer()
     app.command("train")(train_command)

@@ -12,8 +12,9 @@ from lensim.cli.demo_cmd import demo_command, report_command
 from lensim.cli.evaluate_cmd import evaluate_command
 from lensim.cli.lens_cmd import lens_app
 from lensim.cli.psf_cmd import psf_app
+from lensim.cli.restore_cmd import restore_command
 from lensim.cli.simulate_cmd import simulate_command
-from lensim.cli.train_cmd import restore_command, train_command
+from lensim.cli.train_cmd import train_command
 
 app = typer.Typer(
     name="lensim",

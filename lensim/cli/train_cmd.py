@@ -1,28 +1,17 @@
-"""`lensim train` and `lensim restore`: train the field-aware network, restore photos.
+"""`lensim train`: train the field-aware restoration network on a pairs folder.
 
 Register in lensim/cli/__init__.py with
     app.command("train")(train_command)
-    app.command("restore")(restore_command)
 """
 from __future__ import annotations
 
 import math
-import warnings
 from pathlib import Path
 
 import torch
 import typer
 
-from lensim.cli.common import console, print_json, progress_bar
-from lensim.errors import InputError
-
-
-def _parse_pair(text: str, option: str) -> tuple[int, int]:
-    try:
-        a, b = (int(v) for v in text.replace("x", ",").split(","))
-        return a, b
-    except ValueError:
-        raise InputError(option, None, f"expected two integers TOP,LEFT, got {text!r}") from None
+from lensim.cli.common import console, print_json
 
 
 def train_command(
@@ -118,84 +107,4 @@ def train_command(
                       f"checkpoints in {result.run_dir}", highlight=False)
 
 
-def restore_command(
-    checkpoint: Path = typer.Argument(..., help="Run folder (best.pt, else last.pt) or checkpoint file."),
-    images: list[Path] = typer.Argument(..., help="Photos to restore (8/16-bit PNG, TIFF or JPEG)."),
-    output: Path = typer.Option(..., "-o", "--output", help="Output folder."),
-    sensor_file: str = typer.Option(None, "--sensor", help="Sensor profile of the photos (default: the one trained for)."),
-    lens_file: str = typer.Option(None, "--lens", help="Lens of the photos (only checked against the checkpoint's)."),
-    sensor_offset: str = typer.Option(None, "--sensor-offset", help="TOP,LEFT sensor pixel of the image's top-left "
-                                      "pixel at native scale (default: the image is a full frame)."),
-    tile: int = typer.Option(512, "--tile", help="Largest tile side in pixels."),
-    overlap: int = typer.Option(192, "--overlap", help="Least overlap of neighbouring tiles in pixels."),
-    bits: int = typer.Option(0, "--bits", help="Output bit depth 8 or 16 (0: that of the input)."),
-    device: str = typer.Option("cpu", "--device", help="cpu, cuda or cuda:N."),
-    threads: int = typer.Option(0, "--threads", help="CPU threads for PyTorch (0: PyTorch's default)."),
-    quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
-    json_out: bool = typer.Option(False, "--json", help="Print what was written as JSON."),
-) -> None:
-    """Restore photos with a trained network: tiled (any resolution), each tile fed its
-    absolute field-of-view coordinates; writes OUT/<name>.png (or .tif for TIFF input).
-
-    Example: lensim restore runs/a photo.png -o restored/
-    """
-    from lensim.images import read_image, write_image
-    from lensim.restore.infer import image_sensor_geometry, load_checkpoint, restore_image
-    from lensim.sensor.profile import load_sensor
-
-    if threads > 0:
-        torch.set_num_threads(threads)
-    if bits not in (0, 8, 16):
-        raise InputError("--bits", None, f"expected 8 or 16, got {bits}")
-    if tile < 16 or not 0 <= overlap < tile:
-        raise InputError("--tile/--overlap", None, f"expected a tile of at least 16 pixels and 0 <= overlap < tile, got "
-                         f"tile {tile}, overlap {overlap}")
-    lens_dict = None
-    if lens_file is not None:
-        from lensim.optics.lens_file import lens_to_dict, load_lens
-
-        lens_dict = lens_to_dict(load_lens(lens_file))
-    sensor_dict = load_sensor(sensor_file).to_dict() if sensor_file is not None else None
-    model, info = load_checkpoint(checkpoint, lens=lens_dict, sensor=sensor_dict, device=device)
-    sensor_data = sensor_dict or info.get("sensor") or {}
-    res = sensor_data.get("resolution") if isinstance(sensor_data, dict) else None
-    if not (isinstance(res, (list, tuple)) and len(res) == 2 and all(isinstance(v, int) and v > 0 for v in res)):
-        raise InputError(info["path"], "sensor", "records no sensor resolution; expected --sensor")
-    sensor_w, sensor_h = int(res[0]), int(res[1])
-    offset = _parse_pair(sensor_offset, "--sensor-offset") if sensor_offset else None
-    output.mkdir(parents=True, exist_ok=True)
-    written = []
-    for path in images:
-        img, in_bits = read_image(path)
-        _, h, w = img.shape
-        if offset is None:
-            scale = min(sensor_w / w, sensor_h / h)
-            if abs(scale - 1.0) > 0.01:
-                warnings.warn(f"{path}: {w}x{h} pixels mapped onto the {sensor_w}x{sensor_h} sensor at "
-                              f"{scale:.3g} sensor pixels per image pixel; the network was trained at native scale "
-                              f"(1), so blur sizes differ (give --sensor-offset for a native-scale crop)", UserWarning)
-        elif not (0 <= offset[0] <= sensor_h - h and 0 <= offset[1] <= sensor_w - w):
-            raise InputError(str(path), "--sensor-offset", f"a {w}x{h} image at (top, left) {offset} does not fit on "
-                             f"the {sensor_w}x{sensor_h} sensor")
-        top_left, size = image_sensor_geometry(h, w, (sensor_w, sensor_h), offset)
-        prog, tiles_done = progress_bar(f"restoring {path.name}", "tiles", quiet or json_out)
-        if prog is not None:
-            prog.start()
-        try:
-            out = restore_image(model, img, top_left, size, tile=tile, overlap=overlap, progress=tiles_done)
-        finally:
-            if prog is not None:
-                prog.stop()
-        del img  # bound peak memory: only the output lives while it is encoded
-        out.clamp_(0, 1)
-        suffix = ".tif" if path.suffix.lower() in (".tif", ".tiff") else ".png"
-        dest = output / (path.stem + suffix)
-        write_image(dest, out, bits or in_bits)
-        written.append({"input": str(path), "output": str(dest), "bits": bits or in_bits, "width": w, "height": h})
-        if not quiet and not json_out:
-            console.print(f"restored {path} -> {dest}", highlight=False)
-    if json_out:
-        print_json({"checkpoint": info["path"], "images": written})
-
-
-__all__ = ["restore_command", "train_command"]
+__all__ = ["train_command"]
