@@ -4,7 +4,7 @@ Run by hand from the repository root (optiland is a test-only dependency):
 
     .venv/bin/python benchmarks/trace_speed.py [--rays 100000 1000000] [--repeats 5]
 
-Lens: the built-in double Gauss (f = 100 mm, F/2, from shared/lenses/ag_dblgauss.seq),
+Lens: the built-in double Gauss (f = 100 mm, F/2, from tests/data/lenses/ag_dblgauss.seq),
 one field at 10 deg, primary wavelength 587.6 nm, a square grid of pupil points inside
 the unit disc, paraxial ray aiming (both tracers aim at the paraxial entrance pupil, so
 the rays are identical). Each timing is the median of the repeats and covers generating
@@ -35,13 +35,14 @@ from lensim.optics.trace import trace
 # imports optiland only when a model is built)
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from optiland_models import optiland_from_lens  # noqa: E402
+from reference_lenses import REFERENCE_LENSES  # noqa: E402
 
 FIELD_DEG = 10.0
 
 
 def load_benchmark_lens() -> Lens:
     """The built-in double Gauss, or the CODE V original, or the Zemax double Gauss."""
-    for name in ("double_gauss", "/work/shared/lenses/ag_dblgauss.seq", "/work/shared/lenses/US00583336-2-scaled.zmx"):
+    for name in ("double_gauss", REFERENCE_LENSES / "ag_dblgauss.seq", REFERENCE_LENSES / "US00583336-2-scaled.zmx"):
         try:
             return load_lens(name, warn=False)
         except Exception:  # noqa: BLE001 - try the next candidate

@@ -12,7 +12,7 @@ too; benchmarks add tests/ to sys.path first.
   surfaces (spheres, conics, even aspheres, clear apertures, negative thicknesses in air)
   with an object at infinity and angle fields, built surface by surface in optiland with
   lensim's glass data.
-* optiland_cooke(...): the Cooke triplet of shared/lenses/README.md (COOKE_TABLE) built
+* optiland_cooke(...): the Cooke triplet of tests/data/lenses/README.md (COOKE_TABLE) built
   from the table, with optiland's own catalogue glasses unless told otherwise.
 * optiland_pupil, optiland_rms, lensim_rms: optiland's RMS spot radius (its SpotDiagram:
   per wavelength, about the primary-wavelength chief ray, hexapolar rings) and the same
@@ -32,7 +32,7 @@ from lensim.optics.lens import Lens
 from lensim.optics.materials import Air, Material
 from lensim.optics.spot import spot_diagram
 
-# shared/lenses/README.md: radius (mm), thickness (mm), glass as optiland names it
+# tests/data/lenses/README.md: radius (mm), thickness (mm), glass as optiland names it
 # ((name, catalogue); None: air). optiland's J-SK16 (Hikari) and F2 (Schott) give lensim's
 # indices to 2e-16 at 0.55 um (tests/test_psf_peers.py checks it).
 COOKE_TABLE = (

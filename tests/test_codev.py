@@ -15,7 +15,7 @@ from lensim.optics.materials import CatalogGlass, ModelGlass
 from lensim.optics.paraxial import paraxial_data
 from lensim.optics.trace import trace
 
-# shared/lenses/README.md: axial marginal ray, 587.6 nm, entering parallel at 25 mm
+# tests/data/lenses/README.md: axial marginal ray, 587.6 nm, entering parallel at 25 mm
 TRUTH_HEIGHTS = [25.000000, 24.109772, 22.844992, 20.958242, 16.784894, 15.702464, 14.610682, 15.815163,
                  16.882946, 16.583956, 16.261006]
 TRUTH_IMAGE_HEIGHT = 0.014138
@@ -24,8 +24,8 @@ TOL_MM = 1e-5
 
 
 @pytest.fixture(scope="module")
-def dblgauss(shared_lenses):
-    return read_seq(shared_lenses / "ag_dblgauss.seq")
+def dblgauss(reference_lenses):
+    return read_seq(reference_lenses / "ag_dblgauss.seq")
 
 
 def marginal_ray(lens):
@@ -66,10 +66,10 @@ def test_system_data(dblgauss):
     assert paraxial_data(lens).efl_mm == pytest.approx(100.0, abs=0.01)
 
 
-def test_pim_solve_puts_the_image_at_the_paraxial_focus(dblgauss, shared_lenses, tmp_path):
+def test_pim_solve_puts_the_image_at_the_paraxial_focus(dblgauss, reference_lenses, tmp_path):
     # the file's own value is the solve's result
     assert dblgauss.surfaces[-1].thickness == pytest.approx(61.4875364179821, abs=1e-9)
-    text = (shared_lenses / "ag_dblgauss.seq").read_text()
+    text = (reference_lenses / "ag_dblgauss.seq").read_text()
     assert "61.4875364179821" in text
     moved = tmp_path / "moved.seq"
     moved.write_text(text.replace("61.4875364179821", "50.0"))

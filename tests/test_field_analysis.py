@@ -12,6 +12,7 @@ from lensim.optics.lens_file import load_lens
 from lensim.optics.materials import Air, ConstantIndex
 from lensim.optics.paraxial import paraxial_data
 from lensim.optics.surfaces import Surface
+from reference_lenses import REFERENCE_LENSES
 
 pytestmark = pytest.mark.filterwarnings("ignore::numba.core.errors.NumbaIRAssumptionWarning")
 
@@ -76,7 +77,7 @@ def test_distortion_defaults_and_image_height_fields():
     assert d["wavelength_um"] == lens.primary_wavelength_um and d["aiming"] == "real"
     # fields given as real image heights: the real chief ray lands on them (1e-8 mm: the
     # field solve's tolerance), the launch values are angles in degrees
-    zmx = load_lens("/work/shared/lenses/US08427765-1.zmx", warn=False)
+    zmx = load_lens(REFERENCE_LENSES / "US08427765-1.zmx", warn=False)
     dz = distortion(zmx, [4.0, 8.0, 13.6], aiming="real")
     np.testing.assert_allclose(dz["real_height_mm"], [4.0, 8.0, 13.6], atol=1e-8)
     assert dz["field_unit"] == "mm" and 20.0 < dz["launch"][-1] < 30.0
@@ -169,7 +170,7 @@ def test_clear_aperture_lowers_relative_illumination_by_blocked_fraction():
 
 
 def test_relative_illumination_result_fields():
-    lens = load_lens("/work/shared/lenses/US08427765-1.zmx", warn=False)
+    lens = load_lens(REFERENCE_LENSES / "US08427765-1.zmx", warn=False)
     r = relative_illumination(lens, [0.0, 13.6], samples=24)
     assert r["field_unit"] == "mm" and r["wavelength_um"] == lens.primary_wavelength_um
     # the fields are real image heights: the chief ray lands on them (1e-8 mm)

@@ -4,7 +4,7 @@ What is compared, and how the comparison is made fair:
 
 * EFL and F/#: each peer's own value for the same prescription (optiland and rayoptics
   read the .zmx files themselves; the Cooke triplet is built in each peer from the table
-  in shared/lenses/README.md). Tolerance 0.1 % (the brief's).
+  in tests/data/lenses/README.md). Tolerance 0.1 % (the brief's).
 * RMS spot radius, optiland's definition (optiland/analysis/spot_diagram): per
   wavelength, the root mean square distance of the unvignetted rays of a hexapolar
   pupil pattern (6 rings, 127 points, centre included; optiland's default) from the
@@ -59,6 +59,7 @@ from lensim.optics.spot import rms_spot_radius
 from lensim.optics.trace import trace
 
 from optiland_models import COOKE_TABLE, lensim_glass, lensim_rms, optiland_cooke, optiland_pupil, optiland_rms
+from reference_lenses import REFERENCE_LENSES
 
 pytestmark = pytest.mark.filterwarnings("ignore::numba.core.errors.NumbaIRAssumptionWarning")
 
@@ -74,7 +75,7 @@ COOKE_WAVELENGTHS_UM = (0.48, 0.55, 0.65)
 
 
 def _lens(name: str) -> Lens:
-    path = name if name == "cooke_triplet" else f"/work/shared/lenses/{name}"
+    path = name if name == "cooke_triplet" else REFERENCE_LENSES / name
     return load_lens(path, warn=False)
 
 
@@ -92,7 +93,7 @@ def _optiland(name: str, native_glass: bool = True) -> Optic:
     reader; with lensim's glass data on every surface when native_glass is False."""
     if name == "cooke_triplet":
         return _optiland_cooke(native_glass)
-    op = load_zemax_file(f"/work/shared/lenses/{name}")
+    op = load_zemax_file(str(REFERENCE_LENSES / name))
     if not native_glass:
         for i, s in enumerate(_lens(name).surfaces, start=1):
             op.surfaces[i].material_post = lensim_glass(s.material)
@@ -112,7 +113,7 @@ def _rayoptics_efl_fno(name: str) -> tuple[float, float]:
     from rayoptics.raytr.opticalspec import FieldSpec, PupilSpec, WvlSpec
 
     if name != "cooke_triplet":
-        opm = open_model(f"/work/shared/lenses/{name}")
+        opm = open_model(str(REFERENCE_LENSES / name))
     else:
         # built from the table with the same opticalglass entries lensim uses
         opm = OpticalModel()
@@ -244,7 +245,7 @@ def test_l_tim28_mold_substitution():
       back to AbbeMaterial(nd=1.5, vd=40) from the placeholder: EFL 29.19 mm, 5 % short.
     lensim and rayoptics are right; optiland's fallback reads placeholder numbers as data.
     """
-    path = "/work/shared/lenses/US08427765-1.zmx"
+    path = REFERENCE_LENSES / "US08427765-1.zmx"
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         lens = load_lens(path)

@@ -1,6 +1,6 @@
 """lensim's Huygens PSF against optiland 0.6.3's scalar Huygens PSF, same lens, same aiming.
 
-Cooke triplet (shared/lenses/README.md), 0.55 um, normalized fields 0 / 0.7 / 1 (max field
+Cooke triplet (tests/data/lenses/README.md), 0.55 um, normalized fields 0 / 0.7 / 1 (max field
 20 deg), 128 x 128 pupil samples, 128 x 128 image samples 0.5 um apart. Checked per case:
 normalized cross-correlation of the two windows >= 0.99 and Strehl within 5 % (relative),
 both the brief's tolerances.

@@ -1,6 +1,4 @@
 """The chunked tracer (trace) against the surface-by-surface reference (trace_reference)."""
-from pathlib import Path
-
 import pytest
 import torch
 
@@ -11,12 +9,13 @@ from lensim.optics.lens_file import load_lens
 from lensim.optics.materials import ConstantIndex
 from lensim.optics.pupil import random_uniform, square_grid
 from lensim.optics.surfaces import Surface
+from reference_lenses import REFERENCE_LENSES
 
 
 def _systems():
     return {
         "cooke": load_lens("cooke_triplet", warn=False),
-        "asphere_apertures": load_lens(str(Path(__file__).resolve().parents[2] / "shared" / "lenses" / "US08427765-1.zmx"), warn=False),
+        "asphere_apertures": load_lens(REFERENCE_LENSES / "US08427765-1.zmx", warn=False),
         "tir": Lens([Surface(0.0, 5.0, ConstantIndex(1.9), is_stop=True), Surface(-1 / 6.0, 20.0)],
                     aperture_value=10.0, fields=[0.0, 40.0], wavelengths_um=[0.55]),
         "miss": Lens([Surface(1 / 5.0, 2.0, ConstantIndex(1.5), is_stop=True), Surface(0.0, 20.0)],

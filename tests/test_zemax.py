@@ -17,23 +17,23 @@ F_D_C_UM = [0.4861327, 0.5875618, 0.6562725]
 
 
 @pytest.fixture(scope="module")
-def gauss(shared_lenses):
-    return read_zmx(shared_lenses / DOUBLE_GAUSS)
+def gauss(reference_lenses):
+    return read_zmx(reference_lenses / DOUBLE_GAUSS)
 
 
 @pytest.fixture(scope="module")
-def aspheric(shared_lenses):
-    return read_zmx(shared_lenses / ASPHERIC)
+def aspheric(reference_lenses):
+    return read_zmx(reference_lenses / ASPHERIC)
 
 
-def source_text(shared_lenses, name: str) -> str:
-    with open(shared_lenses / name, encoding="ascii", newline="") as fh:
+def source_text(reference_lenses, name: str) -> str:
+    with open(reference_lenses / name, encoding="ascii", newline="") as fh:
         return fh.read()
 
 
-def variant(tmp_path, shared_lenses, name, old, new, count=1):
-    """A copy of a shared lens with `old` replaced by `new` (CRLF kept)."""
-    text = source_text(shared_lenses, name)
+def variant(tmp_path, reference_lenses, name, old, new, count=1):
+    """A copy of a reference lens with `old` replaced by `new` (CRLF kept)."""
+    text = source_text(reference_lenses, name)
     assert text.count(old) >= count, old
     p = tmp_path / name
     p.write_bytes(text.replace(old, new, count).encode("ascii"))
@@ -80,15 +80,15 @@ def test_mold_glass_substitute_is_noted_and_gives_the_patent_efl(aspheric):
     assert paraxial_data(lens).efl_mm == pytest.approx(30.8, abs=0.05)
 
 
-def test_notes_become_warnings(shared_lenses):
+def test_notes_become_warnings(reference_lenses):
     with pytest.warns(GlassSubstitutionWarning, match="L-TIM28_MOLD"):
-        load_lens(shared_lenses / ASPHERIC)
+        load_lens(reference_lenses / ASPHERIC)
 
 
 @pytest.mark.parametrize("encoding, bom", [("utf-16-le", b"\xff\xfe"), ("utf-16-be", b"\xfe\xff"), ("utf-16-le", b"")])
-def test_utf16_loads_identically(tmp_path, shared_lenses, aspheric, encoding, bom):
+def test_utf16_loads_identically(tmp_path, reference_lenses, aspheric, encoding, bom):
     p = tmp_path / ASPHERIC
-    p.write_bytes(bom + source_text(shared_lenses, ASPHERIC).encode(encoding))
+    p.write_bytes(bom + source_text(reference_lenses, ASPHERIC).encode(encoding))
     lens = read_zmx(p)
     assert lens.source == str(p)
     assert lens_to_dict(lens) == lens_to_dict(aspheric)
@@ -103,33 +103,33 @@ def error_message(path) -> str:
 
 
 @pytest.mark.parametrize("surface_type", ["TOROIDAL", "BINARY_2", "COORDBRK"])
-def test_unsupported_surface_type(tmp_path, shared_lenses, surface_type):
-    p = variant(tmp_path, shared_lenses, ASPHERIC, "TYPE EVENASPH", f"TYPE {surface_type}")
+def test_unsupported_surface_type(tmp_path, reference_lenses, surface_type):
+    p = variant(tmp_path, reference_lenses, ASPHERIC, "TYPE EVENASPH", f"TYPE {surface_type}")
     msg = error_message(p)
     assert f"SURF 4 TYPE: unsupported surface type {surface_type}" in msg
 
 
-def test_malformed_number_names_the_line(tmp_path, shared_lenses):
-    p = variant(tmp_path, shared_lenses, ASPHERIC, "CURV 7.230657989877079000E-002", "CURV 7.2306x")
-    lineno = 1 + source_text(shared_lenses, ASPHERIC).split("\r\n").index("  CURV 7.230657989877079000E-002 0 0 0 0 \"\"")
+def test_malformed_number_names_the_line(tmp_path, reference_lenses):
+    p = variant(tmp_path, reference_lenses, ASPHERIC, "CURV 7.230657989877079000E-002", "CURV 7.2306x")
+    lineno = 1 + source_text(reference_lenses, ASPHERIC).split("\r\n").index("  CURV 7.230657989877079000E-002 0 0 0 0 \"\"")
     msg = error_message(p)
     assert f": line {lineno} (SURF 3 CURV): expected a number, got '7.2306x'" in msg
 
 
-def test_missing_stop(tmp_path, shared_lenses):
-    p = variant(tmp_path, shared_lenses, ASPHERIC, "  STOP\r\n", "")
+def test_missing_stop(tmp_path, reference_lenses):
+    p = variant(tmp_path, reference_lenses, ASPHERIC, "  STOP\r\n", "")
     assert "STOP: missing the aperture stop" in error_message(p)
 
 
-def test_unknown_glass_without_model_data_lists_close_names(tmp_path, shared_lenses):
-    p = variant(tmp_path, shared_lenses, ASPHERIC, "GLAS SF11 0 0", "GLAS SF11Q 0 0")
+def test_unknown_glass_without_model_data_lists_close_names(tmp_path, reference_lenses):
+    p = variant(tmp_path, reference_lenses, ASPHERIC, "GLAS SF11 0 0", "GLAS SF11Q 0 0")
     msg = error_message(p)
     assert "SURF 6 GLAS: unknown glass 'SF11Q'" in msg
     assert "close names" in msg and "SF11 (Schott)" in msg and "placeholders" in msg
 
 
-def test_unknown_glass_with_model_data_becomes_a_model_glass(tmp_path, shared_lenses):
-    p = variant(tmp_path, shared_lenses, DOUBLE_GAUSS, "GLAS N-BALF4 0 0", "GLAS QQ-UNOBTAINIUM 0 0")
+def test_unknown_glass_with_model_data_becomes_a_model_glass(tmp_path, reference_lenses):
+    p = variant(tmp_path, reference_lenses, DOUBLE_GAUSS, "GLAS N-BALF4 0 0", "GLAS QQ-UNOBTAINIUM 0 0")
     lens = read_zmx(p)
     m = lens.surfaces[4].material
     assert isinstance(m, ModelGlass)
@@ -140,52 +140,52 @@ def test_unknown_glass_with_model_data_becomes_a_model_glass(tmp_path, shared_le
     assert lens.surfaces[7].material == CatalogGlass("N-BALF4", "Schott", None)
 
 
-def test_blank_model_glass(tmp_path, shared_lenses):
-    p = variant(tmp_path, shared_lenses, ASPHERIC, "GLAS SF11 0 0 1.5 4.0E+1", "GLAS ___BLANK 1 0 1.78472 2.576E+1")
+def test_blank_model_glass(tmp_path, reference_lenses):
+    p = variant(tmp_path, reference_lenses, ASPHERIC, "GLAS SF11 0 0 1.5 4.0E+1", "GLAS ___BLANK 1 0 1.78472 2.576E+1")
     m = read_zmx(p).surfaces[5].material
     assert isinstance(m, ModelGlass) and m.nd == pytest.approx(1.78472, abs=1e-12) and m.vd == pytest.approx(25.76)
-    p = variant(tmp_path, shared_lenses, ASPHERIC, "GLAS SF11 0 0 1.5 4.0E+1", "GLAS ___BLANK 1 0 1.6 0")
+    p = variant(tmp_path, reference_lenses, ASPHERIC, "GLAS SF11 0 0 1.5 4.0E+1", "GLAS ___BLANK 1 0 1.6 0")
     assert read_zmx(p).surfaces[5].material == ConstantIndex(1.6)
 
 
-def test_non_mm_units(tmp_path, shared_lenses):
-    p = variant(tmp_path, shared_lenses, ASPHERIC, "UNIT MM", "UNIT IN")
+def test_non_mm_units(tmp_path, reference_lenses):
+    p = variant(tmp_path, reference_lenses, ASPHERIC, "UNIT MM", "UNIT IN")
     assert "(UNIT): expected lens units MM, got IN" in error_message(p)
 
 
-def test_unsupported_field_type(tmp_path, shared_lenses):
-    p = variant(tmp_path, shared_lenses, ASPHERIC, "FTYP 3 0 3 3", "FTYP 4 0 3 3")
+def test_unsupported_field_type(tmp_path, reference_lenses):
+    p = variant(tmp_path, reference_lenses, ASPHERIC, "FTYP 3 0 3 3", "FTYP 4 0 3 3")
     assert "(FTYP): unsupported field type 4" in error_message(p)
 
 
-def test_x_fields_are_refused(tmp_path, shared_lenses):
-    p = variant(tmp_path, shared_lenses, ASPHERIC, "XFLN 0 0 0", "XFLN 0 0 5")
+def test_x_fields_are_refused(tmp_path, reference_lenses):
+    p = variant(tmp_path, reference_lenses, ASPHERIC, "XFLN 0 0 0", "XFLN 0 0 5")
     assert "(XFLN): field 3 has x = 5" in error_message(p)
 
 
-def test_object_na_aperture_is_refused(tmp_path, shared_lenses):
-    p = variant(tmp_path, shared_lenses, ASPHERIC, "FNUM 2.1 0", "OBNA 0.1 0")
+def test_object_na_aperture_is_refused(tmp_path, reference_lenses):
+    p = variant(tmp_path, reference_lenses, ASPHERIC, "FNUM 2.1 0", "OBNA 0.1 0")
     assert "(OBNA): unsupported system aperture (object-space NA)" in error_message(p)
 
 
-def test_aperture_variants(tmp_path, shared_lenses):
-    lens = read_zmx(variant(tmp_path, shared_lenses, ASPHERIC, "FNUM 2.1 0", "ENPD 14.5"))
+def test_aperture_variants(tmp_path, reference_lenses):
+    lens = read_zmx(variant(tmp_path, reference_lenses, ASPHERIC, "FNUM 2.1 0", "ENPD 14.5"))
     assert (lens.aperture_type, lens.aperture_value) == ("epd", 14.5)
-    lens = read_zmx(variant(tmp_path, shared_lenses, ASPHERIC, "FNUM 2.1 0", "FLOA"))
+    lens = read_zmx(variant(tmp_path, reference_lenses, ASPHERIC, "FNUM 2.1 0", "FLOA"))
     assert (lens.aperture_type, lens.aperture_value) == ("stop_semi_diameter", 5.2)
     assert paraxial_data(lens).stop_semi_diameter_mm == pytest.approx(5.2, rel=1e-12)
     # paraxial working F/# equals EFL / EPD for an object at infinity
-    lens = read_zmx(variant(tmp_path, shared_lenses, ASPHERIC, "FNUM 2.1 0", "FNUM 2.1 1"))
+    lens = read_zmx(variant(tmp_path, reference_lenses, ASPHERIC, "FNUM 2.1 0", "FNUM 2.1 1"))
     assert (lens.aperture_type, lens.aperture_value) == ("fno", 2.1)
     assert paraxial_data(lens).working_fno == pytest.approx(2.1, rel=1e-12)
 
 
-def test_clear_aperture_and_obscuration(tmp_path, shared_lenses):
+def test_clear_aperture_and_obscuration(tmp_path, reference_lenses):
     stop = "  DIAM 4.215000499256 0 0 0 1 \"\"\r\n"
-    p = variant(tmp_path, shared_lenses, DOUBLE_GAUSS, stop, stop + "  CLAP 0 4.1 0\r\n  OBSC 0 1.5 0\r\n")
+    p = variant(tmp_path, reference_lenses, DOUBLE_GAUSS, stop, stop + "  CLAP 0 4.1 0\r\n  OBSC 0 1.5 0\r\n")
     s = read_zmx(p).surfaces[6]
     assert (s.clear_radius, s.obscuration_radius, s.is_stop) == (4.1, 1.5, True)
-    p = variant(tmp_path, shared_lenses, DOUBLE_GAUSS, stop, stop + "  SQAP 2 2 0\r\n")
+    p = variant(tmp_path, reference_lenses, DOUBLE_GAUSS, stop, stop + "  SQAP 2 2 0\r\n")
     assert "(SURF 7 SQAP): a rectangular aperture is not rotationally symmetric" in error_message(p)
 
 
