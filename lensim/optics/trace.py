@@ -325,110 +325,134 @@ def _trace_chunk(steps: list[_Step], comps: list[torch.Tensor], n: list, fail: t
     """Trace one chunk in place: comps = [x, y, z (local to steps[0]'s vertex), L, M, N,
     opl, valid]; n: index of every medium (floats or per-ray tensors); fail: int16 codes.
     While every ray of the chunk is valid the masking steps are skipped."""
-    x, y, z, L, M, N, opl, valid = comps
+    x, y, z, valid = comps[0], comps[1], comps[2], comps[7]
     all_valid = bool(valid.all())
     for j, st in enumerate(steps):
-        if st.shift:
-            z.sub_(st.shift)
-        n1 = n[st.index]
-        t, hit = _intersect(st, x, y, z, L, M, N, valid)
-        if not st.backwards_ok:
-            hit &= t > -1e-9
         code = (st.index + 1) * 4
-        if not (all_valid and bool(hit.all())):
-            miss = valid & ~hit
-            fail.masked_fill_(miss, code + MISSED)
-            valid ^= miss
-            t = torch.where(valid, t, 0.0)
-            all_valid = False
-        x.addcmul_(t, L)
-        y.addcmul_(t, M)
-        z.addcmul_(t, N)
-        if isinstance(n1, torch.Tensor):
-            opl.addcmul_(t, n1)
-        else:
-            opl.add_(t, alpha=n1)
-        if st.r2_max is not None or st.r2_min is not None:
-            rr = x * x
-            rr.addcmul_(y, y)
-            out = rr > st.r2_max if st.r2_max is not None else torch.zeros_like(valid)
-            if st.r2_min is not None:
-                out |= rr < st.r2_min
-            if not (all_valid and not bool(out.any())):
-                out &= valid
-                fail.masked_fill_(out, code + VIGNETTED)
-                valid ^= out
-                all_valid = False
+        all_valid = _move_chunk_to_surface(st, comps, n[st.index], fail, code, all_valid)
         if record is not None:
             record[j][:, 0].copy_(x)
             record[j][:, 1].copy_(y)
             torch.add(z, float(zv[st.index]), out=record[j][:, 2])
         if not st.interact:
             continue
-        n2 = n[st.index + 1]
-        s = st.surface
-        if s.is_mirror:
-            nrm = _normal(st, x, y, z)
-            if nrm is None:
-                if all_valid:
-                    N.neg_()
-                else:
-                    N.copy_(torch.where(valid, -N, N))
-                continue
-            nx, ny, nz = nrm
-            dn = L * nx
-            dn.addcmul_(M, ny).addcmul_(N, nz).mul_(-2.0)
-            if not all_valid:
-                dn = torch.where(valid, dn, 0.0)
-            L.addcmul_(dn, nx)
-            M.addcmul_(dn, ny)
-            N.addcmul_(dn, nz)
-            continue
-        scalar = not isinstance(n1, torch.Tensor) and not isinstance(n2, torch.Tensor)
-        if scalar and n1 == n2:
-            continue  # no refraction (air to air, a dummy or stop surface)
-        mu = n1 / n2
-        c = s.curvature
-        if st.kind == "sphere":
-            # the unit normal on a sphere is (-c x, -c y, 1 - c z): never stored
-            nrm = None
-            cos_i = x * L
-            cos_i.addcmul_(y, M).addcmul_(z, N).mul_(-c).add_(N)
+        if st.surface.is_mirror:
+            _reflect_chunk(st, comps, all_valid)
         else:
-            nrm = _normal(st, x, y, z)
-            cos_i = N.clone() if nrm is None else torch.mul(L, nrm[0]).addcmul_(M, nrm[1]).addcmul_(N, nrm[2])
-        ct = cos_i * cos_i
-        if scalar:
-            ct.mul_(mu * mu).add_(1.0 - mu * mu)
-        else:
-            mu2 = mu * mu
-            ct.mul_(mu2).sub_(mu2).add_(1.0)
-        if not (scalar and mu <= 1.0):  # TIR needs n1 > n2
-            tir = ct < 0.0
-            if not (all_valid and not bool(tir.any())):
-                tir &= valid
-                fail.masked_fill_(tir, code + TIR)
-                valid ^= tir
-                all_valid = False
-        kk = sqrt_nonneg(ct.clamp_(min=0.0)).copysign_(cos_i).sub_(cos_i.mul_(mu))
+            all_valid = _refract_chunk(st, comps, n[st.index], n[st.index + 1], fail, code, all_valid)
+
+
+def _stop_rays(lost: torch.Tensor, valid: torch.Tensor, fail: torch.Tensor, code: int) -> None:
+    """Mark the valid rays in ``lost`` as failed with ``code`` (in place)."""
+    lost &= valid
+    fail.masked_fill_(lost, code)
+    valid ^= lost
+
+
+def _move_chunk_to_surface(st: _Step, comps: list[torch.Tensor], n1: float | torch.Tensor, fail: torch.Tensor,
+                     code: int, all_valid: bool) -> bool:
+    """Carry the rays of a chunk to surface st (in place): intersection, optical path in
+    medium n1, clear aperture and obscuration. Returns whether every ray is still valid."""
+    x, y, z, L, M, N, opl, valid = comps
+    if st.shift:
+        z.sub_(st.shift)
+    t, hit = _intersect(st, x, y, z, L, M, N, valid)
+    if not st.backwards_ok:
+        hit &= t > -1e-9
+    if not (all_valid and bool(hit.all())):
+        _stop_rays(~hit, valid, fail, code + MISSED)
+        t = torch.where(valid, t, 0.0)
+        all_valid = False
+    x.addcmul_(t, L)
+    y.addcmul_(t, M)
+    z.addcmul_(t, N)
+    if isinstance(n1, torch.Tensor):
+        opl.addcmul_(t, n1)
+    else:
+        opl.add_(t, alpha=n1)
+    if st.r2_max is not None or st.r2_min is not None:
+        rr = x * x
+        rr.addcmul_(y, y)
+        out = rr > st.r2_max if st.r2_max is not None else torch.zeros_like(valid)
+        if st.r2_min is not None:
+            out |= rr < st.r2_min
+        if not (all_valid and not bool(out.any())):
+            _stop_rays(out, valid, fail, code + VIGNETTED)
+            all_valid = False
+    return all_valid
+
+
+def _reflect_chunk(st: _Step, comps: list[torch.Tensor], all_valid: bool) -> None:
+    """Mirror reflection of the chunk's directions at surface st (in place); invalid
+    rays keep their direction."""
+    x, y, z, L, M, N, _, valid = comps
+    nrm = _normal(st, x, y, z)
+    if nrm is None:
         if all_valid:
-            scale = mu
+            N.neg_()
         else:
-            kk = torch.where(valid, kk, 0.0)
-            scale = valid.to(x.dtype).mul_(mu - 1.0).add_(1.0)  # 1 for invalid rays: they keep their direction
-        L.mul_(scale)
-        M.mul_(scale)
-        N.mul_(scale)
-        if st.kind == "sphere":
-            L.addcmul_(kk, x, value=-c)
-            M.addcmul_(kk, y, value=-c)
-            N.add_(kk).addcmul_(kk, z, value=-c)
-        elif nrm is None:
-            N.add_(kk)
-        else:
-            L.addcmul_(kk, nrm[0])
-            M.addcmul_(kk, nrm[1])
-            N.addcmul_(kk, nrm[2])
+            N.copy_(torch.where(valid, -N, N))
+        return
+    nx, ny, nz = nrm
+    dn = L * nx
+    dn.addcmul_(M, ny).addcmul_(N, nz).mul_(-2.0)
+    if not all_valid:
+        dn = torch.where(valid, dn, 0.0)
+    L.addcmul_(dn, nx)
+    M.addcmul_(dn, ny)
+    N.addcmul_(dn, nz)
+
+
+def _refract_chunk(st: _Step, comps: list[torch.Tensor], n1: float | torch.Tensor, n2: float | torch.Tensor,
+             fail: torch.Tensor, code: int, all_valid: bool) -> bool:
+    """Snell refraction of the chunk's directions at surface st from index n1 to n2 (in
+    place); totally internally reflected rays are stopped. Returns whether every ray is
+    still valid."""
+    x, y, z, L, M, N, _, valid = comps
+    scalar = not isinstance(n1, torch.Tensor) and not isinstance(n2, torch.Tensor)
+    if scalar and n1 == n2:
+        return all_valid  # no refraction (air to air, a dummy or stop surface)
+    mu = n1 / n2
+    c = st.surface.curvature
+    if st.kind == "sphere":
+        # the unit normal on a sphere is (-c x, -c y, 1 - c z): never stored
+        nrm = None
+        cos_i = x * L
+        cos_i.addcmul_(y, M).addcmul_(z, N).mul_(-c).add_(N)
+    else:
+        nrm = _normal(st, x, y, z)
+        cos_i = N.clone() if nrm is None else torch.mul(L, nrm[0]).addcmul_(M, nrm[1]).addcmul_(N, nrm[2])
+    ct = cos_i * cos_i
+    if scalar:
+        ct.mul_(mu * mu).add_(1.0 - mu * mu)
+    else:
+        mu2 = mu * mu
+        ct.mul_(mu2).sub_(mu2).add_(1.0)
+    if not (scalar and mu <= 1.0):  # TIR needs n1 > n2
+        tir = ct < 0.0
+        if not (all_valid and not bool(tir.any())):
+            _stop_rays(tir, valid, fail, code + TIR)
+            all_valid = False
+    kk = sqrt_nonneg(ct.clamp_(min=0.0)).copysign_(cos_i).sub_(cos_i.mul_(mu))
+    if all_valid:
+        scale = mu
+    else:
+        kk = torch.where(valid, kk, 0.0)
+        scale = valid.to(x.dtype).mul_(mu - 1.0).add_(1.0)  # 1 for invalid rays: they keep their direction
+    L.mul_(scale)
+    M.mul_(scale)
+    N.mul_(scale)
+    if st.kind == "sphere":
+        L.addcmul_(kk, x, value=-c)
+        M.addcmul_(kk, y, value=-c)
+        N.add_(kk).addcmul_(kk, z, value=-c)
+    elif nrm is None:
+        N.add_(kk)
+    else:
+        L.addcmul_(kk, nrm[0])
+        M.addcmul_(kk, nrm[1])
+        N.addcmul_(kk, nrm[2])
+    return all_valid
 
 
 def _index_groups(n: torch.Tensor, wavelength_um: torch.Tensor, batch: torch.Size) -> list[tuple[int, int, list | torch.Tensor]]:

@@ -123,12 +123,16 @@ class _Reader:
 
     # ---- parsing -----------------------------------------------------------------
     def line(self, lineno: int, text: str) -> None:
+        """Read one line of the file: a system keyword, or a keyword of the current surface."""
         tokens = text.split()
         if not tokens:
             return
         key = tokens[0].upper()
-        cur = self.surfs[-1] if self.surfs else None
-        sw = f"SURF {cur.number} {key}" if cur else key
+        if not self.system_line(lineno, key, tokens, text) and self.surfs:
+            self.surface_line(self.surfs[-1], lineno, key, tokens, text)
+
+    def system_line(self, lineno: int, key: str, tokens: list[str], text: str) -> bool:
+        """Read a system keyword (SURF starts a surface); False when ``key`` is not one."""
         if key == "SURF":
             n = self.integer(lineno, "SURF", tokens, 1)
             if n != len(self.surfs):
@@ -149,27 +153,9 @@ class _Reader:
             flag = self.integer(lineno, key, tokens, 2) if len(tokens) > 2 and key != "FLOA" else 0
             self.aperture = (key if flag == 0 else f"{key}/{flag}", value, lineno)
         elif key == "GCAT":
-            cats, unknown = [], []
-            for name in tokens[1:]:
-                (cats if name.upper() in _CATALOG_NAMES else unknown).append(name)
-            if unknown:
-                self.notes.append(f"glass catalogue(s) {', '.join(unknown)} not available in lensim; ignored "
-                                  f"(searching {', '.join(_CATALOG_NAMES[c.upper()] for c in cats) or 'every catalogue'})")
-            self.catalogs = [_CATALOG_NAMES[c.upper()] for c in cats] or None
+            self.glass_catalogues(tokens)
         elif key == "FTYP":
-            ftyp = self.integer(lineno, key, tokens, 1)
-            if ftyp not in FIELD_TYPES:
-                raise self.err(lineno, key, f"unsupported field type {ftyp}; expected 0 (angle), 1 (object height), "
-                                            "2 (paraxial image height) or 3 (real image height)")
-            if len(tokens) > 2 and self.integer(lineno, key, tokens, 2) == 1:
-                raise self.err(lineno, key, "telecentric object space is not supported; expected the stop to "
-                                            "define the entrance pupil (FTYP second value 0)")
-            if len(tokens) > 7 and self.integer(lineno, key, tokens, 7) == 1:
-                raise self.err(lineno, key, "afocal image space is not supported; expected a lens that forms an "
-                                            "image (FTYP seventh value 0)")
-            nf = self.integer(lineno, key, tokens, 3) if len(tokens) > 3 else None
-            nw = self.integer(lineno, key, tokens, 4) if len(tokens) > 4 else None
-            self.ftyp = (ftyp, nf, nw, lineno)
+            self.field_type(lineno, tokens)
         elif key in _COLUMNS:
             self.columns[_COLUMNS[key]] = (self.values(lineno, key, tokens), lineno)
         elif key == "WAVM":
@@ -193,9 +179,41 @@ class _Reader:
             if n > 1:
                 self.notes.append(f"the file has {n} configurations; the lens data as saved (the active "
                                   "configuration) are used")
-        elif cur is None:
-            return  # other system keywords: drawing, tolerancing, environment, ...
-        elif key == "TYPE":
+        else:
+            return False
+        return True
+
+    def glass_catalogues(self, tokens: list[str]) -> None:
+        """GCAT: the catalogues to search, with a note naming those lensim does not have."""
+        cats, unknown = [], []
+        for name in tokens[1:]:
+            (cats if name.upper() in _CATALOG_NAMES else unknown).append(name)
+        if unknown:
+            self.notes.append(f"glass catalogue(s) {', '.join(unknown)} not available in lensim; ignored "
+                              f"(searching {', '.join(_CATALOG_NAMES[c.upper()] for c in cats) or 'every catalogue'})")
+        self.catalogs = [_CATALOG_NAMES[c.upper()] for c in cats] or None
+
+    def field_type(self, lineno: int, tokens: list[str]) -> None:
+        """FTYP: field type, number of fields and wavelengths; telecentric or afocal refused."""
+        key = "FTYP"
+        ftyp = self.integer(lineno, key, tokens, 1)
+        if ftyp not in FIELD_TYPES:
+            raise self.err(lineno, key, f"unsupported field type {ftyp}; expected 0 (angle), 1 (object height), "
+                                        "2 (paraxial image height) or 3 (real image height)")
+        if len(tokens) > 2 and self.integer(lineno, key, tokens, 2) == 1:
+            raise self.err(lineno, key, "telecentric object space is not supported; expected the stop to "
+                                        "define the entrance pupil (FTYP second value 0)")
+        if len(tokens) > 7 and self.integer(lineno, key, tokens, 7) == 1:
+            raise self.err(lineno, key, "afocal image space is not supported; expected a lens that forms an "
+                                        "image (FTYP seventh value 0)")
+        nf = self.integer(lineno, key, tokens, 3) if len(tokens) > 3 else None
+        nw = self.integer(lineno, key, tokens, 4) if len(tokens) > 4 else None
+        self.ftyp = (ftyp, nf, nw, lineno)
+
+    def surface_line(self, cur: _Surf, lineno: int, key: str, tokens: list[str], text: str) -> None:
+        """Read a keyword of surface ``cur`` (other keywords are ignored)."""
+        sw = f"SURF {cur.number} {key}"
+        if key == "TYPE":
             cur.type = tokens[1].upper() if len(tokens) > 1 else ""
             if cur.type not in SUPPORTED_TYPES:
                 raise InputError(self.src, f"SURF {cur.number} TYPE",
