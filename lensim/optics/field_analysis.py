@@ -15,7 +15,7 @@ from lensim.errors import InputError, RayTraceError
 from lensim.optics.aiming import Aiming, chief_ray_image_height, describe_failure, generate_rays, object_field
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import ParaxialData, paraxial_data, paraxial_image_height
-from lensim.optics.trace import DTYPE, Rays, trace
+from lensim.optics.trace import DTYPE, Rays, TraceResult, trace
 
 DEFAULT_FIELD_STEPS = 21
 
@@ -107,6 +107,69 @@ def _quad_areas(u: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
     return 0.5 * ((a * B - b * A) + (b * C - c * B) + (c * D - d * C) + (d * A - a * D)).abs()
 
 
+class _PupilCells:
+    """The pupil grid of :func:`relative_illumination`: n x n cells over [-1, 1]^2, the
+    corner nodes of the cells that touch the unit disc (nodes, (K, 2)), and s x s
+    subsample points in each such cell (sub, (S, 2); points outside the disc moved
+    radially onto its rim) with the cell each belongs to (cell_of_sub, (S,))."""
+
+    def __init__(self, n: int, s: int) -> None:
+        self.n = n
+        edges = torch.linspace(-1.0, 1.0, n + 1, dtype=DTYPE)
+        gy, gx = torch.meshgrid(edges, edges, indexing="ij")
+        all_nodes = torch.stack([gx.reshape(-1), gy.reshape(-1)], -1)  # (n+1)^2, row = y
+        fine = (torch.arange(n * s, dtype=DTYPE) + 0.5) * (2.0 / n / s) - 1.0
+        fy, fx = torch.meshgrid(fine, fine, indexing="ij")
+        sub = torch.stack([fx.reshape(-1), fy.reshape(-1)], -1)
+        r = torch.linalg.norm(sub, dim=-1, keepdim=True)
+        sub = torch.where(r > 1.0, sub * ((1.0 - 1e-12) / r), sub)
+        self.disc = _disc_fraction(edges)  # (n, n) fraction of each cell inside the disc
+        used = self.disc > 0
+        # only the subsample points of cells that touch the disc are traced
+        cell_of_sub = (torch.arange(n * s).reshape(-1, 1) // s * n + torch.arange(n * s).reshape(1, -1) // s).reshape(-1)
+        keep = used.reshape(-1)[cell_of_sub]
+        self.sub, self.cell_of_sub = sub[keep], cell_of_sub[keep]
+        # only the corners of those cells are traced (the far corners of the square need not aim)
+        node_used = torch.zeros(n + 1, n + 1, dtype=torch.bool)
+        for dy in (0, 1):
+            for dx in (0, 1):
+                node_used[dy:dy + n, dx:dx + n] |= used
+        self.node_idx = torch.nonzero(node_used.reshape(-1))[:, 0]
+        self.nodes = all_nodes[self.node_idx]
+
+    def cell_areas(self, free: TraceResult, z_xp: float) -> torch.Tensor:
+        """(F, n, n) area of each cell in image-space direction-cosine space (L, M), from a
+        trace without apertures of [chief ray, nodes...] per field; zero where a corner
+        failed. Directions run from the ray's crossing of the exit-pupil plane at z_xp to
+        the chief ray's image point (the ray directions themselves when z_xp is infinite)."""
+        n = self.n
+        pos, dirs = free.rays.position[0], free.rays.direction[0]  # (F, 1 + nodes, 3)
+        P, X, D = pos[:, :1, :], pos[:, 1:], dirs[:, 1:]
+        if math.isfinite(z_xp):
+            t = (z_xp - X[..., 2]) / torch.where(D[..., 2].abs() > 1e-300, D[..., 2], torch.ones_like(D[..., 2]))
+            to_image = P - (X + t.unsqueeze(-1) * D)
+            u = to_image / torch.linalg.norm(to_image, dim=-1, keepdim=True).clamp_min(1e-300)
+        else:
+            u = D
+        F = pos.shape[0]
+        L = torch.zeros(F, (n + 1) ** 2, dtype=DTYPE)
+        M = torch.zeros(F, (n + 1) ** 2, dtype=DTYPE)
+        node_ok = torch.zeros(F, (n + 1) ** 2, dtype=torch.bool)
+        L[:, self.node_idx], M[:, self.node_idx], node_ok[:, self.node_idx] = u[..., 0], u[..., 1], free.rays.valid[0, :, 1:]
+        L, M, node_ok = (v.reshape(F, n + 1, n + 1) for v in (L, M, node_ok))
+        cell_ok = node_ok[:, :-1, :-1] & node_ok[:, :-1, 1:] & node_ok[:, 1:, 1:] & node_ok[:, 1:, :-1]
+        return torch.where(cell_ok, _quad_areas(L, M), torch.zeros((), dtype=DTYPE))
+
+    def passed_fraction(self, blocked: TraceResult) -> torch.Tensor:
+        """(F, n, n) fraction of each cell's subsample rays that pass every aperture."""
+        n = self.n
+        passed = blocked.rays.valid[0].to(DTYPE)  # (F, n_sub)
+        counts = torch.zeros(n * n, dtype=DTYPE).index_add_(
+            0, self.cell_of_sub, torch.ones(self.cell_of_sub.shape[0], dtype=DTYPE))
+        frac = torch.zeros(passed.shape[0], n * n, dtype=DTYPE).index_add_(1, self.cell_of_sub, passed)
+        return (frac / counts.clamp_min(1.0)).reshape(-1, n, n)
+
+
 def relative_illumination(
     lens: Lens,
     fields: list[float] | np.ndarray | None = None,
@@ -152,32 +215,10 @@ def relative_illumination(
     axis_index = all_launch.index(0.0)
 
     n = samples
-    edges = torch.linspace(-1.0, 1.0, n + 1, dtype=DTYPE)
-    gy, gx = torch.meshgrid(edges, edges, indexing="ij")
-    nodes = torch.stack([gx.reshape(-1), gy.reshape(-1)], -1)  # (n+1)^2, row = y
-    s = subsamples
-    h = 2.0 / n
-    fine = (torch.arange(n * s, dtype=DTYPE) + 0.5) * (h / s) - 1.0
-    fy, fx = torch.meshgrid(fine, fine, indexing="ij")
-    sub = torch.stack([fx.reshape(-1), fy.reshape(-1)], -1)
-    r = torch.linalg.norm(sub, dim=-1, keepdim=True)
-    sub = torch.where(r > 1.0, sub * ((1.0 - 1e-12) / r), sub)
-    disc = _disc_fraction(edges)
-    used = disc > 0
-    # only the subsample points of cells that touch the disc are traced
-    cell_of_sub = (torch.arange(n * s).reshape(-1, 1) // s * n + torch.arange(n * s).reshape(1, -1) // s).reshape(-1)
-    keep = used.reshape(-1)[cell_of_sub]
-    sub, cell_of_sub = sub[keep], cell_of_sub[keep]
-
-    # only the corners of those cells are traced (the far corners of the square need not aim)
-    node_used = torch.zeros(n + 1, n + 1, dtype=torch.bool)
-    for dy in (0, 1):
-        for dx in (0, 1):
-            node_used[dy:dy + n, dx:dx + n] |= used
-    node_idx = torch.nonzero(node_used.reshape(-1))[:, 0]
-    n_nodes = node_idx.numel()
-    pupil = torch.cat([torch.zeros(1, 2, dtype=DTYPE), nodes[node_idx], sub])
+    cells = _PupilCells(n, subsamples)
+    pupil = torch.cat([torch.zeros(1, 2, dtype=DTYPE), cells.nodes, cells.sub])
     rays, wlt = generate_rays(lens, all_launch, pupil, [wl], aiming, para)
+    n_nodes = cells.nodes.shape[0]
     free = trace(lens, _slice(rays, slice(0, 1 + n_nodes)), wlt, apertures=False)
     blocked = trace(lens, _slice(rays, slice(1 + n_nodes, None)), wlt)
 
@@ -187,34 +228,12 @@ def relative_illumination(
         mask = torch.zeros_like(free.rays.valid)
         mask[0, fi, 0] = True
         raise RayTraceError(describe_failure(lens, all_launch[fi], free.first_failure(mask), "chief ray"))
-    pos = free.rays.position[0]  # (F, 1 + nodes, 3)
-    dirs = free.rays.direction[0]
-    P = pos[:, :1, :]
-    X, D = pos[:, 1:], dirs[:, 1:]
-    z_xp = para.exit_pupil_z_mm
-    if math.isfinite(z_xp):
-        t = (z_xp - X[..., 2]) / torch.where(D[..., 2].abs() > 1e-300, D[..., 2], torch.ones_like(D[..., 2]))
-        to_image = P - (X + t.unsqueeze(-1) * D)
-        u = to_image / torch.linalg.norm(to_image, dim=-1, keepdim=True).clamp_min(1e-300)
-    else:
-        u = D
-    F = len(all_launch)
-    L = torch.zeros(F, (n + 1) ** 2, dtype=DTYPE)
-    M = torch.zeros(F, (n + 1) ** 2, dtype=DTYPE)
-    node_ok = torch.zeros(F, (n + 1) ** 2, dtype=torch.bool)
-    L[:, node_idx], M[:, node_idx], node_ok[:, node_idx] = u[..., 0], u[..., 1], free.rays.valid[0, :, 1:]
-    L, M, node_ok = (v.reshape(F, n + 1, n + 1) for v in (L, M, node_ok))
-    cell_ok = node_ok[:, :-1, :-1] & node_ok[:, :-1, 1:] & node_ok[:, 1:, 1:] & node_ok[:, 1:, :-1]
-    area = torch.where(cell_ok, _quad_areas(L, M), torch.zeros((), dtype=DTYPE))
-
-    passed = blocked.rays.valid[0].to(DTYPE)  # (F, n_sub)
-    counts = torch.zeros(n * n, dtype=DTYPE).index_add_(0, cell_of_sub, torch.ones(cell_of_sub.shape[0], dtype=DTYPE))
-    frac = torch.zeros(F, n * n, dtype=DTYPE).index_add_(1, cell_of_sub, passed)
-    frac = (frac / counts.clamp_min(1.0)).reshape(F, n, n)
-    weight = disc.unsqueeze(0) * frac
+    P = free.rays.position[0][:, :1, :]  # chief-ray image points (F, 1, 3)
+    area = cells.cell_areas(free, para.exit_pupil_z_mm)
+    weight = cells.disc.unsqueeze(0) * cells.passed_fraction(blocked)
     solid = (area * weight).sum((-1, -2))
     n_img = float(lens.indices([wl])[-1, 0])
-    unvignetted = (weight.sum((-1, -2)) / disc.sum()).tolist()
+    unvignetted = (weight.sum((-1, -2)) / cells.disc.sum()).tolist()
     ri = (solid / solid[axis_index]).tolist()
     pick = slice(off, off + len(launch))
     return {
