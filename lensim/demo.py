@@ -124,8 +124,9 @@ def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: i
     progress(done, total) reports within it."""
     from lensim.data.pairs import make_dataset
     from lensim.evaluate.harness import builtin_method, checkpoint_method, evaluate
-    from lensim.optics.plots import plot_layout, plot_spots
-    from lensim.psf.bank import compute_bank, write_bank_figures
+    from lensim.plots.lens import plot_layout, plot_spots
+    from lensim.plots.bank import write_bank_figures
+    from lensim.psf.bank import compute_bank
     from lensim.report import edge_study, sample_crops, write_report
     from lensim.simulate import suggest_kernel_pixels
 

@@ -31,7 +31,7 @@ def _figure(size: tuple[float, float]):
 
 
 def _save(fig, path: Path) -> Path:
-    from lensim.optics.plots import save_figure
+    from lensim.plots import save_figure
 
     save_figure(fig, path)
     return path

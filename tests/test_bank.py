@@ -13,7 +13,8 @@ from lensim.errors import InputError
 from lensim.optics.field_analysis import relative_illumination
 from lensim.optics.lens_file import load_lens
 from lensim.optics.paraxial import paraxial_image_height
-from lensim.psf.bank import MANIFEST, PSFBank, compute_bank, default_fields, field_file, rotate_kernel
+from lensim.psf.bank import MANIFEST, PSFBank, compute_bank, default_fields, field_file
+from lensim.render.rotation import rotate_kernel
 from lensim.psf.compute import compute_psf
 from lensim.psf.pupil_field import pupil_field
 from lensim.psf.spectral import read_response_csv, spectral_response

@@ -124,7 +124,7 @@ def plot(
 
     Example: lensim lens plot cooke_triplet -o layout.png --rays 9
     """
-    from lensim.optics.plots import plot_layout
+    from lensim.plots.lens import plot_layout
 
     lens = load_lens(lens_file)
     plot_layout(lens, fields=field or None, rays_per_field=rays, aiming=aiming.value, path=output)
@@ -148,7 +148,7 @@ def spot(
 
     Example: lensim lens spot cooke_triplet -o spot.png --json
     """
-    from lensim.optics.plots import SPOT_RINGS, airy_radius_um, plot_spots, spot_summary
+    from lensim.plots.lens import SPOT_RINGS, airy_radius_um, plot_spots, spot_summary
     from lensim.optics.pupil import hexapolar
     from lensim.optics.spot import spot_diagram
 

@@ -136,7 +136,8 @@ def show(
 
     Example: lensim psf show bank/ -o bank_figures/
     """
-    from lensim.psf.bank import PSFBank, write_bank_figures
+    from lensim.plots.bank import write_bank_figures
+    from lensim.psf.bank import PSFBank
 
     paths = write_bank_figures(PSFBank.load(bank_dir), output, gamma=gamma)
     for p in paths:

@@ -2,7 +2,7 @@
 
 Matplotlib figures built without pyplot (an Agg canvas each), so nothing global is
 touched and nothing is shown. Every function returns the Figure; given a path it also
-saves it atomically (lensim.io.atomic_writer), in the format
+saves it atomically (lensim.plots.figure.save_figure), in the format
 the file name's extension names (png, pdf, svg, ...).
 
 Units: lengths in mm on the layout, um on spot diagrams; wavelengths in um in arguments,
@@ -16,13 +16,11 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Circle
 
 from lensim.errors import InputError, RayTraceError
-from lensim.io import atomic_writer
 from lensim.optics.aiming import Aiming, describe_failure, generate_rays, object_field
 from lensim.optics.lens import Lens
 from lensim.optics.materials import Air
@@ -31,6 +29,7 @@ from lensim.optics.pupil import hexapolar
 from lensim.optics.spot import SpotDiagram, spot_diagram
 from lensim.optics.surfaces import Surface
 from lensim.optics.trace import DTYPE, MISSED, OK, VIGNETTED, Rays, media_indices, trace_surface
+from lensim.plots.figure import new_figure, save_figure
 
 FIELD_COLORS = ("tab:blue", "tab:green", "tab:red", "tab:orange", "tab:purple", "tab:brown", "tab:pink",
                 "tab:olive", "tab:cyan", "tab:gray")
@@ -48,24 +47,6 @@ def field_label(lens: Lens, value: float) -> str:
     if lens.field_type == "angle":
         return f"{value:g}\N{DEGREE SIGN}"
     return f"{value:g} mm"
-
-
-def save_figure(fig: Figure, path: str | Path, dpi: int = 150) -> None:
-    """Save a figure atomically; the format comes from the file name's extension."""
-    path = Path(path)
-    fmt = path.suffix[1:].lower()
-    supported = fig.canvas.get_supported_filetypes()
-    if fmt not in supported:
-        raise InputError(str(path), "output", f"expected a file name ending in one of "
-                         f"{', '.join('.' + k for k in sorted(supported))}")
-    with atomic_writer(path, suffix=path.suffix) as fh:
-        fig.savefig(fh, format=fmt, dpi=dpi)
-
-
-def _new_figure(figsize: tuple[float, float]) -> Figure:
-    fig = Figure(figsize=figsize, layout="constrained")
-    FigureCanvasAgg(fig)
-    return fig
 
 
 def wavelength_color(wavelength_um: float) -> tuple[float, float, float]:
@@ -271,7 +252,7 @@ def plot_layout(
     height = 2 * ymax
     fig_w = 11.0
     fig_h = float(np.clip(fig_w * height / max(width, 1e-9) + 1.6, 3.2, 9.0))
-    fig = _new_figure((fig_w, fig_h))
+    fig = new_figure((fig_w, fig_h), layout="constrained")
     ax = fig.add_subplot(1, 1, 1)
 
     # rays
@@ -449,7 +430,7 @@ def plot_spots(
     F = len(spots.fields)
     ncols = min(F, 3)
     nrows = math.ceil(F / ncols)
-    fig = _new_figure((3.6 * ncols + 0.4, 3.6 * nrows + 1.1))
+    fig = new_figure((3.6 * ncols + 0.4, 3.6 * nrows + 1.1), layout="constrained")
     colors = _wavelength_colors(spots.wavelengths_um)
     axes = fig.subplots(nrows, ncols, squeeze=False)
     for fi in range(F):

@@ -1,0 +1,368 @@
+"""Computing a PSF bank: the per-field work (fine PSFs per wavelength, pixel integration,
+relative illumination, spectral weighting) and the executor that runs it in this process
+or in worker processes, writing each field as it finishes."""
+from __future__ import annotations
+
+import io
+import math
+import warnings
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from lensim.errors import InputError
+from lensim.optics.lens import Lens
+from lensim.optics.lens_file import lens_to_dict
+from lensim.optics.paraxial import ParaxialData, paraxial_data, paraxial_image_height
+from lensim.psf.bank.settings import default_fields
+from lensim.psf.bank.store import (FORMAT, FORMAT_VERSION, lensim_version, open_bank_directory, read_manifest,
+                                   write_field)
+from lensim.psf.bank.types import BankField, Progress, PSFBank
+from lensim.psf.compute import METHODS, PSFSamplingWarning, check_sampling, field_in_lens_units
+from lensim.psf.fourier import fft_psf, geometric_psf
+from lensim.psf.huygens import huygens_psf
+from lensim.psf.metrics import strehl_ratio
+from lensim.psf.pixels import integrate_pixels, oversampling_factor
+from lensim.psf.pupil_field import PupilField, pupil_field
+from lensim.psf.spectral import SpectralResponse, spectral_response
+
+
+@dataclass
+class _Job:
+    """Everything a worker needs to compute fields (picklable)."""
+
+    lens: Lens
+    wavelengths_um: list[float]
+    weights: np.ndarray  # (3, W)
+    primary_um: float
+    pixel_pitch_um: float
+    kernel_pixels: int
+    k: int
+    method: str
+    pupil_samples: int
+    ri_samples: int
+    aiming: str
+
+    @property
+    def spacing_um(self) -> float:
+        """Fine PSF sample spacing (um)."""
+        return self.pixel_pitch_um / self.k
+
+
+def _psf_fn(method: str) -> Callable:
+    return {"huygens": huygens_psf, "fft": fft_psf, "geometric": geometric_psf}[method]
+
+
+def _launch_lens(lens: Lens) -> Lens:
+    return lens.with_changes(field_type="angle" if lens.infinite_object or lens.field_type == "angle" else "object_height")
+
+
+def alias_free_pixels(pf: PupilField, kernel_pixels: int, pixel_pitch_um: float, method: str) -> int:
+    """The odd number of kernel pixels (<= kernel_pixels) whose window the pupil sampling
+    resolves without wrap-around: a pupil grid of N samples repeats a diffraction PSF every
+    lambda / (n' du) um (du: direction-cosine step between samples). Outside that central
+    window the kernel is left at zero; check_sampling then makes sure the spot fits in it."""
+    if method == "geometric":
+        return kernel_pixels
+    from lensim.psf.fourier import direction_scale
+
+    ax, ay = direction_scale(pf)
+    du = max(abs(ax), abs(ay)) * 2.0 / pf.samples
+    period_um = pf.wavelength_um / pf.n_image / du
+    m = int(0.95 * period_um / pixel_pitch_um)
+    m = m if m % 2 else m - 1
+    return max(1, min(kernel_pixels, m))
+
+
+def embed_centred(small: np.ndarray, size: int) -> np.ndarray:
+    """A (size, size) array with `small` (odd-sized) in its centre and zeros around it."""
+    n = small.shape[-1]
+    if n == size:
+        return small
+    out = np.zeros(small.shape[:-2] + (size, size), dtype=small.dtype)
+    a = (size - n) // 2
+    out[..., a:a + n, a:a + n] = small
+    return out
+
+
+class _FieldWork:
+    """The PSFs of one bank field: traced pupils, checked sampling (its warnings collected
+    in `caught`) and fine PSFs on the (k P) x (k P) grid, in the lens's field unit."""
+
+    def __init__(self, job: _Job, fld: float, para: ParaxialData) -> None:
+        self.job, self.fld, self.para = job, fld, para
+        self.lens = job.lens
+        self.value = field_in_lens_units(job.lens, fld)
+        self.caught: list[str] = []
+
+    def trace(self, wl_um: float) -> PupilField:
+        """The pupil field at a wavelength (um); a failed trace names the field."""
+        try:
+            return pupil_field(self.lens, self.value, wl_um, self.job.pupil_samples, self.job.aiming, self.para)
+        except InputError as e:
+            raise InputError(self.lens.source, f"field {self.fld:g} ({self.value:g}) at {wl_um * 1e3:g} nm",
+                             e.message) from None
+
+    def _check(self, pf: PupilField, wl_um: float, sub_grid: int, offset: tuple[float, float]) -> None:
+        job = self.job
+        with warnings.catch_warnings(record=True) as rec:
+            warnings.simplefilter("always")
+            try:
+                check_sampling(self.lens, pf, sub_grid, job.spacing_um, job.method, offset)
+            except InputError as e:
+                raise InputError(self.lens.source, f"field {self.fld:g} at {wl_um * 1e3:g} nm",
+                                 f"{e.message} (kernel {job.kernel_pixels} px of {job.pixel_pitch_um:g} um)") from None
+        prefix = f"{self.lens.source}: "
+        for w in rec:
+            if issubclass(w.category, PSFSamplingWarning):
+                msg = str(w.message)
+                msg = msg.removeprefix(prefix).replace("enlarge the grid or the spacing", "use a larger kernel")
+                self.caught.append(f"{wl_um * 1e3:g} nm: {msg}")
+
+    def fine_psf(self, pf: PupilField, wl_um: float, offset: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
+        """(kP, kP) fine PSF (energy per sample), computed on the alias-free central
+        window and zero outside it, its centre `offset` (mm) from the pupil's chief ray."""
+        job = self.job
+        m = alias_free_pixels(pf, job.kernel_pixels, job.pixel_pitch_um, job.method)
+        self._check(pf, wl_um, m * job.k, offset)
+        fine = _psf_fn(job.method)(pf, m * job.k, job.spacing_um, offset)
+        return embed_centred(fine.numpy(), job.k * job.kernel_pixels)
+
+    def relative_illumination(self, wl_um: float) -> float:
+        """Relative illumination at this field and wavelength (1 on axis)."""
+        from lensim.optics.field_analysis import relative_illumination
+
+        if self.value == 0:
+            return 1.0
+        return relative_illumination(self.lens, [self.value], wl_um, self.job.ri_samples, self.job.aiming,
+                                     para=self.para)["relative_illumination"][0]
+
+
+def _compute_field(job: _Job, index: int, fld: float, para: ParaxialData | None = None) -> BankField:
+    """Compute one bank field: per wavelength a fine PSF about the primary chief-ray point,
+    integrated over pixels, normalized to unit sum, times relative illumination and the
+    channel weights, summed into R, G, B (see lensim.psf.bank)."""
+    from lensim.optics.aiming import object_field
+
+    lens = job.lens
+    para = para or paraxial_data(lens)
+    work = _FieldWork(job, fld, para)
+    primary_pf = work.trace(job.primary_um)
+    ref = primary_pf.chief[:2].clone()
+    para_y = paraxial_image_height(_launch_lens(lens), object_field(lens, work.value, job.aiming, para), para)
+    W, P = len(job.wavelengths_um), job.kernel_pixels
+    rgb = np.zeros((3, P, P))
+    offsets, ri, trans, window = np.zeros((W, 2)), np.zeros(W), np.zeros(W), np.zeros(W)
+    primary_fine = None
+    strehl = math.nan
+    for w, wl in enumerate(job.wavelengths_um):
+        is_primary = abs(wl - job.primary_um) < 1e-9
+        pf = primary_pf if is_primary else work.trace(wl)
+        off = (ref - pf.chief[:2]).tolist()
+        fine = work.fine_psf(pf, wl, (off[0], off[1]))
+        pix = integrate_pixels(fine, job.k)
+        total = float(pix.sum())
+        if not total > 0:
+            raise InputError(lens.source, f"field {fld:g} at {wl * 1e3:g} nm", "no energy inside the kernel window; "
+                             "expected a larger kernel")
+        ri[w] = work.relative_illumination(wl)
+        rgb += (job.weights[:, w] * ri[w])[:, None, None] * (pix / total)[None]
+        offsets[w] = [-off[0], -off[1]]
+        trans[w] = pf.transmission
+        window[w] = total / pf.transmission if pf.transmission > 0 else 0.0
+        if is_primary:
+            primary_fine = fine
+    if primary_fine is None:  # the primary wavelength is not a bank wavelength: one more PSF
+        primary_fine = work.fine_psf(primary_pf, job.primary_um)
+    if job.method != "geometric":
+        strehl = strehl_ratio(torch.from_numpy(primary_fine), primary_pf, job.spacing_um)
+    return BankField(
+        index=index, field=float(fld), field_value=float(work.value), rgb=rgb.astype(np.float32),
+        reference_xy_mm=ref.numpy().astype(np.float64), paraxial_xy_mm=np.array([0.0, float(para_y)]),
+        chief_offsets_mm=offsets, relative_illumination=ri, transmission=trans, window_energy=window,
+        strehl=float(strehl), working_fno=float(primary_pf.working_fno()), primary_fine=primary_fine.astype(np.float32),
+        warnings=work.caught,
+    )
+
+
+def _init_worker() -> None:
+    torch.set_num_threads(1)
+    warnings.simplefilter("ignore")  # sampling warnings travel back in BankField.warnings
+
+
+def _worker(job: _Job, index: int, fld: float) -> bytes:
+    return _compute_field(job, index, fld).to_npz_bytes()
+
+
+def _run_fields(job: _Job, todo: list[tuple[int, float]], workers: int, para: ParaxialData,
+                finish: Callable[[BankField], None]) -> None:
+    """Compute the (index, field) pairs in `todo`, calling finish(field) as each is done:
+    in this process with one torch thread (restored afterwards) when workers == 1 or only
+    one field is left, else in `workers` spawned processes."""
+    if workers == 1 or len(todo) <= 1:
+        # a field's tensors are small (a few thousand rays): one torch thread is fastest
+        # and does not fight other processes for cores
+        threads = torch.get_num_threads()
+        torch.set_num_threads(1)
+        try:
+            for i, fld in todo:
+                finish(_compute_field(job, i, fld, para))
+        finally:
+            torch.set_num_threads(threads)
+        return
+    import multiprocessing as mp
+
+    ctx = mp.get_context("spawn")  # no fork after torch's thread pools started
+    with ProcessPoolExecutor(max_workers=min(workers, len(todo)), mp_context=ctx, initializer=_init_worker) as ex:
+        futures = [ex.submit(_worker, job, i, fld) for i, fld in todo]
+        try:
+            for fut in as_completed(futures):
+                finish(BankField.from_npz(io.BytesIO(fut.result())))
+        except BaseException:
+            for f in futures:
+                f.cancel()
+            raise
+
+
+def _check_fields(lens: Lens, fields: list[float] | np.ndarray | None) -> np.ndarray:
+    f = default_fields() if fields is None else np.asarray(fields, dtype=np.float64).reshape(-1)
+    if f.size == 0:
+        raise InputError(lens.source, "fields", "expected at least one normalized field")
+    if not np.all(np.isfinite(f)) or f.min() < 0 or f.max() > 1 + 1e-9:
+        raise InputError(lens.source, "fields", f"expected normalized fields between 0 and 1, got {f.min():g}..{f.max():g}")
+    if np.any(np.diff(f) <= 0):
+        raise InputError(lens.source, "fields", "expected strictly increasing normalized fields")
+    return f
+
+
+def _check_arguments(lens: Lens, pixel_pitch_um: float, kernel_pixels: int, method: str, aiming: str,
+                     workers: int) -> None:
+    if not (pixel_pitch_um > 0 and math.isfinite(pixel_pitch_um)):
+        raise InputError(lens.source, "pixel_pitch_um", f"expected a positive pitch (um), got {pixel_pitch_um}")
+    if kernel_pixels < 1 or kernel_pixels % 2 == 0:
+        raise InputError(lens.source, "kernel_pixels", f"expected an odd number of pixels, got {kernel_pixels}")
+    if method not in METHODS:
+        raise InputError(lens.source, "method", f"expected one of {', '.join(METHODS)}, got {method!r}")
+    if aiming not in ("real", "paraxial"):
+        raise InputError(lens.source, "aiming", f"expected real or paraxial, got {aiming!r}")
+    if workers < 1:
+        raise InputError(lens.source, "workers", f"expected at least 1 worker, got {workers}")
+
+
+def _response(lens: Lens, wavelengths_nm: list[float] | np.ndarray | None,
+              response: str | Path | SpectralResponse | None, illuminant: str) -> SpectralResponse:
+    """The spectral weights at the bank wavelengths (strictly increasing)."""
+    if isinstance(response, SpectralResponse):
+        resp = response
+        if wavelengths_nm is not None and not np.allclose(np.asarray(wavelengths_nm, dtype=np.float64), resp.wavelengths_nm):
+            raise InputError(lens.source, "wavelengths_nm", "expected the wavelengths of the given SpectralResponse")
+    else:
+        resp = spectral_response(wavelengths_nm, response, illuminant)
+    if np.any(np.diff(np.asarray(resp.wavelengths_nm, dtype=np.float64)) <= 0):
+        raise InputError(lens.source, "wavelengths_nm", "expected strictly increasing wavelengths")
+    return resp
+
+
+def _manifest(job: _Job, fields: np.ndarray, resp: SpectralResponse, max_spacing_um: float) -> dict:
+    """Every setting that shapes the kernels (and, informative, the lens file and version)."""
+    lens = job.lens
+    return {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "lens_file": lens.source,
+        "lens": lens_to_dict(lens),
+        "pixel_pitch_um": float(job.pixel_pitch_um),
+        "kernel_pixels": int(job.kernel_pixels),
+        "oversampling": int(job.k),
+        "fine_spacing_um": float(job.pixel_pitch_um) / job.k,
+        "max_spacing_um": float(max_spacing_um),
+        "fields": [float(f) for f in fields],
+        "field_values": [float(f) * lens.max_field for f in fields],
+        "field_type": lens.field_type,
+        "wavelengths_nm": [float(w) for w in resp.wavelengths_nm],
+        "primary_wavelength_nm": job.primary_um * 1000.0,
+        "response": resp.to_dict(),
+        "method": job.method,
+        "pupil_samples": int(job.pupil_samples),
+        "ri_samples": int(job.ri_samples),
+        "relative_illumination": "lensim.optics.field_analysis.relative_illumination (projected solid angle, normalized on axis)",
+        "aiming": job.aiming,
+        "lensim_version": lensim_version(),
+    }
+
+
+def compute_bank(
+    lens: Lens,
+    pixel_pitch_um: float,
+    kernel_pixels: int,
+    fields: list[float] | np.ndarray | None = None,
+    wavelengths_nm: list[float] | np.ndarray | None = None,
+    response: str | Path | SpectralResponse | None = None,
+    method: str = "huygens",
+    pupil_samples: int = 64,
+    max_spacing_um: float | None = None,
+    aiming: str = "real",
+    workers: int = 1,
+    out_dir: str | Path | None = None,
+    progress: Progress | None = None,
+    illuminant: str = "E",
+    ri_samples: int = 32,
+) -> PSFBank:
+    """Compute an RGB PSF bank (see lensim.psf.bank).
+
+    pixel_pitch_um: sensor pixel pitch (um); kernel_pixels: odd kernel size P (pixels);
+    fields: normalized radial fields 0..1, increasing (default 64, sqrt-spaced: denser
+    towards the edge); wavelengths_nm: default 400-700 nm every 10 nm, or those of the
+    response; response: a colour-science camera name, a CSV path (wavelength_nm,r,g,b) or
+    a SpectralResponse (default the measured Nikon 5100 (NPL) camera), with `illuminant`
+    ('E' equal energy, 'D65', ...); method: huygens, fft or geometric; pupil_samples:
+    pupil grid across; max_spacing_um: the largest fine PSF sample spacing (um), default
+    half the Airy radius 1.22 lambda_min N_w at the shortest wavelength (N_w the on-axis
+    working F-number); the fine spacing is pitch / k with k the smallest odd integer that
+    meets it; aiming: real or paraxial; workers: processes (each with one torch thread;
+    started with the 'spawn' method, so a script that calls this with workers > 1 needs
+    the usual ``if __name__ == "__main__":`` guard; workers=1 computes in this process
+    with one torch thread, restored afterwards);
+    ri_samples: pupil samples of the relative-illumination calculation; out_dir: bank
+    directory (None: keep in memory only); progress(done, total): called once at the start
+    (done = fields already on disk) and after each field computed.
+
+    Raises InputError when out_dir holds a bank made with different settings.
+    """
+    _check_arguments(lens, pixel_pitch_um, kernel_pixels, method, aiming, workers)
+    flds = _check_fields(lens, fields)
+    resp = _response(lens, wavelengths_nm, response, illuminant)
+    wl_um = [float(w) / 1000.0 for w in np.asarray(resp.wavelengths_nm, dtype=np.float64)]
+    para = paraxial_data(lens)
+    if max_spacing_um is None:
+        pf0 = pupil_field(lens, 0.0, min(wl_um), pupil_samples, aiming, para)
+        max_spacing_um = 0.5 * 1.22 * min(wl_um) * pf0.working_fno()
+    if not (max_spacing_um > 0):
+        raise InputError(lens.source, "max_spacing_um", f"expected a positive spacing (um), got {max_spacing_um}")
+    job = _Job(lens, wl_um, resp.weights, lens.primary_wavelength_um, float(pixel_pitch_um), int(kernel_pixels),
+               oversampling_factor(pixel_pitch_um, max_spacing_um), method, int(pupil_samples), int(ri_samples), aiming)
+    manifest = _manifest(job, flds, resp, max_spacing_um)
+    directory = Path(out_dir) if out_dir is not None else None
+    done = open_bank_directory(directory, manifest, flds) if directory is not None else {}
+    total = len(flds)
+    if progress is not None:
+        progress(len(done), total)
+
+    def finish(bf: BankField) -> None:
+        if directory is not None:
+            write_field(directory, bf)
+        done[bf.index] = bf
+        if bf.warnings:
+            more = f" (and {len(bf.warnings) - 1} more)" if len(bf.warnings) > 1 else ""
+            warnings.warn(f"{lens.source}: bank field {bf.field:.4f}: {bf.warnings[0]}{more}", PSFSamplingWarning,
+                          stacklevel=4)
+        if progress is not None:
+            progress(len(done), total)
+
+    _run_fields(job, [(i, float(flds[i])) for i in range(total) if i not in done], workers, para, finish)
+    return PSFBank(manifest if directory is None else (read_manifest(directory) or manifest),
+                   [done[i] for i in range(total)], directory)

@@ -1,0 +1,118 @@
+"""A PSF bank on disk: ``manifest.json`` (every setting that shapes the kernels, the lens
+as a native-format mapping, the spectral weights) and one ``field_XXXX.npz`` per field,
+each written atomically. Rerunning with the same settings finds the fields already on
+disk (resume after a kill); a bank made with different settings is refused."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from lensim.errors import InputError
+from lensim.io import atomic_write_bytes, atomic_write_text
+from lensim.psf.bank.types import BankField, PSFBank
+
+MANIFEST = "manifest.json"
+FORMAT = "lensim-psf-bank"
+FORMAT_VERSION = 1
+# manifest keys that may differ between runs of the same bank (they do not shape kernels)
+_INFORMATIVE_KEYS = ("lens_file", "lensim_version")
+
+
+def lensim_version() -> str:
+    """The installed lensim version recorded in manifests ('unknown' from a source tree)."""
+    try:
+        from importlib.metadata import version
+
+        return version("lensim")
+    except Exception:  # not installed (source tree on sys.path)
+        return "unknown"
+
+
+def field_file(index: int) -> str:
+    """File name of field `index` inside a bank directory."""
+    return f"field_{index:04d}.npz"
+
+
+def read_manifest(directory: str | Path) -> dict | None:
+    """The manifest of a bank directory, or None if there is none."""
+    p = Path(directory) / MANIFEST
+    if not p.exists():
+        return None
+    try:
+        m = json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError) as e:
+        raise InputError(str(p), None, f"not valid JSON: {e}") from None
+    if not isinstance(m, dict) or m.get("format") != FORMAT:
+        raise InputError(str(p), "format", f"expected {FORMAT!r}; not a PSF bank manifest")
+    if m.get("format_version") != FORMAT_VERSION:
+        raise InputError(str(p), "format_version", f"expected {FORMAT_VERSION}, got {m.get('format_version')!r}")
+    return m
+
+
+def _normalized(d: dict) -> dict:
+    return json.loads(json.dumps(d))
+
+
+def manifest_differences(old: dict, new: dict) -> list[str]:
+    """The manifest keys whose values differ (informative keys such as the version aside)."""
+    a = {k: v for k, v in _normalized(old).items() if k not in _INFORMATIVE_KEYS}
+    b = {k: v for k, v in _normalized(new).items() if k not in _INFORMATIVE_KEYS}
+    return sorted(k for k in set(a) | set(b) if a.get(k) != b.get(k))
+
+
+def open_bank_directory(directory: Path, manifest: dict, fields: np.ndarray) -> dict[int, BankField]:
+    """Prepare `directory` for the bank `manifest` describes and return the fields already
+    computed there, by index (a resumed run skips them).
+
+    A directory holding field files made with other settings is refused (InputError naming
+    the differing keys); a manifest without any field file is replaced. Unreadable field
+    files, and files of another field or kernel size, are left to be recomputed."""
+    old = read_manifest(directory)
+    if old is not None and not any(directory.glob("field_*.npz")):
+        old = None  # nothing computed under the old settings: start afresh
+    if old is not None:
+        diff = manifest_differences(old, manifest)
+        if diff:
+            raise InputError(str(directory / MANIFEST), ", ".join(diff), "the bank on disk was made with different "
+                             "settings; expected the same settings to resume, or a new output directory")
+    else:
+        directory.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(directory / MANIFEST, json.dumps(manifest, indent=2) + "\n")
+    size = int(manifest["kernel_pixels"])
+    done: dict[int, BankField] = {}
+    for i, f in enumerate(fields):
+        p = directory / field_file(i)
+        if p.exists():
+            try:
+                bf = BankField.from_npz(p)
+            except InputError:
+                continue  # unreadable: recompute
+            if abs(bf.field - f) <= 1e-12 and bf.rgb.shape == (3, size, size):
+                done[i] = bf
+    return done
+
+
+def write_field(directory: Path, bank_field: BankField) -> None:
+    """Write one computed field into the bank directory (atomically)."""
+    atomic_write_bytes(directory / field_file(bank_field.index), bank_field.to_npz_bytes())
+
+
+def load_bank(directory: str | Path) -> PSFBank:
+    """Load a complete bank directory (manifest.json + one npz per field)."""
+    d = Path(directory)
+    manifest = read_manifest(d)
+    if manifest is None:
+        raise InputError(str(d), MANIFEST, "missing; expected a PSF bank directory written by `lensim psf bank`")
+    flds = []
+    for i, f in enumerate(manifest["fields"]):
+        p = d / field_file(i)
+        if not p.exists():
+            raise InputError(str(d), field_file(i), "missing: the bank is incomplete; rerun `lensim psf bank` with the "
+                             "same settings to finish it")
+        bf = BankField.from_npz(p)
+        if abs(bf.field - f) > 1e-12:
+            raise InputError(str(p), "field", f"expected field {f!r} as the manifest says, got {bf.field!r}")
+        flds.append(bf)
+    return PSFBank(manifest, flds, d)

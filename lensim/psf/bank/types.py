@@ -1,0 +1,186 @@
+"""The in-memory types of a PSF bank: one field (BankField) and the whole bank (PSFBank),
+with the kernel lookup at any image point."""
+from __future__ import annotations
+
+import io
+import json
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from lensim.errors import InputError
+
+#: progress(done, total): fields finished so far out of all the bank's fields
+Progress = Callable[[int, int], None]
+
+
+@dataclass
+class BankField:
+    """One field of a bank.
+
+    rgb (3, P, P) float32: R, G, B pixel kernels (energy per pixel; sums to the
+    channel-weighted relative illumination); field: normalized 0..1; field_value: in the
+    lens's field unit; reference_xy_mm: the primary-wavelength chief-ray image point (the
+    kernel's centre pixel); paraxial_xy_mm: the paraxial image point (primary wavelength);
+    chief_offsets_mm (W, 2): each wavelength's chief-ray point minus the reference point;
+    relative_illumination (W,); transmission (W,): transmitted fraction of the beam;
+    window_energy (W,): fraction of the transmitted energy inside the kernel window;
+    strehl: Strehl ratio at the primary wavelength (sampled peak over the aberration-free
+    peak on the fine grid; NaN for the geometric method); working_fno: image-space
+    F-number at the primary wavelength; primary_fine (kP, kP) float32: the fine PSF at the
+    primary wavelength (energy per fine sample); warnings: sampling warnings raised while
+    computing this field.
+    """
+
+    index: int
+    field: float
+    field_value: float
+    rgb: np.ndarray
+    reference_xy_mm: np.ndarray
+    paraxial_xy_mm: np.ndarray
+    chief_offsets_mm: np.ndarray
+    relative_illumination: np.ndarray
+    transmission: np.ndarray
+    window_energy: np.ndarray
+    strehl: float
+    working_fno: float
+    primary_fine: np.ndarray
+    warnings: list[str] = field(default_factory=list)
+
+    def to_npz_bytes(self) -> bytes:
+        """The field as an .npz file's bytes (the bank's field file, and what worker
+        processes send back)."""
+        buf = io.BytesIO()
+        np.savez(
+            buf, index=np.int64(self.index), field=np.float64(self.field), field_value=np.float64(self.field_value),
+            rgb=self.rgb.astype(np.float32), reference_xy_mm=self.reference_xy_mm, paraxial_xy_mm=self.paraxial_xy_mm,
+            chief_offsets_mm=self.chief_offsets_mm, relative_illumination=self.relative_illumination,
+            transmission=self.transmission, window_energy=self.window_energy, strehl=np.float64(self.strehl),
+            working_fno=np.float64(self.working_fno), primary_fine=self.primary_fine.astype(np.float32),
+            warnings=np.array(json.dumps(self.warnings)),
+        )
+        return buf.getvalue()
+
+    @classmethod
+    def from_npz(cls, path: str | Path | io.BytesIO) -> BankField:
+        """Read a field from an .npz file (or its bytes in a BytesIO); a one-line
+        InputError when it is not a readable field file."""
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                return cls(
+                    index=int(z["index"]), field=float(z["field"]), field_value=float(z["field_value"]), rgb=z["rgb"],
+                    reference_xy_mm=z["reference_xy_mm"], paraxial_xy_mm=z["paraxial_xy_mm"],
+                    chief_offsets_mm=z["chief_offsets_mm"], relative_illumination=z["relative_illumination"],
+                    transmission=z["transmission"], window_energy=z["window_energy"], strehl=float(z["strehl"]),
+                    working_fno=float(z["working_fno"]), primary_fine=z["primary_fine"],
+                    warnings=list(json.loads(str(z["warnings"]))),
+                )
+        except (OSError, KeyError, ValueError) as e:
+            raise InputError(str(path), None, f"not a readable bank field file ({type(e).__name__}: {e}); "
+                             "delete it and rerun the bank to recompute it") from None
+
+
+@dataclass
+class PSFBank:
+    """A PSF bank: manifest (settings) and the fields (sorted by field index).
+
+    psf_at(x_mm, y_mm) gives the RGB kernel at any image point."""
+
+    manifest: dict
+    fields: list[BankField]
+    directory: Path | None = None
+
+    # ---- settings ----------------------------------------------------------------
+    @property
+    def pixel_pitch_um(self) -> float:
+        return float(self.manifest["pixel_pitch_um"])
+
+    @property
+    def kernel_pixels(self) -> int:
+        return int(self.manifest["kernel_pixels"])
+
+    @property
+    def oversampling(self) -> int:
+        return int(self.manifest["oversampling"])
+
+    @property
+    def fine_spacing_um(self) -> float:
+        return float(self.manifest["fine_spacing_um"])
+
+    @property
+    def wavelengths_nm(self) -> np.ndarray:
+        return np.asarray(self.manifest["wavelengths_nm"], dtype=np.float64)
+
+    @property
+    def primary_wavelength_nm(self) -> float:
+        return float(self.manifest["primary_wavelength_nm"])
+
+    @property
+    def field_positions(self) -> np.ndarray:
+        """Normalized fields (0..1)."""
+        return np.asarray([f.field for f in self.fields])
+
+    @property
+    def radii_mm(self) -> np.ndarray:
+        """Image radius (mm) of each field's reference point."""
+        return np.asarray([float(np.hypot(*f.reference_xy_mm)) for f in self.fields])
+
+    @property
+    def kernels(self) -> np.ndarray:
+        """(F, 3, P, P) float32 kernels of all fields."""
+        return np.stack([f.rgb for f in self.fields])
+
+    # ---- loading -------------------------------------------------------------------
+    @classmethod
+    def load(cls, directory: str | Path) -> PSFBank:
+        """Load a complete bank directory (manifest.json + one npz per field)."""
+        from lensim.psf.bank.store import (
+            load_bank,  # the store builds PSFBanks: imported here
+        )
+
+        return load_bank(directory)
+
+    # ---- lookup --------------------------------------------------------------------
+    def reference_azimuth_deg(self) -> float:
+        """Azimuth (deg, from +x towards +y) of the stored fields' reference points (the
+        outermost off-axis field decides: +90 for an image on +y, -90 if inverted)."""
+        for f in reversed(self.fields):
+            x, y = (float(v) for v in f.reference_xy_mm)
+            if math.hypot(x, y) > 0:
+                return math.degrees(math.atan2(y, x))
+        return 90.0
+
+    def radial_kernel(self, radius_mm: float) -> np.ndarray:
+        """(3, P, P) kernel at an image radius along the stored direction: linear
+        interpolation between the two fields whose reference radii bracket it (clamped to
+        the first and last field)."""
+        radii = self.radii_mm
+        if len(radii) > 1 and np.any(np.diff(radii) <= 0):
+            raise InputError(str(self.directory or "<bank>"), "fields", "the reference-point radii do not increase with "
+                             "field; expected a lens whose image height grows with field")
+        r = float(radius_mm)
+        if len(radii) == 1 or r <= radii[0]:
+            return self.fields[0].rgb.astype(np.float64)
+        if r >= radii[-1]:
+            return self.fields[-1].rgb.astype(np.float64)
+        j = int(np.searchsorted(radii, r, side="right"))
+        t = (r - radii[j - 1]) / (radii[j] - radii[j - 1])
+        return (1.0 - t) * self.fields[j - 1].rgb.astype(np.float64) + t * self.fields[j].rgb.astype(np.float64)
+
+    def psf_at(self, x_mm: float, y_mm: float) -> np.ndarray:
+        """(3, P, P) float32 RGB kernel at image point (x_mm, y_mm) (real image-plane
+        coordinates, origin on the axis): the radially interpolated kernel rotated to the
+        point's azimuth about its centre pixel (lensim.render.rotation.rotate_kernel:
+        cubic spline, sum kept, centre fixed)."""
+        # imported here: lensim.render builds on banks, so the bank must not need it loaded
+        from lensim.render.rotation import rotate_kernel
+
+        r = math.hypot(x_mm, y_mm)
+        k = self.radial_kernel(r)
+        if r == 0:
+            return k.astype(np.float32)
+        angle = math.degrees(math.atan2(y_mm, x_mm)) - self.reference_azimuth_deg()
+        return rotate_kernel(k, angle).astype(np.float32)
