@@ -286,38 +286,9 @@ def _spectral(src: str | None, value: Any) -> str:
     return name
 
 
-def sensor_from_dict(data: Any, source: str | None = None) -> SensorProfile:
-    """Build and validate a :class:`SensorProfile` from the file format's mapping.
-    ``source`` (the file name) is named in every error."""
-    src = source
-    data = _mapping(src, "", data, TOP_KEYS)
-    for k in REQUIRED_KEYS:
-        if k not in data:
-            raise InputError(src, k, "missing (required)")
-    name = data["name"]
-    if not isinstance(name, str) or not name.strip():
-        raise InputError(src, "name", f"expected a non-empty string, got {name!r}")
-    for k in ("source", "description", "notes"):
-        if k in data and not isinstance(data[k], (str, list)):
-            raise InputError(src, k, f"expected text, got {type(data[k]).__name__}")
-
-    pitch = _number(src, "pixel_pitch_um", data["pixel_pitch_um"], positive=True)
-    res = data["resolution"]
-    if not isinstance(res, (list, tuple)) or len(res) != 2:
-        raise InputError(src, "resolution", f"expected [width, height] in pixels, got {res!r}")
-    w = _integer(src, "resolution[0]", res[0], 2)
-    h = _integer(src, "resolution[1]", res[1], 2)
-    if w % 2 or h % 2:
-        raise InputError(src, "resolution", f"expected even width and height (whole Bayer quads), got {[w, h]}")
-
-    pattern = data["bayer_pattern"]
-    if not isinstance(pattern, str) or pattern.strip().upper() not in BAYER_PATTERNS:
-        raise InputError(src, "bayer_pattern", f"expected one of {', '.join(BAYER_PATTERNS)}, got {pattern!r}")
-    pattern = pattern.strip().upper()
-
-    spectral = _spectral(src, data["spectral_response"])
-
-    ccm_raw = data["ccm"]
+def _ccm(src: str | None, ccm_raw: Any) -> tuple[tuple[float, float, float], ...]:
+    """The 3x3 colour correction matrix (camera RGB -> linear sRGB): rows summing to 1,
+    invertible."""
     if not isinstance(ccm_raw, (list, tuple)) or len(ccm_raw) != 3 or any(
             not isinstance(r, (list, tuple)) or len(r) != 3 for r in ccm_raw):
         raise InputError(src, "ccm", "expected a 3x3 matrix [[r_r, r_g, r_b], [g_r, ...], [b_r, ...]]")
@@ -329,7 +300,12 @@ def sensor_from_dict(data: Any, source: str | None = None) -> SensorProfile:
     cond = float(np.linalg.cond(np.array(ccm)))
     if not cond < 1e4:
         raise InputError(src, "ccm", f"expected an invertible matrix (condition number < 1e4), got {cond:.3g}")
+    return ccm
 
+
+def _white_balance(src: str | None, data: dict) -> tuple[list[WhiteBalancePoint], tuple[float, float]]:
+    """The white-balance table (strictly increasing kelvin) and the kelvin range drawn
+    from (default: the table's ends)."""
     wb_raw = data["white_balance"]
     if not isinstance(wb_raw, (list, tuple)) or not wb_raw:
         raise InputError(src, "white_balance", "expected a non-empty list of {kelvin, r_gain, b_gain}")
@@ -362,6 +338,11 @@ def sensor_from_dict(data: Any, source: str | None = None) -> SensorProfile:
     else:
         k_lo, k_hi = wb[0].kelvin, wb[-1].kelvin
 
+    return wb, (k_lo, k_hi)
+
+
+def _levels(src: str | None, data: dict) -> tuple[int, float, float]:
+    """(bit depth, black level, white level) in digital numbers."""
     bit_depth = _integer(src, "bit_depth", data["bit_depth"], 8, 16)
     black = _number(src, "black_level", data["black_level"], nonneg=True)
     white = _number(src, "white_level", data["white_level"], positive=True)
@@ -370,7 +351,12 @@ def sensor_from_dict(data: Any, source: str | None = None) -> SensorProfile:
     if not white > black:
         raise InputError(src, "white_level", f"expected more than black_level ({black:g}), got {white:g}")
 
-    nz = _mapping(src, "noise", data["noise"], NOISE_KEYS)
+    return bit_depth, black, white
+
+
+def _noise(src: str | None, noise: Any) -> NoiseModel:
+    """The noise model: shot range and either a read range or read-from-shot regression."""
+    nz = _mapping(src, "noise", noise, NOISE_KEYS)
     if "shot" not in nz:
         raise InputError(src, "noise.shot", "missing (required)")
     shot = _range(src, "noise.shot", nz["shot"])
@@ -391,6 +377,44 @@ def sensor_from_dict(data: Any, source: str | None = None) -> SensorProfile:
                _number(src, "noise.read_from_shot.intercept", r["intercept"]),
                _number(src, "noise.read_from_shot.sigma", r["sigma"], nonneg=True))
 
+    return NoiseModel(shot=shot, read=read, read_from_shot=rfs)
+
+
+def sensor_from_dict(data: Any, source: str | None = None) -> SensorProfile:
+    """Build and validate a :class:`SensorProfile` from the file format's mapping.
+    ``source`` (the file name) is named in every error."""
+    src = source
+    data = _mapping(src, "", data, TOP_KEYS)
+    for k in REQUIRED_KEYS:
+        if k not in data:
+            raise InputError(src, k, "missing (required)")
+    name = data["name"]
+    if not isinstance(name, str) or not name.strip():
+        raise InputError(src, "name", f"expected a non-empty string, got {name!r}")
+    for k in ("source", "description", "notes"):
+        if k in data and not isinstance(data[k], (str, list)):
+            raise InputError(src, k, f"expected text, got {type(data[k]).__name__}")
+
+    pitch = _number(src, "pixel_pitch_um", data["pixel_pitch_um"], positive=True)
+    res = data["resolution"]
+    if not isinstance(res, (list, tuple)) or len(res) != 2:
+        raise InputError(src, "resolution", f"expected [width, height] in pixels, got {res!r}")
+    w = _integer(src, "resolution[0]", res[0], 2)
+    h = _integer(src, "resolution[1]", res[1], 2)
+    if w % 2 or h % 2:
+        raise InputError(src, "resolution", f"expected even width and height (whole Bayer quads), got {[w, h]}")
+
+    pattern = data["bayer_pattern"]
+    if not isinstance(pattern, str) or pattern.strip().upper() not in BAYER_PATTERNS:
+        raise InputError(src, "bayer_pattern", f"expected one of {', '.join(BAYER_PATTERNS)}, got {pattern!r}")
+    pattern = pattern.strip().upper()
+
+    spectral = _spectral(src, data["spectral_response"])
+    ccm = _ccm(src, data["ccm"])
+    wb, (k_lo, k_hi) = _white_balance(src, data)
+    bit_depth, black, white = _levels(src, data)
+    noise = _noise(src, data["noise"])
+
     def _text(v: Any) -> str:
         return " ".join(str(x) for x in v) if isinstance(v, list) else str(v or "")
 
@@ -398,7 +422,7 @@ def sensor_from_dict(data: Any, source: str | None = None) -> SensorProfile:
         name=name.strip(), pixel_pitch_um=pitch, resolution=(w, h), bayer_pattern=pattern,
         spectral_response=spectral, ccm=ccm, white_balance=tuple(wb), kelvin_range=(k_lo, k_hi),
         black_level=black, white_level=white, bit_depth=bit_depth,
-        noise=NoiseModel(shot=shot, read=read, read_from_shot=rfs),
+        noise=noise,
         source=_text(data.get("source")).strip(), description=_text(data.get("description")).strip(),
         path=src,
     )
