@@ -93,7 +93,8 @@ def edge_study(bank: PSFBank, sensor: SensorProfile, model: Method, figs: Path, 
     fields, then restored: MTF50 and MTF area (to Nyquist) of the green channel, and the
     R-G / B-G edge shifts (px), before and after."""
     from lensim.evaluate.chromatic import lateral_color_edge
-    from lensim.evaluate.slanted_edge import make_slanted_edge, slanted_edge_mtf
+    from lensim.evaluate.edge_target import make_slanted_edge
+    from lensim.evaluate.slanted_edge import slanted_edge_mtf
 
     r_max = float(bank.radii_mm[-1])
     p = sensor.pixel_pitch_um * 1e-3

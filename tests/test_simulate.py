@@ -6,7 +6,8 @@ import pytest
 import torch
 
 from lensim.errors import InputError
-from lensim.evaluate.slanted_edge import make_slanted_edge, mtf_area_ratio, mtf_from_psf, slanted_edge_mtf
+from lensim.evaluate.edge_target import make_slanted_edge
+from lensim.evaluate.slanted_edge import mtf_area_ratio, mtf_from_psf, slanted_edge_mtf
 from lensim.optics.lens_file import load_lens
 from lensim.psf.bank import compute_bank
 from lensim.sensor.profile import load_sensor

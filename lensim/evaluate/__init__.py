@@ -1,5 +1,6 @@
 """Image-quality measurements: slanted-edge MTF (ISO 12233 style) and lateral colour."""
 from lensim.evaluate.chromatic import EdgeShiftResult, PointShiftResult, lateral_color_edge, lateral_color_point
+from lensim.evaluate.edge_target import make_slanted_edge
 from lensim.evaluate.slanted_edge import (
     EdgeFit,
     MTFCurve,
@@ -7,7 +8,6 @@ from lensim.evaluate.slanted_edge import (
     default_frequencies,
     edge_spread_function,
     locate_edge,
-    make_slanted_edge,
     mtf_area,
     mtf_area_ratio,
     mtf_from_psf,
