@@ -198,12 +198,57 @@ def plot_layout(
         raise InputError(lens.source, "fields", "expected at least one field to draw")
     launch = [object_field(lens, f, aiming, para) for f in fields]
     zv = lens.vertex_z()
-    S = lens.num_surfaces
     pupil_y = np.linspace(-1.0, 1.0, rays_per_field) if rays_per_field > 1 else np.zeros(1)
     pupil_y = np.concatenate([[0.0], pupil_y])  # index 0: the chief ray, checked, not drawn
 
     # First pass (rays from their launch points) to size the surfaces and the plot.
     paths, _, status, failed_at = trace_ray_paths(lens, launch, pupil_y, aiming, para, None)
+    _check_chief_rays(lens, fields, paths, status, failed_at)
+    sizes = _LayoutSizes(lens, paths, para)
+
+    # where rays are drawn from
+    z_surf = [float(zv[i]) + _sag_at(s, sizes.sds[i]) for i, s in enumerate(lens.surfaces)] + list(zv)
+    z_lo, z_hi = min(z_surf), max(z_surf)
+    extent = max(z_hi - z_lo, 2 * sizes.ymax)
+    z_start: float | None = z_lo - 0.15 * extent
+    if not lens.infinite_object and lens.object_distance <= 1.5 * extent:
+        z_start = None  # draw the rays from the object point
+    paths, _, _, _ = trace_ray_paths(lens, launch, pupil_y, aiming, para, z_start)
+
+    z_all = [z_lo, z_hi, float(np.nanmin(paths.points[..., 0][paths.reached])),
+             float(np.nanmax(paths.points[..., 0][paths.reached]))]
+    width = max(z_all) - min(z_all)
+    fig_w = 11.0
+    fig_h = float(np.clip(fig_w * 2 * sizes.ymax / max(width, 1e-9) + 1.6, 3.2, 9.0))
+    fig = new_figure((fig_w, fig_h), layout="constrained")
+    ax = fig.add_subplot(1, 1, 1)
+    handles = _draw_ray_fans(ax, lens, fields, paths, len(pupil_y))
+    _draw_surfaces(ax, lens, sizes)
+    _draw_glass_edges(ax, lens, sizes.sds)
+    _draw_stop_and_image(ax, lens, sizes)
+
+    ax.axhline(0.0, color="0.6", lw=0.6, ls=(0, (8, 3, 2, 3)), zorder=1)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("z (mm)")
+    ax.set_ylabel("y (mm)")
+    unit = "field angle" if lens.field_type == "angle" else lens.field_type.replace("_", " ")
+    ax.legend(handles=handles, title=unit, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8,
+              title_fontsize=8, frameon=False)
+    efl = para.efl_mm
+    efl_text = "afocal" if not math.isfinite(efl) else f"EFL {efl:.4g} mm"
+    ax.set_title(f"{lens_title(lens)}\n{efl_text}, F/{para.fno:.3g}, {aiming} ray aiming, "
+                 f"{lens.primary_wavelength_um * 1000:.1f} nm", fontsize=10)
+    ax.grid(True, color="0.92", lw=0.5, zorder=0)
+    if path is not None:
+        save_figure(fig, path)
+    return fig
+
+
+def _check_chief_rays(lens: Lens, fields: list[float], paths: RayPaths, status: torch.Tensor,
+                      failed_at: torch.Tensor) -> None:
+    """Raise RayTraceError when a field's chief ray (pupil index 0) does not reach the
+    image, unless a central obscuration blocks it, or when no ray passes the stop."""
+    S = lens.num_surfaces
     chief_ok = torch.as_tensor(paths.reached[:, 0, -1]).clone()  # the chief ray reaches the image
     for fi in torch.nonzero(~chief_ok).flatten().tolist():
         # a chief ray blocked by a central obscuration (a Cassegrain's secondary) is fine
@@ -218,45 +263,39 @@ def plot_layout(
     if not bool(paths.reached[:, :, 0].any()):
         raise RayTraceError(f"{lens.source}: aperture: no ray could be aimed through the stop")
 
-    heights = np.zeros(S + 1)
-    for i in range(S + 1):
-        ok = paths.reached[:, :, i + 1]
-        if ok.any():
-            heights[i] = np.abs(paths.points[:, :, i + 1, 1][ok]).max()
-    stop_r = para.stop_semi_diameter_mm  # the opening the aperture setting gives the stop
-    stop_clear = lens.surfaces[lens.stop_index].clear_radius
-    if stop_clear is not None:
-        stop_r = min(stop_r, stop_clear)
-    sds = []
-    for i, s in enumerate(lens.surfaces):
-        sd = s.semi_diameter or s.clear_radius
-        if sd is None:
-            sd = 1.05 * max(heights[i], stop_r if s.is_stop else 0.0)
-            sd = sd if sd > 0 else 0.05 * max(1.0, float(np.max(heights)))
-        sds.append(min(sd, _domain_limit(s) * (1 - 1e-9)))
-    image_h = lens.image_clear_radius or 1.05 * heights[S]
-    ymax = max(max(sds), image_h, 1e-3)
 
-    # where rays are drawn from
-    z_surf = [float(zv[i]) + _sag_at(s, sds[i]) for i, s in enumerate(lens.surfaces)] + list(zv)
-    z_lo, z_hi = min(z_surf), max(z_surf)
-    extent = max(z_hi - z_lo, 2 * ymax)
-    z_start: float | None = z_lo - 0.15 * extent
-    if not lens.infinite_object and lens.object_distance <= 1.5 * extent:
-        z_start = None  # draw the rays from the object point
-    paths, _, _, _ = trace_ray_paths(lens, launch, pupil_y, aiming, para, z_start)
+class _LayoutSizes:
+    """How large the layout draws each surface (mm): sds, the semi-diameter of every
+    surface; stop_r, the stop's opening; image_h, the image plane's half height; ymax,
+    the largest of these (the plot's half height)."""
 
-    z_all = [z_lo, z_hi, float(np.nanmin(paths.points[..., 0][paths.reached])),
-             float(np.nanmax(paths.points[..., 0][paths.reached]))]
-    width = max(z_all) - min(z_all)
-    height = 2 * ymax
-    fig_w = 11.0
-    fig_h = float(np.clip(fig_w * height / max(width, 1e-9) + 1.6, 3.2, 9.0))
-    fig = new_figure((fig_w, fig_h), layout="constrained")
-    ax = fig.add_subplot(1, 1, 1)
+    def __init__(self, lens: Lens, paths: RayPaths, para: ParaxialData) -> None:
+        S = lens.num_surfaces
+        heights = np.zeros(S + 1)
+        for i in range(S + 1):
+            ok = paths.reached[:, :, i + 1]
+            if ok.any():
+                heights[i] = np.abs(paths.points[:, :, i + 1, 1][ok]).max()
+        stop_r = para.stop_semi_diameter_mm  # the opening the aperture setting gives the stop
+        stop_clear = lens.surfaces[lens.stop_index].clear_radius
+        if stop_clear is not None:
+            stop_r = min(stop_r, stop_clear)
+        sds = []
+        for i, s in enumerate(lens.surfaces):
+            sd = s.semi_diameter or s.clear_radius
+            if sd is None:
+                sd = 1.05 * max(heights[i], stop_r if s.is_stop else 0.0)
+                sd = sd if sd > 0 else 0.05 * max(1.0, float(np.max(heights)))
+            sds.append(min(sd, _domain_limit(s) * (1 - 1e-9)))
+        self.sds, self.stop_r = sds, stop_r
+        self.image_h = lens.image_clear_radius or 1.05 * heights[S]
+        self.ymax = max(max(sds), self.image_h, 1e-3)
 
-    # rays
+
+def _draw_ray_fans(ax, lens: Lens, fields: list[float], paths: RayPaths, n_pupil: int) -> list[Line2D]:
+    """Draw each field's fan (pupil indices 1..n_pupil-1) in its colour; legend handles."""
     handles = []
+    S = lens.num_surfaces
     media = lens.media()
     # a ray's point on a surface that bends no ray lies on its straight path, and may lie
     # behind the next surface (a stop placed by a negative thickness): it is left out of
@@ -264,7 +303,7 @@ def plot_layout(
     bends = np.array([True] + [not lens.is_dummy(k, media) for k in range(S)] + [True])
     for fi, f in enumerate(fields):
         color = FIELD_COLORS[fi % len(FIELD_COLORS)]
-        for p in range(1, len(pupil_y)):
+        for p in range(1, n_pupil):
             r = paths.reached[fi, p]
             if not r[0]:
                 continue
@@ -274,17 +313,23 @@ def plot_layout(
             seg = paths.points[fi, p, :upto][keep]
             ax.plot(seg[:, 0], seg[:, 1], color=color, lw=0.8, alpha=0.9, zorder=2)
         handles.append(Line2D([], [], color=color, lw=1.5, label=field_label(lens, f)))
+    return handles
 
-    # surfaces
+
+def _draw_surfaces(ax, lens: Lens, sizes: _LayoutSizes) -> None:
+    """Draw every surface's sag profile: mirrors bold and hatched on the back, planes
+    between air and air (dummies) dashed grey, stops there left to the diaphragm."""
+    zv = lens.vertex_z()
     dirs = lens.directions()
+    media = lens.media()
     for i, s in enumerate(lens.surfaces):
-        z, y = _profile(s, float(zv[i]), sds[i])
+        z, y = _profile(s, float(zv[i]), sizes.sds[i])
         if s.is_mirror:
             ax.plot(z, y, color="black", lw=2.2, zorder=4, solid_capstyle="butt")
             # hatch the back: the side light would reach if it went on
             back = float(dirs[i])
             k = np.linspace(0, len(z) - 1, 15).astype(int)
-            hl = 0.045 * ymax
+            hl = 0.045 * sizes.ymax
             for j in k:
                 ax.plot([z[j], z[j] + back * hl], [y[j], y[j] + hl], color="black", lw=0.8, zorder=4)
         elif isinstance(media[i], Air) and isinstance(media[i + 1], Air) and s.curvature == 0 and not s.is_aspheric:
@@ -294,7 +339,13 @@ def plot_layout(
         else:
             ax.plot(z, y, color="black", lw=1.2, zorder=3)
 
-    # glass elements: runs of surfaces with glass between them, closed at a common edge
+
+def _draw_glass_edges(ax, lens: Lens, sds: list[float]) -> None:
+    """Close each glass element (a run of surfaces with glass between them) at a common
+    edge height with flat edges."""
+    zv = lens.vertex_z()
+    media = lens.media()
+    S = lens.num_surfaces
     i = 0
     while i < S:
         if isinstance(media[i + 1], Air) or i + 1 >= S:
@@ -317,7 +368,11 @@ def plot_layout(
                 ax.plot([a, b], [sgn * edge, sgn * edge], color="black", lw=1.2, zorder=3)
         i = j + 1
 
-    # stop
+
+def _draw_stop_and_image(ax, lens: Lens, sizes: _LayoutSizes) -> None:
+    """Mark the stop's diaphragm and the image plane."""
+    zv = lens.vertex_z()
+    stop_r, ymax, image_h = sizes.stop_r, sizes.ymax, sizes.image_h
     s = lens.surfaces[lens.stop_index]
     zs = float(zv[lens.stop_index]) + _sag_at(s, min(stop_r, _domain_limit(s) * (1 - 1e-9)))
     outer = stop_r + max(0.25 * stop_r, 0.08 * ymax)
@@ -325,27 +380,9 @@ def plot_layout(
         ax.plot([zs, zs], [sgn * stop_r, sgn * outer], color="black", lw=3.0, zorder=5, solid_capstyle="butt")
     ax.annotate("STOP", (zs, outer), xytext=(0, 3), textcoords="offset points", ha="center", va="bottom",
                 fontsize=8)
-
-    # image plane
     ax.plot([zv[-1], zv[-1]], [-image_h, image_h], color="black", lw=1.6, zorder=3)
     ax.annotate("IMAGE", (zv[-1], image_h), xytext=(0, 3), textcoords="offset points", ha="center",
                 va="bottom", fontsize=8)
-
-    ax.axhline(0.0, color="0.6", lw=0.6, ls=(0, (8, 3, 2, 3)), zorder=1)
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel("z (mm)")
-    ax.set_ylabel("y (mm)")
-    unit = "field angle" if lens.field_type == "angle" else lens.field_type.replace("_", " ")
-    ax.legend(handles=handles, title=unit, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8,
-              title_fontsize=8, frameon=False)
-    efl = para.efl_mm
-    efl_text = "afocal" if not math.isfinite(efl) else f"EFL {efl:.4g} mm"
-    ax.set_title(f"{lens_title(lens)}\n{efl_text}, F/{para.fno:.3g}, {aiming} ray aiming, "
-                 f"{lens.primary_wavelength_um * 1000:.1f} nm", fontsize=10)
-    ax.grid(True, color="0.92", lw=0.5, zorder=0)
-    if path is not None:
-        save_figure(fig, path)
-    return fig
 
 
 # ---- spot diagrams --------------------------------------------------------------------
