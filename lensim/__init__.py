@@ -25,7 +25,7 @@ _API = {
     "map_to_sensor": "lensim.simulate",
     "make_dataset": "lensim.data.pairs",
     "train": "lensim.restore.train",
-    "load_checkpoint": "lensim.restore.infer",
+    "load_checkpoint": "lensim.restore.checkpoint",
     "restore_image": "lensim.restore.infer",
     "evaluate_methods": "lensim.evaluate.harness:evaluate",  # `lensim.evaluate` is the package
     "run_ablation": "lensim.ablation",

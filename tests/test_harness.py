@@ -117,7 +117,7 @@ def test_cli_json_and_files(pairs, tmp_path):
 def test_checkpoint_method_restores_with_sensor_offsets(pairs, tmp_path):
     import torch
 
-    from lensim.restore.infer import CHECKPOINT_FORMAT
+    from lensim.restore.checkpoint import CHECKPOINT_FORMAT
     from lensim.restore.network import FieldAwareUNet
 
     torch.manual_seed(0)

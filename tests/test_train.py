@@ -15,7 +15,9 @@ from lensim.images import write_image
 from lensim.restore.dataset import PairDataset, crop_refs, load_manifest, split_sources
 from lensim.restore.fov import fov_channels, invert_augment
 from lensim.restore.metrics import psnr, ssim
-from lensim.restore.train import atomic_torch_save, read_csv, train
+from lensim.restore.checkpoint import atomic_torch_save
+from lensim.restore.run_log import read_csv
+from lensim.restore.train import train
 
 SENSOR = {"name": "test sensor", "resolution": [640, 480]}  # [width, height]
 LENS = {"name": "test lens", "surfaces": [{"radius": 10.0, "thickness": 1.0}]}
@@ -221,7 +223,7 @@ def test_learning_rate_halves_every_k_epochs(pairs: Path, tmp_path: Path):
 
 
 def test_cosine_schedule_anneals_over_the_epochs_and_resumes_exactly(pairs: Path, tmp_path: Path):
-    from lensim.restore.train import cosine_lr
+    from lensim.restore.schedule import cosine_lr
 
     kw = dict(TINY, max_steps_per_epoch=2, lr_schedule="cosine", lr=1e-3)
     train(pairs, tmp_path / "straight", epochs=3, **kw)
@@ -338,3 +340,44 @@ def test_distributed_data_parallel_on_cpu_matches_one_process(pairs: Path, tmp_p
     one = [r["loss"] for r in read_csv(tmp_path / "one" / "steps.csv")]
     assert len(ddp) == len(one) == 2
     assert np.allclose(ddp, one, rtol=1e-4, atol=0), (ddp, one)  # gradient all-reduce order: float rounding only
+
+
+def test_training_state_resumes_through_the_checkpoint_module(tmp_path: Path):
+    """TrainingState.save then resume_from restores weights, Adam, StepLR, position and the
+    random streams exactly: the next step and the next random draw match an uninterrupted run."""
+    from lensim.errors import InputError
+    from lensim.restore.checkpoint import TrainingState, read_resume_checkpoint, refuse_existing_run
+    from lensim.restore.network import FieldAwareUNet
+
+    def fresh(seed: int) -> TrainingState:
+        torch.manual_seed(seed)
+        model = FieldAwareUNet(width=4, depth=2, use_deformable=False)
+        opt = torch.optim.Adam(model.parameters(), lr=1e-3)
+        return TrainingState(model, opt, torch.optim.lr_scheduler.StepLR(opt, 1, 0.5), torch.amp.GradScaler("cuda",
+                             enabled=False))
+
+    def one_step(state: TrainingState) -> float:
+        x = torch.rand(1, 3, 16, 16)
+        loss = (state.model(x, fov_channels(16, 16, 0, 0, 32, 32)[None]) - x).pow(2).mean()
+        state.optimizer.zero_grad()
+        loss.backward()
+        state.optimizer.step()
+        state.scheduler.step()
+        state.step += 1
+        return float(loss.detach())
+
+    with pytest.raises(InputError, match="last.pt: no such file"):
+        read_resume_checkpoint(tmp_path)
+    a = fresh(0)
+    one_step(a)
+    a.epoch, a.batch_in_epoch, a.best_val_psnr = 1, 0, 31.5
+    a.save(tmp_path, 12.5, {"train_config": {}, "split": {}}, best=False)
+    with pytest.raises(InputError, match="already holds a training run"):
+        refuse_existing_run(tmp_path)
+    expected = one_step(a), float(torch.rand(()))
+    b = fresh(1)  # other weights and random state: all of it must come from the checkpoint
+    b.resume_from(read_resume_checkpoint(tmp_path), "last.pt")
+    assert (b.epoch, b.step, b.best_val_psnr, b.train_seconds) == (1, 1, 31.5, 12.5)
+    assert (one_step(b), float(torch.rand(()))) == expected
+    assert b.optimizer.param_groups[0]["lr"] == a.optimizer.param_groups[0]["lr"] == 2.5e-4
+    assert all(torch.equal(p, q) for p, q in zip(a.model.parameters(), b.model.parameters()))

@@ -45,7 +45,8 @@ def restore_command(
     Example: lensim restore runs/a photo.png -o restored/
     """
     from lensim.images import read_image, write_image
-    from lensim.restore.infer import image_sensor_geometry, load_checkpoint, restore_image
+    from lensim.restore.checkpoint import load_checkpoint
+    from lensim.restore.infer import image_sensor_geometry, restore_image
     from lensim.sensor.profile import load_sensor
 
     if threads > 0:

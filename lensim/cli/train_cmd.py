@@ -1,5 +1,7 @@
 """`lensim train`: train the field-aware restoration network on a pairs folder.
 
+Every default comes from lensim.restore.train.TrainConfig (the one place that sets them).
+
 Register in lensim/cli/__init__.py with
     app.command("train")(train_command)
 """
@@ -7,42 +9,54 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any, Callable
 
 import torch
 import typer
 
 from lensim.cli.common import console, print_json
+from lensim.restore.train import TrainConfig, TrainProgress, TrainResult
+
+_D = TrainConfig()
+#: What a resumed run may change (the architecture and recipe come from its checkpoint).
+_RESUMABLE = ("epochs", "time_budget_s", "device", "amp")
 
 
 def train_command(
     dataset: Path = typer.Argument(..., help="Pairs folder from `lensim dataset make`."),
     output: Path = typer.Option(..., "-o", "--output", help="Run folder (checkpoints, logs)."),
-    epochs: int = typer.Option(30, "--epochs", help="Epochs in total (paper: 30)."),
-    batch_size: int = typer.Option(4, "--batch-size", help="Crops per step (per GPU under torchrun)."),
-    lr: float = typer.Option(1e-4, "--lr", help="Initial Adam learning rate (paper: 1e-4)."),
-    lr_halve_every: int = typer.Option(5, "--lr-halve-every", help="Halve the learning rate every N epochs (paper: 5)."),
-    lr_schedule: str = typer.Option("step", "--lr-schedule", help="step (halve every --lr-halve-every epochs) or "
-                                    "cosine (anneal to 0 over the time budget, else over the epochs)."),
-    crop: int = typer.Option(128, "--crop", help="Training sub-crop size in pixels (0: the stored crops)."),
-    width: int = typer.Option(32, "--width", help="Channels at full resolution (doubled at each scale)."),
-    depth: int = typer.Option(3, "--depth", help="Number of scales."),
-    deformable_groups: int = typer.Option(2, "--deformable-groups", help="Offset groups of each deformable conv."),
-    deformable_scales: int = typer.Option(-1, "--deformable-scales", help="Decoder scales, coarsest first, with "
+    epochs: int = typer.Option(_D.epochs, "--epochs", help="Epochs in total (paper: 30)."),
+    batch_size: int = typer.Option(_D.batch_size, "--batch-size", help="Crops per step (per GPU under torchrun)."),
+    lr: float = typer.Option(_D.lr, "--lr", help="Initial Adam learning rate (paper: 1e-4)."),
+    lr_halve_every: int = typer.Option(_D.lr_halve_every, "--lr-halve-every",
+                                       help="Halve the learning rate every N epochs (paper: 5)."),
+    lr_schedule: str = typer.Option(_D.lr_schedule, "--lr-schedule", help="step (halve every --lr-halve-every "
+                                    "epochs) or cosine (anneal to 0 over the time budget, else over the epochs)."),
+    crop: int = typer.Option(_D.crop or 0, "--crop", help="Training sub-crop size in pixels (0: the stored crops)."),
+    width: int = typer.Option(_D.width, "--width", help="Channels at full resolution (doubled at each scale)."),
+    depth: int = typer.Option(_D.depth, "--depth", help="Number of scales."),
+    deformable_groups: int = typer.Option(_D.deformable_groups, "--deformable-groups",
+                                          help="Offset groups of each deformable conv."),
+    deformable_scales: int = typer.Option(-1 if _D.deformable_scales is None else _D.deformable_scales,
+                                          "--deformable-scales", help="Decoder scales, coarsest first, with "
                                           "deformable blocks (-1: all, the paper; 1 trains about 2x faster on a CPU)."),
-    field_modulation: bool = typer.Option(False, "--field-modulation", help="Scale and shift the features by "
-                                          "functions of the sensor position at every decoder scale (lensim's "
-                                          "extension of the paper's FOV input)."),
-    no_fov: bool = typer.Option(False, "--no-fov", help="Ablation: no field-of-view input channels."),
-    no_deformable: bool = typer.Option(False, "--no-deformable", help="Ablation: plain residual decoder blocks."),
-    no_context: bool = typer.Option(False, "--no-context", help="Ablation: no context block."),
-    val_fraction: float = typer.Option(0.2, "--val-fraction", help="Share of source photos held out for validation."),
-    steps_per_epoch: int = typer.Option(0, "--steps-per-epoch", help="Cap on steps per epoch (0: whole epochs)."),
-    time_budget: float = typer.Option(0.0, "--time-budget", help="Stop cleanly once the run has trained this many "
-                                     "minutes in all, resumes included (0: none)."),
+    field_modulation: bool = typer.Option(_D.field_modulation, "--field-modulation", help="Scale and shift the "
+                                          "features by functions of the sensor position at every decoder scale "
+                                          "(lensim's extension of the paper's FOV input)."),
+    no_fov: bool = typer.Option(not _D.use_fov, "--no-fov", help="Ablation: no field-of-view input channels."),
+    no_deformable: bool = typer.Option(not _D.use_deformable, "--no-deformable",
+                                       help="Ablation: plain residual decoder blocks."),
+    no_context: bool = typer.Option(not _D.use_context, "--no-context", help="Ablation: no context block."),
+    val_fraction: float = typer.Option(_D.val_fraction, "--val-fraction",
+                                       help="Share of source photos held out for validation."),
+    steps_per_epoch: int = typer.Option(_D.max_steps_per_epoch or 0, "--steps-per-epoch",
+                                        help="Cap on steps per epoch (0: whole epochs)."),
+    time_budget: float = typer.Option((_D.time_budget_s or 0.0) / 60.0, "--time-budget", help="Stop cleanly once "
+                                      "the run has trained this many minutes in all, resumes included (0: none)."),
     resume: bool = typer.Option(False, "--resume", help="Continue the run in OUTPUT from last.pt."),
-    seed: int = typer.Option(0, "--seed", help="Seed of initialisation, data order, crops and augmentation."),
-    device: str = typer.Option("cpu", "--device", help="cpu, cuda or cuda:N (mixed precision on CUDA)."),
-    no_amp: bool = typer.Option(False, "--no-amp", help="Full float32 on CUDA."),
+    seed: int = typer.Option(_D.seed, "--seed", help="Seed of initialisation, data order, crops and augmentation."),
+    device: str = typer.Option(_D.device, "--device", help="cpu, cuda or cuda:N (mixed precision on CUDA)."),
+    no_amp: bool = typer.Option(not _D.amp, "--no-amp", help="Full float32 on CUDA."),
     threads: int = typer.Option(0, "--threads", help="CPU threads for PyTorch (0: PyTorch's default)."),
     quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
     json_out: bool = typer.Option(False, "--json", help="Print a summary as JSON (no progress output)."),
@@ -53,48 +67,60 @@ def train_command(
 
     Example: lensim train data/ -o runs/a --epochs 30 --crop 128 --time-budget 30
     """
-    from lensim.restore.train import TrainConfig, TrainProgress, train
+    from lensim.restore.train import train
 
     if threads > 0:
         torch.set_num_threads(threads)
-    overrides = dict(
-        epochs=epochs, batch_size=batch_size, lr=lr, lr_halve_every=lr_halve_every, lr_schedule=lr_schedule,
-        crop=crop or None, width=width,
-        depth=depth, deformable_groups=deformable_groups,
-        deformable_scales=None if deformable_scales < 0 else deformable_scales, use_fov=not no_fov,
-        field_modulation=field_modulation, use_deformable=not no_deformable, use_context=not no_context,
-        val_fraction=val_fraction, max_steps_per_epoch=steps_per_epoch or None,
-        time_budget_s=time_budget * 60.0 if time_budget > 0 else None, seed=seed, device=device, amp=not no_amp,
-    )
-    if resume:  # architecture/recipe come from the checkpoint; pass only what the user may change
-        overrides = {k: overrides[k] for k in ("epochs", "time_budget_s", "device", "amp")}
-    prog = None
-    if not quiet and not json_out:
-        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-
-        prog = Progress(TextColumn("epoch {task.fields[epoch]}/{task.fields[epochs]}"), BarColumn(),
-                        TextColumn("{task.completed}/{task.total} steps"), TextColumn("loss {task.fields[loss]}"),
-                        TextColumn("{task.fields[val]}"), TimeElapsedColumn(), console=console, transient=False)
-        task = prog.add_task("train", total=None, epoch=0, epochs=epochs, loss="-", val="")
-
-        def progress_callback(p: TrainProgress) -> None:
-            if p.kind == "step":
-                prog.update(task, completed=p.batch, total=p.batches, epoch=p.epoch + 1, epochs=p.epochs,
-                            loss=f"{p.loss:.3e}")
-            else:
-                val = "" if p.val_psnr is None or math.isnan(p.val_psnr) else \
-                    f"val {p.val_psnr:.2f} dB / SSIM {p.val_ssim:.4f}"
-                prog.update(task, val=val)
-                console.print(f"epoch {p.epoch + 1}/{p.epochs} step {p.step}: loss {p.loss:.4e}"
-                              + (f", {val}" if val else "") + (" (time budget reached)" if p.kind == "stop" else ""),
-                              highlight=False)
-        prog.start()
+    overrides: dict[str, Any] = {
+        "epochs": epochs, "batch_size": batch_size, "lr": lr, "lr_halve_every": lr_halve_every,
+        "lr_schedule": lr_schedule, "crop": crop or None, "width": width, "depth": depth,
+        "deformable_groups": deformable_groups,
+        "deformable_scales": None if deformable_scales < 0 else deformable_scales, "use_fov": not no_fov,
+        "field_modulation": field_modulation, "use_deformable": not no_deformable, "use_context": not no_context,
+        "val_fraction": val_fraction, "max_steps_per_epoch": steps_per_epoch or None,
+        "time_budget_s": time_budget * 60.0 if time_budget > 0 else None, "seed": seed, "device": device,
+        "amp": not no_amp,
+    }
+    if resume:
+        overrides = {k: overrides[k] for k in _RESUMABLE}
+    prog, callback = _progress(epochs, show=not quiet and not json_out)
     try:
-        result = train(dataset, output, TrainConfig(), resume=resume,
-                       progress=progress_callback if prog else None, **overrides)
+        result = train(dataset, output, TrainConfig(), resume=resume, progress=callback, **overrides)
     finally:
-        if prog:
+        if prog is not None:
             prog.stop()
+    _report(result, quiet, json_out)
+
+
+def _progress(epochs: int, show: bool) -> tuple[Any, Callable[[TrainProgress], None] | None]:
+    """A started rich progress bar over an epoch's steps and its train() callback (a line
+    per validation); (None, None) when not shown."""
+    if not show:
+        return None, None
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    prog = Progress(TextColumn("epoch {task.fields[epoch]}/{task.fields[epochs]}"), BarColumn(),
+                    TextColumn("{task.completed}/{task.total} steps"), TextColumn("loss {task.fields[loss]}"),
+                    TextColumn("{task.fields[val]}"), TimeElapsedColumn(), console=console, transient=False)
+    task = prog.add_task("train", total=None, epoch=0, epochs=epochs, loss="-", val="")
+
+    def callback(p: TrainProgress) -> None:
+        if p.kind == "step":
+            prog.update(task, completed=p.batch, total=p.batches, epoch=p.epoch + 1, epochs=p.epochs,
+                        loss=f"{p.loss:.3e}")
+            return
+        val = "" if p.val_psnr is None or math.isnan(p.val_psnr) else \
+            f"val {p.val_psnr:.2f} dB / SSIM {p.val_ssim:.4f}"
+        prog.update(task, val=val)
+        console.print(f"epoch {p.epoch + 1}/{p.epochs} step {p.step}: loss {p.loss:.4e}"
+                      + (f", {val}" if val else "") + (" (time budget reached)" if p.kind == "stop" else ""),
+                      highlight=False)
+    prog.start()
+    return prog, callback
+
+
+def _report(result: TrainResult, quiet: bool, json_out: bool) -> None:
+    """Print the run's summary: JSON, one line, or nothing."""
     summary = {"run": result.run_dir, "epochs_done": result.epochs_done, "steps": result.step,
                "stopped_early": result.stopped_early, "seconds": result.seconds, "val_psnr_db": result.val_psnr,
                "val_ssim": result.val_ssim, "val_input_psnr_db": result.val_input_psnr,

@@ -115,7 +115,8 @@ def checkpoint_method(run: str | Path, lens: Mapping[str, Any] | None = None, se
     restored by lensim.restore.infer.restore_image with its absolute sensor offset (native
     scale) and the sensor's size in pixels. lens / sensor (dataset settings) make
     load_checkpoint warn when the checkpoint was trained for another camera."""
-    from lensim.restore.infer import load_checkpoint, restore_image
+    from lensim.restore.checkpoint import load_checkpoint
+    from lensim.restore.infer import restore_image
 
     model, _ = load_checkpoint(run, lens=dict(lens) if lens else None, sensor=dict(sensor) if sensor else None,
                                device=device)

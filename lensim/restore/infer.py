@@ -1,4 +1,4 @@
-"""Inference: loading checkpoints and tiled restoration of images of any size.
+"""Inference: tiled restoration of images of any size (checkpoints: lensim.restore.checkpoint).
 
 Tiling (:func:`restore_image`): the image is cut into a grid of tiles of at most ``tile``
 pixels a side whose top-left corners lie at multiples of ``model.size_multiple`` (the
@@ -29,114 +29,12 @@ is given (then it is at the sensor's native pixel scale, like lensim.simulate.na
 """
 from __future__ import annotations
 
-import json
-import warnings
-from pathlib import Path
-from typing import Any, Callable
+from typing import Callable
 
 import torch
 
-from lensim.errors import InputError
 from lensim.restore.fov import fov_channels
 from lensim.restore.network import FieldAwareUNet
-
-CHECKPOINT_FORMAT = "lensim-restore-checkpoint"
-_REQUIRED = ("format", "model_config", "model_state")
-
-
-# ----------------------------------------------------------------------------- checkpoints
-
-
-def read_checkpoint(path: str | Path) -> dict[str, Any]:
-    """The dict stored in a lensim checkpoint (loaded with weights_only=True on CPU);
-    one-line InputError naming the file when it is missing, corrupt or not ours."""
-    path = Path(path)
-    src = str(path)
-    if not path.is_file():
-        raise InputError(src, None, "no such file; expected a lensim training checkpoint (.pt)")
-    try:
-        data = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as e:  # truncated zip, pickle garbage, foreign objects
-        msg = str(e).strip().splitlines()[0] if str(e).strip() else ""
-        raise InputError(src, None, f"is corrupt or not a lensim checkpoint ({type(e).__name__}: {msg[:200]})") from None
-    if not isinstance(data, dict) or data.get("format") != CHECKPOINT_FORMAT:
-        raise InputError(src, "format", f"expected a {CHECKPOINT_FORMAT!r} dict from `lensim train`")
-    missing = [k for k in _REQUIRED if k not in data]
-    if missing:
-        raise InputError(src, ", ".join(missing), "missing; expected a complete lensim checkpoint")
-    return data
-
-
-def resolve_checkpoint(path: str | Path) -> Path:
-    """A checkpoint file, or RUN/best.pt (else RUN/last.pt) for a run folder."""
-    path = Path(path)
-    if path.is_dir():
-        for name in ("best.pt", "last.pt"):
-            if (path / name).is_file():
-                return path / name
-        raise InputError(str(path), None, "holds no best.pt or last.pt; expected a `lensim train` run folder")
-    return path
-
-
-def _describe_lens(lens: Any) -> str:
-    return str(lens.get("name") or "unnamed lens") if isinstance(lens, dict) else str(lens)
-
-
-def _describe_sensor(sensor: Any) -> str:
-    if isinstance(sensor, dict):
-        res = sensor.get("resolution")
-        return f"{sensor.get('name', 'unnamed sensor')} {res[0]}x{res[1]}" if res else str(sensor.get("name"))
-    return str(sensor)
-
-
-def _canonical(d: Any) -> str:
-    return json.dumps(d, sort_keys=True, default=str)
-
-
-def load_checkpoint(
-    path: str | Path,
-    lens: dict[str, Any] | None = None,
-    sensor: dict[str, Any] | None = None,
-    device: str | torch.device = "cpu",
-) -> tuple[FieldAwareUNet, dict[str, Any]]:
-    """Rebuild the trained network from a checkpoint (or run folder).
-
-    Args:
-        path: a checkpoint file, or a run folder (best.pt, else last.pt).
-        lens: the lens the user will restore photos of (lensim.optics.lens_file.lens_to_dict),
-            or None. A UserWarning is issued when it differs from the checkpoint's lens.
-        sensor: the sensor profile dict (SensorProfile.to_dict()), or None; warned likewise.
-        device: where the model is put.
-
-    Returns:
-        (model in eval mode, the checkpoint dict without optimizer/RNG state).
-    Raises:
-        InputError (one line, naming the file) for a missing, corrupt, foreign or
-        mismatched checkpoint (state not matching its model config).
-    """
-    path = resolve_checkpoint(path)
-    data = read_checkpoint(path)
-    cfg = data["model_config"]
-    try:
-        model = FieldAwareUNet(**cfg)
-    except (TypeError, ValueError) as e:
-        raise InputError(str(path), "model_config", f"cannot build the network ({e})") from None
-    try:
-        model.load_state_dict(data["model_state"])
-    except (RuntimeError, KeyError, TypeError) as e:
-        first = str(e).strip().splitlines()
-        detail = " ".join(line.strip() for line in first[:3])[:300]
-        raise InputError(str(path), "model_state", f"does not match the model config it records ({detail})") from None
-    model.to(device).eval()
-    if lens is not None and data.get("lens") is not None and _canonical(lens) != _canonical(data["lens"]):
-        warnings.warn(f"{path}: trained for lens {_describe_lens(data['lens'])!r}, used for lens "
-                      f"{_describe_lens(lens)!r}; the restoration may be wrong", UserWarning, stacklevel=2)
-    if sensor is not None and data.get("sensor") is not None and _canonical(sensor) != _canonical(data["sensor"]):
-        warnings.warn(f"{path}: trained for sensor {_describe_sensor(data['sensor'])!r}, used for sensor "
-                      f"{_describe_sensor(sensor)!r}; the restoration may be wrong", UserWarning, stacklevel=2)
-    info = {k: v for k, v in data.items() if k not in ("model_state", "optimizer", "scheduler", "scaler", "rng")}
-    info["path"] = str(path)
-    return model, info
 
 
 # ----------------------------------------------------------------------------- geometry
@@ -274,5 +172,4 @@ def restore_image(
     return out
 
 
-__all__ = ["image_sensor_geometry", "load_checkpoint", "read_checkpoint", "resolve_checkpoint", "restore_image",
-           "tile_starts"]
+__all__ = ["image_sensor_geometry", "restore_image", "tile_starts"]
