@@ -44,13 +44,16 @@ def _fsync_dir(directory: Path) -> None:
 def atomic_writer(path: str | Path, suffix: str = "") -> Iterator[IO[bytes]]:
     """Open a binary file handle whose contents replace ``path`` when the block ends
     without an error. The parent folder is created when missing. ``suffix`` is appended to
-    the temporary name (some writers pick a format from it)."""
+    the temporary name (some writers pick a format from it). The handle is opened for
+    reading too (``w+b``; writers such as tifffile seek back and read) and its ``name`` is
+    the temporary file's path."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent)
+    os.close(fd)
     try:
         os.chmod(tmp, _umask_mode())
-        with os.fdopen(fd, "wb") as fh:
+        with open(tmp, "w+b") as fh:
             yield fh
             fh.flush()
             os.fsync(fh.fileno())

@@ -84,3 +84,17 @@ def wb_table(kelvins: list[float], color_matrix: list[float] | np.ndarray,
     scale = np.array([r65 / ref[0], b65 / ref[1]])
     return [{"kelvin": float(k), "r_gain": round(float(g[0] * scale[0]), 4), "b_gain": round(float(g[1] * scale[1]), 4)}
             for k, g in zip(kelvins, gains)]
+
+
+def dng_color_matrix_from_ccm(ccm: list[list[float]] | np.ndarray, r_gain_d65: float, b_gain_d65: float) -> np.ndarray:
+    """The inverse of :func:`ccm_from_dng_color_matrix`: a profile's CCM (3, 3; white-balanced
+    camera RGB -> linear sRGB, rows summing to 1) and its white-balance gains at D65 ->
+    the DNG ColorMatrix (3, 3; XYZ -> camera RGB, D65 calibration illuminant).
+
+    The CCM alone fixes the matrix up to one scale per camera channel (the row
+    normalization of the forward relation); the D65 gains restore it: the camera's
+    response to the D65 white (XYZ with Y = 1) is (1 / r_gain, 1, 1 / b_gain), the DNG
+    convention of a neutral whose largest (green) channel is 1 for gains above 1."""
+    rgb2cam = np.linalg.inv(np.asarray(ccm, dtype=np.float64).reshape(3, 3))
+    white = np.array([1.0 / r_gain_d65, 1.0, 1.0 / b_gain_d65])
+    return (white[:, None] * rgb2cam) @ np.linalg.inv(SRGB_TO_XYZ)

@@ -142,12 +142,18 @@ def unprocess(img: torch.Tensor, profile: SensorProfile, generator: torch.Genera
     if kelvin is None:
         kelvin = profile.sample_kelvin(generator)
     r_gain, b_gain = profile.wb_gains(float(kelvin))
-    ccm = torch.tensor(profile.ccm, dtype=torch.float64)
-    lin = srgb_to_linear(img)
-    cam = apply_ccm(lin, torch.linalg.inv(ccm).to(torch.float32))
-    cam = white_balance(cam, r_gain, b_gain, inverse=True)
+    cam = srgb_to_camera(img, profile.ccm, r_gain, b_gain)
     return cam, CaptureParams(kelvin=float(kelvin), r_gain=r_gain, b_gain=b_gain,
                               ccm=[list(r) for r in profile.ccm], bayer_pattern=profile.bayer_pattern)
+
+
+def srgb_to_camera(img: torch.Tensor, ccm: Any, r_gain: float, b_gain: float) -> torch.Tensor:
+    """sRGB (..., 3, H, W) in [0, 1] -> camera RGB before white balance, float32: exact
+    inverse sRGB curve (input clamped at 1e-8), inverse CCM (3x3, camera RGB -> linear
+    sRGB), inverse white balance with the gains. The inverse of :func:`process`."""
+    lin = srgb_to_linear(img.to(torch.float32))
+    cam = apply_ccm(lin, torch.linalg.inv(torch.as_tensor(ccm, dtype=torch.float64)).to(torch.float32))
+    return white_balance(cam, r_gain, b_gain, inverse=True)
 
 
 # ---------------------------------------------------------------- 3. mosaic and noise
@@ -210,9 +216,16 @@ def quantize_raw(raw: torch.Tensor, profile: SensorProfile) -> torch.Tensor:
     """Simulate the ADC: normalized raw -> digital numbers DN = round(black + raw * (white -
     black)) clipped to [0, white_level] -> back to normalized units. The result is clipped
     at 1 (saturation) and at -black/(white-black) below."""
+    dn = digital_numbers(raw, profile)
+    return (dn - profile.black_level) / (profile.white_level - profile.black_level)
+
+
+def digital_numbers(raw: torch.Tensor, profile: SensorProfile) -> torch.Tensor:
+    """The ADC's output for a normalized raw mosaic: DN = round(black + raw * (white -
+    black)) clipped to [0, white_level], a float tensor of whole numbers (raw files store
+    these)."""
     scale = profile.white_level - profile.black_level
-    dn = torch.round(profile.black_level + raw * scale).clamp(0.0, profile.white_level)
-    return (dn - profile.black_level) / scale
+    return torch.round(profile.black_level + raw * scale).clamp(0.0, profile.white_level)
 
 
 def white_balance_mosaic(raw: torch.Tensor, pattern: str, r_gain: float, b_gain: float) -> torch.Tensor:
