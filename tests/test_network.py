@@ -1,5 +1,7 @@
 """The field-aware UNet (lensim.restore.network): shapes, dtypes, identity at init, the
-three ablation switches, the parameter-matched plain UNet. Tiny widths and images."""
+three ablation switches, the parameter-matched plain UNet; against derivations by hand
+from the block definitions: absolute parameter counts, the receptive field, the residual
+contract and shift equivariance on the downsampling grid. Tiny widths and images."""
 from __future__ import annotations
 
 import pytest
@@ -101,6 +103,54 @@ def test_switches_change_parameter_count_as_expected() -> None:
     assert full - count_parameters(_net(use_deformable=False)) == offsets
     plain = _net(use_fov=False, use_deformable=False, use_context=False)
     assert full - count_parameters(plain) == 2 * 9 * W0 + offsets + count_parameters(ContextBlock(c_last))
+
+
+def _block_counts(ws: tuple[int, ...], fov: bool, deformable: int, context: bool, groups: int,
+                  modulation: bool = False) -> int:
+    """Parameter count of FieldAwareUNet written out from the block definitions in the module
+    docstring: k x k convs have cout * (cin * k^2 + 1) parameters, the 2x2 transposed conv
+    cin * cout * 4 + cout, the DCN as many as the 3x3 conv it replaces; ``deformable`` is
+    the number of deformable decoder scales, coarsest first."""
+    def conv(cin: int, cout: int, k: int = 3) -> int:
+        return cout * (cin * k * k + 1)
+
+    def res(c: int) -> int:
+        return 2 * conv(c, c)
+
+    n = conv(5 if fov else 3, ws[0]) + res(ws[0]) + conv(ws[0], 3)  # head, first block, tail
+    n += sum(conv(ws[s - 1], ws[s]) + res(ws[s]) for s in range(1, len(ws)))  # encoder
+    if context:
+        branch = ws[-1] // 4
+        n += 4 * conv(ws[-1], branch) + conv(4 * branch, ws[-1], 1)
+    taps = 9 * groups  # offsets 2 * taps, masks taps
+    for i, s in enumerate(range(len(ws) - 2, -1, -1)):  # decoder, coarse to fine
+        n += ws[s + 1] * ws[s] * 4 + ws[s] + conv(2 * ws[s], ws[s], 1) + res(ws[s])
+        if i < deformable:
+            n += conv(ws[s] + (2 * taps if i > 0 else 0), 3 * taps)
+    if modulation:
+        n += sum(conv(5, 16, 1) + conv(16, 2 * c, 1) for c in [ws[-1], *ws[-2::-1]])
+    return n
+
+
+@pytest.mark.parametrize("ws, groups", [((8, 16, 32), 2), ((32, 64, 128), 2), ((32, 64, 128, 256), 8)],
+                         ids=["tiny", "default", "paper"])
+def test_parameter_counts_from_the_block_definitions(ws: tuple[int, ...], groups: int) -> None:
+    """Absolute counts of the full net, every ablation variant, partial deformable scales
+    and field modulation, against the block-by-block count above."""
+    dec = len(ws) - 1
+    cases = [
+        ({}, dict(fov=True, deformable=dec, context=True)),
+        ({"use_fov": False}, dict(fov=False, deformable=dec, context=True)),
+        ({"use_deformable": False}, dict(fov=True, deformable=0, context=True)),
+        ({"use_context": False}, dict(fov=True, deformable=dec, context=False)),
+        ({"use_fov": False, "use_deformable": False, "use_context": False}, dict(fov=False, deformable=0, context=False)),
+        ({"deformable_scales": 1}, dict(fov=True, deformable=1, context=True)),
+        ({"deformable_scales": 1, "field_modulation": True}, dict(fov=True, deformable=1, context=True, modulation=True)),
+    ]
+    with torch.device("meta"):
+        for switches, hand in cases:
+            net = FieldAwareUNet(widths=ws, deformable_groups=groups, **switches)  # type: ignore[arg-type]
+            assert count_parameters(net) == _block_counts(ws, groups=groups, **hand), switches  # type: ignore[arg-type]
 
 
 def test_default_and_paper_sizes() -> None:
@@ -295,3 +345,95 @@ def test_field_modulation_config_round_trip_and_old_configs() -> None:
     assert torch.equal(clone(rgb, fov), net(rgb, fov))
     old = {k: v for k, v in _net().config.items() if k != "field_modulation"}
     assert FieldAwareUNet(**old).modulate is None
+
+
+# ------------------------------------------------------------------ known values
+
+
+def _receptive_columns(p: int, depth: int) -> tuple[int, int]:
+    """Input columns that can reach output column ``p`` with zero offsets, derived by hand
+    from the layer list in the module docstring (hull over every path of the UNet):
+    a 3x3 conv widens an interval by 1 (dilation d: by d); a stride-2 3x3 conv (padding 1)
+    maps coarse j to fine 2j-1 .. 2j+1; the 2x2 stride-2 transposed conv maps fine i to
+    coarse i // 2; 1x1 convs, the skips and the residual additions add nothing."""
+    def conv(iv: tuple[int, int], r: int = 1) -> tuple[int, int]:
+        return iv[0] - r, iv[1] + r
+
+    def encoder(iv: tuple[int, int], s: int) -> tuple[int, int]:  # output of encoder scale s
+        iv = conv(conv(iv))  # residual block
+        return conv(iv) if s == 0 else encoder((2 * iv[0] - 1, 2 * iv[1] + 1), s - 1)  # head / strided conv
+
+    def decoder(iv: tuple[int, int], s: int) -> tuple[int, int]:  # output of decoder scale s
+        iv = conv(conv(iv))  # (deformable) residual block, after the 1x1 fusion of [up, skip]
+        coarse = (iv[0] // 2, iv[1] // 2)
+        deeper = encoder(conv(coarse, 8), depth - 1) if s == depth - 2 else decoder(coarse, s + 1)  # context: d <= 8
+        skip = encoder(iv, s)
+        return min(skip[0], deeper[0]), max(skip[1], deeper[1])
+
+    return decoder(conv((p, p)), 0)  # the tail conv
+
+
+@pytest.mark.parametrize("widths, radius", [((4, 8, 16), 60), ((4, 8, 16, 32), 124)], ids=["depth3", "depth4"])
+def test_receptive_field_is_the_architectures(widths: tuple[int, ...], radius: int) -> None:
+    """Back-propagating from one output pixel reaches exactly the input columns derived by
+    hand, for output columns at every phase of the downsampling grid. The largest reach
+    over the phases is 60 px for 3 scales and 124 px for the paper's 4 (the module
+    docstring's "about 58" and "about 118" are one output pixel's reach). Weights
+    are made positive (and the FOV input weights zero) so that no ReLU is inactive: the
+    gradient's support is then the structural one (float64, zero offsets)."""
+    torch.manual_seed(0)
+    net = FieldAwareUNet(widths=widths, zero_init_tail=False).double()
+    with torch.no_grad():
+        for param in net.parameters():
+            param.abs_()
+        net.head.weight[:, 3:].zero_()
+    m = net.size_multiple
+    width = 2 * (radius + 2 * m) // m * m + 4 * m
+    rgb = torch.rand(1, 3, 8, width, dtype=torch.float64, requires_grad=True)
+    out = net(rgb, fov_channels(8, width, 0, 0, 8, width, dtype=torch.float64))
+    reach = 0
+    for p in range(width // 2, width // 2 + m):
+        (grad,) = torch.autograd.grad(out[0, :, 4, p].sum(), rgb, retain_graph=True)
+        columns = torch.nonzero(grad.abs().sum(dim=(0, 1, 2))).flatten().tolist()
+        lo, hi = _receptive_columns(p, len(widths))
+        assert columns == list(range(lo, hi + 1)), p
+        reach = max(reach, p - lo, hi - p)
+    assert reach == radius
+
+
+def test_untrained_parts_leave_the_input_plus_the_tail_bias() -> None:
+    """All weights zero and the tail bias b: the output is rgb + b at every pixel, for an
+    odd size (padded internally and cropped back): the residual is added, not replacing."""
+    net = _net()
+    bias = torch.tensor([0.1, -0.2, 0.3])
+    with torch.no_grad():
+        for param in net.parameters():
+            param.zero_()
+        net.tail.bias.copy_(bias)
+    rgb, fov = _inputs(2, 13, 7)
+    torch.testing.assert_close(net(rgb, fov), rgb + bias.view(1, 3, 1, 1), atol=1e-7, rtol=0)
+
+
+def test_float32_and_float64_compute_the_same_function() -> None:
+    """The same weights in float32 and float64 give the same output (1e-5)."""
+    rgb, fov = _inputs(1, 16, 20, dtype=torch.float64)
+    out64 = _net(zero_init_tail=False).double()(rgb, fov)
+    out32 = _net(zero_init_tail=False)(rgb.float(), fov.float())
+    torch.testing.assert_close(out32.double(), out64, atol=1e-5, rtol=0)
+
+
+def test_shift_equivariant_for_multiples_of_the_grid_only() -> None:
+    """Without FOV input the network is a translation-equivariant filter for shifts that
+    are multiples of size_multiple: shifting the input by 4 columns shifts the output by 4
+    (1e-5) wherever neither window touches the border (the hand-derived receptive field);
+    a 1-column shift does not commute (the strided convs sample another grid)."""
+    net = _net(zero_init_tail=False, use_fov=False)
+    assert net.size_multiple == 4
+    width = 160
+    rgb = torch.rand(1, 3, 8, width + 4, generator=torch.Generator().manual_seed(5))
+    lo, hi = _receptive_columns(0, DEPTH)
+    interior = slice(-lo + 4, width - hi - 4)
+    for shift, equal in ((4, True), (1, False)):
+        a = net(rgb[..., shift:shift + width])[..., interior]
+        b = net(rgb[..., :width])[..., shift:][..., interior]
+        assert torch.allclose(a, b, atol=1e-5) == equal, shift
