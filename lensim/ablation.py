@@ -4,11 +4,11 @@ parameter count, trained on the same pairs with the same time budget and evaluat
 same held-out photos."""
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Callable
 
-from lensim.io import atomic_write_text
+from lensim.data.manifest import read_held_out, read_pairs_manifest
+from lensim.io import atomic_write_json, read_json
 
 VARIANTS: dict[str, dict] = {
     "full": {},
@@ -35,7 +35,7 @@ def run_ablation(pairs_dir: str | Path, out_dir: str | Path, minutes: float, wid
     out.mkdir(parents=True, exist_ok=True)
     names = variants or list(VARIANTS)
     full_params = count_parameters(FieldAwareUNet(width=width))
-    manifest = json.loads((Path(pairs_dir) / "manifest.json").read_text())
+    manifest = read_pairs_manifest(pairs_dir)
     results: dict[str, dict] = {}
     held_out = None
     for name in names:
@@ -48,10 +48,10 @@ def run_ablation(pairs_dir: str | Path, out_dir: str | Path, minutes: float, wid
             res = train(pairs_dir, run, epochs=100_000, width=w, crop=crop, seed=seed, lr=5e-4, lr_schedule="cosine",
                         time_budget_s=minutes * 60.0, device=device,
                         progress=budget_progress(progress, minutes * 60.0), **switches)
-            atomic_write_text(marker, json.dumps({"steps": res.step, "seconds": res.seconds}) + "\n")
-        held_out = held_out or json.loads((run / "split.json").read_text())["val"]
+            atomic_write_json(marker, {"steps": res.step, "seconds": res.seconds})
+        held_out = held_out or read_held_out(run)
         params = count_parameters(FieldAwareUNet(width=w, **switches))
-        results[name] = {"params": params, "width": w, **switches, "train": json.loads(marker.read_text())}
+        results[name] = {"params": params, "width": w, **switches, "train": read_json(marker, "training record")}
     say("evaluating on the held-out photos")
     methods = {name: checkpoint_method(out / name, manifest.get("lens"), manifest.get("sensor"), device=device)
                for name in names}
@@ -60,5 +60,5 @@ def run_ablation(pairs_dir: str | Path, out_dir: str | Path, minutes: float, wid
         results[name]["metrics"] = metrics["methods"][name]
     summary = {"held_out_photos": held_out, "minutes": minutes, "input": metrics["methods"]["input"],
                "variants": results}
-    atomic_write_text(out / "ablation.json", json.dumps(summary, indent=1, default=str) + "\n")
+    atomic_write_json(out / "ablation.json", summary)
     return summary

@@ -21,7 +21,7 @@ from lensim.assets.images import available_sample_images, read_sample_image
 from lensim.errors import InputError
 from lensim.images import write_image
 from lensim.optics.analysis import first_order_summary
-from lensim.io import atomic_write_text
+from lensim.io import atomic_write_json, read_json
 from lensim.optics.lens_file import load_lens
 from lensim.sensor.profile import DEFAULT_SENSOR, load_sensor
 
@@ -67,16 +67,16 @@ def _claim_folder(out: Path, settings: DemoSettings, quick: bool, seed: int) -> 
     mine = json.loads(json.dumps({**asdict(settings), "quick": quick, "seed": seed}))
     if marker.exists():
         try:
-            theirs = json.loads(marker.read_text(encoding="utf-8"))
-        except (OSError, ValueError):
-            theirs = None
+            theirs = read_json(marker, "demo settings record")
+        except InputError:
+            theirs = None  # unreadable: made by something else
         if theirs != mine:
             what = "other settings" if not isinstance(theirs, dict) else ", ".join(
                 f"{k}={theirs.get(k)!r}" for k in mine if theirs.get(k) != mine[k])
             raise InputError(str(marker), "settings", f"this folder holds a demo run with {what}; expected the "
                              "same options (--quick, --seed) to resume it, or a new output folder")
     else:
-        atomic_write_text(marker, json.dumps(mine, indent=1) + "\n")
+        atomic_write_json(marker, mine)
 
 
 def _photos(out: Path, size: int) -> Path:
@@ -101,7 +101,7 @@ def _train(pairs: Path, run: Path, settings: DemoSettings, plain: bool, seed: in
 
     marker = run / "done.json"
     if marker.exists():
-        return json.loads(marker.read_text())
+        return read_json(marker, "training record")
     if run.exists():
         shutil.rmtree(run)  # an unfinished run: start it again (its budget was not spent)
     kw = dict(epochs=100_000, batch_size=4, lr=5e-4, lr_schedule="cosine", crop=settings.train_crop, seed=seed,
@@ -113,7 +113,7 @@ def _train(pairs: Path, run: Path, settings: DemoSettings, plain: bool, seed: in
         kw.update(width=settings.width, deformable_scales=settings.deformable_scales)
     res = train(pairs, run, progress=budget_progress(progress, settings.train_seconds), **kw)
     info = {k: v for k, v in asdict(res).items() if k != "history"}
-    atomic_write_text(marker, json.dumps(info, indent=1, default=str) + "\n")
+    atomic_write_json(marker, info)
     return info
 
 
@@ -122,6 +122,7 @@ def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: i
     """Run the demo into out_dir; returns the report's JSON (also written). device: where the
     networks train and run ("cpu", "cuda", "cuda:N"). say(stage) announces each stage and
     progress(done, total) reports within it."""
+    from lensim.data.manifest import read_held_out, read_pairs_manifest
     from lensim.data.pairs import make_dataset
     from lensim.evaluate.harness import builtin_method, checkpoint_method, evaluate
     from lensim.plots.lens import plot_layout, plot_spots
@@ -175,8 +176,8 @@ def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: i
 
     t = time.perf_counter()
     say("evaluation on held-out photos")
-    held_out = json.loads((out / "run-model" / "split.json").read_text())["val"]
-    manifest = json.loads((out / "pairs" / "manifest.json").read_text())
+    held_out = read_held_out(out / "run-model")
+    manifest = read_pairs_manifest(out / "pairs")
     # the last checkpoints: best.pt is picked by validation PSNR on these very photos
     methods = {"model": checkpoint_method(out / "run-model" / "last.pt", manifest.get("lens"), manifest.get("sensor"),
                                           device=device),

@@ -12,7 +12,8 @@ import pytest
 import torch
 
 from lensim.images import write_image
-from lensim.restore.dataset import PairDataset, crop_refs, load_manifest, split_sources
+from lensim.data.manifest import read_pairs_manifest
+from lensim.restore.dataset import PairDataset, crop_refs, split_sources
 from lensim.restore.fov import fov_channels, invert_augment
 from lensim.restore.metrics import psnr, ssim
 from lensim.restore.checkpoint import atomic_torch_save
@@ -75,14 +76,14 @@ def test_split_by_source_is_deterministic_and_disjoint():
 def test_crops_of_one_photo_never_straddle_the_split(pairs: Path, tmp_path: Path):
     train(pairs, tmp_path / "run", epochs=1, max_steps_per_epoch=1, **TINY)
     split = json.loads((tmp_path / "run" / "split.json").read_text())
-    refs = crop_refs(pairs, load_manifest(pairs))
+    refs = crop_refs(pairs, read_pairs_manifest(pairs))
     assert split["val"] and split["train"] and not set(split["val"]) & set(split["train"])
     for src in {r.source for r in refs}:
         assert src in split["train"] or src in split["val"]
 
 
 def test_items_carry_absolute_fov_channels(pairs: Path):
-    refs = crop_refs(pairs, load_manifest(pairs))
+    refs = crop_refs(pairs, read_pairs_manifest(pairs))
     plain = PairDataset(refs, (480, 640), crop=None, augment=False)
     for i in (0, 5):
         item = plain[i]
@@ -131,7 +132,7 @@ def test_bad_manifest_is_a_one_line_error(tmp_path: Path):
 
     (tmp_path / "manifest.json").write_text(json.dumps({"sensor": {"resolution": [10]}, "records": []}))
     with pytest.raises(InputError, match="manifest.json: sensor.resolution"):
-        load_manifest(tmp_path)
+        read_pairs_manifest(tmp_path)
 
 
 # ----------------------------------------------------------------------------- metrics

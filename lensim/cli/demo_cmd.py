@@ -43,16 +43,12 @@ def report_command(
 
     Example: lensim report lensim-demo/
     """
-    import json
-
     from lensim.errors import InputError
+    from lensim.io import read_json
     from lensim.report import write_report
 
     path = demo_dir / "report.json"
     if not path.is_file():
         raise InputError(str(path), None, "missing; expected a folder written by `lensim demo`")
-    try:
-        report = json.loads(path.read_text())
-    except ValueError as e:
-        raise InputError(str(path), None, f"not valid JSON: {e}") from None
+    report = read_json(path, "demo report")
     console.print(f"wrote {write_report(demo_dir, report, demo_dir / 'figures')}", highlight=False)

@@ -6,8 +6,8 @@ Register in lensim/cli/__init__.py with
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
+from typing import Any
 
 import typer
 
@@ -15,20 +15,6 @@ from lensim.cli.common import console, print_json, progress_bar
 from lensim.errors import InputError
 
 DEFAULT_METHODS = "input,wiener,rl,unsharp"
-
-
-def _held_out_sources(run: Path) -> list[str]:
-    """The validation source photos a `lensim train` run recorded in RUN/split.json."""
-    p = run / "split.json"
-    if not p.is_file():
-        raise InputError(str(p), None, "missing; expected a `lensim train` run folder")
-    try:
-        val = json.loads(p.read_text(encoding="utf-8"))["val"]
-    except (OSError, ValueError, KeyError, TypeError) as e:
-        raise InputError(str(p), "val", f"expected the run's validation photos ({type(e).__name__})") from None
-    if not val:
-        raise InputError(str(p), "val", "is empty: the run held out no photos")
-    return [str(v) for v in val]
 
 
 def evaluate_command(
@@ -57,7 +43,46 @@ def evaluate_command(
 
     Example: lensim evaluate --pairs data/ --methods input,wiener,rl,unsharp,model --model runs/a --held-out runs/a -o eval/
     """
+    from lensim.data.manifest import read_held_out, read_pairs_manifest
     from lensim.evaluate import harness
+
+    names = _method_names(methods, model, plain_unet)
+    manifest = read_pairs_manifest(pairs)
+    keep = read_held_out(held_out) if held_out is not None else None
+    if sources:
+        keep = (keep or []) + [s.strip() for s in sources.split(",") if s.strip()]
+    runs = {"model": model, "plain-unet": plain_unet}
+    options = {"rl": {"iterations": rl_iterations}, "unsharp": {"sigma_px": unsharp_sigma, "amount": unsharp_amount}}
+    table: dict[str, harness.Method] = {}
+    for n in names:
+        if n in harness.CHECKPOINT_METHODS:
+            table[n] = harness.checkpoint_method(runs[n], manifest.get("lens"), manifest.get("sensor"), device=device)
+        elif n != "input":
+            table[n] = harness.builtin_method(n, **{k: v for k, v in options.get(n, {}).items() if v is not None})
+    prog, cb = progress_bar("evaluate", "crops", quiet or json_out)
+    if prog:
+        prog.start()
+    rows: list[dict[str, Any]] = []
+    try:
+        summary = harness.evaluate(pairs, table, bank=bank, sources=keep, max_crops=max_crops, progress=cb, rows=rows)
+    finally:
+        if prog:
+            prog.stop()
+    if output is not None:
+        _write_outputs(output, pairs, rows, summary)
+    if json_out:
+        print_json(summary)
+    elif not quiet:
+        _print_table(pairs, rows, summary)
+        if output is not None:
+            console.print(f"wrote {output / 'metrics.csv'}, {output / 'metrics.md'}, {output / 'metrics.json'}",
+                          highlight=False)
+
+
+def _method_names(methods: str | None, model: Path | None, plain_unet: Path | None) -> list[str]:
+    """The methods asked for (default: the built-in ones plus those whose runs are given),
+    checked: known names, and a run for each checkpoint method."""
+    from lensim.evaluate.harness import BUILTIN_METHODS, CHECKPOINT_METHODS
 
     if methods is None:
         names = DEFAULT_METHODS.split(",") + (["model"] if model else []) + (["plain-unet"] if plain_unet else [])
@@ -65,48 +90,30 @@ def evaluate_command(
         names = [m.strip() for m in methods.split(",") if m.strip()]
     if not names:
         raise InputError("--methods", None, "expected at least one method")
-    known = harness.BUILTIN_METHODS + harness.CHECKPOINT_METHODS
+    known = BUILTIN_METHODS + CHECKPOINT_METHODS
+    runs = {"model": model, "plain-unet": plain_unet}
     for n in names:
         if n not in known:
             raise InputError("--methods", None, f"unknown method {n!r}; expected some of {', '.join(known)}")
-    manifest = harness.load_pairs_manifest(pairs)
-    runs = {"model": model, "plain-unet": plain_unet}
-    options = {"rl": {"iterations": rl_iterations}, "unsharp": {"sigma_px": unsharp_sigma, "amount": unsharp_amount}}
-    table: dict = {}
-    for n in names:
-        if n in harness.CHECKPOINT_METHODS:
-            if runs[n] is None:
-                raise InputError("--methods", None, f"method {n!r} needs its run: pass --{n} RUN")
-            table[n] = harness.checkpoint_method(runs[n], manifest.get("lens"), manifest.get("sensor"), device=device)
-        elif n != "input":
-            table[n] = harness.builtin_method(n, **{k: v for k, v in options.get(n, {}).items() if v is not None})
-    keep = None
-    if held_out is not None:
-        keep = _held_out_sources(held_out)
-    if sources:
-        keep = (keep or []) + [s.strip() for s in sources.split(",") if s.strip()]
-    prog, cb = progress_bar("evaluate", "crops", quiet or json_out)
-    if prog:
-        prog.start()
-    rows: list = []
-    try:
-        summary = harness.evaluate(pairs, table, bank=bank, sources=keep, max_crops=max_crops, progress=cb, rows=rows)
-    finally:
-        if prog:
-            prog.stop()
-    if output is not None:
-        output.mkdir(parents=True, exist_ok=True)
-        harness.write_csv(rows, output / "metrics.csv")
-        harness.write_markdown(summary, output / "metrics.md", title=f"lensim evaluate: {pairs}")
-        from lensim.jsonable import jsonable as _jsonable
-        from lensim.io import atomic_write_text
+        if n in CHECKPOINT_METHODS and runs[n] is None:
+            raise InputError("--methods", None, f"method {n!r} needs its run: pass --{n} RUN")
+    return names
 
-        atomic_write_text(output / "metrics.json", json.dumps(_jsonable(summary), indent=2) + "\n")
-    if json_out:
-        print_json(summary)
-        return
-    if quiet:
-        return
+
+def _write_outputs(output: Path, pairs: Path, rows: list[dict[str, Any]], summary: dict[str, Any]) -> None:
+    """OUTPUT/metrics.csv (per crop), metrics.md and metrics.json (the summary)."""
+    from lensim.evaluate import harness
+    from lensim.io import atomic_write_json
+    from lensim.jsonable import jsonable
+
+    output.mkdir(parents=True, exist_ok=True)
+    harness.write_csv(rows, output / "metrics.csv")
+    harness.write_markdown(summary, output / "metrics.md", title=f"lensim evaluate: {pairs}")
+    atomic_write_json(output / "metrics.json", jsonable(summary), indent=2)
+
+
+def _print_table(pairs: Path, rows: list[dict[str, Any]], summary: dict[str, Any]) -> None:
+    """The summary as a rich table: PSNR, gain over the input and SSIM, overall and per zone."""
     from rich.table import Table
 
     from lensim.evaluate.metrics import ZONES
@@ -127,6 +134,3 @@ def evaluate_command(
         t.add_row(n, f(m["psnr_db"], 2), f(m["psnr_db"] - base, 2), f(m["ssim"], 4),
                   *[f"{f(m['zones'][z]['psnr_db'], 2)} / {f(m['zones'][z]['ssim'], 3)}" for z in ZONES])
     console.print(t)
-    if output is not None:
-        console.print(f"wrote {output / 'metrics.csv'}, {output / 'metrics.md'}, {output / 'metrics.json'}",
-                      highlight=False)

@@ -26,7 +26,6 @@ worker process); `scheduler` connects to an existing Dask cluster instead.
 from __future__ import annotations
 
 import hashlib
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,15 +33,14 @@ from typing import Callable
 
 import torch
 
+from lensim.data.manifest import FORMAT, MANIFEST
 from lensim.errors import InputError
 from lensim.images import READ_SUFFIXES, read_image, write_image
-from lensim.io import atomic_write_text
+from lensim.io import atomic_write_json, read_json
 from lensim.psf.bank import PSFBank
 from lensim.sensor.profile import SensorProfile, load_sensor
 from lensim.simulate import native_mapping, simulate
 
-MANIFEST = "manifest.json"
-FORMAT = "lensim-pairs"
 
 
 @dataclass
@@ -142,7 +140,7 @@ def make_pairs_for_image(job: PairJob) -> dict:
                           "placement": p})
     record = {"index": job.index, "source": job.path, "seed": job.seed, "source_crop": [y, x, h2, w2],
               "placements": placed, "crops": crops}
-    atomic_write_text(record_path(out, job.index), json.dumps(record, indent=1, default=str) + "\n")
+    atomic_write_json(record_path(out, job.index), record)
     return record
 
 
@@ -183,13 +181,13 @@ def make_dataset(
                 "bank": str(bank.directory), "sources": [str(p) for p in files]}
     old = out / "settings.json"
     if old.exists():
-        prev = json.loads(old.read_text())
+        prev = read_json(old, "pairs settings record")
         diff = sorted(k for k in settings if k != "bank" and prev.get(k) != settings[k])
         if diff:
             raise InputError(str(out), ", ".join(diff), "differs from the dataset already in this folder; expected the "
                              "same settings to resume, or a new output folder")
     else:
-        atomic_write_text(old, json.dumps(settings, indent=1, default=str) + "\n")
+        atomic_write_json(old, settings)
     jobs = [PairJob(i, str(p), str(out), str(bank.directory), sensor_name, image_seed(seed, i, p.name), crops, size,
                     noise, demosaic, placements) for i, p in enumerate(files)]
     todo = [j for j in jobs if not record_path(out, j.index).exists()]
@@ -222,7 +220,7 @@ def make_dataset(
         finally:
             if cluster is not None:
                 cluster.close()
-    records = [json.loads(record_path(out, j.index).read_text()) for j in jobs]
+    records = [read_json(record_path(out, j.index), "photo record") for j in jobs]
     manifest = {**settings, "records": records, "pairs": sum(len(r["crops"]) for r in records)}
-    atomic_write_text(out / MANIFEST, json.dumps(manifest, indent=1, default=str) + "\n")
+    atomic_write_json(out / MANIFEST, manifest)
     return manifest

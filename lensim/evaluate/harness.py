@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -42,17 +41,18 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 import torch
 
+from lensim.data.manifest import MANIFEST, read_pairs_manifest
 from lensim.data.pairs import crop_capture
 from lensim.errors import InputError
 from lensim.evaluate import baselines
 from lensim.evaluate.metrics import ZONES, image_scores, normalized_radius
 from lensim.images import read_image
 from lensim.io import atomic_write_text
+from lensim.psf.bank import MANIFEST as BANK_MANIFEST
 from lensim.psf.bank import PSFBank
 from lensim.sensor.profile import SensorProfile, sensor_from_dict
 from lensim.simulate import SensorMapping, native_mapping
 
-MANIFEST = "manifest.json"
 #: Method names understood by :func:`builtin_method` (``model`` and ``plain-unet`` need a
 #: checkpoint: :func:`checkpoint_method`).
 BUILTIN_METHODS: tuple[str, ...] = ("input", "wiener", "rl", "unsharp")
@@ -131,22 +131,6 @@ def checkpoint_method(run: str | Path, lens: Mapping[str, Any] | None = None, se
 # dataset
 
 
-def load_pairs_manifest(pairs_dir: str | Path) -> dict:
-    """The manifest of a pairs dataset; a one-line InputError naming the file otherwise."""
-    p = Path(pairs_dir) / MANIFEST
-    if not p.is_file():
-        raise InputError(str(p), None, "missing; expected a pairs dataset folder written by `lensim dataset make`")
-    try:
-        m = json.loads(p.read_text(encoding="utf-8"))
-    except (OSError, json.JSONDecodeError) as e:
-        raise InputError(str(p), None, f"not valid JSON: {e}") from None
-    if not isinstance(m, dict) or m.get("format") != "lensim-pairs":
-        raise InputError(str(p), "format", "expected 'lensim-pairs'; not a pairs dataset manifest")
-    if not isinstance(m.get("records"), list) or not isinstance(m.get("sensor"), dict):
-        raise InputError(str(p), "records", "missing; expected the records and sensor of a finished dataset")
-    return m
-
-
 def _load_bank(manifest: Mapping[str, Any], pairs_dir: Path, bank: PSFBank | str | Path | None) -> PSFBank | None:
     if isinstance(bank, PSFBank):
         return bank
@@ -156,7 +140,7 @@ def _load_bank(manifest: Mapping[str, Any], pairs_dir: Path, bank: PSFBank | str
     if not path:
         return None
     for cand in (Path(path), pairs_dir / path):
-        if (cand / "manifest.json").is_file():
+        if (cand / BANK_MANIFEST).is_file():
             return PSFBank.load(cand)
     return None
 
@@ -179,7 +163,7 @@ def evaluate_rows(
     sensor_left, method, psnr_db, ssim, mse and per zone <zone>_psnr_db, <zone>_ssim,
     <zone>_pixels, <zone>_ssim_pixels."""
     pairs_dir = Path(pairs_dir)
-    manifest = load_pairs_manifest(pairs_dir)
+    manifest = read_pairs_manifest(pairs_dir)
     sensor = sensor_from_dict(manifest["sensor"], str(pairs_dir / MANIFEST))
     the_bank = _load_bank(manifest, pairs_dir, bank)
     all_methods: dict[str, Method] = {"input": builtin_method("input")}

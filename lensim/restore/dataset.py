@@ -1,9 +1,10 @@
 """A torch Dataset over a pairs folder written by ``lensim dataset make`` (lensim.data.pairs).
 
-Layout read: DATASET/manifest.json with ``sensor.resolution`` = [width, height] (pixels),
-``records[i].source`` (the sharp photo) and ``records[i].crops[k]`` = {input, target,
-sensor_top, sensor_left}: paths relative to DATASET of the aberrated and sharp crops, and
-the absolute sensor pixel of the crop's top-left corner.
+Layout read: DATASET/manifest.json (lensim.data.manifest.read_pairs_manifest) with
+``sensor.resolution`` = [width, height] (pixels), ``records[i].source`` (the sharp photo)
+and ``records[i].crops[k]`` = {input, target, sensor_top, sensor_left}: paths relative to
+DATASET of the aberrated and sharp crops, and the absolute sensor pixel of the crop's
+top-left corner.
 
 Every item is a dict
     input  (3, h, w) float32 in [0, 1]  aberrated crop
@@ -24,7 +25,6 @@ crops of one photo overlap and share content.
 from __future__ import annotations
 
 import hashlib
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
@@ -32,12 +32,10 @@ from typing import Any, Sequence
 import torch
 from torch.utils.data import Dataset
 
+from lensim.data.manifest import read_pairs_manifest
 from lensim.errors import InputError
 from lensim.images import read_image
 from lensim.restore.fov import augment, fov_channels
-
-MANIFEST = "manifest.json"
-
 
 @dataclass(frozen=True)
 class CropRef:
@@ -49,37 +47,6 @@ class CropRef:
     sensor_top: int
     sensor_left: int
     source: str
-
-
-def load_manifest(dataset_dir: str | Path) -> dict[str, Any]:
-    """The validated manifest of a pairs folder (one-line InputError naming the file)."""
-    root = Path(dataset_dir)
-    path = root / MANIFEST
-    if not root.is_dir():
-        raise InputError(str(root), None, "no such folder; expected a pairs folder from `lensim dataset make`")
-    if not path.is_file():
-        raise InputError(str(path), None, "no such file; expected a finished `lensim dataset make` folder")
-    try:
-        manifest = json.loads(path.read_text())
-    except (OSError, ValueError) as e:
-        raise InputError(str(path), None, f"cannot be read as JSON ({type(e).__name__}: {e})") from None
-    if not isinstance(manifest, dict):
-        raise InputError(str(path), None, "expected a JSON object")
-    res = (manifest.get("sensor") or {}).get("resolution") if isinstance(manifest.get("sensor"), dict) else None
-    if not (isinstance(res, list) and len(res) == 2 and all(isinstance(v, int) and v > 0 for v in res)):
-        raise InputError(str(path), "sensor.resolution", f"expected [width, height] in pixels, got {res!r}")
-    records = manifest.get("records")
-    if not isinstance(records, list) or not records:
-        raise InputError(str(path), "records", "expected a non-empty list of photo records")
-    for i, r in enumerate(records):
-        crops = r.get("crops") if isinstance(r, dict) else None
-        if not isinstance(crops, list) or not crops:
-            raise InputError(str(path), f"records[{i}].crops", "expected a non-empty list of crops")
-        for k, c in enumerate(crops):
-            if not isinstance(c, dict) or not all(key in c for key in ("input", "target", "sensor_top", "sensor_left")):
-                raise InputError(str(path), f"records[{i}].crops[{k}]",
-                                 "expected {input, target, sensor_top, sensor_left}")
-    return manifest
 
 
 def sensor_hw(manifest: dict[str, Any]) -> tuple[int, int]:
@@ -164,7 +131,7 @@ class PairDataset(Dataset):
     @classmethod
     def from_folder(cls, dataset_dir: str | Path, sources: Sequence[str] | None = None, **kwargs: Any) -> "PairDataset":
         """All crops of a pairs folder (or those of the named source photos)."""
-        manifest = load_manifest(dataset_dir)
+        manifest = read_pairs_manifest(dataset_dir)
         refs = crop_refs(dataset_dir, manifest)
         if sources is not None:
             keep = set(sources)
@@ -225,4 +192,4 @@ class PairDataset(Dataset):
         return {"input": inp.contiguous(), "target": tgt.contiguous(), "fov": fov, "index": i}
 
 
-__all__ = ["CropRef", "PairDataset", "crop_refs", "item_generator", "load_manifest", "sensor_hw", "split_sources"]
+__all__ = ["CropRef", "PairDataset", "crop_refs", "item_generator", "sensor_hw", "split_sources"]

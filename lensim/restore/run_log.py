@@ -17,6 +17,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+from lensim.data.manifest import SPLIT
 from lensim.io import atomic_write_json
 
 LOG_FIELDS = ("epoch", "step", "loss", "val_psnr", "val_ssim", "lr", "seconds")
@@ -71,7 +72,7 @@ class RunLog:
     def __init__(self, run: Path, config: dict[str, Any], split: dict[str, Any], resumed_at_step: int | None) -> None:
         run.mkdir(parents=True, exist_ok=True)
         atomic_write_json(run / "config.json", config)
-        atomic_write_json(run / "split.json", split)
+        atomic_write_json(run / SPLIT, split)
         self.steps = CsvLog(run / "steps.csv", STEP_FIELDS, resumed_at_step)
         self.epochs = CsvLog(run / "log.csv", LOG_FIELDS, resumed_at_step)
         self.tensorboard: Any = None

@@ -42,6 +42,7 @@ import torch
 import torch.nn.functional as F
 from torch.utils.data import DataLoader
 
+from lensim.data.manifest import read_pairs_manifest
 from lensim.errors import InputError
 from lensim.restore.checkpoint import (
     BEST,
@@ -50,7 +51,7 @@ from lensim.restore.checkpoint import (
     read_resume_checkpoint,
     refuse_existing_run,
 )
-from lensim.restore.dataset import PairDataset, crop_refs, load_manifest, sensor_hw, split_sources
+from lensim.restore.dataset import PairDataset, crop_refs, sensor_hw, split_sources
 from lensim.restore.distributed import (
     Ranks,
     amp_dtype,
@@ -267,7 +268,7 @@ class _Data:
 
 def _load_data(dataset_dir: str | Path, cfg: TrainConfig, ckpt: dict[str, Any] | None) -> _Data:
     """Training and validation crops split by source photo (a resumed run keeps its split)."""
-    manifest = load_manifest(dataset_dir)
+    manifest = read_pairs_manifest(dataset_dir)
     refs = crop_refs(dataset_dir, manifest)
     sources = sorted({r.source for r in refs})
     if ckpt is not None:
