@@ -38,7 +38,7 @@ from lensim.demo import DemoSettings
 from lensim.optics.lens_file import load_lens
 from lensim.psf.bank import compute_bank
 from lensim.sensor.profile import DEFAULT_SENSOR, load_sensor
-from lensim.simulate import suggest_kernel_pixels
+from lensim.render.bank_cache import suggest_kernel_pixels
 
 if __name__ == "__main__":
     s = DemoSettings.make(quick=False)

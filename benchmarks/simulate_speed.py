@@ -19,7 +19,10 @@ import json, resource, sys, time, torch, torch.nn.functional as F
 torch.set_num_threads(int(sys.argv[2]))
 from lensim.optics.lens_file import load_lens
 from lensim.sensor.profile import load_sensor
-from lensim.simulate import ensure_bank, map_to_sensor, simulate, blur_energy_image, kernel_function
+from lensim.render.bank_cache import ensure_bank
+from lensim.render.kernels import kernel_function
+from lensim.render.mapping import map_to_sensor
+from lensim.render.pipeline import blur_energy_image, simulate
 from lensim.assets import DEFAULT_LENS
 from lensim.assets.images import sample_image_path
 from lensim.images import read_image

@@ -20,9 +20,9 @@ _API = {
     "load_sensor": "lensim.sensor.profile",
     "read_image": "lensim.images",
     "write_image": "lensim.images",
-    "simulate_photo": "lensim.simulate:simulate",  # `lensim.simulate` is the module
-    "ensure_bank": "lensim.simulate",
-    "map_to_sensor": "lensim.simulate",
+    "simulate_photo": "lensim.render.pipeline:simulate",
+    "ensure_bank": "lensim.render.bank_cache",
+    "map_to_sensor": "lensim.render.mapping",
     "make_dataset": "lensim.data.pairs",
     "train": "lensim.restore.train",
     "load_checkpoint": "lensim.restore.checkpoint",

@@ -129,7 +129,7 @@ def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: i
     from lensim.plots.bank import write_bank_figures
     from lensim.psf.bank import compute_bank
     from lensim.report import edge_study, sample_crops, write_report
-    from lensim.simulate import suggest_kernel_pixels
+    from lensim.render.bank_cache import suggest_kernel_pixels
 
     say = say or (lambda msg: None)
     step = progress or (lambda done, total: None)

@@ -14,11 +14,12 @@ import torch
 from lensim.data.pairs import crop_capture
 from lensim.evaluate.harness import CropContext, Method, markdown_table
 from lensim.images import read_image
-from lensim.jsonable import jsonable
 from lensim.io import atomic_write_text
+from lensim.jsonable import jsonable
 from lensim.psf.bank import PSFBank
+from lensim.render.mapping import native_mapping
+from lensim.render.pipeline import simulate
 from lensim.sensor.profile import SensorProfile
-from lensim.simulate import native_mapping, simulate
 
 
 def _figure(size: tuple[float, float]):

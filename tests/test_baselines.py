@@ -9,7 +9,8 @@ from lensim.evaluate.metrics import psnr
 from lensim.images import read_image
 from lensim.psf.bank import BankField, PSFBank
 from lensim.render.blur import spatially_variant_blur
-from lensim.simulate import SensorMapping, kernel_function
+from lensim.render.kernels import kernel_function
+from lensim.render.mapping import SensorMapping
 
 P = 15
 PITCH_UM = 4.0

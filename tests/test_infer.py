@@ -106,8 +106,8 @@ def test_each_tile_gets_its_absolute_fov_channels():
 
 
 def test_full_frame_geometry_matches_map_to_sensor():
+    from lensim.render.mapping import map_to_sensor
     from lensim.sensor.profile import load_sensor
-    from lensim.simulate import map_to_sensor
 
     sensor = load_sensor("apsc_mirrorless")
     for h, w in [(400, 600), (300, 600), (500, 500)]:

@@ -10,8 +10,8 @@ import pytest
 import torch
 
 from lensim.errors import InputError
+from lensim.render.pipeline import simulate_capture
 from lensim.sensor import isp, load_sensor
-
 
 # ----------------------------------------------------------------- natural test images
 
@@ -234,14 +234,14 @@ def test_process_quantizes_and_white_balanced_flag_skips_gains():
 def test_simulate_capture_is_deterministic_and_close_without_noise(natural):
     prof = load_sensor("phone")
     x = _t(natural["kodim23"])[:, :128, :192]
-    a, pa = isp.simulate_capture(x, prof, torch.Generator().manual_seed(9))
-    b, pb = isp.simulate_capture(x, prof, torch.Generator().manual_seed(9))
+    a, pa = simulate_capture(x, prof, torch.Generator().manual_seed(9))
+    b, pb = simulate_capture(x, prof, torch.Generator().manual_seed(9))
     assert torch.equal(a, b) and pa == pb and pa.shot is not None and pa.read is not None
-    clean, pc = isp.simulate_capture(x, prof, torch.Generator().manual_seed(9), noise=False, adc=False)
+    clean, pc = simulate_capture(x, prof, torch.Generator().manual_seed(9), noise=False, adc=False)
     assert pc.shot is None and _psnr(clean, x) > 30.0
     assert _psnr(a, x) < _psnr(clean, x)  # noise costs something
     seen = []
-    isp.simulate_capture(x, prof, torch.Generator().manual_seed(9), blur=lambda c: seen.append(c.shape) or c)
+    simulate_capture(x, prof, torch.Generator().manual_seed(9), blur=lambda c: seen.append(c.shape) or c)
     assert seen == [(3, 128, 192)]
 
 

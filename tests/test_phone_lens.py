@@ -15,6 +15,7 @@ import warnings
 
 import pytest
 import torch
+from optiland_models import assert_agrees_with_optiland  # imports optiland only when used
 
 from lensim.assets import lens_names
 from lensim.errors import InputError, RayTraceError
@@ -25,10 +26,9 @@ from lensim.optics.materials import WAVELENGTH_D_UM, Air, ModelGlass
 from lensim.optics.paraxial import paraxial_data
 from lensim.optics.pupil import hexapolar
 from lensim.optics.trace import trace
+from lensim.render.kernels import check_bank_fits
+from lensim.render.mapping import SensorMapping, map_to_sensor
 from lensim.sensor.profile import load_sensor
-from lensim.simulate import SensorMapping, check_bank_fits, map_to_sensor
-
-from optiland_models import assert_agrees_with_optiland  # imports optiland only when used
 
 # the patent's stated values (Table 5)
 PATENT_EFL_MM = 3.35

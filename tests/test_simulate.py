@@ -10,9 +10,11 @@ from lensim.evaluate.edge_target import make_slanted_edge
 from lensim.evaluate.slanted_edge import mtf_area_ratio, mtf_from_psf, slanted_edge_mtf
 from lensim.optics.lens_file import load_lens
 from lensim.psf.bank import compute_bank
+from lensim.render.bank_cache import suggest_kernel_pixels
+from lensim.render.kernels import check_bank_fits
+from lensim.render.mapping import SensorMapping, map_to_sensor, native_mapping
+from lensim.render.pipeline import blur_energy_image, simulate
 from lensim.sensor.profile import load_sensor
-from lensim.simulate import (SensorMapping, blur_energy_image, check_bank_fits, map_to_sensor, native_mapping,
-                             simulate, suggest_kernel_pixels)
 
 PITCH = 3.92  # um, the APS-C sensor
 
@@ -122,7 +124,7 @@ def test_wrong_pitch_and_uncovered_sensor_are_refused(bank):
 def test_distortion_moves_points_from_paraxial_to_real_chief_ray_positions(bank):
     # a small blob whose paraxial image lies at field 0.9 lands where the real chief ray
     # of that field lands (Cooke: ~+5 um at 12.6 mm): centroid within 0.05 px of it
-    from lensim.simulate import apply_distortion
+    from lensim.render.distortion import apply_distortion
 
     f = bank.fields[5]  # field 0.9
     r_par, r_real = float(np.hypot(*f.paraxial_xy_mm)), float(np.hypot(*f.reference_xy_mm))

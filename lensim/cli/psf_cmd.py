@@ -89,7 +89,7 @@ def bank(
     from lensim.psf.bank import compute_bank, default_fields
     from lensim.psf.spectral import DEFAULT_CAMERA, parse_wavelengths_nm
     from lensim.sensor.profile import load_sensor
-    from lensim.simulate import suggest_kernel_pixels
+    from lensim.render.bank_cache import suggest_kernel_pixels
 
     if lens_file and lens_opt and lens_file != lens_opt:
         raise InputError("<command line>", "lens", f"given twice ({lens_file!r} and --lens {lens_opt!r}); expected one")

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import torch
 import typer
+
 from lensim import assets
 from lensim.cli.common import console, parse_wavelengths, print_json, progress_bar
 from lensim.errors import InputError
@@ -14,8 +15,11 @@ from lensim.images import read_image, write_image
 from lensim.io import atomic_write_text
 from lensim.optics.lens_file import load_lens
 from lensim.psf.bank import PSFBank
+from lensim.render.bank_cache import ensure_bank
+from lensim.render.kernels import check_bank_fits
+from lensim.render.mapping import map_to_sensor
+from lensim.render.pipeline import simulate
 from lensim.sensor.profile import load_sensor
-from lensim.simulate import check_bank_fits, ensure_bank, map_to_sensor, simulate
 
 
 def default_cache_dir() -> Path:

@@ -2,8 +2,8 @@
 
 Each sharp photo is placed on the sensor at its native scale (one image pixel = one sensor
 pixel; a random crop of it if it is larger than the sensor) at `placements` seeded random
-positions, simulated through the lens and sensor at each (lensim.simulate, a fresh capture
-draw each time), and cut into `crops` aligned pairs of size x size pixels per placement:
+positions, simulated through the lens and sensor at each (lensim.render.pipeline, a fresh
+capture draw each time), and cut into `crops` aligned pairs of size x size pixels per placement:
 the simulated camera image (network input) and the original (target), each with the
 absolute sensor position of its top-left pixel, so a network can be fed field-of-view
 channels.
@@ -38,8 +38,9 @@ from lensim.errors import InputError
 from lensim.images import READ_SUFFIXES, read_image, write_image
 from lensim.io import atomic_write_json, read_json
 from lensim.psf.bank import PSFBank
+from lensim.render.mapping import native_mapping
+from lensim.render.pipeline import simulate
 from lensim.sensor.profile import SensorProfile, load_sensor
-from lensim.simulate import native_mapping, simulate
 
 
 

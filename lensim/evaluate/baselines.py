@@ -2,7 +2,7 @@
 
 Every method has the form ``method(image, mapping, bank, capture=None, **options) ->
 image``: image is a camera (aberrated) sRGB image (3, H, W) in [0, 1]; mapping
-(lensim.simulate.SensorMapping) places its pixels on the sensor (mm); bank is the PSF
+(lensim.render.mapping.SensorMapping) places its pixels on the sensor (mm); bank is the PSF
 bank the image was simulated with; capture is the capture's record (the ``capture``
 mapping of a dataset record: colour-matrix ``ccm``, white-balance gains ``r_gain``,
 ``b_gain`` and the noise draw ``shot``, ``read``), or None. The result is an sRGB image
@@ -23,9 +23,10 @@ says ``relative_illumination: false`` gets unit-sum kernels.
 
 Tiles and blending. Kernels are taken at tile centres on a regular grid of spacing
 ``tile`` pixels (0, tile, 2 tile, ... in both axes, as lensim.render.blur places them),
-at each centre's sensor position (``bank.psf_at``: radially interpolated and rotated to
-the azimuth). Each centre's kernel deconvolves a window of 2 tile + 1 pixels plus a
-margin of ``margin`` pixels (default: the kernel size) on every side, the image being
+at each centre's sensor position (lensim.render.kernels: ``bank.psf_at``, radially
+interpolated and rotated to the azimuth). Each centre's kernel deconvolves a window of
+2 tile + 1 pixels plus a margin of ``margin`` pixels (default: the kernel size) on every
+side, the image being
 mirrored (symmetric padding) beyond its borders; the window's centre part is weighted by
 the bilinear hat of that centre (1 at the centre, 0 at the neighbouring centres) and the
 weighted results are summed. The hats sum to 1 at every pixel, so there are no seams and
@@ -76,8 +77,9 @@ import numpy as np
 import torch
 
 from lensim.psf.bank import PSFBank
+from lensim.render.kernels import check_bank_fits, kernels_at, tile_centres
+from lensim.render.mapping import SensorMapping
 from lensim.sensor.isp import apply_ccm, linear_to_srgb, srgb_to_linear, white_balance
-from lensim.simulate import SensorMapping, check_bank_fits
 
 DEFAULT_TILE = 32
 DEFAULT_NOISE_FLOOR = 1e-5
@@ -130,23 +132,6 @@ def _unit_sum_kernels(capture: Mapping[str, Any] | None) -> bool:
 # tiles
 
 
-def tile_centres(size: int, tile: int) -> np.ndarray:
-    """Tile-centre pixel coordinates along one axis: 0, tile, 2 tile, ... covering size - 1."""
-    n = math.ceil(max(size - 1, 0) / tile) + 1
-    return np.arange(n) * tile
-
-
-def tile_kernels(mapping: SensorMapping, bank: PSFBank, rows: np.ndarray, cols: np.ndarray,
-                 unit_sum: bool = False) -> torch.Tensor:
-    """(N, 3, P, P) float64 kernels of the bank at the sensor positions of pixels (rows,
-    cols) (pixel units of the image; positions from the mapping, mm)."""
-    x, y = mapping.pixel_to_mm(torch.as_tensor(rows, dtype=torch.float64), torch.as_tensor(cols, dtype=torch.float64))
-    ks = np.stack([bank.psf_at(float(a), float(b)) for a, b in zip(x.tolist(), y.tolist())]).astype(np.float64)
-    if unit_sum:
-        ks /= ks.sum(axis=(-2, -1), keepdims=True)
-    return torch.from_numpy(ks)
-
-
 def _otf(kernels: torch.Tensor, n: int) -> torch.Tensor:
     """Transfer functions (N, C, n, n//2+1) of (N, C, P, P) kernels whose centre pixel is the
     source point (true convolution, as lensim.render.blur applies them)."""
@@ -189,9 +174,9 @@ def tiled_deconvolve(cam: torch.Tensor, mapping: SensorMapping, bank: PSFBank, s
     centres = [(i, j) for i in range(ny) for j in range(nx)]
     for s in range(0, len(centres), chunk):
         part = centres[s:s + chunk]
-        rows = np.array([cy[i] for i, _ in part], dtype=np.float64)
-        cols = np.array([cx[j] for _, j in part], dtype=np.float64)
-        ks = tile_kernels(mapping, bank, rows, cols, unit_sum)
+        rows = torch.stack([cy[i] for i, _ in part])
+        cols = torch.stack([cx[j] for _, j in part])
+        ks = kernels_at(bank, mapping, rows, cols, unit_sum)
         if ks.shape[1] != c:
             raise ValueError(f"the bank has {ks.shape[1]} channels; the image {c}")
         win = torch.stack([padded[:, i * tile:i * tile + n, j * tile:j * tile + n] for i, j in part])

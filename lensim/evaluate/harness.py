@@ -50,8 +50,8 @@ from lensim.images import read_image
 from lensim.io import atomic_write_text
 from lensim.psf.bank import MANIFEST as BANK_MANIFEST
 from lensim.psf.bank import PSFBank
+from lensim.render.mapping import SensorMapping, native_mapping
 from lensim.sensor.profile import SensorProfile, sensor_from_dict
-from lensim.simulate import SensorMapping, native_mapping
 
 #: Method names understood by :func:`builtin_method` (``model`` and ``plain-unet`` need a
 #: checkpoint: :func:`checkpoint_method`).

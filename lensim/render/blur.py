@@ -11,19 +11,10 @@ overlap-added. Energy is conserved: each source pixel's energy times its kernels
 """
 from __future__ import annotations
 
-import math
-from typing import Callable
-
 import torch
 import torch.nn.functional as F
 
-KernelFn = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
-
-
-def tile_centres(size: int, tile: int) -> torch.Tensor:
-    """Pixel coordinates of tile centres along one axis: 0, tile, 2 tile, ... covering size-1."""
-    n = math.ceil((size - 1) / tile) + 1
-    return torch.arange(n, dtype=torch.float64) * tile
+from lensim.render.kernels import KernelFn, tile_centres
 
 
 def _hat(size: int, tile: int) -> torch.Tensor:

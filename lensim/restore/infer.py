@@ -23,9 +23,9 @@ the tile term (roughly with the tile area) at the cost of more overlap work: wit
 default tile 512 / overlap 192 each pixel is computed about 2.6 times.
 
 Sensor mapping (:func:`image_sensor_geometry`): a photo is assumed to be a full sensor
-frame mapped like lensim.simulate.map_to_sensor (fitted inside the sensor, centred, the
+frame mapped like lensim.render.mapping.map_to_sensor (fitted inside the sensor, centred, the
 limiting side spanning it) unless an explicit offset of its top-left pixel on the sensor
-is given (then it is at the sensor's native pixel scale, like lensim.simulate.native_mapping).
+is given (then it is at the sensor's native pixel scale, like lensim.render.mapping.native_mapping).
 """
 from __future__ import annotations
 
@@ -52,7 +52,7 @@ def image_sensor_geometry(
         height, width: image size in pixels.
         sensor_resolution: (width, height) of the sensor in pixels (square pixels).
         offset: (top, left) sensor pixel of the image's top-left pixel at native scale, or
-            None for a full frame fitted like lensim.simulate.map_to_sensor.
+            None for a full frame fitted like lensim.render.mapping.map_to_sensor.
 
     Returns:
         ((top, left), (sensor_height, sensor_width)) in image pixels: the image's top-left

@@ -29,7 +29,7 @@ Example (the whole sensor side, no blur)::
     raw = isp.mosaic(cam, prof.bayer_pattern)
     params.shot, params.read = prof.sample_noise(g)
     raw = isp.quantize_raw(isp.add_noise(raw, params.shot, params.read, g), prof)
-    out = isp.raw_to_srgb(raw, params, method="ahd", bits=8)   # or isp.simulate_capture(...)
+    out = isp.raw_to_srgb(raw, params, method="ahd", bits=8)   # or lensim.render.pipeline.simulate_capture
 
 The unprocessing follows Brooks et al. 2019 ("Unprocessing images for learned raw
 denoising") without their tone-curve inversion, as the paper describes: the exact sRGB
@@ -45,7 +45,7 @@ import json
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 import torch
@@ -527,28 +527,6 @@ def raw_to_srgb(raw: torch.Tensor, params: CaptureParams, method: str = "ahd", b
         kwargs["rgb_to_xyz"] = SRGB_TO_XYZ @ torch.tensor(params.ccm, dtype=torch.float64)
     rgb = demosaic(wb, params.bayer_pattern, method, **kwargs)
     return process(rgb, params, bits=bits, white_balanced=True)
-
-
-def simulate_capture(img: torch.Tensor, profile: SensorProfile, generator: torch.Generator | None = None,
-                     blur: Callable[[torch.Tensor], torch.Tensor] | None = None, noise: bool = True,
-                     kelvin: float | None = None, method: str = "ahd", bits: int | None = 8,
-                     adc: bool = True) -> tuple[torch.Tensor, CaptureParams]:
-    """sRGB image (3, H, W) -> what the camera delivers (3, H, W) sRGB, with every draw
-    recorded: unprocess (random colour temperature unless ``kelvin``), ``blur`` (a function
-    of the energy-domain camera RGB image, e.g. the spatially-variant PSF convolution;
-    None: no blur), mosaic, noise drawn from the profile (when ``noise``), the ADC
-    (:func:`quantize_raw`, when ``adc``), then :func:`raw_to_srgb`.
-    Draw order with the generator: colour temperature, then (shot, read), then the noise."""
-    cam, params = unprocess(img, profile, generator, kelvin)
-    if blur is not None:
-        cam = blur(cam)
-    raw = mosaic(cam, profile.bayer_pattern)
-    if noise:
-        params.shot, params.read = profile.sample_noise(generator)
-        raw = add_noise(raw, params.shot, params.read, generator)
-    if adc:
-        raw = quantize_raw(raw, profile)
-    return raw_to_srgb(raw, params, method=method, bits=bits), params
 
 
 # ---------------------------------------------------------------- raw output
