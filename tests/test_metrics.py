@@ -11,7 +11,9 @@ from lensim.evaluate.metrics import (
     image_scores,
     normalized_radius,
     psnr,
+    psnr_batch,
     ssim,
+    ssim_batch,
     ssim_map,
     zone_masks,
 )
@@ -87,3 +89,23 @@ def test_image_scores_zone_counts_and_values():
     # the pixel-weighted mean of the zone MSEs is the overall MSE
     m = sum(s["zones"][z]["mse"] * s["zones"][z]["pixels"] for z in ZONES if s["zones"][z]["pixels"]) / (64 * 120)
     assert abs(m - s["mse"]) < 1e-12
+
+
+def test_torch_batch_entry_points_match_references_and_the_numpy_ones():
+    """psnr_batch / ssim_batch (what training validates with): the MSE formula, scikit-image,
+    and the numpy entry points image by image."""
+    gen = torch.Generator().manual_seed(0)
+    a = torch.rand(2, 3, 40, 48, generator=gen, dtype=torch.float64)
+    b = (a + 0.05 * torch.randn(a.shape, generator=gen, dtype=torch.float64)).clamp(0, 1)
+    mse = ((a - b) ** 2).flatten(1).mean(1)
+    assert torch.allclose(psnr_batch(b, a), -10 * torch.log10(mse), atol=1e-12)
+    s = ssim_batch(b, a)
+    assert torch.allclose(ssim_batch(a, a), torch.ones(2, dtype=torch.float64), atol=1e-12)
+    metrics = pytest.importorskip("skimage.metrics")
+    for i in range(2):
+        ref = metrics.structural_similarity(b[i].numpy(), a[i].numpy(), channel_axis=0, data_range=1.0,
+                                            gaussian_weights=True, sigma=1.5, use_sample_covariance=False)
+        assert abs(float(s[i]) - ref) < 1e-6, (float(s[i]), ref)
+    p = psnr_batch(b, a)
+    for i in range(2):
+        assert abs(float(p[i]) - psnr(b[i], a[i])) < 1e-12 and abs(float(s[i]) - ssim(b[i], a[i])) < 1e-12

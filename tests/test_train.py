@@ -15,7 +15,6 @@ from lensim.images import write_image
 from lensim.data.manifest import read_pairs_manifest
 from lensim.restore.dataset import PairDataset, crop_refs, split_sources
 from lensim.restore.fov import fov_channels, invert_augment
-from lensim.restore.metrics import psnr, ssim
 from lensim.restore.checkpoint import atomic_torch_save
 from lensim.restore.run_log import read_csv
 from lensim.restore.train import train
@@ -133,24 +132,6 @@ def test_bad_manifest_is_a_one_line_error(tmp_path: Path):
     (tmp_path / "manifest.json").write_text(json.dumps({"sensor": {"resolution": [10]}, "records": []}))
     with pytest.raises(InputError, match="manifest.json: sensor.resolution"):
         read_pairs_manifest(tmp_path)
-
-
-# ----------------------------------------------------------------------------- metrics
-
-
-def test_psnr_and_ssim_match_references():
-    gen = torch.Generator().manual_seed(0)
-    a = torch.rand(2, 3, 40, 48, generator=gen, dtype=torch.float64)
-    b = (a + 0.05 * torch.randn(a.shape, generator=gen, dtype=torch.float64)).clamp(0, 1)
-    mse = ((a - b) ** 2).flatten(1).mean(1)
-    assert torch.allclose(psnr(b, a), -10 * torch.log10(mse), atol=1e-12)
-    s = ssim(b, a)
-    assert torch.allclose(ssim(a, a), torch.ones(2, dtype=torch.float64), atol=1e-12)
-    metrics = pytest.importorskip("skimage.metrics")
-    for i in range(2):
-        ref = metrics.structural_similarity(b[i].numpy(), a[i].numpy(), channel_axis=0, data_range=1.0,
-                                            gaussian_weights=True, sigma=1.5, use_sample_covariance=False)
-        assert abs(float(s[i]) - ref) < 1e-6, (float(s[i]), ref)
 
 
 # ----------------------------------------------------------------------------- training

@@ -1,7 +1,9 @@
 """Full-reference image metrics (PSNR, SSIM) and their split by field zone.
 
 Images are (3, H, W) (or (C, H, W)) arrays or tensors of display-referred values (sRGB
-code / 255) with data range 1. Computation is in float64 numpy.
+code / 255) with data range 1. Computation is in float64 numpy; :func:`psnr_batch` and
+:func:`ssim_batch` are the torch entry points (batches (B, C, H, W) on any device, float64,
+one value per image: what training validation uses), with the same definitions.
 
 * PSNR (dB) = 10 log10(1 / MSE), the MSE over every pixel and channel (data range 1);
   identical images give +inf.
@@ -27,6 +29,7 @@ from typing import Union
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 from scipy.ndimage import correlate1d
 
 ArrayLike = Union[np.ndarray, torch.Tensor]
@@ -121,6 +124,64 @@ def ssim_map(test: ArrayLike, reference: ArrayLike, data_range: float = 1.0,
 def ssim(test: ArrayLike, reference: ArrayLike, data_range: float = 1.0, sigma: float = SSIM_SIGMA) -> float:
     """Mean SSIM (dimensionless) over the valid pixels of every channel (Wang et al. 2004)."""
     return float(ssim_map(test, reference, data_range, sigma).mean())
+
+
+# ---------------------------------------------------------------------------------------
+# torch entry points (batched, for training validation)
+
+
+def _as_batch(x: torch.Tensor, name: str) -> torch.Tensor:
+    if x.dim() == 3:
+        x = x.unsqueeze(0)
+    if x.dim() != 4:
+        raise ValueError(f"{name} must be (B, C, H, W) or (C, H, W), got {tuple(x.shape)}")
+    return x.to(torch.float64)
+
+
+def _batch_pair(pred: torch.Tensor, target: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    p, t = _as_batch(pred, "pred"), _as_batch(target, "target")
+    if p.shape != t.shape:
+        raise ValueError(f"shapes differ: {tuple(p.shape)} vs {tuple(t.shape)}")
+    return p, t
+
+
+def psnr_batch(pred: torch.Tensor, target: torch.Tensor, data_range: float = 1.0) -> torch.Tensor:
+    """PSNR (B,) in dB of images (B, C, H, W) or (C, H, W), each over all its channels and
+    pixels, in float64 on the images' device (:func:`psnr` per image); +inf for identical
+    images."""
+    p, t = _batch_pair(pred, target)
+    mse_per_image = (p - t).pow(2).flatten(1).mean(1)
+    return 10.0 * torch.log10(data_range**2 / mse_per_image)
+
+
+def ssim_batch(pred: torch.Tensor, target: torch.Tensor, data_range: float = 1.0,
+               sigma: float = SSIM_SIGMA) -> torch.Tensor:
+    """Mean SSIM (B,) of images (B, C, H, W) or (C, H, W) in float64 on the images' device:
+    :func:`ssim` per image (the same window, constants and valid pixels). Images must be
+    larger than 2 * ssim_pad(sigma) pixels on each side."""
+    p, t = _batch_pair(pred, target)
+    _, c, h, w = p.shape
+    window = 2 * ssim_pad(sigma) + 1
+    if h < window or w < window:
+        raise ValueError(f"SSIM needs images of at least {window}x{window} pixels, got {h}x{w}")
+    r = torch.arange(window, dtype=p.dtype, device=p.device) - (window - 1) / 2.0
+    g = torch.exp(-(r**2) / (2.0 * sigma**2))
+    g = g / g.sum()
+    kx = g.view(1, 1, 1, window).expand(c, 1, 1, window)
+    ky = g.view(1, 1, window, 1).expand(c, 1, window, 1)
+
+    def blur(x: torch.Tensor) -> torch.Tensor:  # separable, valid positions only
+        return F.conv2d(F.conv2d(x, kx, groups=c), ky, groups=c)
+
+    mu_p, mu_t = blur(p), blur(t)
+    s_pp = blur(p * p) - mu_p**2
+    s_tt = blur(t * t) - mu_t**2
+    s_pt = blur(p * t) - mu_p * mu_t
+    c1 = (SSIM_K1 * data_range) ** 2
+    c2 = (SSIM_K2 * data_range) ** 2
+    num = (2 * mu_p * mu_t + c1) * (2 * s_pt + c2)
+    den = (mu_p**2 + mu_t**2 + c1) * (s_pp + s_tt + c2)
+    return (num / den).flatten(1).mean(1)
 
 
 # ---------------------------------------------------------------------------------------

@@ -62,7 +62,7 @@ from lensim.restore.distributed import (
     shutdown,
     wrap_model,
 )
-from lensim.restore.metrics import psnr, ssim
+from lensim.evaluate.metrics import psnr_batch, ssim_batch
 from lensim.restore.network import FieldAwareUNet
 from lensim.restore.run_log import RunLog
 from lensim.restore.schedule import LR_SCHEDULES, BudgetClock, LearningRate
@@ -214,10 +214,10 @@ def evaluate_pairs(model: torch.nn.Module, loader: Iterator[dict[str, torch.Tens
         inp = batch["input"].to(device)
         tgt = batch["target"].to(device)
         out = model(inp, batch["fov"].to(device)).float().clamp(0, 1)
-        tot["psnr"] += float(psnr(out, tgt).clamp(max=100.0).sum())
-        tot["ssim"] += float(ssim(out, tgt).sum())
-        tot["input_psnr"] += float(psnr(inp, tgt).clamp(max=100.0).sum())
-        tot["input_ssim"] += float(ssim(inp, tgt).sum())
+        tot["psnr"] += float(psnr_batch(out, tgt).clamp(max=100.0).sum())
+        tot["ssim"] += float(ssim_batch(out, tgt).sum())
+        tot["input_psnr"] += float(psnr_batch(inp, tgt).clamp(max=100.0).sum())
+        tot["input_ssim"] += float(ssim_batch(inp, tgt).sum())
         n += inp.shape[0]
     model.train(was_training)
     return {k: v / n for k, v in tot.items()} if n else {k: math.nan for k in tot}
