@@ -36,17 +36,15 @@ import sys
 from lensim.assets import DEFAULT_LENS
 from lensim.demo import DemoSettings
 from lensim.optics.lens_file import load_lens
-from lensim.psf.bank import compute_bank
+from lensim.psf.bank import BankSettings, build_bank
 from lensim.sensor.profile import DEFAULT_SENSOR, load_sensor
-from lensim.render.bank_cache import suggest_kernel_pixels
 
 if __name__ == "__main__":
-    s = DemoSettings.make(quick=False)
+    s = DemoSettings.make(quick=False)  # the demo's bank
     lens, sensor = load_lens(DEFAULT_LENS), load_sensor(DEFAULT_SENSOR)
-    kernel = suggest_kernel_pixels(lens, sensor.pixel_pitch_um, limit=41)
-    fields = [(k / (s.fields - 1)) ** 0.5 for k in range(s.fields)]
-    compute_bank(lens, sensor.pixel_pitch_um, kernel, fields=fields, wavelengths_nm=list(s.wavelengths_nm),
-                 response=sensor.spectral_response, pupil_samples=s.pupil_samples, workers=2, out_dir=sys.argv[1])
+    settings = BankSettings(fields=s.fields, wavelengths_nm=s.wavelengths_nm, pupil_samples=s.pupil_samples,
+                            kernel_limit=41)
+    build_bank(lens, sensor.pixel_pitch_um, settings, response=sensor.spectral_response, workers=2, out_dir=sys.argv[1])
 EOF
 "$PY" "$OUT/make_bank.py" "$OUT/bank"
 

@@ -17,6 +17,7 @@ _API = {
     "compute_psf": "lensim.psf.compute",
     "compute_bank": "lensim.psf.bank",
     "PSFBank": "lensim.psf.bank",
+    "BankSettings": "lensim.psf.bank",
     "load_sensor": "lensim.sensor.profile",
     "read_image": "lensim.images",
     "write_image": "lensim.images",

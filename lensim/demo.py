@@ -127,9 +127,8 @@ def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: i
     from lensim.evaluate.harness import builtin_method, checkpoint_method, evaluate
     from lensim.plots.lens import plot_layout, plot_spots
     from lensim.plots.bank import write_bank_figures
-    from lensim.psf.bank import compute_bank
+    from lensim.psf.bank import BankSettings, build_bank
     from lensim.report import edge_study, sample_crops, write_report
-    from lensim.render.bank_cache import suggest_kernel_pixels
 
     say = say or (lambda msg: None)
     step = progress or (lambda done, total: None)
@@ -150,11 +149,10 @@ def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: i
 
     t = time.perf_counter()
     say("PSF bank")
-    kernel = suggest_kernel_pixels(lens, sensor.pixel_pitch_um, limit=41)
-    fields = [(k / (settings.fields - 1)) ** 0.5 for k in range(settings.fields)]
-    bank = compute_bank(lens, sensor.pixel_pitch_um, kernel, fields=fields, wavelengths_nm=list(settings.wavelengths_nm),
-                        response=sensor.spectral_response, pupil_samples=settings.pupil_samples, workers=workers,
-                        out_dir=out / "bank", progress=step)
+    bank_settings = BankSettings(fields=settings.fields, wavelengths_nm=settings.wavelengths_nm,
+                                 pupil_samples=settings.pupil_samples, kernel_limit=41)
+    bank = build_bank(lens, sensor.pixel_pitch_um, bank_settings, response=sensor.spectral_response,
+                      out_dir=out / "bank", workers=workers, progress=step)
     write_bank_figures(bank, figs)
     timings["bank"] = time.perf_counter() - t
 
@@ -193,7 +191,7 @@ def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: i
         "lens": summary,
         "sensor": {"name": sensor.name, "pixel_pitch_um": sensor.pixel_pitch_um, "resolution": list(sensor.resolution)},
         "settings": {**asdict(settings), "quick": quick, "seed": seed, "workers": workers, "device": device,
-                     "kernel_pixels": kernel},
+                     "kernel_pixels": bank.kernel_pixels},
         "bank": {"fields": [float(f.field) for f in bank.fields],
                  "image_height_mm": [float(r) for r in bank.radii_mm],
                  "strehl": [float(f.strehl) for f in bank.fields],

@@ -86,17 +86,3 @@ class StageBars:
         if self.bars is not None and self.task is not None:
             self.bars.update(self.task, completed=done, total=total)
 
-
-def parse_wavelengths(text: str) -> list[float]:
-    """'start:stop:step' (nm) or a comma list -> wavelengths in nm."""
-    from lensim.errors import InputError
-
-    try:
-        if ":" in text:
-            start, stop, step = (float(v) for v in text.split(":"))
-            if step <= 0 or stop < start:
-                raise ValueError
-            return [start + i * step for i in range(int(round((stop - start) / step)) + 1)]
-        return [float(v) for v in text.split(",")]
-    except ValueError:
-        raise InputError("--wavelengths-nm", None, f"expected start:stop:step or a comma list in nm, got {text!r}") from None

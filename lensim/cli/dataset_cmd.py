@@ -6,8 +6,9 @@ from pathlib import Path
 import typer
 
 from lensim import assets
-from lensim.cli.common import console, parse_wavelengths, print_json, progress_bar
-from lensim.cli.simulate_cmd import cached_bank
+from lensim.cli.bank_options import (bank_settings, cache_option, cached_bank, fields_option, pupil_samples_option,
+                                     wavelengths_option)
+from lensim.cli.common import console, print_json, progress_bar
 from lensim.data.pairs import make_dataset
 from lensim.optics.lens_file import load_lens
 from lensim.psf.bank import PSFBank
@@ -30,12 +31,12 @@ def make(
     noise: bool = typer.Option(True, "--noise/--no-noise", help="Add shot and read noise."),
     demosaic: str = typer.Option("ahd", "--demosaic", help="ahd, malvar, menon or bilinear."),
     bank_dir: Path = typer.Option(None, "--bank", help="A PSF bank at the sensor's pitch (default: computed and cached)."),
-    fields: int = typer.Option(32, "--fields", help="Radial fields of a computed bank."),
-    wavelengths: str = typer.Option("400:700:20", "--wavelengths-nm", help="Bank wavelengths, start:stop:step in nm."),
-    pupil_samples: int = typer.Option(128, "--pupil-samples", help="Pupil samples of a computed bank."),
+    fields: int = fields_option(),
+    wavelengths: str = wavelengths_option(),
+    pupil_samples: int = pupil_samples_option(),
     workers: int = typer.Option(1, "--workers", help="Worker processes (a local Dask cluster when > 1)."),
     scheduler: str = typer.Option(None, "--scheduler", help="Address of an existing Dask scheduler to run on."),
-    cache: Path = typer.Option(None, "--cache", help="Bank cache folder (default $LENSIM_CACHE or ~/.cache/lensim)."),
+    cache: Path = cache_option(),
     quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
     json_out: bool = typer.Option(False, "--json", help="Print a summary as JSON."),
 ) -> None:
@@ -46,13 +47,14 @@ def make(
 
     Example: lensim dataset make photos/ --lens cooke_triplet --sensor apsc_mirrorless -o data/ --crops 8 --size 256 --placements 3
     """
+    settings = bank_settings(fields, wavelengths, pupil_samples, cache)
     lens = load_lens(lens_file)
     sensor = load_sensor(sensor_file)
+    quiet = quiet or json_out
     if bank_dir is not None:
         bank = PSFBank.load(bank_dir)
     else:
-        bank = cached_bank(lens, sensor.pixel_pitch_um, sensor, fields, parse_wavelengths(wavelengths), pupil_samples,
-                           workers, cache, quiet)
+        bank = cached_bank(lens, sensor.pixel_pitch_um, sensor, settings, workers, quiet)
     prog, cb = progress_bar("pairs", "photos", quiet)
     if prog:
         prog.start()

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import typer
 
+from lensim.cli.bank_options import bank_settings, fields_option, pupil_samples_option, wavelengths_option
 from lensim.cli.common import console, print_json, progress_bar
 from lensim.io import atomic_write_bytes
 from lensim.optics.lens_file import load_lens
@@ -61,14 +62,14 @@ def bank(
                                "the spectral response."),
     pixel_um: float = typer.Option(None, "--pixel-um", help="Sensor pixel pitch in um (instead of --sensor)."),
     kernel: int = typer.Option(0, "--kernel", help="Kernel size in pixels (odd; 0: sized from the lens's spots)."),
-    fields: int = typer.Option(64, "--fields", help="Number of radial fields 0..1 (sqrt-spaced, denser towards the edge)."),
-    wavelengths_nm: str = typer.Option("400:700:10", "--wavelengths-nm", help="START:STOP:STEP or a comma list, in nm."),
+    fields: int = fields_option(),
+    wavelengths_nm: str = wavelengths_option(),
     response: str = typer.Option(None, "--response",
                                  help="Camera spectral sensitivities: a colour-science camera name or a CSV file "
                                  "(wavelength_nm,r,g,b). Default: the sensor's, else Nikon 5100 (NPL)."),
     illuminant: str = typer.Option("E", "--illuminant", help="E (equal energy), D65, A, ... (colour-science names)."),
     method: str = typer.Option("huygens", "--method", help=f"One of {', '.join(METHODS)}."),
-    pupil_samples: int = typer.Option(64, "--pupil-samples", help="Pupil grid samples across the diameter."),
+    pupil_samples: int = pupil_samples_option(),
     max_spacing_um: float = typer.Option(None, "--max-spacing-um",
                                          help="Largest fine PSF spacing in um (default: half the Airy radius at the shortest wavelength)."),
     aiming: str = typer.Option("real", "--aiming", help="Ray aiming: real or paraxial."),
@@ -81,15 +82,17 @@ def bank(
     response and the lens's relative illumination, stored as OUTPUT/manifest.json and one
     OUTPUT/field_XXXX.npz per field. Rerun the same command to resume after an interruption.
 
+    The bank options and their defaults are those of `simulate` and `dataset make`
+    (lensim.psf.bank.BankSettings).
+
     Example: lensim psf bank --lens cooke_triplet --sensor apsc_mirrorless --fields 64 --workers 2 -o bank/
     """
     import time
 
     from lensim.errors import InputError
-    from lensim.psf.bank import compute_bank, default_fields
-    from lensim.psf.spectral import DEFAULT_CAMERA, parse_wavelengths_nm
+    from lensim.psf.bank import build_bank
+    from lensim.psf.spectral import DEFAULT_CAMERA
     from lensim.sensor.profile import load_sensor
-    from lensim.render.bank_cache import suggest_kernel_pixels
 
     if lens_file and lens_opt and lens_file != lens_opt:
         raise InputError("<command line>", "lens", f"given twice ({lens_file!r} and --lens {lens_opt!r}); expected one")
@@ -98,18 +101,16 @@ def bank(
         raise InputError("<command line>", "lens", "missing; expected a lens file or built-in name (argument or --lens)")
     if (sensor is None) == (pixel_um is None):
         raise InputError("<command line>", "--sensor/--pixel-um", "expected exactly one of them")
+    settings = bank_settings(fields, wavelengths_nm, pupil_samples, aiming=aiming, kernel_pixels=kernel or None)
     lens = load_lens(name)
     profile = load_sensor(sensor) if sensor is not None else None
     pitch = profile.pixel_pitch_um if profile is not None else float(pixel_um)
     response = response or (profile.spectral_response if profile is not None else DEFAULT_CAMERA)
-    kernel = kernel or suggest_kernel_pixels(lens, pitch)
-    wl = parse_wavelengths_nm(wavelengths_nm)
     t0 = time.time()
     prog, report = progress_bar("PSF bank", "fields", quiet or json_out)
     with prog or contextlib.nullcontext():
-        result = compute_bank(lens, pitch, kernel, fields=default_fields(fields), wavelengths_nm=wl, response=response,
-                              method=method, pupil_samples=pupil_samples, max_spacing_um=max_spacing_um, aiming=aiming,
-                              workers=workers, out_dir=output, progress=report, illuminant=illuminant)
+        result = build_bank(lens, pitch, settings, response=response, out_dir=output, workers=workers, progress=report,
+                            method=method, max_spacing_um=max_spacing_um, illuminant=illuminant)
     m = result.manifest
     info = {"bank": str(output), "lens": lens.source, "sensor": sensor, "fields": len(m["fields"]),
             "wavelengths": len(m["wavelengths_nm"]), "kernel_pixels": m["kernel_pixels"],

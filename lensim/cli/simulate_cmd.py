@@ -2,45 +2,24 @@
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import torch
 import typer
 
 from lensim import assets
-from lensim.cli.common import console, parse_wavelengths, print_json, progress_bar
+from lensim.cli.bank_options import (bank_settings, cache_option, cached_bank, fields_option, pupil_samples_option,
+                                     wavelengths_option)
+from lensim.cli.common import console, print_json
 from lensim.errors import InputError
 from lensim.images import read_image, write_image
 from lensim.io import atomic_write_text
 from lensim.optics.lens_file import load_lens
 from lensim.psf.bank import PSFBank
-from lensim.render.bank_cache import ensure_bank
 from lensim.render.kernels import check_bank_fits
 from lensim.render.mapping import map_to_sensor
 from lensim.render.pipeline import simulate
 from lensim.sensor.profile import load_sensor
-
-
-def default_cache_dir() -> Path:
-    """Where computed PSF banks are cached: $LENSIM_CACHE or ~/.cache/lensim."""
-    return Path(os.environ.get("LENSIM_CACHE", Path.home() / ".cache" / "lensim"))
-
-
-def cached_bank(lens, pitch_um: float, sensor, fields: int, wavelengths_nm: list[float], pupil_samples: int,
-                workers: int, cache: Path | None, quiet: bool) -> PSFBank:
-    """The lens's bank at this pitch with the sensor's spectral response, from the cache or
-    computed into it, with a progress bar."""
-    prog, cb = progress_bar("PSF bank", "fields", quiet)
-    if prog:
-        prog.start()
-    try:
-        return ensure_bank(lens, pitch_um, cache or default_cache_dir(), progress=cb,
-                           fields=[(k / (fields - 1)) ** 0.5 for k in range(fields)], wavelengths_nm=wavelengths_nm,
-                           response=sensor.spectral_response, pupil_samples=pupil_samples, workers=workers)
-    finally:
-        if prog:
-            prog.stop()
 
 
 def simulate_command(
@@ -58,11 +37,11 @@ def simulate_command(
     bits: int = typer.Option(8, "--bits", help="Output bit depth: 8 or 16."),
     fmt: str = typer.Option("png", "--format", help="Output file type: png or tif."),
     raw: bool = typer.Option(False, "--raw", help="Also write the noisy Bayer mosaic as a 16-bit TIFF (+ JSON metadata)."),
-    fields: int = typer.Option(32, "--fields", help="Radial fields of a computed bank."),
-    wavelengths: str = typer.Option("400:700:20", "--wavelengths-nm", help="Bank wavelengths, start:stop:step in nm."),
-    pupil_samples: int = typer.Option(64, "--pupil-samples", help="Pupil samples of a computed bank."),
+    fields: int = fields_option(),
+    wavelengths: str = wavelengths_option(),
+    pupil_samples: int = pupil_samples_option(),
     workers: int = typer.Option(1, "--workers", help="Processes for the bank."),
-    cache: Path = typer.Option(None, "--cache", help="Bank cache folder (default $LENSIM_CACHE or ~/.cache/lensim)."),
+    cache: Path = cache_option(),
     quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
     json_out: bool = typer.Option(False, "--json", help="Print what was written and drawn as JSON."),
 ) -> None:
@@ -70,14 +49,17 @@ def simulate_command(
 
     Each image is mapped onto the whole sensor (centred, the limiting side spanning it), so
     every pixel has a physical field position; the PSF bank is computed at that effective
-    pitch and cached. Writes OUT/<name>.png and OUT/<name>.json (the draws: colour
+    pitch and cached (the bank options are those of `psf bank` and `dataset make`, with the
+    same defaults). Writes OUT/<name>.png and OUT/<name>.json (the draws: colour
     temperature, noise levels, seed).
 
     Example: lensim simulate photo.png --lens cooke_triplet --sensor apsc_mirrorless -o sim/
     """
+    settings = bank_settings(fields, wavelengths, pupil_samples, cache)
+    if fmt not in ("png", "tif"):
+        raise InputError("--format", None, f"expected png or tif, got {fmt!r}")
     lens = load_lens(lens_file)
     sensor = load_sensor(sensor_file)
-    wls = parse_wavelengths(wavelengths)
     banks: dict[tuple[int, int], PSFBank] = {}
     results = []
     for i, path in enumerate(images):
@@ -90,15 +72,12 @@ def simulate_command(
                 bank = banks.setdefault((h, w), PSFBank.load(bank_dir))
                 check_bank_fits(bank, mapping, str(bank_dir))
             elif (h, w) not in banks:
-                banks[(h, w)] = cached_bank(lens, mapping.pitch_um, sensor, fields, wls, pupil_samples, workers, cache,
-                                            quiet)
+                banks[(h, w)] = cached_bank(lens, mapping.pitch_um, sensor, settings, workers, quiet or json_out)
             bank = banks.get((h, w), bank)
         gen = torch.Generator().manual_seed(seed + i)
         raw_path = output / (path.stem + "_raw.tif") if raw else None
         out, params = simulate(img, bank, sensor, gen, blur=blur, noise=noise, relative_illumination=shading,
                                demosaic=demosaic, bits=bits, raw_path=raw_path, distortion=distortion)
-        if fmt not in ("png", "tif"):
-            raise InputError("--format", None, f"expected png or tif, got {fmt!r}")
         target = output / f"{path.stem}.{fmt}"
         write_image(target, out, bits)
         info = {"input": str(path), "output": str(target), "seed": seed + i, "lens": lens.source, "sensor": sensor.name,

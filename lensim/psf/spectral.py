@@ -67,26 +67,6 @@ class SpectralResponse:
         }
 
 
-def parse_wavelengths_nm(spec: str) -> np.ndarray:
-    """'400:700:10' (start:stop:step, stop included when on the grid) or '450,550,650'
-    to an array of wavelengths in nm."""
-    text = spec.strip()
-    try:
-        if ":" in text:
-            parts = [float(p) for p in text.split(":")]
-            if len(parts) != 3 or parts[2] <= 0 or parts[1] < parts[0]:
-                raise ValueError
-            n = int(math.floor((parts[1] - parts[0]) / parts[2] + 1e-9)) + 1
-            out = parts[0] + parts[2] * np.arange(n)
-        else:
-            out = np.asarray([float(p) for p in text.split(",") if p.strip()])
-    except ValueError:
-        raise InputError(None, "wavelengths-nm", f"expected START:STOP:STEP (e.g. 400:700:10) or a comma list, got {spec!r}") from None
-    if out.size == 0:
-        raise InputError(None, "wavelengths-nm", f"expected at least one wavelength, got {spec!r}")
-    return out
-
-
 def camera_names() -> list[str]:
     """Names of the measured cameras colour-science ships."""
     import colour

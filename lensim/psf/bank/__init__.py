@@ -24,18 +24,21 @@ field, each written atomically. Rerunning with the same settings skips the field
 on disk (resume after a kill); different settings are refused.
 
 Modules: types (BankField, PSFBank and its kernel lookup), store (manifest, field files,
-resume guard), compute (per-field work and the executor), settings (field sampling).
+resume guard), compute (per-field work, the executor, build_bank), settings (BankSettings:
+what a bank is asked for; field positions, the wavelength parser, kernel sizing).
 Kernel rotation lives in lensim.render.rotation, the bank's figures in lensim.plots.bank.
 
 Units: lengths mm, pixel pitch and PSF spacing um, wavelengths nm in the manifest and the
 API of this module (um inside the optics code), angles in degrees.
 """
-from lensim.psf.bank.compute import alias_free_pixels, compute_bank, embed_centred
-from lensim.psf.bank.settings import DEFAULT_FIELDS, default_fields
+from lensim.psf.bank.compute import alias_free_pixels, build_bank, compute_bank, embed_centred
+from lensim.psf.bank.settings import (DEFAULT_FIELDS, BankSettings, default_fields, parse_wavelengths_nm,
+                                      suggest_kernel_pixels)
 from lensim.psf.bank.store import FORMAT, FORMAT_VERSION, MANIFEST, field_file, read_manifest
 from lensim.psf.bank.types import BankField, Progress, PSFBank
 
 __all__ = [
-    "DEFAULT_FIELDS", "FORMAT", "FORMAT_VERSION", "MANIFEST", "BankField", "PSFBank", "Progress", "alias_free_pixels",
-    "compute_bank", "default_fields", "embed_centred", "field_file", "read_manifest",
+    "DEFAULT_FIELDS", "FORMAT", "FORMAT_VERSION", "MANIFEST", "BankField", "BankSettings", "PSFBank", "Progress",
+    "alias_free_pixels", "build_bank", "compute_bank", "default_fields", "embed_centred", "field_file",
+    "parse_wavelengths_nm", "read_manifest", "suggest_kernel_pixels",
 ]

@@ -10,6 +10,7 @@ from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -18,7 +19,7 @@ from lensim.errors import InputError
 from lensim.optics.lens import Lens
 from lensim.optics.lens_file import lens_to_dict
 from lensim.optics.paraxial import ParaxialData, paraxial_data, paraxial_image_height
-from lensim.psf.bank.settings import default_fields
+from lensim.psf.bank.settings import BankSettings, default_fields
 from lensim.psf.bank.store import (FORMAT, FORMAT_VERSION, lensim_version, open_bank_directory, read_manifest,
                                    write_field)
 from lensim.psf.bank.types import BankField, Progress, PSFBank
@@ -366,3 +367,14 @@ def compute_bank(
     _run_fields(job, [(i, float(flds[i])) for i in range(total) if i not in done], workers, para, finish)
     return PSFBank(manifest if directory is None else (read_manifest(directory) or manifest),
                    [done[i] for i in range(total)], directory)
+
+
+def build_bank(lens: Lens, pixel_pitch_um: float, settings: BankSettings, response: str | Path | None = None,
+               out_dir: str | Path | None = None, workers: int = 1, progress: Progress | None = None,
+               **options: Any) -> PSFBank:
+    """The bank `settings` ask for, for this lens at this pixel pitch (um) and spectral
+    response (compute_bank's): the kernel sized by settings.kernel_size, the fields,
+    wavelengths, pupil samples and aiming from the settings. options: compute_bank's
+    other keywords (method, max_spacing_um, illuminant, ri_samples)."""
+    return compute_bank(lens, pixel_pitch_um, settings.kernel_size(lens, pixel_pitch_um), response=response,
+                        workers=workers, out_dir=out_dir, progress=progress, **settings.compute_options(), **options)
