@@ -189,7 +189,7 @@ def object_field(lens: Lens, value: float, aiming: Aiming = "paraxial", para: Pa
         return float(value)
     if value == 0:
         return 0.0
-    probe_lens = lens.with_changes(field_type="angle" if lens.infinite_object else "object_height")
+    probe_lens = lens.launch_lens()
     # paraxial image height per unit of tan(angle) (infinite object) or object height
     unit = 1e-3
     probe = math.degrees(math.atan(unit)) if lens.infinite_object else unit
@@ -230,7 +230,7 @@ def chief_ray_image_height(lens: Lens, field_value: float, aiming: Aiming = "rea
 
 def describe_failure(lens: Lens, field_value: float, fail, what: str) -> str:
     """One line: which ray failed, where and how."""
-    unit = "deg" if (lens.infinite_object or lens.field_type == "angle") else "mm"
+    unit = "deg" if lens.launch_field_type == "angle" else "mm"
     if fail is None:
         return (f"{lens.source}: fields: the {what} at field {field_value:g} {unit} could not be aimed through the stop; "
                 f"expected a field inside the lens's coverage")

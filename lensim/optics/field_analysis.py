@@ -29,14 +29,6 @@ def _default_fields(lens: Lens, fields) -> list[float]:
     return out
 
 
-def _launch_lens(lens: Lens) -> Lens:
-    """The lens with its field type set to what rays are launched with (angle or object
-    height), so launch values from object_field() are read the right way."""
-    if lens.field_type in ("angle", "object_height"):
-        return lens
-    return lens.with_changes(field_type="angle" if lens.infinite_object else "object_height")
-
-
 def _field_unit(lens: Lens) -> str:
     return "deg" if lens.field_type == "angle" else "mm"
 
@@ -63,7 +55,7 @@ def distortion(
     para = paraxial_data(lens)
     wl = lens.primary_wavelength_um if wavelength_um is None else float(wavelength_um)
     para_wl = para if wl == para.wavelength_um else paraxial_data(lens, wl)
-    probe = _launch_lens(lens)
+    probe = lens.launch_lens()
     launch, real, parax, dist = [], [], [], []
     for f in flds:
         lv = object_field(lens, f, aiming, para)

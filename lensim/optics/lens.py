@@ -232,6 +232,21 @@ class Lens:
         """First vertex to image plane (mm)."""
         return float(self.vertex_z()[-1])
 
+    @property
+    def launch_field_type(self) -> str:
+        """What rays are launched with: "angle" (deg) for an object at infinity or for angle
+        fields, "object_height" (mm) for a finite object otherwise. Image-height fields are
+        solved for a launch value of this type (lensim.optics.aiming.object_field)."""
+        return "angle" if self.infinite_object or self.field_type == "angle" else "object_height"
+
+    def launch_lens(self) -> "Lens":
+        """This lens with field_type set to :attr:`launch_field_type`, so that launch values
+        (from object_field) are read the right way by functions that take a field in the
+        lens's unit (paraxial_image_height, chief_ray_image_height). The lens itself when
+        its field type already is the launch type; otherwise a copy (surfaces shared)."""
+        launch_type = self.launch_field_type
+        return self if self.field_type == launch_type else self.with_changes(field_type=launch_type)
+
     def with_changes(self, **changes) -> "Lens":
         """A copy with some top-level attributes replaced (surfaces are shared)."""
         from dataclasses import replace

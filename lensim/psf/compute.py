@@ -110,7 +110,7 @@ def compute_psf(
     fn = {"huygens": huygens_psf, "fft": fft_psf, "geometric": geometric_psf}[method]
     data = fn(pf, grid, spacing_um, offset_mm)
     launch = object_field(lens, value, aiming, para)
-    para_y = paraxial_image_height(lens.with_changes(field_type="angle" if lens.infinite_object or lens.field_type == "angle" else "object_height"), launch, para)
+    para_y = paraxial_image_height(lens.launch_lens(), launch, para)
     arr = data.numpy()
     figures = {
         "strehl": strehl_ratio(data, pf, spacing_um) if method != "geometric" else None,

@@ -58,10 +58,6 @@ def _psf_fn(method: str) -> Callable:
     return {"huygens": huygens_psf, "fft": fft_psf, "geometric": geometric_psf}[method]
 
 
-def _launch_lens(lens: Lens) -> Lens:
-    return lens.with_changes(field_type="angle" if lens.infinite_object or lens.field_type == "angle" else "object_height")
-
-
 def alias_free_pixels(pf: PupilField, kernel_pixels: int, pixel_pitch_um: float, method: str) -> int:
     """The odd number of kernel pixels (<= kernel_pixels) whose window the pupil sampling
     resolves without wrap-around: a pupil grid of N samples repeats a diffraction PSF every
@@ -154,7 +150,7 @@ def _compute_field(job: _Job, index: int, fld: float, para: ParaxialData | None 
     work = _FieldWork(job, fld, para)
     primary_pf = work.trace(job.primary_um)
     ref = primary_pf.chief[:2].clone()
-    para_y = paraxial_image_height(_launch_lens(lens), object_field(lens, work.value, job.aiming, para), para)
+    para_y = paraxial_image_height(lens.launch_lens(), object_field(lens, work.value, job.aiming, para), para)
     W, P = len(job.wavelengths_um), job.kernel_pixels
     rgb = np.zeros((3, P, P))
     offsets, ri, trans, window = np.zeros((W, 2)), np.zeros(W), np.zeros(W), np.zeros(W)
