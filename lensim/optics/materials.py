@@ -189,11 +189,6 @@ def resolve_glass(name: str, catalogs: tuple[str, ...] | list[str] | None = None
     raise UnknownGlassError(None, "material", f"unknown glass {name!r} (searched {', '.join(everywhere)}); close names: {hint}")
 
 
-def find_glass(name: str, catalogs: tuple[str, ...] | list[str] | None = None) -> CatalogGlass:
-    """resolve_glass() without the note."""
-    return resolve_glass(name, catalogs)[0]
-
-
 def material_from_spec(spec, catalogs: list[str] | None = None, notes: list[str] | None = None) -> Material:
     """Build a material from its native-file form.
 

@@ -52,16 +52,14 @@ import torch
 import torch.nn.functional as F
 
 from lensim.errors import InputError
+from lensim.sensor.calibration import SRGB_TO_XYZ
 from lensim.sensor.profile import BAYER_PATTERNS, SensorProfile
 
 EPS = 1e-8
 DEMOSAIC_METHODS = ("ahd", "malvar", "menon", "bilinear")
 _CHANNEL = {"R": 0, "G": 1, "B": 2}
 
-# Linear sRGB (D65) -> CIE XYZ (IEC 61966-2-1) and the D65 white in XYZ (Y = 1).
-SRGB_TO_XYZ = torch.tensor([[0.4124564, 0.3575761, 0.1804375],
-                            [0.2126729, 0.7151522, 0.0721750],
-                            [0.0193339, 0.1191920, 0.9503041]], dtype=torch.float64)
+# The D65 white in XYZ (Y = 1); linear sRGB -> XYZ is calibration.SRGB_TO_XYZ.
 D65_XYZ = (0.95047, 1.0, 1.08883)
 
 
@@ -398,7 +396,7 @@ def demosaic_ahd(raw: torch.Tensor, pattern: str, rgb_to_xyz: torch.Tensor | Any
     _check_size(h, w)
     p = _check_pattern(pattern)
     passes = max(0, int(median_passes))
-    to_xyz = (SRGB_TO_XYZ if rgb_to_xyz is None else torch.as_tensor(rgb_to_xyz, dtype=torch.float64)).tolist()
+    to_xyz = SRGB_TO_XYZ.tolist() if rgb_to_xyz is None else torch.as_tensor(rgb_to_xyz, dtype=torch.float64).tolist()
     halo = 2 * ((6 + 2 * passes + 1) // 2)  # even, more than the reach: 2 + 1 + 1 + 1 + 2 per pass
     step = max(2, 2 * (int(block_rows) // 2))
     out = torch.empty(3, h, w, dtype=raw.dtype, device=raw.device)
@@ -524,7 +522,7 @@ def raw_to_srgb(raw: torch.Tensor, params: CaptureParams, method: str = "ahd", b
     wb = white_balance_mosaic(raw, params.bayer_pattern, params.r_gain, params.b_gain)
     kwargs: dict[str, Any] = {}
     if str(method).lower() == "ahd":  # AHD's CIELab through the camera's own colour matrix
-        kwargs["rgb_to_xyz"] = SRGB_TO_XYZ @ torch.tensor(params.ccm, dtype=torch.float64)
+        kwargs["rgb_to_xyz"] = torch.from_numpy(SRGB_TO_XYZ) @ torch.tensor(params.ccm, dtype=torch.float64)
     rgb = demosaic(wb, params.bayer_pattern, method, **kwargs)
     return process(rgb, params, bits=bits, white_balanced=True)
 

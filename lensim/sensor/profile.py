@@ -166,10 +166,6 @@ class SensorProfile:
         w, h = self.sensor_size_mm
         return 0.5 * math.hypot(w, h)
 
-    def ccm_tensor(self, dtype: torch.dtype = torch.float32, device: torch.device | str | None = None) -> torch.Tensor:
-        """The 3x3 CCM (camera RGB -> linear sRGB) as a tensor."""
-        return torch.tensor(self.ccm, dtype=dtype, device=device)
-
     def wb_gains(self, kelvin: float) -> tuple[float, float]:
         """(r_gain, b_gain) at a colour temperature (K), linearly interpolated in mired
         (1e6 / K) between the table's entries and held constant beyond its ends."""
