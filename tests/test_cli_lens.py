@@ -222,6 +222,28 @@ def test_spot_json_of_a_paraboloid_is_perfect_on_axis(tmp_path, capsys, monkeypa
     assert d["output"] is None
 
 
+def test_spot_fields_normalized_in_degrees_or_as_image_height(capsys, monkeypatch):
+    def chief_y(*field_args: str) -> tuple[float, dict]:
+        code, out, err = run_cli(["lens", "spot", "cooke_triplet", "--json", "--aiming", "real", *field_args],
+                                 capsys, monkeypatch)
+        assert code == 0, err
+        f = json.loads(out)["fields"][0]
+        return f["wavelengths"][load_lens("cooke_triplet").primary]["chief_y_mm"], f
+
+    # --field is normalized (1 = the triplet's 20 deg), --field-deg an angle
+    full, f = chief_y("--field", "1")
+    assert f["field"] == 20.0 and f["field_unit"] == "deg"
+    assert chief_y("--field-deg", "20")[0] == pytest.approx(full, abs=1e-12)
+    # --image-height-mm: the real chief ray lands at the asked height
+    height, f = chief_y("--image-height-mm", "12.5")
+    assert height == pytest.approx(12.5, abs=1e-8) and f["field_unit"] == "mm"
+    code, _, err = run_cli(["lens", "spot", "cooke_triplet", "--json", "--field", "1", "--field-deg", "20"],
+                           capsys, monkeypatch)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "--field-deg" in err
+    code, _, err = run_cli(["lens", "plot", "cooke_triplet", "-o", "x.png", "--field", "1.5"], capsys, monkeypatch)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "between 0 and 1" in err
+
+
 def test_spot_needs_an_output_or_json(capsys, monkeypatch):
     code, out, err = run_cli(["lens", "spot", "cooke_triplet"], capsys, monkeypatch)
     assert code == 2

@@ -12,6 +12,7 @@ from rich.table import Table
 from lensim.cli.common import console, print_json
 from lensim.errors import InputError
 from lensim.optics.analysis import first_order_summary
+from lensim.optics.lens import Lens
 from lensim.optics.lens_file import load_lens, save_lens
 from lensim.optics.materials import Air
 
@@ -106,8 +107,35 @@ class ReferenceChoice(str, Enum):
     centroid = "centroid"
 
 
-FIELD_OPT_HELP = ("Field to show, in the lens's field unit (deg or mm); repeat for several. "
-                  "Default: the lens's own fields.")
+FIELD_HELP = ("Normalized field to show, 0..1 of the lens's maximum field along +y; repeat for several. "
+              "Default: the lens's own fields.")
+FIELD_DEG_HELP = "Field to show as an object-space angle (deg, below 90); repeat for several."
+IMAGE_HEIGHT_HELP = "Field to show as the real chief ray's image height (mm); repeat for several."
+
+
+def fields_to_show(lens: Lens, field: list[float] | None, field_deg: list[float] | None,
+                   image_height_mm: list[float] | None) -> tuple[Lens, list[float] | None]:
+    """The lens to trace and its field values for --field (normalized 0..1, in the lens's
+    own unit), --field-deg (an angle, deg) or --image-height-mm (the real chief ray's image
+    height, mm; solved for): at most one of them. (lens, None) when none is given: the
+    lens's own fields."""
+    given = [name for name, v in (("--field", field), ("--field-deg", field_deg), ("--image-height-mm", image_height_mm))
+             if v]
+    if len(given) > 1:
+        raise InputError(None, given[1], f"expected one of --field, --field-deg, --image-height-mm, got {' and '.join(given)}")
+    if field:
+        from lensim.psf.compute import field_in_lens_units
+
+        return lens, [field_in_lens_units(lens, f) for f in field]
+    if field_deg:
+        if any(not (math.isfinite(f) and abs(f) < 90.0) for f in field_deg):
+            raise InputError(None, "--field-deg", f"expected angles below 90 deg, got {', '.join(f'{f:g}' for f in field_deg)}")
+        return lens.with_changes(field_type="angle", fields=list(field_deg)), list(field_deg)
+    if image_height_mm:
+        if any(not math.isfinite(f) for f in image_height_mm):
+            raise InputError(None, "--image-height-mm", "expected finite image heights (mm)")
+        return lens.with_changes(field_type="real_image_height", fields=list(image_height_mm)), list(image_height_mm)
+    return lens, None
 
 
 @lens_app.command("plot")
@@ -116,18 +144,20 @@ def plot(
     output: Path = typer.Option(..., "-o", "--output", help="Image to write (.png, .pdf or .svg)."),
     aiming: AimingChoice = typer.Option(AimingChoice.real, help="Ray aiming for the ray fans."),
     rays: int = typer.Option(7, "--rays", min=1, max=101, help="Meridional rays per field, spread across the pupil."),
-    field: Optional[list[float]] = typer.Option(None, "--field", help=FIELD_OPT_HELP),
+    field: Optional[list[float]] = typer.Option(None, "--field", help=FIELD_HELP),
+    field_deg: Optional[list[float]] = typer.Option(None, "--field-deg", help=FIELD_DEG_HELP),
+    image_height_mm: Optional[list[float]] = typer.Option(None, "--image-height-mm", help=IMAGE_HEIGHT_HELP),
 ) -> None:
     """Draw the lens layout: a y-z cross-section with a fan of rays per field.
 
     Lengths in mm, primary wavelength; vignetted rays end where they are blocked.
 
-    Example: lensim lens plot cooke_triplet -o layout.png --rays 9
+    Example: lensim lens plot cooke_triplet -o layout.png --rays 9 --field 0 --field 0.7 --field 1
     """
     from lensim.plots.lens import plot_layout
 
-    lens = load_lens(lens_file)
-    plot_layout(lens, fields=field or None, rays_per_field=rays, aiming=aiming.value, path=output)
+    lens, fields = fields_to_show(load_lens(lens_file), field, field_deg, image_height_mm)
+    plot_layout(lens, fields=fields, rays_per_field=rays, aiming=aiming.value, path=output)
     console.print(f"wrote {output}", highlight=False)
 
 
@@ -138,7 +168,9 @@ def spot(
     aiming: AimingChoice = typer.Option(AimingChoice.paraxial, help="Ray aiming."),
     json_out: bool = typer.Option(False, "--json", help="Print, per field and wavelength, the RMS spot radius (um) "
                                   "and the chief-ray position on the image plane (mm) as JSON."),
-    field: Optional[list[float]] = typer.Option(None, "--field", help=FIELD_OPT_HELP),
+    field: Optional[list[float]] = typer.Option(None, "--field", help=FIELD_HELP),
+    field_deg: Optional[list[float]] = typer.Option(None, "--field-deg", help=FIELD_DEG_HELP),
+    image_height_mm: Optional[list[float]] = typer.Option(None, "--image-height-mm", help=IMAGE_HEIGHT_HELP),
     reference: ReferenceChoice = typer.Option(ReferenceChoice.chief, help="Centre of the spots and of the RMS radius: "
                                               "the chief ray or the centroid."),
 ) -> None:
@@ -146,16 +178,16 @@ def spot(
 
     Give -o to draw them (axes in um, Airy disk dashed), --json to print the numbers, or both.
 
-    Example: lensim lens spot cooke_triplet -o spot.png --json
+    Example: lensim lens spot cooke_triplet -o spot.png --json --image-height-mm 0 --image-height-mm 14.1
     """
-    from lensim.plots.lens import SPOT_RINGS, airy_radius_um, plot_spots, spot_summary
     from lensim.optics.pupil import hexapolar
     from lensim.optics.spot import spot_diagram
+    from lensim.plots.lens import SPOT_RINGS, airy_radius_um, plot_spots, spot_summary
 
     if output is None and not json_out:
         raise InputError(None, "--output", "expected -o FILE (an image to write), --json, or both")
-    lens = load_lens(lens_file)
-    spots = spot_diagram(lens, field or None, None, hexapolar(SPOT_RINGS), aiming.value)
+    lens, fields = fields_to_show(load_lens(lens_file), field, field_deg, image_height_mm)
+    spots = spot_diagram(lens, fields, None, hexapolar(SPOT_RINGS), aiming.value)
     if output is not None:
         plot_spots(lens, aiming=aiming.value, path=output, reference=reference.value, spots=spots)
     if json_out:
