@@ -10,8 +10,8 @@ import pytest
 import torch
 
 from lensim.errors import InputError
-from lensim.raw.dng import (DngCamera, DngColour, DngExif, profile_colour, write_capture_dng, write_cfa_dng,
-                            write_linear_dng, write_srgb_as_linear_dng)
+from lensim.raw.dng import (DngCamera, DngColour, DngExif, profile_colour, read_simulation_record, write_capture_dng,
+                            write_cfa_dng, write_linear_dng, write_srgb_as_linear_dng)
 from lensim.sensor import isp
 from lensim.sensor.calibration import ccm_from_dng_color_matrix, dng_color_matrix_from_ccm
 from lensim.sensor.profile import load_sensor
@@ -121,7 +121,7 @@ def test_pidng_writes_what_libraw_reads_the_same(tmp_path: Path):
 def test_linear_dng_reads_back_in_libraw(tmp_path: Path):
     rng = np.random.default_rng(2)
     cam = rng.uniform(-0.05, 1.05, (3, 24, 30)).astype(np.float32)
-    colour = DngColour.from_gains(ILCE7_XYZ_TO_CAM, 2.0, 1.5)
+    colour = DngColour.from_gains(ILCE7_XYZ_TO_CAM, 2.0, 1.5, 21).with_second_matrix(ILCE7_XYZ_TO_CAM * 1.1, 17)
     path = write_linear_dng(tmp_path / "lin.dng", torch.from_numpy(cam), colour, CAMERA, orientation=6,
                             exif=DngExif(iso=100), block_rows=7)
     expected = np.rint(np.clip(cam, 0, 1) * 65535).astype(np.uint16).transpose(1, 2, 0)
@@ -131,6 +131,13 @@ def test_linear_dng_reads_back_in_libraw(tmp_path: Path):
         np.testing.assert_allclose(raw.color_matrix[:, :3], ccm_from_dng_color_matrix(ILCE7_XYZ_TO_CAM)[0], atol=1e-5)
         np.testing.assert_allclose(raw.camera_whitebalance[:3], [2.0, 1.0, 1.5], rtol=1e-6)
         assert raw.sizes.flip == 6 and raw.other.iso_speed == 100
+    import tifffile
+
+    with tifffile.TiffFile(path) as tf:
+        tags = tf.pages.first.tags
+        assert (tags["CalibrationIlluminant1"].value, tags["CalibrationIlluminant2"].value) == (21, 17)
+        m2 = np.array(tags["ColorMatrix2"].value, dtype=np.float64).reshape(9, 2)
+        np.testing.assert_allclose(m2[:, 0] / m2[:, 1], (ILCE7_XYZ_TO_CAM * 1.1).ravel(), atol=1e-6)
 
 
 def test_developed_photo_round_trips_through_linear_dng(tmp_path: Path):
@@ -153,6 +160,11 @@ def test_capture_dng_holds_the_simulated_adc_output(tmp_path: Path):
     cam, params = isp.unprocess(torch.rand(3, 24, 32, generator=g), prof, g)
     raw = isp.quantize_raw(isp.add_noise(isp.mosaic(cam, prof.bayer_pattern), 1e-3, 2e-3, g), prof)
     path = write_capture_dng(tmp_path / "c.dng", raw, prof, params)
+    record = read_simulation_record(path)
+    assert record is not None and record["sensor"] == prof.name and record["capture"]["r_gain"] == params.r_gain
+    assert (record["x0_mm"], record["pitch_um"]) == (-prof.sensor_size_mm[0] / 2, prof.pixel_pitch_um)
+    assert read_simulation_record(write_cfa_dng(tmp_path / "other.dng", _mosaic(24, 24, 4095), "RGGB", 0, 4095,
+                                                DngColour.from_gains(np.eye(3), 1, 1), CAMERA)) is None
     with rawpy.imread(str(path)) as r:
         back = (r.raw_image_visible.astype(np.float64) - prof.black_level) / (prof.white_level - prof.black_level)
         np.testing.assert_allclose(back, raw.numpy(), atol=1e-6)
@@ -172,3 +184,36 @@ def test_bad_arguments_write_nothing(tmp_path: Path, kwargs: dict, field: str):
                       camera=CAMERA, **args)
     assert err.value.field == field
     assert list(tmp_path.iterdir()) == []
+
+
+def test_simulate_writes_the_mosaic_it_develops(tmp_path: Path):
+    """simulate(raw_path=...) writes the mosaic its own develop chain ran on: LibRaw's
+    digital numbers, normalized, developed by raw_to_srgb give simulate's output."""
+    from lensim.render.mapping import native_mapping
+    from lensim.render.pipeline import simulate
+
+    prof = load_sensor("apsc_mirrorless")
+    photo = torch.rand(3, 32, 48, generator=torch.Generator().manual_seed(5))
+    mapping = native_mapping(32, 48, prof, 1000, 2000)
+    out, params = simulate(photo, None, prof, torch.Generator().manual_seed(6), blur=False, bits=None, mapping=mapping,
+                           raw_path=tmp_path / "s.dng")
+    with rawpy.imread(str(tmp_path / "s.dng")) as r:
+        dn = torch.from_numpy(r.raw_image_visible.astype(np.float32))
+    raw = (dn - prof.black_level) / (prof.white_level - prof.black_level)
+    assert float((isp.raw_to_srgb(raw, params, bits=None) - out).abs().max()) < 1e-6
+    record = read_simulation_record(tmp_path / "s.dng")
+    assert record is not None
+    assert (record["pitch_um"], record["x0_mm"], record["y0_mm"]) == (mapping.pitch_um, mapping.x0_mm, mapping.y0_mm)
+
+
+def test_simulate_command_writes_a_dng(tmp_path: Path, capsys, monkeypatch):
+    from cli_runner import run_cli
+    from lensim.images import write_image
+
+    write_image(tmp_path / "photo.png", torch.rand(3, 24, 36, generator=torch.Generator().manual_seed(7)))
+    code, _, err = run_cli(["simulate", str(tmp_path / "photo.png"), "-o", str(tmp_path / "out"), "--no-blur", "--raw",
+                            "--quiet"], capsys, monkeypatch)
+    assert code == 0, err
+    with rawpy.imread(str(tmp_path / "out" / "photo.dng")) as r:
+        assert r.raw_image_visible.shape == (24, 36) and _pattern_from_libraw(r) == "RGGB"
+    assert not list((tmp_path / "out").glob("*_raw*"))

@@ -243,23 +243,3 @@ def test_simulate_capture_is_deterministic_and_close_without_noise(natural):
     seen = []
     simulate_capture(x, prof, torch.Generator().manual_seed(9), blur=lambda c: seen.append(c.shape) or c)
     assert seen == [(3, 128, 192)]
-
-
-def test_raw_tiff_round_trip_with_metadata(tmp_path: Path):
-    pytest.importorskip("tifffile")
-    prof = load_sensor("fullframe_dslr")
-    raw = torch.rand(16, 24, generator=torch.Generator().manual_seed(4)) * 1.1 - 0.02
-    params = isp.CaptureParams(kelvin=5000.0, r_gain=2.4, b_gain=1.45, ccm=[list(r) for r in prof.ccm], shot=1e-3, read=2e-3)
-    f = isp.write_raw_tiff(tmp_path / "shot.tiff", raw, prof, params, extra={"image": "x.png"})
-    back, meta = isp.read_raw_tiff(f)
-    assert meta["bayer_pattern"] == "RGGB" and meta["black_level"] == 512 and meta["capture"]["kelvin"] == 5000.0
-    assert meta["extra"] == {"image": "x.png"}
-    scale = prof.white_level - prof.black_level
-    want = isp.quantize_raw(raw, prof)
-    assert torch.allclose(back, want, atol=1e-6)
-    assert (tmp_path / "shot.json").is_file()
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["shot.json", "shot.tiff"]  # no temporary left
-    import tifffile
-
-    assert tifffile.imread(f).dtype == np.uint16 and int(tifffile.imread(f).max()) <= prof.white_level
-    assert abs(float(back.max()) - 1.0) < 1.0 / scale

@@ -36,7 +36,8 @@ def simulate_command(
     demosaic: str = typer.Option("ahd", "--demosaic", help="ahd, malvar, menon or bilinear."),
     bits: int = typer.Option(8, "--bits", help="Output bit depth: 8 or 16."),
     fmt: str = typer.Option("png", "--format", help="Output file type: png or tif."),
-    raw: bool = typer.Option(False, "--raw", help="Also write the noisy Bayer mosaic as a 16-bit TIFF (+ JSON metadata)."),
+    raw: bool = typer.Option(False, "--raw", help="Also write the noisy Bayer mosaic as a CFA DNG (OUT/<name>.dng) "
+                             "that LibRaw and raw converters open."),
     fields: int = fields_option(),
     wavelengths: str = wavelengths_option(),
     pupil_samples: int = pupil_samples_option(),
@@ -75,7 +76,7 @@ def simulate_command(
                 banks[(h, w)] = cached_bank(lens, mapping.pitch_um, sensor, settings, workers, quiet or json_out)
             bank = banks.get((h, w), bank)
         gen = torch.Generator().manual_seed(seed + i)
-        raw_path = output / (path.stem + "_raw.tif") if raw else None
+        raw_path = output / (path.stem + ".dng") if raw else None
         out, params = simulate(img, bank, sensor, gen, blur=blur, noise=noise, relative_illumination=shading,
                                demosaic=demosaic, bits=bits, raw_path=raw_path, distortion=distortion)
         target = output / f"{path.stem}.{fmt}"

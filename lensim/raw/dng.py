@@ -23,9 +23,10 @@ when complete).
 """
 from __future__ import annotations
 
+import json
 import os
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from fractions import Fraction
 from pathlib import Path
 from collections.abc import Callable, Mapping, Sequence
@@ -37,6 +38,7 @@ from lensim.errors import InputError
 from lensim.io import atomic_writer
 
 if TYPE_CHECKING:
+    from lensim.render.mapping import SensorMapping
     from lensim.sensor.isp import CaptureParams
     from lensim.sensor.profile import SensorProfile
 
@@ -47,18 +49,25 @@ CFA_CODES = {"R": 0, "G": 1, "B": 2}
 ORIENTATIONS = range(1, 9)
 MIN_SIDE = 22  # LibRaw refuses images smaller than this (pixels a side)
 SIMULATED_MAKE = "lensim"  # the Make of DNGs written by the simulator
+SIMULATION_RECORD = "lensim_simulation"  # key of the simulator's JSON record in ImageDescription
 _RATIONAL_DENOMINATOR = 1_000_000
 
 # TIFF tag types and codes used here
 _BYTE, _ASCII, _SHORT, _LONG, _RATIONAL, _SRATIONAL = 1, 2, 3, 4, 5, 10
 _TAG = {
-    "Make": 271, "Model": 272, "Orientation": 274, "CFARepeatPatternDim": 33421, "CFAPattern": 33422,
-    "ExifIFD": 34665, "ExifIFDPlaceholder": 34664, "DNGVersion": 50706, "DNGBackwardVersion": 50707, "UniqueCameraModel": 50708,
-    "CFAPlaneColor": 50710, "CFALayout": 50711, "BlackLevelRepeatDim": 50713, "BlackLevel": 50714,
-    "WhiteLevel": 50717, "ColorMatrix1": 50721, "AsShotNeutral": 50728, "CalibrationIlluminant1": 50778,
+    "ImageDescription": 270, "Make": 271, "Model": 272, "Orientation": 274, "CFARepeatPatternDim": 33421,
+    "CFAPattern": 33422, "ExifIFD": 34665, "ExifIFDPlaceholder": 34664, "DNGVersion": 50706,
+    "DNGBackwardVersion": 50707, "UniqueCameraModel": 50708, "CFAPlaneColor": 50710, "CFALayout": 50711,
+    "BlackLevelRepeatDim": 50713, "BlackLevel": 50714, "WhiteLevel": 50717, "ColorMatrix1": 50721,
+    "ColorMatrix2": 50722, "AsShotNeutral": 50728, "CalibrationIlluminant1": 50778, "CalibrationIlluminant2": 50779,
 }
 _EXIF_TAG = {"exposure_s": 33434, "fno": 33437, "iso": 34855, "exif_version": 36864, "focus_distance_m": 37382,
              "focal_length_mm": 37386, "lens": 42036}
+
+
+def _matrix_rows(matrix: Any) -> tuple[tuple[float, float, float], ...]:
+    m = np.asarray(matrix, dtype=np.float64).reshape(3, 3)
+    return tuple((float(r[0]), float(r[1]), float(r[2])) for r in m)
 
 
 @dataclass(frozen=True)
@@ -75,14 +84,19 @@ class DngColour:
     color_matrix: tuple[tuple[float, float, float], ...]
     as_shot_neutral: tuple[float, float, float]
     calibration_illuminant: int = D65_ILLUMINANT
+    color_matrix2: tuple[tuple[float, float, float], ...] | None = None
+    calibration_illuminant2: int | None = None
+
+    def with_second_matrix(self, color_matrix: Any, calibration_illuminant: int) -> DngColour:
+        """A copy that also carries ColorMatrix2 with CalibrationIlluminant2 (raw
+        converters interpolate between the two by the white balance)."""
+        return replace(self, color_matrix2=_matrix_rows(color_matrix), calibration_illuminant2=int(calibration_illuminant))
 
     @classmethod
     def from_gains(cls, color_matrix: Any, r_gain: float, b_gain: float,
                    calibration_illuminant: int = D65_ILLUMINANT) -> DngColour:
         """From a 3x3 XYZ -> camera matrix and the as-shot white-balance gains (green 1)."""
-        m = np.asarray(color_matrix, dtype=np.float64).reshape(3, 3)
-        rows = tuple((float(r[0]), float(r[1]), float(r[2])) for r in m)
-        return cls(rows, (1.0 / r_gain, 1.0, 1.0 / b_gain), int(calibration_illuminant))
+        return cls(_matrix_rows(color_matrix), (1.0 / r_gain, 1.0, 1.0 / b_gain), int(calibration_illuminant))
 
 
 @dataclass(frozen=True)
@@ -150,10 +164,11 @@ def _check_orientation(orientation: int) -> int:
     return int(orientation)
 
 
-def _common_tags(colour: DngColour, camera: DngCamera, orientation: int) -> list[tuple]:
-    """tifffile extratags shared by both kinds: version, names, orientation, colour."""
+def _common_tags(colour: DngColour, camera: DngCamera, orientation: int, description: str = "") -> list[tuple]:
+    """tifffile extratags shared by both kinds: version, names, orientation, colour,
+    ImageDescription (when given)."""
     t = _TAG
-    return [
+    tags = [
         (t["Make"], _ASCII, 0, camera.make, True),
         (t["Model"], _ASCII, 0, camera.model, True),
         (t["Orientation"], _SHORT, 1, _check_orientation(orientation), True),
@@ -164,6 +179,12 @@ def _common_tags(colour: DngColour, camera: DngCamera, orientation: int) -> list
         (t["AsShotNeutral"], _RATIONAL, 3, _rationals(colour.as_shot_neutral), True),
         (t["CalibrationIlluminant1"], _SHORT, 1, int(colour.calibration_illuminant), True),
     ]
+    if colour.color_matrix2 is not None and colour.calibration_illuminant2 is not None:
+        tags += [(t["ColorMatrix2"], _SRATIONAL, 9, _rationals(np.ravel(colour.color_matrix2), signed=True), True),
+                 (t["CalibrationIlluminant2"], _SHORT, 1, int(colour.calibration_illuminant2), True)]
+    if description:
+        tags.append((t["ImageDescription"], _ASCII, 0, description, True))
+    return tags
 
 
 # ----------------------------------------------------------------------------- EXIF IFD
@@ -258,7 +279,7 @@ def _black_level_tag(black_level: float | Sequence[float], white_level: int) -> 
 
 def write_cfa_dng(path: str | Path, mosaic: np.ndarray, cfa_pattern: str, black_level: float | Sequence[float],
                   white_level: int, colour: DngColour, camera: DngCamera, orientation: int = 1,
-                  exif: DngExif | None = None) -> Path:
+                  exif: DngExif | None = None, description: str = "") -> Path:
     """Write a Bayer mosaic as a CFA DNG.
 
     Args:
@@ -269,6 +290,7 @@ def write_cfa_dng(path: str | Path, mosaic: np.ndarray, cfa_pattern: str, black_
         black_level: DN, one number or four (the CFA positions in the same order).
         white_level: DN of saturation (< 65536).
         colour, camera, orientation, exif: see the module docstring.
+        description: ImageDescription text (lensim's simulator stores a JSON record there).
     Returns the path.
     """
     arr = np.asarray(mosaic)
@@ -279,7 +301,7 @@ def write_cfa_dng(path: str | Path, mosaic: np.ndarray, cfa_pattern: str, black_
         raise InputError(str(path), "white_level", f"expected an integer in [1, 65535], got {white_level!r}")
     if not np.issubdtype(arr.dtype, np.integer) or arr.min() < 0 or arr.max() > white_level:
         raise InputError(str(path), "mosaic", f"expected integer digital numbers in [0, {int(white_level)}]")
-    tags = _common_tags(colour, camera, orientation) + [
+    tags = _common_tags(colour, camera, orientation, description) + [
         (_TAG["CFARepeatPatternDim"], _SHORT, 2, (2, 2), True),
         (_TAG["CFAPattern"], _BYTE, 4, _cfa_codes(cfa_pattern), True),
         (_TAG["CFAPlaneColor"], _BYTE, 3, bytes([0, 1, 2]), True),
@@ -363,20 +385,44 @@ def profile_colour(profile: SensorProfile, r_gain: float, b_gain: float) -> DngC
 
 
 def write_capture_dng(path: str | Path, raw: Any, profile: SensorProfile, params: CaptureParams,
-                      orientation: int = 1, exif: DngExif | None = None) -> Path:
+                      mapping: SensorMapping | None = None, orientation: int = 1, exif: DngExif | None = None) -> Path:
     """Write a simulated capture as a CFA DNG: ``raw`` (H, W) normalized mosaic (0 at the
     black level, 1 at the white level; torch or numpy) turned into the profile's digital
     numbers exactly as the simulated ADC does (lensim.sensor.isp.digital_numbers), the
-    profile's pattern, levels and camera names, the capture's white balance."""
+    profile's pattern, levels and camera names, the capture's white balance. ImageDescription
+    holds the simulation record (:func:`read_simulation_record`): the sensor's name, where
+    the frame lay on it (``mapping``: pitch_um, x0_mm, y0_mm; default the whole sensor at
+    its own pitch) and the capture's draws."""
     import torch
 
     from lensim.sensor.isp import digital_numbers
 
     dn = digital_numbers(torch.as_tensor(raw), profile).to(torch.int32).cpu().numpy()
+    if mapping is None:
+        place = {"pitch_um": profile.pixel_pitch_um, "x0_mm": -profile.sensor_size_mm[0] / 2,
+                 "y0_mm": -profile.sensor_size_mm[1] / 2}
+    else:
+        place = {"pitch_um": mapping.pitch_um, "x0_mm": mapping.x0_mm, "y0_mm": mapping.y0_mm}
+    record = {SIMULATION_RECORD: {"sensor": profile.name, **place, "capture": params.to_dict()}}
     return write_cfa_dng(path, dn, params.bayer_pattern, profile.black_level, int(profile.white_level),
                          profile_colour(profile, params.r_gain, params.b_gain), profile_camera(profile),
-                         orientation, exif)
+                         orientation, exif, description=json.dumps(record, default=str))
 
 
-__all__ = ["DngCamera", "DngColour", "DngExif", "profile_camera", "profile_colour", "write_capture_dng",
+def read_simulation_record(path: str | Path) -> dict[str, Any] | None:
+    """The simulation record of a DNG written by :func:`write_capture_dng` (sensor,
+    pitch_um, x0_mm, y0_mm, capture), or None for any other file (camera raws included)."""
+    import tifffile
+
+    try:
+        with tifffile.TiffFile(path) as tf:
+            text = tf.pages.first.description
+        record = json.loads(text).get(SIMULATION_RECORD)
+    except Exception:  # noqa: BLE001 - not a TIFF, no description, not our JSON: not a simulated DNG
+        return None
+    return record if isinstance(record, dict) else None
+
+
+__all__ = ["DngCamera", "DngColour", "DngExif", "profile_camera", "profile_colour", "read_simulation_record",
+           "write_capture_dng",
            "write_cfa_dng", "write_linear_dng", "write_srgb_as_linear_dng"]

@@ -7,8 +7,8 @@ temperature), the lens (a ``blur`` hook: here the spatially-variant blur with th
 lensim.render.blur, and optionally the distortion warp), Bayer mosaic, heteroscedastic
 shot + read noise, ADC, then the develop chain (demosaic, AHD by default, white balance,
 CCM, sRGB curve; lensim.sensor.isp.raw_to_srgb). The raw mosaic is handed to an ``on_raw``
-hook after the ADC (e.g. :func:`raw_tiff_writer`), so writing raw output never repeats the
-stages.
+hook after the ADC (e.g. :func:`dng_writer`: a CFA DNG, lensim.raw.dng), so writing raw
+output never repeats the stages.
 
 Where the image lies on the sensor: lensim.render.mapping; kernels from the bank:
 lensim.render.kernels; the bank itself (cached): lensim.render.bank_cache.
@@ -25,7 +25,7 @@ from lensim.render.blur import spatially_variant_blur
 from lensim.render.distortion import apply_distortion
 from lensim.render.kernels import check_bank_fits, kernel_function
 from lensim.render.mapping import SensorMapping, map_to_sensor
-from lensim.sensor.isp import CaptureParams, add_noise, mosaic, quantize_raw, raw_to_srgb, unprocess, write_raw_tiff
+from lensim.sensor.isp import CaptureParams, add_noise, mosaic, quantize_raw, raw_to_srgb, unprocess
 from lensim.sensor.profile import SensorProfile
 
 if TYPE_CHECKING:
@@ -61,11 +61,14 @@ def simulate_capture(img: torch.Tensor, profile: SensorProfile, generator: torch
     return raw_to_srgb(raw, params, method=method, bits=bits), params
 
 
-def raw_tiff_writer(path: str | Path, sensor: SensorProfile) -> RawHook:
-    """An ``on_raw`` hook writing the mosaic as a 16-bit TIFF + JSON sidecar
-    (lensim.sensor.isp.write_raw_tiff)."""
+def dng_writer(path: str | Path, sensor: SensorProfile, mapping: SensorMapping | None = None) -> RawHook:
+    """An ``on_raw`` hook writing the mosaic as a CFA DNG that LibRaw and raw converters
+    open (lensim.raw.dng.write_capture_dng: the sensor's pattern, levels, colour matrix and
+    names, the capture's white balance, and where the frame lies on the sensor)."""
+    from lensim.raw.dng import write_capture_dng
+
     def write(raw: torch.Tensor, params: CaptureParams) -> None:
-        write_raw_tiff(path, raw, sensor, params)
+        write_capture_dng(path, raw, sensor, params, mapping)
     return write
 
 
@@ -96,7 +99,7 @@ def simulate(
     """What the camera would deliver for a sharp sRGB image (3, H, W) in [0, 1].
 
     mapping: where the image lies on the sensor (default: fitted to the whole sensor).
-    raw_path: also write the noisy, quantized Bayer mosaic there (16-bit TIFF + JSON);
+    raw_path: also write the noisy, quantized Bayer mosaic there (a CFA DNG, :func:`dng_writer`);
     on_raw: any other raw hook (not both).
     distortion: also warp the image by the lens's distortion (off by default, so training
     pairs stay pixel-aligned with their targets).
@@ -112,7 +115,7 @@ def simulate(
     if raw_path is not None:
         if on_raw is not None:
             raise ValueError("give raw_path or on_raw, not both")
-        on_raw = raw_tiff_writer(raw_path, sensor)
+        on_raw = dng_writer(raw_path, sensor, mapping)
 
     def lens(cam: torch.Tensor) -> torch.Tensor:
         if distortion:

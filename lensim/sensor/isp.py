@@ -41,10 +41,8 @@ Cutler 2004 and Menon, Andriani & Calvagno 2007 from the colour-demosaicing pack
 """
 from __future__ import annotations
 
-import json
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -525,63 +523,3 @@ def raw_to_srgb(raw: torch.Tensor, params: CaptureParams, method: str = "ahd", b
         kwargs["rgb_to_xyz"] = torch.from_numpy(SRGB_TO_XYZ) @ torch.tensor(params.ccm, dtype=torch.float64)
     rgb = demosaic(wb, params.bayer_pattern, method, **kwargs)
     return process(rgb, params, bits=bits, white_balanced=True)
-
-
-# ---------------------------------------------------------------- raw output
-
-def write_raw_tiff(path: str | Path, raw: torch.Tensor, profile: SensorProfile,
-                   params: CaptureParams | None = None, extra: dict | None = None) -> Path:
-    """Write a normalized raw mosaic (H, W) as a 16-bit single-channel TIFF of digital
-    numbers, DN = round(black + raw * (white - black)) clipped to [0, white_level], with a
-    JSON description (also in a ``.json`` sidecar beside it): bayer_pattern, black_level,
-    white_level, bit_depth, the sensor name, the capture parameters and ``extra``.
-    Written to a temporary name and renamed. Returns the TIFF's path."""
-    import tifffile
-
-    from lensim.io import atomic_write_bytes, atomic_write_text
-
-    path = Path(path)
-    if raw.dim() != 2:
-        raise InputError(str(path), "raw", f"expected a mosaic of shape (H, W), got {tuple(raw.shape)}")
-    scale = profile.white_level - profile.black_level
-    dn = torch.round(profile.black_level + raw.detach().to(torch.float64).cpu() * scale).clamp(0, profile.white_level)
-    arr = dn.numpy().astype(np.uint16)
-    meta = {
-        "lensim_raw": 1,
-        "sensor": profile.name,
-        "bayer_pattern": profile.bayer_pattern,
-        "black_level": profile.black_level,
-        "white_level": profile.white_level,
-        "bit_depth": profile.bit_depth,
-        "pixel_pitch_um": profile.pixel_pitch_um,
-        "capture": params.to_dict() if params is not None else None,
-        "extra": extra or {},
-    }
-    text = json.dumps(meta)
-    import io
-
-    buf = io.BytesIO()
-    tifffile.imwrite(buf, arr, photometric="minisblack", description=text, metadata=None)
-    atomic_write_bytes(path, buf.getvalue())
-    atomic_write_text(path.with_suffix(".json"), json.dumps(meta, indent=2) + "\n")
-    return path
-
-
-def read_raw_tiff(path: str | Path) -> tuple[torch.Tensor, dict]:
-    """Read a TIFF written by :func:`write_raw_tiff` -> (normalized raw (H, W) float32,
-    metadata dict)."""
-    import tifffile
-
-    path = Path(path)
-    with tifffile.TiffFile(path) as tf:
-        arr = tf.asarray()
-        desc = tf.pages[0].description
-    try:
-        meta = json.loads(desc)
-    except (TypeError, ValueError):
-        raise InputError(str(path), "description", "expected the JSON metadata written by lensim") from None
-    if not isinstance(meta, dict) or meta.get("lensim_raw") != 1:
-        raise InputError(str(path), "description", "expected the JSON metadata written by lensim")
-    scale = float(meta["white_level"]) - float(meta["black_level"])
-    raw = (torch.from_numpy(arr.astype(np.float32)) - float(meta["black_level"])) / scale
-    return raw, meta
