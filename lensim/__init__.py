@@ -6,7 +6,7 @@ import os as _os
 # dedicated machine; set OMP_WAIT_POLICY yourself to override. Must precede torch's import.
 _os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-__version__ = "0.1.0"
+__version__ = "0.1.0"  # the one place: pyproject.toml reads it (dynamic version)
 
 # The Python API mirrors the CLI; names load lazily so `import lensim` stays light.
 _API = {
