@@ -77,7 +77,7 @@ PAIRS="--bank $OUT/bank --placements 3 --crops 8 --size 128 --seed 0 --quiet"
 "$LENSIM" dataset make "$OUT/photos" -o "$OUT/pairs" $PAIRS
 "$LENSIM" dataset make "$OUT/test_photos" -o "$OUT/test_pairs" $PAIRS
 
-TRAIN="--time-budget $MINUTES --threads 1 --crop 96 --batch-size 4 --lr 5e-4 --lr-schedule cosine --epochs 100000
+TRAIN="--time-budget-s $((MINUTES * 60)) --threads 1 --crop 96 --batch-size 4 --lr 5e-4 --lr-schedule cosine --epochs 100000
        --val-fraction 0.25 --seed 0 --quiet"
 pids=()
 if [ ! -f "$OUT/model.done" ]; then

@@ -19,7 +19,7 @@ VARIANTS: dict[str, dict] = {
 }
 
 
-def run_ablation(pairs_dir: str | Path, out_dir: str | Path, minutes: float, width: int = 32, crop: int = 128,
+def run_ablation(pairs_dir: str | Path, out_dir: str | Path, time_budget_s: float, width: int = 32, crop: int = 128,
                  seed: int = 0, variants: list[str] | None = None, say: Callable[[str], None] | None = None,
                  device: str = "cpu", progress: Callable[[float, float], None] | None = None) -> dict:
     """Train every variant (cached: a finished run is reused) and evaluate it on the held-out
@@ -44,10 +44,10 @@ def run_ablation(pairs_dir: str | Path, out_dir: str | Path, minutes: float, wid
         run = out / name
         marker = run / "done.json"
         if not marker.exists():
-            say(f"training {name} ({minutes:g} min)")
+            say(f"training {name} ({time_budget_s:g} s)")
             res = train(pairs_dir, run, epochs=100_000, width=w, crop=crop, seed=seed, lr=5e-4, lr_schedule="cosine",
-                        time_budget_s=minutes * 60.0, device=device,
-                        progress=budget_progress(progress, minutes * 60.0), **switches)
+                        time_budget_s=time_budget_s, device=device,
+                        progress=budget_progress(progress, time_budget_s), **switches)
             atomic_write_json(marker, {"steps": res.step, "seconds": res.seconds})
         held_out = held_out or read_held_out(run)
         params = count_parameters(FieldAwareUNet(width=w, **switches))
@@ -58,7 +58,7 @@ def run_ablation(pairs_dir: str | Path, out_dir: str | Path, minutes: float, wid
     metrics = evaluate(pairs_dir, methods, sources=held_out, progress=progress)
     for name in names:
         results[name]["metrics"] = metrics["methods"][name]
-    summary = {"held_out_photos": held_out, "minutes": minutes, "input": metrics["methods"]["input"],
+    summary = {"held_out_photos": held_out, "time_budget_s": time_budget_s, "input": metrics["methods"]["input"],
                "variants": results}
     atomic_write_json(out / "ablation.json", summary)
     return summary

@@ -80,7 +80,7 @@ def test_ablation_trains_evaluates_and_caches(pairs: Path) -> None:
     said: list[str] = []
     out = pairs / "ablation"
     names = ["full", "plain-unet"]
-    s = run_ablation(pairs / "pairs", out, minutes=0.05, width=8, crop=32, variants=names, say=said.append)
+    s = run_ablation(pairs / "pairs", out, time_budget_s=3.0, width=8, crop=32, variants=names, say=said.append)
     assert list(s["variants"]) == names
     # the same held-out photos for every variant, none of them trained on; all photos used
     held_out = s["held_out_photos"]
@@ -105,5 +105,5 @@ def test_ablation_trains_evaluates_and_caches(pairs: Path) -> None:
         assert abs(v["metrics"]["psnr_db"] - s["input"]["psnr_db"]) < 1.0, name
     assert json.loads((out / "ablation.json").read_text())["held_out_photos"] == held_out
     said.clear()
-    run_ablation(pairs / "pairs", out, minutes=0.05, width=8, crop=32, variants=names, say=said.append)
+    run_ablation(pairs / "pairs", out, time_budget_s=3.0, width=8, crop=32, variants=names, say=said.append)
     assert said and not any(m.startswith("training") for m in said)  # finished runs are reused

@@ -12,7 +12,7 @@ from lensim.cli.common import StageBars, console, print_json
 def ablation_command(
     dataset: Path = typer.Argument(..., help="Pairs folder from `lensim dataset make`."),
     output: Path = typer.Option(..., "-o", "--output", help="Folder for the runs and ablation.json (reused)."),
-    minutes: float = typer.Option(10.0, "--time-budget", help="Training minutes per variant."),
+    time_budget_s: float = typer.Option(600.0, "--time-budget-s", help="Training seconds per variant."),
     width: int = typer.Option(32, "--width", help="Channels at full resolution of the field-aware network."),
     crop: int = typer.Option(128, "--crop", help="Training sub-crop size in pixels."),
     seed: int = typer.Option(0, "--seed", help="Seed of every run."),
@@ -25,17 +25,17 @@ def ablation_command(
     """Train the field-aware network with each idea switched off in turn, and a plain UNet
     of about the same size, on the same budget; report held-out PSNR/SSIM by zone.
 
-    Example: lensim ablation data/ -o ablation/ --time-budget 10
+    Example: lensim ablation data/ -o ablation/ --time-budget-s 600
     """
     from lensim.ablation import run_ablation
 
     with StageBars(show=not quiet and not json_out) as bars:
-        summary = run_ablation(dataset, output, minutes, width, crop, seed, [v.strip() for v in variants.split(",")],
+        summary = run_ablation(dataset, output, time_budget_s, width, crop, seed, [v.strip() for v in variants.split(",")],
                                bars.say, device=device, progress=bars.progress)
     if json_out:
         print_json(summary)
         return
-    t = Table(title=f"Ablation, {minutes:g} min per variant, held-out photos")
+    t = Table(title=f"Ablation, {time_budget_s:g} s per variant, held-out photos")
     for c in ("variant", "params", "PSNR dB", "SSIM", "centre", "middle", "edge"):
         t.add_column(c, justify="left" if c == "variant" else "right")
     rows = [("input", None, summary["input"])] + [(k, v["params"], v["metrics"]) for k, v in summary["variants"].items()]

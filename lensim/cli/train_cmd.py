@@ -51,8 +51,8 @@ def train_command(
                                        help="Share of source photos held out for validation."),
     steps_per_epoch: int = typer.Option(_D.max_steps_per_epoch or 0, "--steps-per-epoch",
                                         help="Cap on steps per epoch (0: whole epochs)."),
-    time_budget: float = typer.Option((_D.time_budget_s or 0.0) / 60.0, "--time-budget", help="Stop cleanly once "
-                                      "the run has trained this many minutes in all, resumes included (0: none)."),
+    time_budget_s: float = typer.Option(_D.time_budget_s or 0.0, "--time-budget-s", help="Stop cleanly once the "
+                                        "run has trained this many seconds in all, resumes included (0: none)."),
     resume: bool = typer.Option(False, "--resume", help="Continue the run in OUTPUT from last.pt."),
     seed: int = typer.Option(_D.seed, "--seed", help="Seed of initialisation, data order, crops and augmentation."),
     device: str = typer.Option(_D.device, "--device", help="cpu, cuda or cuda:N (mixed precision on CUDA)."),
@@ -65,7 +65,7 @@ def train_command(
     FOV-consistent augmentation, validation PSNR/SSIM per epoch; RUN/log.csv, steps.csv,
     last.pt, best.pt). Multi-GPU: torchrun --nproc_per_node N -m lensim train ... --device cuda
 
-    Example: lensim train data/ -o runs/a --epochs 30 --crop 128 --time-budget 30
+    Example: lensim train data/ -o runs/a --epochs 30 --crop 128 --time-budget-s 1800
     """
     from lensim.restore.train import train
 
@@ -78,7 +78,7 @@ def train_command(
         "deformable_scales": None if deformable_scales < 0 else deformable_scales, "use_fov": not no_fov,
         "field_modulation": field_modulation, "use_deformable": not no_deformable, "use_context": not no_context,
         "val_fraction": val_fraction, "max_steps_per_epoch": steps_per_epoch or None,
-        "time_budget_s": time_budget * 60.0 if time_budget > 0 else None, "seed": seed, "device": device,
+        "time_budget_s": time_budget_s if time_budget_s > 0 else None, "seed": seed, "device": device,
         "amp": not no_amp,
     }
     if resume:
