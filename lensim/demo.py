@@ -14,7 +14,7 @@ import shutil
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 from lensim.assets import DEFAULT_LENS
 from lensim.assets.images import available_sample_images, read_sample_image
@@ -23,7 +23,10 @@ from lensim.images import write_image
 from lensim.optics.analysis import first_order_summary
 from lensim.io import atomic_write_json, read_json
 from lensim.optics.lens_file import load_lens
-from lensim.sensor.profile import DEFAULT_SENSOR, load_sensor
+from lensim.sensor.profile import DEFAULT_SENSOR, SensorProfile, load_sensor
+
+if TYPE_CHECKING:
+    from lensim.psf.bank import PSFBank
 
 Say = Callable[[str], None]
 #: progress(done, total) of the stage last announced by ``say``: PSF fields, photos,
@@ -122,13 +125,11 @@ def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: i
     """Run the demo into out_dir; returns the report's JSON (also written). device: where the
     networks train and run ("cpu", "cuda", "cuda:N"). say(stage) announces each stage and
     progress(done, total) reports within it."""
-    from lensim.data.manifest import read_held_out, read_pairs_manifest
     from lensim.data.pairs import make_dataset
-    from lensim.evaluate.harness import builtin_method, checkpoint_method, evaluate
-    from lensim.plots.lens import plot_layout, plot_spots
     from lensim.plots.bank import write_bank_figures
+    from lensim.plots.lens import plot_layout, plot_spots
     from lensim.psf.bank import BankSettings, build_bank
-    from lensim.report import edge_study, sample_crops, write_report
+    from lensim.report import write_report
 
     say = say or (lambda msg: None)
     step = progress or (lambda done, total: None)
@@ -174,6 +175,32 @@ def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: i
 
     t = time.perf_counter()
     say("evaluation on held-out photos")
+    evaluation = _evaluate(out, bank, sensor, figs, seed, device, step)
+    timings["evaluation"] = time.perf_counter() - t
+
+    report = {
+        "lens": summary,
+        "sensor": {"name": sensor.name, "pixel_pitch_um": sensor.pixel_pitch_um, "resolution": list(sensor.resolution)},
+        "settings": {**asdict(settings), "quick": quick, "seed": seed, "workers": workers, "device": device,
+                     "kernel_pixels": bank.kernel_pixels},
+        "bank": _bank_summary(bank),
+        "training": {"model": model_info, "plain-unet": plain_info},
+        **evaluation,
+        "timings_s": timings,
+    }
+    write_report(out, report, figs)
+    return report
+
+
+def _evaluate(out: Path, bank: PSFBank, sensor: SensorProfile, figs: Path, seed: int, device: str,
+              progress: StageProgress) -> dict:
+    """The held-out evaluation of both networks and the Wiener oracle, the sample crops and
+    the edge study (slanted-edge MTF, lateral colour): the report's entries
+    held_out_photos, sample_crops, metrics, slanted_edge and lateral_colour."""
+    from lensim.data.manifest import read_held_out, read_pairs_manifest
+    from lensim.evaluate.harness import builtin_method, checkpoint_method, evaluate
+    from lensim.report import edge_study, sample_crops
+
     held_out = read_held_out(out / "run-model")
     manifest = read_pairs_manifest(out / "pairs")
     # the last checkpoints: best.pt is picked by validation PSNR on these very photos
@@ -182,27 +209,17 @@ def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: i
                "plain-unet": checkpoint_method(out / "run-plain" / "last.pt", manifest.get("lens"),
                                                manifest.get("sensor"), device=device),
                "wiener": builtin_method("wiener")}
-    metrics = evaluate(out / "pairs", methods, bank=bank, sources=held_out, progress=step)
+    metrics = evaluate(out / "pairs", methods, bank=bank, sources=held_out, progress=progress)
     samples = sample_crops(out / "pairs", manifest, held_out, methods["model"], bank, figs)
     edges = edge_study(bank, sensor, methods["model"], figs, seed=seed)
-    timings["evaluation"] = time.perf_counter() - t
+    return {"held_out_photos": held_out, "sample_crops": samples, "metrics": metrics,
+            "slanted_edge": edges["slanted_edge"], "lateral_colour": edges["lateral_colour"]}
 
-    report = {
-        "lens": summary,
-        "sensor": {"name": sensor.name, "pixel_pitch_um": sensor.pixel_pitch_um, "resolution": list(sensor.resolution)},
-        "settings": {**asdict(settings), "quick": quick, "seed": seed, "workers": workers, "device": device,
-                     "kernel_pixels": bank.kernel_pixels},
-        "bank": {"fields": [float(f.field) for f in bank.fields],
-                 "image_height_mm": [float(r) for r in bank.radii_mm],
-                 "strehl": [float(f.strehl) for f in bank.fields],
-                 "relative_illumination_green": [float(f.rgb[1].sum()) for f in bank.fields]},
-        "training": {"model": model_info, "plain-unet": plain_info},
-        "held_out_photos": held_out,
-        "sample_crops": samples,
-        "metrics": metrics,
-        "slanted_edge": edges["slanted_edge"],
-        "lateral_colour": edges["lateral_colour"],
-        "timings_s": timings,
-    }
-    write_report(out, report, figs)
-    return report
+
+def _bank_summary(bank: PSFBank) -> dict:
+    """The report's bank entry: normalized fields, image heights (mm), Strehl ratios and the
+    green channel's relative illumination, one value per field."""
+    return {"fields": [float(f.field) for f in bank.fields],
+            "image_height_mm": [float(r) for r in bank.radii_mm],
+            "strehl": [float(f.strehl) for f in bank.fields],
+            "relative_illumination_green": [float(f.rgb[1].sum()) for f in bank.fields]}

@@ -178,23 +178,42 @@ def make_dataset(
     files = list_images(sharp_dir)
     out = Path(out_dir)
     settings = {"format": FORMAT, "seed": seed, "crops": crops, "placements": placements, "size": size,
-                "noise": noise, "demosaic": demosaic, "sensor": sensor.to_dict(), "sensor_name": sensor_name, "lens": bank.manifest.get("lens"),
-                "bank": str(bank.directory), "sources": [str(p) for p in files]}
-    old = out / "settings.json"
-    if old.exists():
-        prev = read_json(old, "pairs settings record")
-        diff = sorted(k for k in settings if k != "bank" and prev.get(k) != settings[k])
-        if diff:
-            raise InputError(str(out), ", ".join(diff), "differs from the dataset already in this folder; expected the "
-                             "same settings to resume, or a new output folder")
-    else:
-        atomic_write_json(old, settings)
+                "noise": noise, "demosaic": demosaic, "sensor": sensor.to_dict(), "sensor_name": sensor_name,
+                "lens": bank.manifest.get("lens"), "bank": str(bank.directory), "sources": [str(p) for p in files]}
+    _claim_folder(out, settings)
     jobs = [PairJob(i, str(p), str(out), str(bank.directory), sensor_name, image_seed(seed, i, p.name), crops, size,
                     noise, demosaic, placements) for i, p in enumerate(files)]
     todo = [j for j in jobs if not record_path(out, j.index).exists()]
-    done = len(jobs) - len(todo)
+    _run_jobs(todo, len(jobs), workers, scheduler, progress)
+    records = [read_json(record_path(out, j.index), "photo record") for j in jobs]
+    manifest = {**settings, "records": records, "pairs": sum(len(r["crops"]) for r in records)}
+    atomic_write_json(out / MANIFEST, manifest)
+    return manifest
+
+
+def _claim_folder(out: Path, settings: dict) -> None:
+    """Record the dataset's settings in OUT/settings.json, or check them against those
+    already recorded there (a one-line InputError naming what differs; the bank folder
+    may move)."""
+    path = out / "settings.json"
+    if not path.exists():
+        atomic_write_json(path, settings)
+        return
+    prev = read_json(path, "pairs settings record")
+    diff = sorted(k for k in settings if k != "bank" and prev.get(k) != settings[k])
+    if diff:
+        raise InputError(str(out), ", ".join(diff), "differs from the dataset already in this folder; expected the "
+                         "same settings to resume, or a new output folder")
+
+
+def _run_jobs(todo: list[PairJob], total: int, workers: int, scheduler: str | None,
+              progress: Callable[[int, int], None] | None) -> None:
+    """Run the unfinished jobs here (workers <= 1, no scheduler) or on a Dask cluster (a
+    local one of ``workers`` processes, or the one at ``scheduler``); progress(done, total)
+    counts photos, the ones finished before included."""
+    done = total - len(todo)
     if progress:
-        progress(done, len(jobs))
+        progress(done, total)
     if workers <= 1 and scheduler is None:
         threads = torch.get_num_threads()
         try:
@@ -202,26 +221,21 @@ def make_dataset(
                 make_pairs_for_image(j)
                 done += 1
                 if progress:
-                    progress(done, len(jobs))
+                    progress(done, total)
         finally:
             torch.set_num_threads(threads)
-    else:
-        from distributed import Client, LocalCluster, as_completed
+        return
+    from distributed import Client, LocalCluster, as_completed
 
-        cluster = None if scheduler else LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                                      dashboard_address=None)
-        try:
-            with Client(scheduler or cluster) as client:
-                futures = client.map(make_pairs_for_image, todo, pure=False)
-                for fut in as_completed(futures):
-                    fut.result()
-                    done += 1
-                    if progress:
-                        progress(done, len(jobs))
-        finally:
-            if cluster is not None:
-                cluster.close()
-    records = [read_json(record_path(out, j.index), "photo record") for j in jobs]
-    manifest = {**settings, "records": records, "pairs": sum(len(r["crops"]) for r in records)}
-    atomic_write_json(out / MANIFEST, manifest)
-    return manifest
+    cluster = None if scheduler else LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                                  dashboard_address=None)
+    try:
+        with Client(scheduler or cluster) as client:
+            for fut in as_completed(client.map(make_pairs_for_image, todo, pure=False)):
+                fut.result()
+                done += 1
+                if progress:
+                    progress(done, total)
+    finally:
+        if cluster is not None:
+            cluster.close()
