@@ -14,10 +14,10 @@ from lensim.optics.field_analysis import relative_illumination
 from lensim.optics.lens_file import load_lens
 from lensim.optics.paraxial import paraxial_image_height
 from lensim.psf.bank import MANIFEST, PSFBank, compute_bank, default_fields, field_file
-from lensim.render.rotation import rotate_kernel
 from lensim.psf.compute import compute_psf
 from lensim.psf.pupil_field import pupil_field
-from lensim.psf.spectral import read_response_csv, spectral_response
+from lensim.render.rotation import rotate_kernel
+from lensim.sensor.spectral import read_response_csv, spectral_response
 
 FIELDS = [0.0, 0.5, 0.8, 1.0]
 WAVELENGTHS = [450.0, 550.0, 650.0]  # 550 nm is the Cooke triplet's primary

@@ -91,8 +91,8 @@ def bank(
 
     from lensim.errors import InputError
     from lensim.psf.bank import build_bank
-    from lensim.psf.spectral import DEFAULT_CAMERA
     from lensim.sensor.profile import load_sensor
+    from lensim.sensor.spectral import DEFAULT_CAMERA
 
     if lens_file and lens_opt and lens_file != lens_opt:
         raise InputError("<command line>", "lens", f"given twice ({lens_file!r} and --lens {lens_opt!r}); expected one")

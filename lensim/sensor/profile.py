@@ -10,7 +10,7 @@ A profile is a JSON or YAML file (or a built-in name, see :func:`load_sensor`)::
                                              # pixels (0,0) (0,1) (1,0) (1,1), row-major,
                                              # (0,0) the top-left pixel of the image
     spectral_response: Nikon 5100 (NPL)      # a colour-science camera name (resolved by
-                                             # lensim.psf.spectral) or a CSV path
+                                             # lensim.sensor.spectral) or a CSV path
                                              # (wavelength_nm,r,g,b; relative to this file)
     ccm: [[...], [...], [...]]               # 3x3, white-balanced camera RGB -> linear
                                              # sRGB; every row sums to 1 (within 1e-3)
@@ -275,7 +275,7 @@ def _spectral(src: str | None, value: Any) -> str:
             p = Path(src).resolve().parent / p
         if not p.is_file():
             raise InputError(src, fld, f"CSV file {str(p)!r} not found (a relative path is taken from the profile's folder)")
-        from lensim.psf.spectral import read_response_csv
+        from lensim.sensor.spectral import read_response_csv
 
         read_response_csv(p)  # raises InputError naming the CSV file, line and column
         return str(p)

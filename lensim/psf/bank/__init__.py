@@ -11,7 +11,7 @@ summed over lambda into R, G, B kernels (the paper's Eq. 10):
 
     K_c(fov) = sum_lambda C_wav,c(lambda) * C_ill(fov, lambda) * PSF_pix(fov, lambda) / sum PSF_pix.
 
-Each channel's weights sum to 1 (lensim.psf.spectral), so a kernel sums to the
+Each channel's weights sum to 1 (lensim.sensor.spectral), so a kernel sums to the
 channel-weighted relative illumination: 1 on axis, less off axis.
 
 Relative illumination comes from lensim.optics.field_analysis.relative_illumination

@@ -29,7 +29,7 @@ from lensim.psf.huygens import huygens_psf
 from lensim.psf.metrics import strehl_ratio
 from lensim.psf.pixels import integrate_pixels, oversampling_factor
 from lensim.psf.pupil_field import PupilField, pupil_field
-from lensim.psf.spectral import SpectralResponse, spectral_response
+from lensim.sensor.spectral import SpectralResponse, spectral_response
 
 
 @dataclass

@@ -1,4 +1,4 @@
-"""Camera spectral response: per-channel weights C_wav(lambda) for the PSF bank.
+"""The sensor's spectral response: per-channel weights C_wav(lambda) for the PSF bank.
 
 The paper (Sec. "Wavelength Response and Relative Illumination", Eq. 10) weights each
 wavelength's PSF by the sensor's colour-filter response. This module samples a camera's
@@ -65,13 +65,6 @@ class SpectralResponse:
             "wavelengths_nm": [float(w) for w in self.wavelengths_nm],
             "weights": [[float(v) for v in row] for row in self.weights],
         }
-
-
-def camera_names() -> list[str]:
-    """Names of the measured cameras colour-science ships."""
-    import colour
-
-    return list(colour.MSDS_CAMERA_SENSITIVITIES.keys())
 
 
 def _camera_table(name: str) -> tuple[np.ndarray, np.ndarray, str]:
