@@ -12,6 +12,7 @@ from lensim.cli.demo_cmd import demo_command, report_command
 from lensim.cli.evaluate_cmd import evaluate_command
 from lensim.cli.lens_cmd import lens_app
 from lensim.cli.psf_cmd import psf_app
+from lensim.cli.raw_cmd import raw_app
 from lensim.cli.restore_cmd import restore_command
 from lensim.cli.simulate_cmd import simulate_command
 from lensim.cli.train_cmd import train_command
@@ -25,6 +26,7 @@ app = typer.Typer(
 )
 app.add_typer(lens_app, name="lens")
 app.add_typer(psf_app, name="psf")
+app.add_typer(raw_app, name="raw")
 app.command("assets")(assets_command)
 app.command("simulate")(simulate_command)
 app.add_typer(dataset_app, name="dataset")
