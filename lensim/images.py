@@ -94,8 +94,10 @@ def _read_png16(path: Path) -> np.ndarray:
     return arr[..., 0] if info["planes"] == 1 else arr
 
 
-def write_image(path: str | Path, image: torch.Tensor, bits: int = 8) -> None:
-    """Write a (3, H, W) float image in [0, 1] as 8- or 16-bit PNG or TIFF, atomically."""
+def write_image(path: str | Path, image: torch.Tensor, bits: int = 8, srgb_tag: bool = False) -> None:
+    """Write a (3, H, W) float image in [0, 1] as 8- or 16-bit PNG or TIFF, atomically.
+    ``srgb_tag`` marks the file as sRGB: an embedded sRGB ICC profile in a TIFF, the
+    sRGB chunk (rendering intent perceptual) in a PNG."""
     path = Path(path)
     if path.suffix.lower() not in WRITE_SUFFIXES:
         raise InputError(str(path), "format", f"expected one of {', '.join(WRITE_SUFFIXES)} for output")
@@ -118,5 +120,26 @@ def write_image(path: str | Path, image: torch.Tensor, bits: int = 8) -> None:
     else:
         import tifffile
 
-        tifffile.imwrite(buf, q, photometric="rgb")
-    atomic_write_bytes(path, buf.getvalue())
+        tifffile.imwrite(buf, q, photometric="rgb", iccprofile=srgb_icc_profile() if srgb_tag else None)
+    data = buf.getvalue()
+    if srgb_tag and path.suffix.lower() == ".png":
+        data = _with_png_srgb_chunk(data)
+    atomic_write_bytes(path, data)
+
+
+def srgb_icc_profile() -> bytes:
+    """An sRGB ICC profile (LittleCMS's built-in sRGB, through Pillow's ImageCms)."""
+    from PIL import ImageCms
+
+    return ImageCms.ImageCmsProfile(ImageCms.createProfile("sRGB")).tobytes()
+
+
+def _with_png_srgb_chunk(data: bytes) -> bytes:
+    """Insert an sRGB chunk (PNG spec 11.3.3.5; rendering intent 0) after the IHDR chunk."""
+    import struct
+    import zlib
+
+    ihdr_end = 8 + 8 + 13 + 4  # signature, IHDR length+type, IHDR data, CRC
+    body = b"sRGB" + b"\x00"
+    chunk = struct.pack(">I", 1) + body + struct.pack(">I", zlib.crc32(body) & 0xFFFFFFFF)
+    return data[:ihdr_end] + chunk + data[ihdr_end:]

@@ -10,7 +10,8 @@ import typer
 
 from lensim.cli import app
 
-TOP = {"lens", "psf", "simulate", "dataset", "train", "restore", "evaluate", "ablation", "report", "demo", "assets", "raw"}
+TOP = {"lens", "psf", "simulate", "dataset", "train", "restore", "evaluate", "ablation", "report", "demo", "assets",
+       "raw", "develop", "sensor"}
 # other spellings of the common options that must not appear anywhere
 FORBIDDEN = {"--out", "--outdir", "--output-dir", "--num-workers", "--jobs", "-j", "--gpu", "--cuda", "--random-seed",
              "--lens-file", "--camera", "--silent", "--verbose-json", "--dev"}
@@ -41,7 +42,8 @@ def test_common_options_are_spelled_one_way(path: tuple[str, ...], cmd: Any) -> 
     assert not opts & FORBIDDEN, f"{' '.join(path)}: {sorted(opts & FORBIDDEN)}"
     if "--output" in opts:
         assert "-o" in opts, f"{' '.join(path)}: --output without -o"
-    if "--json" in opts and path not in {("lens", "info"), ("lens", "spot"), ("psf", "compute"), ("assets",), ("raw", "info")}:
+    if "--json" in opts and path not in {("lens", "info"), ("lens", "spot"), ("psf", "compute"), ("assets",),
+                                         ("raw", "info"), ("sensor", "from-raw")}:
         assert "--quiet" in opts, f"{' '.join(path)}: long job with --json but no --quiet"
     assert "Example:" in (cmd.help or ""), f"{' '.join(path)}: --help has no example"
 

@@ -9,11 +9,13 @@ from lensim.cli.ablation_cmd import ablation_command
 from lensim.cli.assets_cmd import assets_command
 from lensim.cli.dataset_cmd import dataset_app
 from lensim.cli.demo_cmd import demo_command, report_command
+from lensim.cli.develop_cmd import develop_command
 from lensim.cli.evaluate_cmd import evaluate_command
 from lensim.cli.lens_cmd import lens_app
 from lensim.cli.psf_cmd import psf_app
 from lensim.cli.raw_cmd import raw_app
 from lensim.cli.restore_cmd import restore_command
+from lensim.cli.sensor_cmd import sensor_app
 from lensim.cli.simulate_cmd import simulate_command
 from lensim.cli.train_cmd import train_command
 
@@ -27,12 +29,14 @@ app = typer.Typer(
 app.add_typer(lens_app, name="lens")
 app.add_typer(psf_app, name="psf")
 app.add_typer(raw_app, name="raw")
+app.add_typer(sensor_app, name="sensor")
 app.command("assets")(assets_command)
 app.command("simulate")(simulate_command)
 app.add_typer(dataset_app, name="dataset")
 app.command("evaluate")(evaluate_command)
 app.command("train")(train_command)
 app.command("restore")(restore_command)
+app.command("develop")(develop_command)
 app.command("demo")(demo_command)
 app.command("ablation")(ablation_command)
 app.command("report")(report_command)

@@ -13,7 +13,28 @@ own chain.
   ``info()`` (the `lensim raw info --json` mapping).
 - :func:`raw_files(paths) <lensim.raw.read.raw_files>`: files as given, folders expanded
   to their raw files.
+- :func:`develop_raw(raw, sensor=None, wb="as-shot", method="ahd", bits=None, orient=True)
+  <lensim.raw.develop.develop_raw>` -> (sRGB (3, H, W) float32 in [0, 1], CaptureParams):
+  the simulator's chain on the real mosaic (:func:`normalized_mosaic
+  <lensim.raw.develop.normalized_mosaic>` -> ``lensim.sensor.isp.raw_to_srgb`` ->
+  :func:`apply_orientation <lensim.raw.develop.apply_orientation>`); ``orient=False``
+  keeps the sensor's pixel order (for field-dependent work), orient afterwards with
+  ``apply_orientation(img, raw.orientation)``. :func:`capture_params
+  <lensim.raw.develop.capture_params>` gives the CaptureParams alone (CCM and WB table
+  from ``sensor``, else from the raw's colour matrix).
+- :func:`develop_files <lensim.raw.develop.develop_files>`: a batch into OUT/<stem>.tif
+  (`lensim develop`).
+- :func:`sensor_from_raw <lensim.raw.profile.sensor_from_raw>`: a sensor profile for the
+  camera that wrote a raw file (`lensim sensor from-raw`).
 """
+from lensim.raw.develop import (
+           apply_orientation,
+           capture_params,
+           develop_files,
+           develop_raw,
+           normalized_mosaic,
+)
 from lensim.raw.read import RAW_SUFFIXES, RawImage, raw_files, read_raw
 
-__all__ = ["RAW_SUFFIXES", "RawImage", "raw_files", "read_raw"]
+__all__ = ["RAW_SUFFIXES", "RawImage", "apply_orientation", "capture_params", "develop_files", "develop_raw",
+           "normalized_mosaic", "raw_files", "read_raw"]
