@@ -41,7 +41,12 @@ def test_launch_type_for_every_field_type_and_object(field_type, distance, expec
     assert lens.launch_field_type == expected and probe.field_type == expected
     assert (probe is lens) == (field_type == expected)  # a copy only when the type changes
     assert probe.surfaces is lens.surfaces and probe.object_distance == lens.object_distance
-    assert probe.fields == lens.fields and lens.field_type == field_type  # the original is untouched
+    assert lens.field_type == field_type and lens.fields == [0.0, 5.0]  # the original is untouched
+
+
+def test_image_heights_beyond_90_mm_are_not_read_as_angles():
+    lens = _singlet("real_image_height", [0.0, 95.0], math.inf, F_MM)
+    assert lens.launch_lens().field_type == "angle"  # formerly: "field angles must be below 90 degrees"
 
 
 def test_object_height_fields_need_a_finite_object():

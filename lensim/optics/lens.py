@@ -243,9 +243,13 @@ class Lens:
         """This lens with field_type set to :attr:`launch_field_type`, so that launch values
         (from object_field) are read the right way by functions that take a field in the
         lens's unit (paraxial_image_height, chief_ray_image_height). The lens itself when
-        its field type already is the launch type; otherwise a copy (surfaces shared)."""
+        its field type already is the launch type; otherwise a copy (surfaces shared) whose
+        fields are [0] (the lens's fields are image heights in mm, not launch values, and
+        an image height of 90 mm or more would fail as an angle)."""
         launch_type = self.launch_field_type
-        return self if self.field_type == launch_type else self.with_changes(field_type=launch_type)
+        if self.field_type == launch_type:
+            return self
+        return self.with_changes(field_type=launch_type, fields=[0.0])
 
     def with_changes(self, **changes) -> "Lens":
         """A copy with some top-level attributes replaced (surfaces are shared)."""
