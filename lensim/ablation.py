@@ -8,7 +8,10 @@ from pathlib import Path
 from typing import Callable
 
 from lensim.data.manifest import read_held_out, read_pairs_manifest
+from lensim.errors import InputError
 from lensim.io import atomic_write_json, read_json
+from lensim.restore.network import FieldAwareUNet, count_parameters, plain_unet_width
+from lensim.restore.train import TrainConfig, budget_progress, train
 
 VARIANTS: dict[str, dict] = {
     "full": {},
@@ -19,23 +22,27 @@ VARIANTS: dict[str, dict] = {
 }
 
 
-def run_ablation(pairs_dir: str | Path, out_dir: str | Path, time_budget_s: float, width: int = 32, crop: int = 128,
-                 seed: int = 0, variants: list[str] | None = None, say: Callable[[str], None] | None = None,
-                 device: str = "cpu", progress: Callable[[float, float], None] | None = None) -> dict:
+def run_ablation(pairs_dir: str | Path, out_dir: str | Path, time_budget_s: float, width: int = TrainConfig.width,
+                 crop: int | None = TrainConfig.crop, seed: int = TrainConfig.seed, variants: list[str] | None = None,
+                 say: Callable[[str], None] | None = None, device: str = TrainConfig.device,
+                 progress: Callable[[float, float], None] | None = None) -> dict:
     """Train every variant (cached: a finished run is reused) and evaluate it on the held-out
     photos of the first run's split; returns {"variants": {name: {params, train, metrics}}}.
     say(stage) announces each training and the evaluation; progress(done, total) reports
     training seconds and evaluated crops within them."""
     from lensim.evaluate.harness import checkpoint_method, evaluate
-    from lensim.restore.network import FieldAwareUNet, count_parameters, plain_unet_width
-    from lensim.restore.train import budget_progress, train
 
+    names = variants or list(VARIANTS)
+    unknown = [n for n in names if n not in VARIANTS]
+    if unknown:
+        raise InputError(None, "variants", f"unknown variant {unknown[0]!r}; expected some of {', '.join(VARIANTS)}")
+    if time_budget_s <= 0:
+        raise InputError(None, "time_budget_s", f"expected a positive number of seconds, got {time_budget_s:g}")
+    manifest = read_pairs_manifest(pairs_dir)
     say = say or (lambda m: None)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    names = variants or list(VARIANTS)
     full_params = count_parameters(FieldAwareUNet(width=width))
-    manifest = read_pairs_manifest(pairs_dir)
     results: dict[str, dict] = {}
     held_out = None
     for name in names:

@@ -107,3 +107,13 @@ def test_ablation_trains_evaluates_and_caches(pairs: Path) -> None:
     said.clear()
     run_ablation(pairs / "pairs", out, time_budget_s=3.0, width=8, crop=32, variants=names, say=said.append)
     assert said and not any(m.startswith("training") for m in said)  # finished runs are reused
+
+
+def test_bad_variants_and_budgets_are_refused_before_any_work(tmp_path: Path) -> None:
+    from lensim.errors import InputError
+
+    with pytest.raises(InputError, match="variants: unknown variant 'no-such'; expected some of full, no-fov"):
+        run_ablation(tmp_path / "pairs", tmp_path / "out", 1.0, variants=["full", "no-such"])
+    with pytest.raises(InputError, match="time_budget_s: expected a positive number of seconds"):
+        run_ablation(tmp_path / "pairs", tmp_path / "out", 0.0)
+    assert not (tmp_path / "out").exists()

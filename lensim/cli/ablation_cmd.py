@@ -6,19 +6,23 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
+from lensim.ablation import VARIANTS
 from lensim.cli.common import StageBars, console, print_json
+from lensim.restore.train import TrainConfig
+
+_D = TrainConfig()
 
 
 def ablation_command(
     dataset: Path = typer.Argument(..., help="Pairs folder from `lensim dataset make`."),
     output: Path = typer.Option(..., "-o", "--output", help="Folder for the runs and ablation.json (reused)."),
     time_budget_s: float = typer.Option(600.0, "--time-budget-s", help="Training seconds per variant."),
-    width: int = typer.Option(32, "--width", help="Channels at full resolution of the field-aware network."),
-    crop: int = typer.Option(128, "--crop", help="Training sub-crop size in pixels."),
-    seed: int = typer.Option(0, "--seed", help="Seed of every run."),
-    variants: str = typer.Option("full,no-fov,no-deformable,no-context,plain-unet", "--variants",
+    width: int = typer.Option(_D.width, "--width", help="Channels at full resolution of the field-aware network."),
+    crop: int = typer.Option(_D.crop, "--crop", help="Training sub-crop size in pixels."),
+    seed: int = typer.Option(_D.seed, "--seed", help="Seed of every run."),
+    variants: str = typer.Option(",".join(VARIANTS), "--variants",
                                  help="Comma-separated subset of the variants."),
-    device: str = typer.Option("cpu", "--device", help="cpu, cuda or cuda:N."),
+    device: str = typer.Option(_D.device, "--device", help="cpu, cuda or cuda:N."),
     quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
     json_out: bool = typer.Option(False, "--json", help="Print ablation.json."),
 ) -> None:
@@ -28,6 +32,8 @@ def ablation_command(
     Example: lensim ablation data/ -o ablation/ --time-budget-s 600
     """
     from lensim.ablation import run_ablation
+    from lensim.evaluate.harness import format_score
+    from lensim.evaluate.metrics import ZONES
 
     with StageBars(show=not quiet and not json_out) as bars:
         summary = run_ablation(dataset, output, time_budget_s, width, crop, seed, [v.strip() for v in variants.split(",")],
@@ -41,7 +47,6 @@ def ablation_command(
     rows = [("input", None, summary["input"])] + [(k, v["params"], v["metrics"]) for k, v in summary["variants"].items()]
     for name, params, m in rows:
         z = m["zones"]
-        f = (lambda v: "-" if v is None else f"{v:.2f}")
-        t.add_row(name, "" if params is None else f"{params:,}", f(m["psnr_db"]), f"{m['ssim']:.3f}",
-                  f(z["centre"]["psnr_db"]), f(z["middle"]["psnr_db"]), f(z["edge"]["psnr_db"]))
+        t.add_row(name, "" if params is None else f"{params:,}", format_score(m["psnr_db"], 2),
+                  format_score(m["ssim"], 3), *(format_score(z[zone]["psnr_db"], 2) for zone in ZONES))
     console.print(t)

@@ -116,6 +116,7 @@ def _print_table(pairs: Path, rows: list[dict[str, Any]], summary: dict[str, Any
     """The summary as a rich table: PSNR, gain over the input and SSIM, overall and per zone."""
     from rich.table import Table
 
+    from lensim.evaluate.harness import format_score
     from lensim.evaluate.metrics import ZONES
 
     t = Table(title=f"{len(rows) // max(len(summary['methods']), 1)} crops from {pairs}",
@@ -127,9 +128,7 @@ def _print_table(pairs: Path, rows: list[dict[str, Any]], summary: dict[str, Any
     for z in ZONES:
         t.add_column(z, justify="right", no_wrap=True)
     base = summary["methods"]["input"]["psnr_db"]
-
-    def f(x: float, d: int) -> str:
-        return "–" if x != x else f"{x:.{d}f}"
+    f = format_score
     for n, m in summary["methods"].items():
         t.add_row(n, f(m["psnr_db"], 2), f(m["psnr_db"] - base, 2), f(m["ssim"], 4),
                   *[f"{f(m['zones'][z]['psnr_db'], 2)} / {f(m['zones'][z]['ssim'], 3)}" for z in ZONES])

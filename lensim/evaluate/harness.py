@@ -281,7 +281,8 @@ def write_csv(rows: Sequence[Mapping[str, Any]], path: str | Path) -> Path:
     return path
 
 
-def _fmt(x: float, digits: int) -> str:
+def format_score(x: float | None, digits: int) -> str:
+    """A score for a table: ``digits`` decimals, a dash for a missing or non-finite one."""
     return "–" if x is None or not math.isfinite(x) else f"{x:.{digits}f}"
 
 
@@ -296,9 +297,9 @@ def markdown_table(summary: Mapping[str, Any]) -> str:
     lines = ["| " + " | ".join(head) + " |", "|" + "|".join(["---"] + ["---:"] * (len(head) - 1)) + "|"]
     for name, m in methods.items():
         gain = m["psnr_db"] - base["psnr_db"] if base is not None else math.nan
-        cells = [name, _fmt(m["psnr_db"], 2), _fmt(gain, 2), _fmt(m["ssim"], 4)]
+        cells = [name, format_score(m["psnr_db"], 2), format_score(gain, 2), format_score(m["ssim"], 4)]
         for z in ZONES:
-            cells += [_fmt(m["zones"][z]["psnr_db"], 2), _fmt(m["zones"][z]["ssim"], 4)]
+            cells += [format_score(m["zones"][z]["psnr_db"], 2), format_score(m["zones"][z]["ssim"], 4)]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
