@@ -15,11 +15,9 @@ import torch
 import typer
 
 from lensim.cli.common import console, print_json
-from lensim.restore.train import TrainConfig, TrainProgress, TrainResult
+from lensim.restore.train import FROZEN_ON_RESUME, TrainConfig, TrainProgress, TrainResult
 
 _D = TrainConfig()
-#: What a resumed run may change (the architecture and recipe come from its checkpoint).
-_RESUMABLE = ("epochs", "time_budget_s", "device", "amp")
 
 
 def train_command(
@@ -81,8 +79,8 @@ def train_command(
         "time_budget_s": time_budget_s if time_budget_s > 0 else None, "seed": seed, "device": device,
         "amp": not no_amp,
     }
-    if resume:
-        overrides = {k: overrides[k] for k in _RESUMABLE}
+    if resume:  # the architecture and recipe come from the checkpoint
+        overrides = {k: v for k, v in overrides.items() if k not in FROZEN_ON_RESUME}
     prog, callback = _progress(epochs, show=not quiet and not json_out)
     try:
         result = train(dataset, output, TrainConfig(), resume=resume, progress=callback, **overrides)
