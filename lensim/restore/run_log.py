@@ -13,12 +13,13 @@ rows of an uninterrupted run. Floats are written with repr (exact), NaN and None
 from __future__ import annotations
 
 import csv
+import io
 import math
 from pathlib import Path
 from typing import Any
 
 from lensim.data.manifest import SPLIT
-from lensim.io import atomic_write_json
+from lensim.io import atomic_write_json, atomic_write_text
 
 LOG_FIELDS = ("epoch", "step", "loss", "val_psnr", "val_ssim", "lr", "seconds")
 STEP_FIELDS = ("epoch", "step", "loss", "lr", "seconds")
@@ -32,7 +33,9 @@ def _cell(value: Any) -> Any:
 
 
 class CsvLog:
-    """Append-only CSV that, on resume, drops rows newer than the checkpoint's step."""
+    """Append-only CSV that, on resume, drops rows newer than the checkpoint's step. The
+    header and the rows kept are written atomically; each new row is appended (a log
+    grows by one line per step, and a crash loses at most the line being written)."""
 
     def __init__(self, path: Path, fields: tuple[str, ...], keep_until_step: int | None) -> None:
         self.path = path
@@ -42,10 +45,11 @@ class CsvLog:
             with open(path, newline="") as fh:
                 rows = [r for r in csv.DictReader(fh)
                         if r.get("step", "").isdigit() and int(r["step"]) <= keep_until_step]
-        with open(path, "w", newline="") as fh:
-            w = csv.DictWriter(fh, fieldnames=fields)
-            w.writeheader()
-            w.writerows(rows)
+        text = io.StringIO(newline="")
+        writer = csv.DictWriter(text, fieldnames=fields)
+        writer.writeheader()
+        writer.writerows(rows)
+        atomic_write_text(path, text.getvalue())
 
     def write(self, row: dict[str, Any]) -> None:
         with open(self.path, "a", newline="") as fh:
