@@ -195,33 +195,39 @@ def _raw_ifd(tf: Any) -> Any:
 
 def _tiff_tags(path: Path) -> dict[str, Any]:
     """Tags of a TIFF-based raw: IFD0 and EXIF values by tifffile name, plus the raw IFD's
-    photometric interpretation and CFA repeat size under 'raw_photometric' and
-    'raw_cfa_dims'. {} when tifffile cannot read the file (CR3, RAF, ORF, ...)."""
+    photometric interpretation, samples per pixel and CFA repeat size under
+    'raw_photometric', 'raw_samples' and 'raw_cfa_dims'. {} when tifffile cannot read the
+    file (CR3, RAF, ORF, ...); what was read before an IFD tifffile cannot parse is kept."""
     import tifffile
 
+    tags: dict[str, Any] = {}
     try:
         with tifffile.TiffFile(path) as tf:
             first: Any = tf.pages[0]
-            tags = {t.name: t.value for t in first.tags.values()}
+            tags.update({t.name: t.value for t in first.tags.values()})
             exif = tags.pop("ExifTag", None)
             if isinstance(exif, dict):
                 for k, v in exif.items():
                     tags.setdefault(k, v)
             raw = _raw_ifd(tf)
-            for t in raw.tags.values():
-                tags.setdefault(t.name, t.value)
-            tags["raw_photometric"] = int(raw.tags.valueof("PhotometricInterpretation", 0) or 0)
-            tags["raw_samples"] = int(raw.tags.valueof("SamplesPerPixel", 1) or 1)
+            found = {t.name: t.value for t in raw.tags.values()}
             dims = raw.tags.valueof("CFARepeatPatternDim")
-            tags["raw_cfa_dims"] = tuple(int(d) for d in dims) if dims is not None else None
-    except Exception:  # noqa: BLE001 - not a TIFF container, or tags tifffile cannot parse: rawpy's data only
-        return {}
+            found["raw_cfa_dims"] = tuple(int(d) for d in dims) if dims is not None else None
+            found["raw_samples"] = int(raw.tags.valueof("SamplesPerPixel", 1) or 1)
+            found["raw_photometric"] = int(raw.tags.valueof("PhotometricInterpretation", 0) or 0)
+            for k, v in found.items():
+                tags.setdefault(k, v)
+    except Exception:  # noqa: BLE001 - not a TIFF container, or an IFD tifffile cannot parse: LibRaw's data then
+        pass
     return tags
 
 
 def _dng_refusal(src: str, tags: dict[str, Any]) -> None:
-    """Refuse a DNG whose raw IFD is not a 2x2 colour filter array."""
-    photometric = int(tags.get("raw_photometric", 0))
+    """Refuse a DNG whose raw IFD is not a 2x2 colour filter array (LibRaw judges when
+    tifffile could not read the raw IFD)."""
+    if "raw_photometric" not in tags:
+        return
+    photometric = int(tags["raw_photometric"])
     if photometric != _CFA_PHOTOMETRIC:
         what = _PHOTOMETRIC_NAMES.get(photometric, f"PhotometricInterpretation {photometric}")
         raise InputError(src, "cfa", f"found {what} data with {tags.get('raw_samples', 1)} sample(s) per pixel; "
