@@ -23,9 +23,39 @@ def _parse_pair(text: str, option: str) -> tuple[int, int]:
         raise InputError(option, None, f"expected two integers TOP,LEFT, got {text!r}") from None
 
 
+def _split_inputs(paths: list[Path]) -> tuple[list[Path], list[Path]]:
+    """(raw files, other photos): folders are expanded to their raw files
+    (lensim.raw.raw_files), files go by their suffix."""
+    from lensim.raw import RAW_SUFFIXES, raw_files
+
+    raw_given: list[str | Path] = [p for p in paths if p.is_dir() or p.suffix.lower() in RAW_SUFFIXES]
+    photos = [p for p in paths if p not in raw_given]
+    return (raw_files(raw_given) if raw_given else []), photos
+
+
+def _restore_raws(files: list[Path], output: Path, model, settings, dng: bool, workers: int, quiet: bool) -> list[dict]:
+    """Restore raw files with a progress bar over the batch (lensim.raw.restore)."""
+    from lensim.raw.restore import restore_raw_files
+
+    prog, step = progress_bar("restoring raw files", "files", quiet)
+    if prog is not None:
+        prog.start()
+    try:
+        records = restore_raw_files(files, output, model, settings, dng=dng, workers=workers, progress=step)
+    finally:
+        if prog is not None:
+            prog.stop()
+    if not quiet:
+        for r in records:
+            what = "skipped (done)" if r["skipped"] else "->"
+            console.print(f"restored {r['input']} {what} {r['output']}", highlight=False)
+    return records
+
+
 def restore_command(
     checkpoint: Path = typer.Argument(..., help="Run folder (best.pt, else last.pt) or checkpoint file."),
-    images: list[Path] = typer.Argument(..., help="Photos to restore (8/16-bit PNG, TIFF or JPEG)."),
+    images: list[Path] = typer.Argument(..., help="Photos to restore (8/16-bit PNG, TIFF or JPEG), camera raw files "
+                                        "(DNG, CR2, NEF, ARW, ...) or folders of raw files."),
     output: Path = typer.Option(..., "-o", "--output", help="Output folder."),
     sensor_file: str = typer.Option(None, "--sensor", help="Sensor profile of the photos (default: the one trained for)."),
     lens_file: str = typer.Option(None, "--lens", help="Lens of the photos (only checked against the checkpoint's)."),
@@ -36,13 +66,25 @@ def restore_command(
     bits: int = typer.Option(0, "--bits", help="Output bit depth 8 or 16 (0: that of the input)."),
     device: str = typer.Option("cpu", "--device", help="cpu, cuda or cuda:N."),
     threads: int = typer.Option(0, "--threads", help="CPU threads for PyTorch (0: PyTorch's default)."),
+    dng: bool = typer.Option(False, "--dng", help="Raw inputs: also write OUT/<name>.dng, the restored photo as a "
+                             "LinearRaw DNG with the raw's colour matrices, white balance and EXIF."),
+    allow_other_camera: bool = typer.Option(False, "--allow-other-camera", help="Restore raws from another camera or "
+                                            "of another size than the checkpoint's sensor (as full frames of it)."),
+    workers: int = typer.Option(1, "--workers", help="Raw inputs restored side by side (processes sharing the threads)."),
     quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
     json_out: bool = typer.Option(False, "--json", help="Print what was written as JSON."),
 ) -> None:
     """Restore photos with a trained network: tiled (any resolution), each tile fed its
     absolute field-of-view coordinates; writes OUT/<name>.png (or .tif for TIFF input).
 
-    Example: lensim restore runs/a photo.png -o restored/
+    Camera raw files are developed with the simulator's own chain (no sharpening), restored
+    with the field-of-view of their active area on the sensor and written as OUT/<name>.tif
+    (16-bit sRGB; with --dng also a linear DNG). A raw from another camera than the
+    checkpoint's sensor is refused unless --allow-other-camera. Every raw is checked
+    before the first output; finished outputs are skipped, so a rerun resumes.
+
+    Example: lensim restore runs/a photo.png -o restored/;
+    lensim restore runs/a raws/ -o restored/ --dng --workers 2
     """
     from lensim.images import read_image, write_image
     from lensim.restore.checkpoint import load_checkpoint
@@ -69,9 +111,18 @@ def restore_command(
         raise InputError(info["path"], "sensor", "records no sensor resolution; expected --sensor")
     sensor_w, sensor_h = int(res[0]), int(res[1])
     offset = _parse_pair(sensor_offset, "--sensor-offset") if sensor_offset else None
-    output.mkdir(parents=True, exist_ok=True)
+    raws, photos = _split_inputs(images)
+    if dng and not raws:
+        raise InputError("--dng", None, "applies to camera raw inputs; none were given")
     written = []
-    for path in images:
+    if raws:
+        from lensim.raw.restore import RestoreSettings
+
+        settings = RestoreSettings(checkpoint=info["path"], sensor=dict(sensor_data), tile=tile, overlap=overlap,
+                                   device=device, allow_other_camera=allow_other_camera)
+        written += _restore_raws(raws, output, model, settings, dng, workers, quiet or json_out)
+    output.mkdir(parents=True, exist_ok=True)
+    for path in photos:
         img, in_bits = read_image(path)
         _, h, w = img.shape
         if offset is None:

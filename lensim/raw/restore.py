@@ -1,0 +1,265 @@
+"""Restoring camera raw files: develop with the simulator's chain, restore, write.
+
+For each raw file (:func:`restore_raw_files`):
+
+1. read it (lensim.raw.read_raw) and check it against the sensor the network was trained
+   for (:func:`check_camera`): the camera's name ('Make Model' or the Model, as `lensim
+   sensor from-raw` names a profile) and the active area's size must match, else it is
+   refused in one line naming both (``allow_other_camera`` lets it through);
+2. develop it in the sensor's orientation (lensim.raw.develop.develop_raw with the
+   profile's CCM and the as-shot white balance, no rounding: what the network was trained on);
+3. restore it tile by tile (lensim.restore.infer.restore_image), each tile fed the
+   field-of-view coordinates of its place on the sensor (:func:`raw_geometry`): the active
+   area is the whole sensor, the optical axis at its centre; a DNG written by `lensim
+   simulate` records where its frame lay on the sensor (:func:`lensim.raw.dng.read_simulation_record`);
+4. write OUT/<stem>.tif (16-bit sRGB, turned by the file's orientation) and, with
+   ``dng``, OUT/<stem>.dng: the restored photo as LinearRaw camera RGB with the raw's
+   colour matrix, as-shot white balance, orientation and EXIF (lensim.raw.dng).
+
+Every input is read and checked before the first output is written; outputs that exist
+are skipped (a rerun resumes); each file is written atomically. ``workers`` > 1 restores
+files side by side in worker processes, the CPU threads shared among them.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from lensim.errors import InputError
+from lensim.restore.network import FieldAwareUNet
+from lensim.sensor.profile import SensorProfile, sensor_from_dict
+
+Progress = Callable[[float, float], None]
+
+
+@dataclass(frozen=True)
+class RawJob:
+    """One raw file to restore and where its outputs go (dng: None when not asked for)."""
+
+    source: Path
+    tif: Path
+    dng: Path | None
+
+    @property
+    def outputs(self) -> list[Path]:
+        return [self.tif] + ([self.dng] if self.dng is not None else [])
+
+    @property
+    def finished(self) -> bool:
+        return all(p.exists() for p in self.outputs)
+
+
+@dataclass(frozen=True)
+class RestoreSettings:
+    """What every file shares: the checkpoint, the sensor trained for (profile mapping),
+    tiling, device and whether other cameras are allowed."""
+
+    checkpoint: str
+    sensor: dict[str, Any]
+    tile: int = 512
+    overlap: int = 192
+    device: str = "cpu"
+    allow_other_camera: bool = False
+
+
+def plan_jobs(files: list[Path], out_dir: Path, dng: bool) -> list[RawJob]:
+    """OUT/<stem>.tif (and OUT/<stem>.dng) per file; two inputs with one stem, or an
+    output that would overwrite its input, are refused."""
+    jobs: list[RawJob] = []
+    seen: dict[Path, Path] = {}
+    for f in files:
+        job = RawJob(f, out_dir / f"{f.stem}.tif", out_dir / f"{f.stem}.dng" if dng else None)
+        if job.tif in seen:
+            raise InputError(str(f), None, f"has the same name stem as {seen[job.tif]}; both would be written to "
+                             f"{job.tif}")
+        if job.dng is not None and job.dng.resolve() == f.resolve():
+            raise InputError(str(f), "--output", "the restored DNG would overwrite this input; expected another "
+                             "output folder")
+        seen[job.tif] = f
+        jobs.append(job)
+    return jobs
+
+
+def _names_match(raw: Any, sensor: SensorProfile) -> bool:
+    names = {n.strip().lower() for n in (raw.camera, raw.model or "") if n and n.strip()}
+    return sensor.name.strip().lower() in names
+
+
+def check_camera(raw: Any, sensor: SensorProfile, placement: dict[str, Any] | None, checkpoint: str,
+                 allow_other: bool) -> bool:
+    """True when the raw comes from the sensor the network was trained for, at its native
+    pixel scale: its camera name matches the profile's name and its active area is the
+    sensor's (rounded down to whole Bayer quads), or, for a DNG written by `lensim
+    simulate`, its frame lies on that sensor at the sensor's pitch. Otherwise a one-line
+    InputError naming both, unless ``allow_other`` (then False)."""
+    w, h = raw.width - raw.width % 2, raw.height - raw.height % 2
+    if placement is not None:
+        native = abs(float(placement.get("pitch_um", 0.0)) / sensor.pixel_pitch_um - 1.0) < 1e-6
+        size_ok = native and _native_offset(placement, sensor, raw.height, raw.width) is not None
+    else:
+        size_ok = (w, h) == tuple(sensor.resolution)
+    if _names_match(raw, sensor) and size_ok:
+        return True
+    if allow_other:
+        return False
+    what = f"{raw.camera} {raw.width}x{raw.height}"
+    if placement is not None and _names_match(raw, sensor):
+        what += f" simulated at {float(placement.get('pitch_um', 0.0)):.4g} um per pixel"
+    raise InputError(raw.path, "camera", f"{what}, but {checkpoint} was trained for {sensor.name} "
+                     f"{sensor.width}x{sensor.height} at {sensor.pixel_pitch_um:g} um; give --allow-other-camera "
+                     "to restore it anyway (as a full frame of that sensor)")
+
+
+def _native_offset(placement: dict[str, Any], sensor: SensorProfile, height: int, width: int) -> tuple[int, int] | None:
+    """(top, left) sensor pixel of a simulated frame's top-left pixel, when it lies on the
+    sensor's pixel grid and fits on it; else None."""
+    p = sensor.pixel_pitch_um * 1e-3
+    top = float(placement.get("y0_mm", 0.0)) / p + sensor.height / 2.0
+    left = float(placement.get("x0_mm", 0.0)) / p + sensor.width / 2.0
+    if abs(top - round(top)) > 1e-3 or abs(left - round(left)) > 1e-3:
+        return None
+    t, le = round(top), round(left)
+    if 0 <= t <= sensor.height - height and 0 <= le <= sensor.width - width:
+        return t, le
+    return None
+
+
+def raw_geometry(raw: Any, sensor: SensorProfile, placement: dict[str, Any] | None,
+                 native: bool) -> tuple[tuple[float, float], tuple[float, float]]:
+    """((top, left), (sensor_height, sensor_width)) in image pixels for fov_channels.
+
+    A native raw (``native``: :func:`check_camera` passed) is the whole active area, the
+    optical axis at its centre, or for a simulated DNG its recorded place on the sensor;
+    any other raw is taken as a full frame fitted onto the sensor
+    (lensim.restore.infer.image_sensor_geometry)."""
+    from lensim.restore.infer import image_sensor_geometry
+
+    offset: tuple[int, int] | None = None
+    if native:
+        offset = (0, 0) if placement is None else _native_offset(placement, sensor, raw.height, raw.width)
+    return image_sensor_geometry(raw.height, raw.width, sensor.resolution, offset)
+
+
+def _dng_colour(raw: Any, r_gain: float, b_gain: float) -> Any:
+    """The raw's colour matrices (ColorMatrix1/2 with their illuminants, else its one
+    matrix at D65) and the develop's white balance as DNG metadata."""
+    from lensim.raw.dng import D65_ILLUMINANT, DngColour
+
+    matrices = list(raw.color_matrices) or [(raw.color_matrix_illuminant or D65_ILLUMINANT, raw.color_matrix)]
+    colour = DngColour.from_gains(matrices[0][1], r_gain, b_gain, matrices[0][0])
+    if len(matrices) > 1:
+        colour = colour.with_second_matrix(matrices[1][1], matrices[1][0])
+    return colour
+
+
+def validate(jobs: list[RawJob], sensor: SensorProfile, settings: RestoreSettings) -> None:
+    """Read and check every unfinished job's raw (camera, size, develop settings) before
+    anything is written; one-line InputError on the first bad file."""
+    from lensim.raw import read_raw
+    from lensim.raw.develop import capture_params
+    from lensim.raw.dng import read_simulation_record
+
+    for job in jobs:
+        if job.finished:
+            continue
+        raw = read_raw(job.source)
+        check_camera(raw, sensor, read_simulation_record(job.source), settings.checkpoint, settings.allow_other_camera)
+        capture_params(raw, sensor)  # the develop settings exist (as-shot white balance)
+        if job.dng is not None and raw.color_matrix is None:
+            raise InputError(str(job.source), "color_matrix", "the file has no colour matrix to carry into the "
+                             "restored DNG; leave out --dng")
+
+
+def restore_raw(job: RawJob, model: FieldAwareUNet, sensor: SensorProfile, settings: RestoreSettings,
+                progress: Callable[[int, int], None] | None = None) -> dict[str, Any]:
+    """Develop, restore and write one raw file (see the module docstring); returns its
+    record: input, outputs, size, whether it was native, the develop's capture parameters."""
+    from lensim.images import write_image
+    from lensim.raw import read_raw
+    from lensim.raw.develop import apply_orientation, develop_raw
+    from lensim.raw.dng import DngCamera, DngExif, read_simulation_record, write_srgb_as_linear_dng
+    from lensim.restore.infer import restore_image
+
+    raw = read_raw(job.source)
+    placement = read_simulation_record(job.source)
+    native = check_camera(raw, sensor, placement, settings.checkpoint, settings.allow_other_camera)
+    img, params = develop_raw(raw, sensor, bits=None, orient=False)
+    top_left, size = raw_geometry(raw, sensor, placement, native)
+    out = restore_image(model, img, top_left, size, tile=settings.tile, overlap=settings.overlap, progress=progress)
+    del img  # bound peak memory
+    out.clamp_(0.0, 1.0)
+    if job.dng is not None:
+        write_srgb_as_linear_dng(job.dng, out, params.ccm, _dng_colour(raw, params.r_gain, params.b_gain),
+                                 DngCamera(raw.make or "", raw.model or ""), raw.orientation,
+                                 DngExif.from_mapping(raw.info()))
+    write_image(job.tif, apply_orientation(out, raw.orientation), 16, srgb_tag=True)
+    return {"input": str(job.source), "output": str(job.tif), "dng": None if job.dng is None else str(job.dng),
+            "width": raw.width, "height": raw.height, "camera": raw.camera, "native": native, "skipped": False,
+            "capture": params.to_dict()}
+
+
+# ----------------------------------------------------------------------------- batches
+
+_WORKER: dict[str, Any] = {}
+
+
+def _worker_start(settings: RestoreSettings, threads: int) -> None:
+    """Worker process set-up: its share of the CPU threads and its own copy of the model."""
+    from lensim.restore.checkpoint import load_checkpoint
+
+    torch.set_num_threads(threads)
+    _WORKER["model"], _ = load_checkpoint(settings.checkpoint, device=settings.device)
+    _WORKER["sensor"] = sensor_from_dict(settings.sensor, "checkpoint sensor")
+    _WORKER["settings"] = settings
+
+
+def _worker_run(job: RawJob) -> dict[str, Any]:
+    return restore_raw(job, _WORKER["model"], _WORKER["sensor"], _WORKER["settings"])
+
+
+def restore_raw_files(files: list[Path], out_dir: Path, model: FieldAwareUNet, settings: RestoreSettings,
+                      dng: bool = False, workers: int = 1, progress: Progress | None = None) -> list[dict[str, Any]]:
+    """Restore raw files into ``out_dir`` (see the module docstring). ``model`` is the
+    loaded network (used in this process when ``workers`` is 1; worker processes load
+    their own from ``settings.checkpoint``). ``progress(done, total)`` counts files (with
+    one worker, fractions of a file as its tiles finish). Returns one record per file."""
+    if workers < 1:
+        raise InputError("--workers", None, f"expected at least 1, got {workers}")
+    sensor = sensor_from_dict(settings.sensor, "checkpoint sensor")
+    jobs = plan_jobs(files, out_dir, dng)
+    validate(jobs, sensor, settings)
+    records = [{"input": str(j.source), "output": str(j.tif), "skipped": True} for j in jobs if j.finished]
+    todo = [j for j in jobs if not j.finished]
+    total = len(jobs)
+    def step(done: float) -> None:
+        if progress is not None:
+            progress(done, total)
+
+    step(len(records))
+    if workers == 1 or len(todo) <= 1:
+        for job in todo:
+            before = len(records)
+
+            def tiles(d: int, n: int, before: int = before) -> None:
+                step(before + d / n)
+            records.append(restore_raw(job, model, sensor, settings, progress=tiles))
+            step(len(records))
+        return records
+    threads = max(1, torch.get_num_threads() // workers)
+    import multiprocessing
+
+    with ProcessPoolExecutor(max_workers=min(workers, len(todo)), mp_context=multiprocessing.get_context("spawn"),
+                             initializer=_worker_start, initargs=(settings, threads)) as pool:
+        for fut in as_completed([pool.submit(_worker_run, job) for job in todo]):
+            records.append(fut.result())
+            step(len(records))
+    return records
+
+
+__all__ = ["RawJob", "RestoreSettings", "check_camera", "plan_jobs", "raw_geometry", "restore_raw",
+           "restore_raw_files", "validate"]
