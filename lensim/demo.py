@@ -178,6 +178,11 @@ def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: i
     evaluation = _evaluate(out, bank, sensor, figs, seed, device, step)
     timings["evaluation"] = time.perf_counter() - t
 
+    t = time.perf_counter()
+    say("a held-out photo as a camera raw file, restored")
+    raw_file = _raw_stage(out, bank, sensor, figs, seed, device)
+    timings["raw"] = time.perf_counter() - t
+
     report = {
         "lens": summary,
         "sensor": {"name": sensor.name, "pixel_pitch_um": sensor.pixel_pitch_um, "resolution": list(sensor.resolution)},
@@ -186,6 +191,7 @@ def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: i
         "bank": _bank_summary(bank),
         "training": {"model": model_info, "plain-unet": plain_info},
         **evaluation,
+        "raw_file": raw_file,
         "timings_s": timings,
     }
     write_report(out, report, figs)
@@ -214,6 +220,38 @@ def _evaluate(out: Path, bank: PSFBank, sensor: SensorProfile, figs: Path, seed:
     edges = edge_study(bank, sensor, methods["model"], figs, seed=seed)
     return {"held_out_photos": held_out, "sample_crops": samples, "metrics": metrics,
             "slanted_edge": edges["slanted_edge"], "lateral_colour": edges["lateral_colour"]}
+
+
+def _raw_stage(out: Path, bank: PSFBank, sensor: SensorProfile, figs: Path, seed: int, device: str) -> dict:
+    """The first held-out photo as the camera's raw file: simulated at the sensor's right
+    edge and written as a CFA DNG (what `lensim simulate --raw` writes), then through
+    `lensim restore`'s raw path (develop, restore, 16-bit TIFF) with the field-aware
+    network; the report's raw_file entry and figure (developed input, restored, truth)."""
+    import torch
+
+    from lensim.data.manifest import read_held_out
+    from lensim.images import read_image
+    from lensim.raw.restore import RestoreSettings, restore_raw_files
+    from lensim.render.mapping import native_mapping
+    from lensim.render.pipeline import simulate
+    from lensim.report import raw_file_figure
+    from lensim.restore.checkpoint import load_checkpoint
+
+    d = _stage(out, "raw")
+    name = Path(read_held_out(out / "run-model")[0]).stem
+    truth, _ = read_image(out / "photos" / f"{name}.png")
+    h, w = truth.shape[1:]
+    top, left = (sensor.height - h) // 4 * 2, (sensor.width - w - 16) // 2 * 2  # mid-height, at the right edge
+    dng = d / f"{name}.dng"
+    if not dng.exists():
+        simulate(truth, bank, sensor, torch.Generator().manual_seed(seed), mapping=native_mapping(h, w, sensor, top, left),
+                 raw_path=dng)
+    checkpoint = out / "run-model" / "last.pt"
+    model, _ = load_checkpoint(checkpoint, device=device)
+    settings = RestoreSettings(str(checkpoint), sensor.to_dict(), device=device)
+    record = restore_raw_files([dng], d / "restored", model, settings)[0]
+    entry = raw_file_figure(dng, Path(record["output"]), truth, sensor, figs)
+    return {"photo": name, "dng": str(dng.relative_to(out)), "sensor_top": top, "sensor_left": left, **entry}
 
 
 def _bank_summary(bank: PSFBank) -> dict:
