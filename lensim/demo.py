@@ -14,7 +14,7 @@ import shutil
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 from lensim.assets import DEFAULT_LENS
 from lensim.assets.images import available_sample_images, read_sample_image
@@ -107,8 +107,8 @@ def _train(pairs: Path, run: Path, settings: DemoSettings, plain: bool, seed: in
         return read_json(marker, "training record")
     if run.exists():
         shutil.rmtree(run)  # an unfinished run: start it again (its budget was not spent)
-    kw = dict(epochs=100_000, batch_size=4, lr=5e-4, lr_schedule="cosine", crop=settings.train_crop, seed=seed,
-              time_budget_s=settings.train_seconds, val_fraction=0.25, device=device)
+    kw: dict[str, Any] = dict(epochs=100_000, batch_size=4, lr=5e-4, lr_schedule="cosine", crop=settings.train_crop,
+                              seed=seed, time_budget_s=settings.train_seconds, val_fraction=0.25, device=device)
     if plain:
         target = count_parameters(FieldAwareUNet(width=settings.width, deformable_scales=settings.deformable_scales))
         kw.update(width=plain_unet_width(target, 3), use_fov=False, use_deformable=False, use_context=False)

@@ -116,8 +116,8 @@ def edge_study(bank: PSFBank, sensor: SensorProfile, model: Method, figs: Path, 
             restored = model(cam, ctx).clamp(0, 1)
         field_here = math.hypot(left + size / 2 - sensor.width / 2, top + size / 2 - sensor.height / 2) * p / r_max
         ax = fig.add_subplot(1, len(fields), i + 1)
-        entry_m = {"normalized_field": field_here}
-        entry_c = {"normalized_field": field_here}
+        entry_m: dict[str, Any] = {"normalized_field": field_here}
+        entry_c: dict[str, Any] = {"normalized_field": field_here}
         for name, img, style in (("before", cam, "--"), ("after", restored, "-"), ("sharp", sharp, ":")):
             region = img[:, 8:-8, 8:-8].numpy()
             g = slanted_edge_mtf(region[1])

@@ -52,7 +52,7 @@ def evaluate_command(
     if sources:
         keep = (keep or []) + [s.strip() for s in sources.split(",") if s.strip()]
     runs = {"model": model, "plain-unet": plain_unet}
-    options = {"rl": {"iterations": rl_iterations}, "unsharp": {"sigma_px": unsharp_sigma, "amount": unsharp_amount}}
+    options: dict[str, dict[str, Any]] = {"rl": {"iterations": rl_iterations}, "unsharp": {"sigma_px": unsharp_sigma, "amount": unsharp_amount}}
     table: dict[str, harness.Method] = {}
     for n in names:
         if n in harness.CHECKPOINT_METHODS:

@@ -29,7 +29,7 @@ import hashlib
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable, Mapping
 
 import torch
 
@@ -82,7 +82,7 @@ def record_path(out_dir: Path, index: int) -> Path:
     return out_dir / "records" / f"{index:06d}.json"
 
 
-def crop_capture(record: dict, crop: dict) -> dict | None:
+def crop_capture(record: Mapping[str, Any], crop: Mapping[str, Any]) -> dict | None:
     """The capture draws (colour temperature, noise levels) behind one crop of a record."""
     if "placements" in record:
         return record["placements"][int(crop.get("placement", 0))].get("capture")
@@ -123,7 +123,8 @@ def make_pairs_for_image(job: PairJob) -> dict:
     y = int(torch.randint(0, h - h2 + 1, (1,), generator=gen))
     x = int(torch.randint(0, w - w2 + 1, (1,), generator=gen))
     img = img[:, y:y + h2, x:x + w2]
-    crops, placed = [], []
+    crops: list[dict] = []
+    placed: list[dict] = []
     stem = f"{job.index:06d}"
     for p in range(job.placements):
         top, left = place_on_sensor(h2, w2, sensor, p, job.placements, gen)

@@ -156,7 +156,7 @@ def load_checkpoint(
 def rng_state() -> dict[str, Any]:
     """Torch (CPU and CUDA), Python and NumPy RNG states as tensors/lists (weights_only-safe)."""
     py = random.getstate()
-    npst = np.random.get_state()
+    npst: Any = np.random.get_state()  # the legacy tuple (kind, keys, pos, has_gauss, cached)
     out: dict[str, Any] = {
         "torch": torch.get_rng_state(),
         "python": [py[0], list(py[1]), py[2]],
