@@ -2,73 +2,45 @@
 
 A ray is named by its field (in the lens's field unit) and its normalized pupil
 coordinates (px, py) in the unit disc. Paraxial aiming sends it through the point
-(px, py) * EPD/2 of the paraxial entrance pupil; real aiming finds, by Newton
-iteration, the ray that crosses the real stop surface at (px, py) * paraxial stop
+(px, py) * EPD/2 of the paraxial entrance pupil; real aiming (lensim.optics.real_aiming)
+finds the ray that crosses the real stop surface at (px, py) * paraxial stop
 semi-diameter (as Zemax's ray aiming does), so wide-angle lenses with pupil aberration
-and distortion are traced right. The chief ray is (0, 0).
+and distortion are traced right, up to the field where the chief ray stops existing.
+The chief ray is (0, 0). Where rays start: lensim.optics.launch.
 
-Object at infinity: rays of one field are parallel, direction (0, sin a, cos a) for
-field angle a (Zemax's sign convention), starting on the entrance-pupil plane; their
-OPL starts at the plane wavefront through the origin. Finite object: rays start at the
-object point (0, h, -distance) with OPL 0.
+The chief ray is a reference ray: it is traced through unobscured(lens), so a central
+obscuration (a Cassegrain's secondary, a mirror-backed secondary spot, the shadow of a
+spider hub) never rejects a field, while every real ray is still blocked by it. A field
+whose chief ray fails is named in a one-line error with the largest field that works.
 """
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Literal
 
 import numpy as np
 import torch
 
 from lensim.errors import InputError, RayTraceError
+from lensim.optics.launch import launch, launch_at, object_rays
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import ParaxialData, paraxial_data, paraxial_image_height
-from lensim.optics.trace import DTYPE, STATUS_TEXT, Rays, media_indices, trace
+from lensim.optics.real_aiming import aim_real
+from lensim.optics.trace import (
+    DTYPE,
+    STATUS_TEXT,
+    Rays,
+    TraceResult,
+    media_indices,
+    trace,
+)
 
 Aiming = Literal["paraxial", "real"]
-AIM_TOL_MM = 1e-10
-AIM_MAX_ITER = 25
 
 
 def _tensor(x, device=None) -> torch.Tensor:
     return torch.as_tensor(np.asarray(x, dtype=np.float64), dtype=DTYPE, device=device)
-
-
-def launch(lens: Lens, field: torch.Tensor, pupil_xy: torch.Tensor, para: ParaxialData) -> tuple[torch.Tensor, torch.Tensor]:
-    """Object-space rays from field values (angle deg or object height mm, shape F[,...])
-    through entrance-pupil-plane points pupil_xy (..., 2) in mm. Returns (position,
-    direction) broadcast to (F, P, 3)."""
-    z_ep = para.entrance_pupil_z_mm
-    fld = field.reshape(-1, 1)
-    ex, ey = pupil_xy[..., 0].unsqueeze(0), pupil_xy[..., 1].unsqueeze(0)
-    if lens.infinite_object:
-        a = torch.deg2rad(fld)
-        dirs = torch.stack(torch.broadcast_tensors(torch.zeros_like(a), torch.sin(a), torch.cos(a)), -1)
-        dirs = dirs.expand(ex.shape[0] * 0 + fld.shape[0], ex.shape[1], 3)
-        pos = torch.stack(torch.broadcast_tensors(ex, ey, torch.full_like(ey, z_ep)), -1)
-        pos = pos.expand(fld.shape[0], ex.shape[1], 3)
-        return pos.clone(), dirs.clone()
-    d = lens.object_distance
-    if lens.field_type == "angle":
-        h = -(d + z_ep) * torch.tan(torch.deg2rad(fld))
-    else:
-        h = fld
-    src = torch.stack(torch.broadcast_tensors(torch.zeros_like(h), h, torch.full_like(h, -d)), -1)
-    target = torch.stack(torch.broadcast_tensors(ex, ey, torch.full_like(ey, z_ep)), -1)
-    src, target = torch.broadcast_tensors(src, target)
-    v = target - src
-    return src.clone(), v / torch.linalg.norm(v, dim=-1, keepdim=True)
-
-
-def object_rays(lens: Lens, position: torch.Tensor, direction: torch.Tensor, n_object: torch.Tensor) -> Rays:
-    """Rays with their starting OPL: plane wavefront through the origin for an object at
-    infinity, zero at the object point otherwise."""
-    if lens.infinite_object:
-        opl = n_object * (position * direction).sum(-1)
-    else:
-        opl = torch.zeros(position.shape[:-1], dtype=DTYPE, device=position.device) + 0 * n_object
-    valid = torch.ones(opl.shape, dtype=torch.bool, device=position.device)
-    return Rays(position, direction, opl, valid)
 
 
 def generate_rays(
@@ -100,79 +72,11 @@ def generate_rays(
         return object_rays(lens, pos, dirs, n[0]), wl
     if aiming != "real":
         raise InputError(None, "aiming", f"expected 'paraxial' or 'real', got {aiming!r}")
-    target = pupil.to(DTYPE) * para.stop_semi_diameter_mm  # (P, 2)
-    guess = ep_xy.unsqueeze(0).unsqueeze(0).expand(W, F, P, 2).clone()
-    solved, converged = _aim(lens, fld, guess, target, wl, n, para)
-    pos, dirs = _launch_batched(lens, fld, solved, para)
+    solved, converged = aim_real(lens, fld, pupil, wl, n, para)
+    pos, dirs = launch_at(lens, fld.reshape(1, F, 1), solved, para.entrance_pupil_z_mm)
     rays = object_rays(lens, pos, dirs, n[0])
     rays.valid = rays.valid & converged
     return rays, wl
-
-
-def _launch_batched(lens, fld, ep_xy, para):
-    """launch() for per-(W, F, P) pupil-plane points ep_xy (W, F, P, 2)."""
-    W, F, P, _ = ep_xy.shape
-    flat = ep_xy.permute(1, 0, 2, 3).reshape(F, W * P, 2)
-    z_ep = para.entrance_pupil_z_mm
-    fl = fld.reshape(F, 1)
-    if lens.infinite_object:
-        a = torch.deg2rad(fl)
-        dirs = torch.stack([torch.zeros_like(a), torch.sin(a), torch.cos(a)], -1).expand(F, W * P, 3)
-        pos = torch.cat([flat, torch.full_like(flat[..., :1], z_ep)], -1)
-    else:
-        d = lens.object_distance
-        h = -(d + z_ep) * torch.tan(torch.deg2rad(fl)) if lens.field_type == "angle" else fl
-        src = torch.stack([torch.zeros_like(h), h, torch.full_like(h, -d)], -1).expand(F, W * P, 3)
-        tgt = torch.cat([flat, torch.full_like(flat[..., :1], z_ep)], -1)
-        v = tgt - src
-        pos, dirs = src, v / torch.linalg.norm(v, dim=-1, keepdim=True)
-    pos = pos.reshape(F, W, P, 3).permute(1, 0, 2, 3).contiguous()
-    dirs = dirs.reshape(F, W, P, 3).permute(1, 0, 2, 3).contiguous()
-    return pos, dirs
-
-
-def _stop_xy(lens, fld, ep_xy, wl, n, para):
-    pos, dirs = _launch_batched(lens, fld, ep_xy, para)
-    rays = object_rays(lens, pos, dirs, n[0])
-    res = trace(lens, rays, wl, end=lens.stop_index + 1, to_image=False, apertures=False, indices=n)
-    return res.rays.position[..., :2], res.rays.valid
-
-
-def _aim(lens, fld, guess, target, wl, n, para):
-    """Newton iteration on the entrance-pupil-plane point so the ray meets the stop at target."""
-    scale = max(para.epd_mm, 1e-3)
-    h = 1e-7 * scale
-    x = guess
-    converged = torch.zeros(x.shape[:-1], dtype=torch.bool, device=x.device)
-    for _ in range(AIM_MAX_ITER):
-        s0, v0 = _stop_xy(lens, fld, x, wl, n, para)
-        r = s0 - target
-        converged = v0 & (r.abs().amax(-1) < AIM_TOL_MM * max(1.0, para.stop_semi_diameter_mm))
-        if bool(converged.all()):
-            break
-        dx = torch.zeros_like(x)
-        dx[..., 0] = h
-        sx, vx = _stop_xy(lens, fld, x + dx, wl, n, para)
-        dy = torch.zeros_like(x)
-        dy[..., 1] = h
-        sy, vy = _stop_xy(lens, fld, x + dy, wl, n, para)
-        j00, j10 = (sx[..., 0] - s0[..., 0]) / h, (sx[..., 1] - s0[..., 1]) / h
-        j01, j11 = (sy[..., 0] - s0[..., 0]) / h, (sy[..., 1] - s0[..., 1]) / h
-        det = j00 * j11 - j01 * j10
-        ok = v0 & vx & vy & (det.abs() > 1e-300)
-        det = torch.where(ok, det, torch.ones_like(det))
-        step_x = (j11 * r[..., 0] - j01 * r[..., 1]) / det
-        step_y = (-j10 * r[..., 0] + j00 * r[..., 1]) / det
-        step = torch.stack([step_x, step_y], -1)
-        # damp large steps (far from the solution the map can be strongly non-linear)
-        limit = 0.5 * scale
-        norm = torch.linalg.norm(step, dim=-1, keepdim=True)
-        step = torch.where(norm > limit, step * limit / norm, step)
-        active = ok & ~converged
-        if not bool(active.any()):
-            break  # the rest cannot move: a ray that fails at its guess or its probes keeps it
-        x = torch.where(active.unsqueeze(-1), x - step, x)
-    return x, converged
 
 
 def object_field(lens: Lens, value: float, aiming: Aiming = "paraxial", para: ParaxialData | None = None) -> float:
@@ -221,20 +125,68 @@ def chief_ray_image_height(lens: Lens, field_value: float, aiming: Aiming = "rea
     para = para or paraxial_data(lens)
     wl = lens.primary_wavelength_um if wavelength_um is None else wavelength_um
     rays, wlt = generate_rays(lens, [field_value], torch.zeros(1, 2, dtype=DTYPE), [wl], aiming, para)
-    res = trace(lens, rays, wlt)
-    if not bool(res.rays.valid.all()):
-        fail = res.first_failure()
-        raise RayTraceError(describe_failure(lens, field_value, fail, "chief ray"))
+    res = trace_chief_rays(lens, rays, wlt, [field_value], aiming, para)
     return float(res.rays.position[0, 0, 0, 1])
 
 
-def describe_failure(lens: Lens, field_value: float, fail, what: str) -> str:
-    """One line: which ray failed, where and how."""
+def unobscured(lens: Lens) -> Lens:
+    """The lens without its central obscurations: what reference rays (chief rays) are
+    traced through. Clear apertures still apply."""
+    if all(s.obscuration_radius is None for s in lens.surfaces):
+        return lens
+    return lens.with_changes(surfaces=[replace(s, obscuration_radius=None) for s in lens.surfaces])
+
+
+def trace_chief_rays(lens: Lens, rays: Rays, wavelength_um: torch.Tensor, launch_fields: list[float],
+                     aiming: Aiming, para: ParaxialData) -> TraceResult:
+    """Trace chief rays (W, F, 1) to the image as reference rays (central obscurations do
+    not block them). launch_fields: the F launch values (deg or mm) the rays were made
+    with. Raises RayTraceError naming the first field whose chief ray fails, and the
+    largest field whose chief ray reaches the image."""
+    res = trace(unobscured(lens), rays, wavelength_um)
+    bad = ~res.rays.valid
+    if bool(bad.any()):
+        wi, fi = (int(v) for v in torch.nonzero(bad)[0, :2])
+        mask = torch.zeros_like(bad)
+        mask[wi, fi] = bad[wi, fi]
+        wl = float(wavelength_um.reshape(-1)[wi if wavelength_um.numel() > 1 else 0])
+        coverage = largest_chief_field(lens, launch_fields[fi], aiming, para, wl)
+        raise RayTraceError(describe_failure(lens, launch_fields[fi], res.first_failure(mask), "chief ray", coverage))
+    return res
+
+
+def _chief_reaches_image(lens: Lens, field_value: float, aiming: Aiming, para: ParaxialData, wl: float) -> bool:
+    rays, wlt = generate_rays(lens, [field_value], torch.zeros(1, 2, dtype=DTYPE), [wl], aiming, para)
+    return bool(trace(unobscured(lens), rays, wlt).rays.valid.all())
+
+
+def largest_chief_field(lens: Lens, field_value: float, aiming: Aiming, para: ParaxialData, wavelength_um: float,
+                        resolution: float = 0.005) -> float | None:
+    """The largest launch field between 0 and field_value (same sign; deg or mm) whose chief
+    ray (aimed as `aiming` says) reaches the image, by bisection to `resolution` (deg or
+    mm); None when not even the axial chief ray does."""
+    if not _chief_reaches_image(lens, 0.0, aiming, para, wavelength_um):
+        return None
+    lo, hi = 0.0, float(field_value)
+    for _ in range(max(1, math.ceil(math.log2(max(abs(hi) / resolution, 2.0))))):
+        mid = 0.5 * (lo + hi)
+        if _chief_reaches_image(lens, mid, aiming, para, wavelength_um):
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+def describe_failure(lens: Lens, field_value: float, fail, what: str, coverage: float | None = None) -> str:
+    """One line: which ray failed, where and how; coverage: the largest field that works
+    (launch units), named when given."""
     unit = "deg" if lens.launch_field_type == "angle" else "mm"
+    expected = "expected a field inside the lens's coverage"
+    if coverage is not None:
+        largest = math.copysign(math.floor(abs(coverage) * 100) / 100, coverage)  # rounded towards the axis
+        expected += f" (its chief ray reaches the image up to {largest:g} {unit})"
     if fail is None:
-        return (f"{lens.source}: fields: the {what} at field {field_value:g} {unit} could not be aimed through the stop; "
-                f"expected a field inside the lens's coverage")
+        return f"{lens.source}: fields: the {what} at field {field_value:g} {unit} could not be aimed through the stop; {expected}"
     status, surf = fail
     where = "the image plane" if surf >= lens.num_surfaces else f"surfaces[{surf}] (surface {surf + 1} in lens info)"
-    return (f"{lens.source}: fields: the {what} at field {field_value:g} {unit} {STATUS_TEXT[status]} at {where}; "
-            f"expected a field inside the lens's coverage")
+    return f"{lens.source}: fields: the {what} at field {field_value:g} {unit} {STATUS_TEXT[status]} at {where}; {expected}"

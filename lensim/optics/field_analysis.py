@@ -15,7 +15,7 @@ from lensim.errors import InputError, RayTraceError
 from lensim.optics.aiming import Aiming, chief_ray_image_height, describe_failure, generate_rays, object_field
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import ParaxialData, paraxial_data, paraxial_image_height
-from lensim.optics.trace import DTYPE, Rays, TraceResult, trace
+from lensim.optics.trace import DTYPE, TraceResult, trace
 
 DEFAULT_FIELD_STEPS = 21
 
@@ -75,10 +75,6 @@ def distortion(
         "wavelength_um": wl,
         "aiming": aiming,
     }
-
-
-def _slice(rays: Rays, idx: slice) -> Rays:
-    return Rays(rays.position[:, :, idx], rays.direction[:, :, idx], rays.opl[:, :, idx], rays.valid[:, :, idx])
 
 
 def _disc_fraction(edges: torch.Tensor, fine: int = 16) -> torch.Tensor:
@@ -211,8 +207,8 @@ def relative_illumination(
     pupil = torch.cat([torch.zeros(1, 2, dtype=DTYPE), cells.nodes, cells.sub])
     rays, wlt = generate_rays(lens, all_launch, pupil, [wl], aiming, para)
     n_nodes = cells.nodes.shape[0]
-    free = trace(lens, _slice(rays, slice(0, 1 + n_nodes)), wlt, apertures=False)
-    blocked = trace(lens, _slice(rays, slice(1 + n_nodes, None)), wlt)
+    free = trace(lens, rays.select(slice(0, 1 + n_nodes)), wlt, apertures=False)
+    blocked = trace(lens, rays.select(slice(1 + n_nodes, None)), wlt)
 
     chief_ok = free.rays.valid[0, :, 0]
     if not bool(chief_ok.all()):

@@ -109,6 +109,11 @@ class Lens:
                 raise self._err(f"surfaces[{i}].thickness", f"expected a non-zero thickness inside {s.material.name}, got 0")
             if s.clear_radius is not None and s.clear_radius <= 0:
                 raise self._err(f"surfaces[{i}].clear_semi_diameter", f"expected a positive number, got {s.clear_radius}")
+            limit = s.clear_radius if s.clear_radius is not None else math.inf
+            if s.obscuration_radius is not None and not (0 <= s.obscuration_radius < limit):
+                within = "" if s.clear_radius is None else f" below the clear semi-diameter {s.clear_radius:g}"
+                raise self._err(f"surfaces[{i}].obscuration",
+                                f"expected a central obscuration radius >= 0 mm{within}, got {s.obscuration_radius:g}")
             for p in s.asphere:
                 if p % 2 or not (2 <= p <= 20):
                     raise self._err(f"surfaces[{i}].asphere", f"expected even powers r2..r20, got r{p}")

@@ -5,8 +5,7 @@ from dataclasses import dataclass
 
 import torch
 
-from lensim.errors import RayTraceError
-from lensim.optics.aiming import Aiming, describe_failure, generate_rays, object_field
+from lensim.optics.aiming import Aiming, generate_rays, object_field, trace_chief_rays
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import ParaxialData, paraxial_data
 from lensim.optics.pupil import hexapolar
@@ -63,7 +62,9 @@ def spot_diagram(
     para: ParaxialData | None = None,
 ) -> SpotDiagram:
     """Trace a pupil pattern (default: hexapolar, 6 rings) for each field (lens units;
-    default the lens's fields) and wavelength (default the lens's) to the image plane."""
+    default the lens's fields) and wavelength (default the lens's) to the image plane.
+    Obscured rays are invalid; the chief ray is a reference ray that obscurations do not
+    block (aiming.trace_chief_rays)."""
     para = para or paraxial_data(lens)
     fields = list(lens.fields) if fields is None else list(fields)
     wls = list(lens.wavelengths_um) if wavelengths_um is None else list(wavelengths_um)
@@ -73,16 +74,10 @@ def spot_diagram(
     launch = [object_field(lens, f, aiming, para) for f in fields]
     pts = torch.cat([torch.zeros(1, 2, dtype=pupil.dtype), pupil.to(torch.float64)])
     rays, wl = generate_rays(lens, launch, pts, wls, aiming, para)
-    res = trace(lens, rays, wl)
-    chief_ok = res.rays.valid[:, :, 0]
-    if not bool(chief_ok.all()):
-        fi = int(torch.nonzero(~chief_ok)[0, 1])
-        chief_mask = torch.zeros_like(res.rays.valid)
-        chief_mask[:, fi, 0] = True
-        raise RayTraceError(describe_failure(lens, fields[fi], res.first_failure(mask=chief_mask), "chief ray"))
-    xy = res.rays.position[..., 1:, :2]
-    return SpotDiagram(xy=xy, valid=res.rays.valid[..., 1:], chief=res.rays.position[..., 0, :2], fields=fields,
-                       wavelengths_um=wls, weights=weights, primary=primary)
+    chief = trace_chief_rays(lens, rays.select(0), wl, launch, aiming, para)
+    res = trace(lens, rays.select(slice(1, None)), wl)
+    return SpotDiagram(xy=res.rays.position[..., :2], valid=res.rays.valid, chief=chief.rays.position[..., 0, :2],
+                       fields=fields, wavelengths_um=wls, weights=weights, primary=primary)
 
 
 def rms_spot_radius(lens: Lens, field: float, wavelength_um: float | None = None, rings: int = 6,

@@ -45,6 +45,11 @@ class Rays:
     def shape(self) -> torch.Size:
         return self.opl.shape
 
+    def select(self, index: slice | int) -> Rays:
+        """The rays at `index` along the last batch axis (the pupil axis of (W, F, P) rays)."""
+        idx = index if isinstance(index, slice) else slice(index, index + 1)
+        return Rays(self.position[..., idx, :], self.direction[..., idx, :], self.opl[..., idx], self.valid[..., idx])
+
 
 @dataclass
 class TraceResult:

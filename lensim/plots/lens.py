@@ -21,14 +21,14 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Circle
 
 from lensim.errors import InputError, RayTraceError
-from lensim.optics.aiming import Aiming, describe_failure, generate_rays, object_field
+from lensim.optics.aiming import Aiming, generate_rays, object_field, trace_chief_rays
 from lensim.optics.lens import Lens
 from lensim.optics.materials import Air
 from lensim.optics.paraxial import ParaxialData, paraxial_data
 from lensim.optics.pupil import hexapolar
 from lensim.optics.spot import SpotDiagram, spot_diagram
 from lensim.optics.surfaces import Surface
-from lensim.optics.trace import DTYPE, MISSED, OK, VIGNETTED, Rays, media_indices, trace_surface
+from lensim.optics.trace import DTYPE, MISSED, OK, Rays, media_indices, trace_surface
 from lensim.plots.figure import new_figure, save_figure
 
 FIELD_COLORS = ("tab:blue", "tab:green", "tab:red", "tab:orange", "tab:purple", "tab:brown", "tab:pink",
@@ -202,8 +202,8 @@ def plot_layout(
     pupil_y = np.concatenate([[0.0], pupil_y])  # index 0: the chief ray, checked, not drawn
 
     # First pass (rays from their launch points) to size the surfaces and the plot.
-    paths, _, status, failed_at = trace_ray_paths(lens, launch, pupil_y, aiming, para, None)
-    _check_chief_rays(lens, fields, paths, status, failed_at)
+    paths, _, _, _ = trace_ray_paths(lens, launch, pupil_y, aiming, para, None)
+    _check_chief_rays(lens, launch, aiming, para, paths)
     sizes = _LayoutSizes(lens, paths, para)
 
     # where rays are drawn from
@@ -244,22 +244,12 @@ def plot_layout(
     return fig
 
 
-def _check_chief_rays(lens: Lens, fields: list[float], paths: RayPaths, status: torch.Tensor,
-                      failed_at: torch.Tensor) -> None:
-    """Raise RayTraceError when a field's chief ray (pupil index 0) does not reach the
-    image, unless a central obscuration blocks it, or when no ray passes the stop."""
-    S = lens.num_surfaces
-    chief_ok = torch.as_tensor(paths.reached[:, 0, -1]).clone()  # the chief ray reaches the image
-    for fi in torch.nonzero(~chief_ok).flatten().tolist():
-        # a chief ray blocked by a central obscuration (a Cassegrain's secondary) is fine
-        k = int(failed_at[0, fi, 0])
-        obsc = lens.surfaces[k].obscuration_radius if k < S else None
-        if int(status[0, fi, 0]) == VIGNETTED and obsc and abs(paths.points[fi, 0, k + 1, 1]) <= obsc:
-            chief_ok[fi] = True
-    if not bool(chief_ok.all()):
-        fi = int(torch.nonzero(~chief_ok)[0, 0])
-        st, surf = int(status[0, fi, 0]), int(failed_at[0, fi, 0])
-        raise RayTraceError(describe_failure(lens, fields[fi], None if st == OK else (st, surf), "chief ray"))
+def _check_chief_rays(lens: Lens, launch: list[float], aiming: Aiming, para: ParaxialData, paths: RayPaths) -> None:
+    """Raise RayTraceError when a field's chief ray does not reach the image (a reference
+    ray: central obscurations do not block it, see aiming.trace_chief_rays), or when no
+    ray passes the stop."""
+    rays, wl = generate_rays(lens, launch, torch.zeros(1, 2, dtype=DTYPE), [lens.primary_wavelength_um], aiming, para)
+    trace_chief_rays(lens, rays, wl, launch, aiming, para)
     if not bool(paths.reached[:, :, 0].any()):
         raise RayTraceError(f"{lens.source}: aperture: no ray could be aimed through the stop")
 

@@ -6,6 +6,10 @@ chief ray's crossing of the paraxial exit-pupil plane. Each ray becomes a second
 source with its position, direction, optical path length and power; the power of a ray
 is the object-space étendue of its grid cell (so energy is conserved) and its area on
 the sphere comes from the grid neighbours (so ray density sets the amplitude).
+
+Central obscurations block their rays (an annular pupil of ratio eps transmits 1 - eps^2
+of the power), never the chief ray, which is a reference ray (aiming.trace_chief_rays):
+the sphere is centred on it whether or not an obscuration covers the stop centre.
 """
 from __future__ import annotations
 
@@ -15,7 +19,7 @@ from dataclasses import dataclass
 import torch
 
 from lensim.errors import InputError, RayTraceError
-from lensim.optics.aiming import Aiming, describe_failure, generate_rays, object_field
+from lensim.optics.aiming import Aiming, generate_rays, object_field, trace_chief_rays
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import ParaxialData, paraxial_data
 from lensim.optics.pupil import square_grid_full
@@ -119,17 +123,14 @@ def pupil_field(
     all_pts = torch.cat([torch.zeros(1, 2, dtype=DTYPE), pts])
     rays, wl = generate_rays(lens, [launch], all_pts, [wavelength_um], aiming, para)
     start_pos, start_dir = rays.position[0, 0, 1:].clone(), rays.direction[0, 0, 1:].clone()
-    res = trace(lens, rays, wl)
-    out = res.rays
-    if not bool(out.valid[0, 0, 0]):
-        fail = res.first_failure(mask=torch.zeros_like(out.valid).index_fill_(2, torch.tensor([0]), True))
-        raise RayTraceError(describe_failure(lens, field, fail, "chief ray"))
+    ref = trace_chief_rays(lens, rays.select(0), wl, [launch], aiming, para).rays
+    out = trace(lens, rays.select(slice(1, None)), wl).rays
     n_img = float(lens.indices([wavelength_um])[-1, 0])
-    chief = out.position[0, 0, 0]
-    chief_dir = out.direction[0, 0, 0]
-    chief_opl = out.opl[0, 0, 0]
-    pos, dirs, opl = out.position[0, 0, 1:], out.direction[0, 0, 1:], out.opl[0, 0, 1:]
-    valid = out.valid[0, 0, 1:] & inside
+    chief = ref.position[0, 0, 0]
+    chief_dir = ref.direction[0, 0, 0]
+    chief_opl = ref.opl[0, 0, 0]
+    pos, dirs, opl = out.position[0, 0], out.direction[0, 0], out.opl[0, 0]
+    valid = out.valid[0, 0] & inside
     # reference sphere: centre at the chief-ray image point, through the chief ray's
     # crossing of the paraxial exit-pupil plane
     z_xp = para.exit_pupil_z_mm

@@ -84,7 +84,7 @@ def suggest_kernel_pixels(lens: Lens, pitch_um: float, limit: int = 99) -> int:
     7 and at most `limit`."""
     import torch
 
-    from lensim.optics.aiming import generate_rays, object_field
+    from lensim.optics.aiming import generate_rays, object_field, trace_chief_rays
     from lensim.optics.paraxial import paraxial_data
     from lensim.optics.pupil import hexapolar
     from lensim.optics.trace import trace
@@ -93,8 +93,8 @@ def suggest_kernel_pixels(lens: Lens, pitch_um: float, limit: int = 99) -> int:
     fields = [object_field(lens, f * lens.max_field, "real", para) for f in (0.0, 0.5, 0.7, 0.85, 1.0)]
     pupil = torch.cat([torch.zeros(1, 2, dtype=torch.float64), hexapolar(8)])
     rays, wl = generate_rays(lens, fields, pupil, [lens.primary_wavelength_um, 0.40, 0.70], "real", para)
-    res = trace(lens, rays, wl)
-    chief = res.rays.position[0, :, 0, :2]  # primary wavelength
+    chief = trace_chief_rays(lens, rays.select(0), wl, fields, "real", para).rays.position[0, :, 0, :2]  # primary
+    res = trace(lens, rays.select(slice(1, None)), wl)
     d = torch.linalg.norm(res.rays.position[..., :2] - chief.unsqueeze(0).unsqueeze(2), dim=-1)
     reach_um = 0.0
     for fi in range(len(fields)):

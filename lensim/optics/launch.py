@@ -1,0 +1,50 @@
+"""Object-space rays: where a ray of a field starts and where it points.
+
+A ray is launched through a point (x, y) of the paraxial entrance-pupil plane z = z_ep.
+Object at infinity: rays of one field are parallel, direction (0, sin a, cos a) for field
+angle a (Zemax's sign convention), starting on the entrance-pupil plane; their OPL starts
+at the plane wavefront through the origin. Finite object: rays start at the object point
+(0, h, -distance) with OPL 0 (h = -(distance + z_ep) tan a for angle fields).
+Lengths in mm, angles in degrees.
+"""
+from __future__ import annotations
+
+import torch
+
+from lensim.optics.lens import Lens
+from lensim.optics.paraxial import ParaxialData
+from lensim.optics.trace import DTYPE, Rays
+
+
+def launch_at(lens: Lens, field: torch.Tensor, ep_xy: torch.Tensor, z_ep: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """(position, direction), each (..., 3), of the rays of launch field values `field`
+    (deg or mm; broadcast against ep_xy[..., 0]) through the points ep_xy (..., 2) mm of
+    the plane z = z_ep."""
+    fld, ex, ey = torch.broadcast_tensors(field, ep_xy[..., 0], ep_xy[..., 1])
+    through = torch.stack([ex, ey, torch.full_like(ex, z_ep)], -1)
+    if lens.infinite_object:
+        a = torch.deg2rad(fld)
+        return through, torch.stack([torch.zeros_like(a), torch.sin(a), torch.cos(a)], -1)
+    d = lens.object_distance
+    h = -(d + z_ep) * torch.tan(torch.deg2rad(fld)) if lens.field_type == "angle" else fld
+    src = torch.stack([torch.zeros_like(h), h, torch.full_like(h, -d)], -1)
+    v = through - src
+    return src, v / torch.linalg.norm(v, dim=-1, keepdim=True)
+
+
+def launch(lens: Lens, field: torch.Tensor, pupil_xy: torch.Tensor, para: ParaxialData) -> tuple[torch.Tensor, torch.Tensor]:
+    """Object-space rays from field values (angle deg or object height mm, shape (F,))
+    through entrance-pupil-plane points pupil_xy (P, 2) in mm. Returns (position,
+    direction), each (F, P, 3)."""
+    return launch_at(lens, field.reshape(-1, 1), pupil_xy.unsqueeze(0), para.entrance_pupil_z_mm)
+
+
+def object_rays(lens: Lens, position: torch.Tensor, direction: torch.Tensor, n_object: torch.Tensor) -> Rays:
+    """Rays with their starting OPL: plane wavefront through the origin for an object at
+    infinity, zero at the object point otherwise."""
+    if lens.infinite_object:
+        opl = n_object * (position * direction).sum(-1)
+    else:
+        opl = torch.zeros(position.shape[:-1], dtype=DTYPE, device=position.device) + 0 * n_object
+    valid = torch.ones(opl.shape, dtype=torch.bool, device=position.device)
+    return Rays(position, direction, opl, valid)
