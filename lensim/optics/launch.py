@@ -26,7 +26,7 @@ def launch_at(lens: Lens, field: torch.Tensor, ep_xy: torch.Tensor, z_ep: float)
         a = torch.deg2rad(fld)
         return through, torch.stack([torch.zeros_like(a), torch.sin(a), torch.cos(a)], -1)
     d = lens.object_distance
-    h = -(d + z_ep) * torch.tan(torch.deg2rad(fld)) if lens.field_type == "angle" else fld
+    h = -(d + z_ep) * torch.tan(torch.deg2rad(fld)) if lens.launch_field_type == "angle" else fld
     src = torch.stack([torch.zeros_like(h), h, torch.full_like(h, -d)], -1)
     v = through - src
     return src, v / torch.linalg.norm(v, dim=-1, keepdim=True)

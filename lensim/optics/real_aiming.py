@@ -139,7 +139,7 @@ def _meridian_points(lens: Lens, field: torch.Tensor, offsets: torch.Tensor, z_e
         a = torch.deg2rad(field)
         return offsets / torch.cos(a) + z_ep * torch.tan(a)
     d = lens.object_distance
-    h = -(d + z_ep) * torch.tan(torch.deg2rad(field)) if lens.field_type == "angle" else field
+    h = -(d + z_ep) * torch.tan(torch.deg2rad(field)) if lens.launch_field_type == "angle" else field
     norm = torch.sqrt(h * h + d * d)
     py, pz = offsets * d / norm, offsets * h / norm  # the point offset across the line object -> vertex
     return h + (py - h) * (z_ep + d) / (pz + d)
