@@ -86,11 +86,6 @@ def restore_command(
     Example: lensim restore runs/a photo.png -o restored/;
     lensim restore runs/a raws/ -o restored/ --dng --workers 2
     """
-    from lensim.images import read_image, write_image
-    from lensim.restore.checkpoint import load_checkpoint
-    from lensim.restore.infer import image_sensor_geometry, restore_image
-    from lensim.sensor.profile import load_sensor
-
     if threads > 0:
         torch.set_num_threads(threads)
     if bits not in (0, 8, 16):
@@ -98,18 +93,7 @@ def restore_command(
     if tile < 16 or not 0 <= overlap < tile:
         raise InputError("--tile/--overlap", None, f"expected a tile of at least 16 pixels and 0 <= overlap < tile, got "
                          f"tile {tile}, overlap {overlap}")
-    lens_dict = None
-    if lens_file is not None:
-        from lensim.optics.lens_file import lens_to_dict, load_lens
-
-        lens_dict = lens_to_dict(load_lens(lens_file))
-    sensor_dict = load_sensor(sensor_file).to_dict() if sensor_file is not None else None
-    model, info = load_checkpoint(checkpoint, lens=lens_dict, sensor=sensor_dict, device=device)
-    sensor_data = sensor_dict or info.get("sensor") or {}
-    res = sensor_data.get("resolution") if isinstance(sensor_data, dict) else None
-    if not (isinstance(res, (list, tuple)) and len(res) == 2 and all(isinstance(v, int) and v > 0 for v in res)):
-        raise InputError(info["path"], "sensor", "records no sensor resolution; expected --sensor")
-    sensor_w, sensor_h = int(res[0]), int(res[1])
+    model, info, sensor_data, (sensor_w, sensor_h) = _load_model(checkpoint, lens_file, sensor_file, device)
     offset = _parse_pair(sensor_offset, "--sensor-offset") if sensor_offset else None
     raws, photos = _split_inputs(images)
     if dng and not raws:
@@ -123,36 +107,70 @@ def restore_command(
         written += _restore_raws(raws, output, model, settings, dng, workers, quiet or json_out)
     output.mkdir(parents=True, exist_ok=True)
     for path in photos:
-        img, in_bits = read_image(path)
-        _, h, w = img.shape
-        if offset is None:
-            scale = min(sensor_w / w, sensor_h / h)
-            if abs(scale - 1.0) > 0.01:
-                warnings.warn(f"{path}: {w}x{h} pixels mapped onto the {sensor_w}x{sensor_h} sensor at "
-                              f"{scale:.3g} sensor pixels per image pixel; the network was trained at native scale "
-                              f"(1), so blur sizes differ (give --sensor-offset for a native-scale crop)", UserWarning)
-        elif not (0 <= offset[0] <= sensor_h - h and 0 <= offset[1] <= sensor_w - w):
-            raise InputError(str(path), "--sensor-offset", f"a {w}x{h} image at (top, left) {offset} does not fit on "
-                             f"the {sensor_w}x{sensor_h} sensor")
-        top_left, size = image_sensor_geometry(h, w, (sensor_w, sensor_h), offset)
-        prog, tiles_done = progress_bar(f"restoring {path.name}", "tiles", quiet or json_out)
-        if prog is not None:
-            prog.start()
-        try:
-            out = restore_image(model, img, top_left, size, tile=tile, overlap=overlap, progress=tiles_done)
-        finally:
-            if prog is not None:
-                prog.stop()
-        del img  # bound peak memory: only the output lives while it is encoded
-        out.clamp_(0, 1)
-        suffix = ".tif" if path.suffix.lower() in (".tif", ".tiff") else ".png"
-        dest = output / (path.stem + suffix)
-        write_image(dest, out, bits or in_bits)
-        written.append({"input": str(path), "output": str(dest), "bits": bits or in_bits, "width": w, "height": h})
-        if not quiet and not json_out:
-            console.print(f"restored {path} -> {dest}", highlight=False)
+        written.append(_restore_photo(path, output, model, (sensor_w, sensor_h), offset, tile, overlap, bits,
+                                      quiet or json_out))
     if json_out:
         print_json({"checkpoint": info["path"], "images": written})
+
+
+def _load_model(checkpoint: Path, lens_file: str | None, sensor_file: str | None,
+                device: str) -> tuple[torch.nn.Module, dict, dict, tuple[int, int]]:
+    """(model, checkpoint info, sensor profile dict, its (width, height) in pixels): the network of a checkpoint, warned
+    about when the given lens or sensor differs from its own; the sensor is --sensor's, else
+    the one trained for, and must record its resolution [width, height] in pixels."""
+    from lensim.restore.checkpoint import load_checkpoint
+    from lensim.sensor.profile import load_sensor
+
+    lens_dict = None
+    if lens_file is not None:
+        from lensim.optics.lens_file import lens_to_dict, load_lens
+
+        lens_dict = lens_to_dict(load_lens(lens_file))
+    sensor_dict = load_sensor(sensor_file).to_dict() if sensor_file is not None else None
+    model, info = load_checkpoint(checkpoint, lens=lens_dict, sensor=sensor_dict, device=device)
+    sensor_data = sensor_dict or info.get("sensor") or {}
+    res = sensor_data.get("resolution") if isinstance(sensor_data, dict) else None
+    if not (isinstance(res, (list, tuple)) and len(res) == 2 and all(isinstance(v, int) and v > 0 for v in res)):
+        raise InputError(info["path"], "sensor", "records no sensor resolution; expected --sensor")
+    return model, info, sensor_data, (int(res[0]), int(res[1]))
+
+
+def _restore_photo(path: Path, output: Path, model: torch.nn.Module, sensor_wh: tuple[int, int],
+                   offset: tuple[int, int] | None, tile: int, overlap: int, bits: int, quiet: bool) -> dict:
+    """Restore one photo (a full frame, or a native-scale crop at ``offset`` = (top, left)
+    sensor pixels) into OUTPUT/<stem>.png (.tif for TIFF input); returns what was written."""
+    from lensim.images import read_image, write_image
+    from lensim.restore.infer import image_sensor_geometry, restore_image
+
+    sensor_w, sensor_h = sensor_wh
+    img, in_bits = read_image(path)
+    _, h, w = img.shape
+    if offset is None:
+        scale = min(sensor_w / w, sensor_h / h)
+        if abs(scale - 1.0) > 0.01:
+            warnings.warn(f"{path}: {w}x{h} pixels mapped onto the {sensor_w}x{sensor_h} sensor at "
+                          f"{scale:.3g} sensor pixels per image pixel; the network was trained at native scale "
+                          f"(1), so blur sizes differ (give --sensor-offset for a native-scale crop)", UserWarning)
+    elif not (0 <= offset[0] <= sensor_h - h and 0 <= offset[1] <= sensor_w - w):
+        raise InputError(str(path), "--sensor-offset", f"a {w}x{h} image at (top, left) {offset} does not fit on "
+                         f"the {sensor_w}x{sensor_h} sensor")
+    top_left, size = image_sensor_geometry(h, w, (sensor_w, sensor_h), offset)
+    prog, tiles_done = progress_bar(f"restoring {path.name}", "tiles", quiet)
+    if prog is not None:
+        prog.start()
+    try:
+        out = restore_image(model, img, top_left, size, tile=tile, overlap=overlap, progress=tiles_done)
+    finally:
+        if prog is not None:
+            prog.stop()
+    del img  # bound peak memory: only the output lives while it is encoded
+    out.clamp_(0, 1)
+    suffix = ".tif" if path.suffix.lower() in (".tif", ".tiff") else ".png"
+    dest = output / (path.stem + suffix)
+    write_image(dest, out, bits or in_bits)
+    if not quiet:
+        console.print(f"restored {path} -> {dest}", highlight=False)
+    return {"input": str(path), "output": str(dest), "bits": bits or in_bits, "width": w, "height": h}
 
 
 __all__ = ["restore_command"]
