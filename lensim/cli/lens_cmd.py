@@ -13,12 +13,42 @@ from lensim.cli.common import console, print_json
 from lensim.errors import InputError
 from lensim.optics.analysis import first_order_summary
 from lensim.optics.lens import Lens
-from lensim.optics.lens_file import load_lens, save_lens
-from lensim.optics.materials import Air
+from lensim.optics.lens_file import load_lens, match_glasses, save_lens
+from lensim.optics.materials import CATALOGS, Air
 
 lens_app = typer.Typer(help="Inspect, plot and convert lens prescriptions.", no_args_is_help=True)
 
 LENS_ARG = typer.Argument(..., help="Lens file (.json/.yaml native, .zmx Zemax, .seq CODE V) or a built-in lens name.")
+
+
+MATCH_GLASS_HELP = ("Replace each model glass (nd/Vd) by the nearest catalogue glass (smallest RMS index "
+                    "difference over 400-700 nm); lens info reports each replacement.")
+GLASS_MAKERS_HELP = ("Catalogues --match-glass searches, comma-separated (Schott, Ohara, CDGM, Hikari, Hoya, "
+                     "Sumita). Default: all.")
+
+
+def _glass_makers(makers: Optional[str], match_glass: bool) -> Optional[list[str]]:
+    """The --glass-makers list, checked before any work (an unknown maker is a one-line error)."""
+    if makers is None:
+        return None
+    if not match_glass:
+        raise InputError(None, "--glass-makers", "only applies with --match-glass")
+    names = [m.strip() for m in makers.split(",") if m.strip()]
+    known = {c.lower(): c for c in CATALOGS}
+    unknown = [m for m in names if m.lower() not in known]
+    if unknown or not names:
+        raise InputError(None, "--glass-makers", f"unknown glass maker(s) {', '.join(unknown) or repr(makers)}; "
+                                                 f"expected some of {', '.join(CATALOGS)}")
+    return [known[m.lower()] for m in names]
+
+
+def _load(lens_file: str, match_glass: bool = False, makers: Optional[list[str]] = None):
+    """Load a lens; with match_glass its model glasses become the nearest catalogue glasses.
+    Returns (lens, glass matches)."""
+    lens = load_lens(lens_file)
+    if not match_glass:
+        return lens, []
+    return match_glasses(lens, makers)
 
 
 def _fmt(x, digits=6) -> str:
@@ -34,15 +64,17 @@ def info(
     lens_file: str = LENS_ARG,
     json_out: bool = typer.Option(False, "--json", help="Print a JSON object instead of tables."),
     aiming: str = typer.Option("real", help="Ray aiming for real-ray figures: real or paraxial."),
+    match_glass: bool = typer.Option(False, "--match-glass", help=MATCH_GLASS_HELP),
+    glass_makers: Optional[str] = typer.Option(None, "--glass-makers", help=GLASS_MAKERS_HELP),
 ) -> None:
     """Surface table and first-order data (EFL, BFL, F/#, pupils, fields, wavelengths).
 
-    Example: lensim lens info cooke_triplet --json
+    Example: lensim lens info phone_wide --match-glass --glass-makers Ohara,Schott --json
     """
-    lens = load_lens(lens_file)
+    lens, matches = _load(lens_file, match_glass, _glass_makers(glass_makers, match_glass))
     summary = first_order_summary(lens, aiming=aiming)
     if json_out:
-        print_json(summary)
+        print_json(summary | {"glass_matches": matches} if match_glass else summary)
         return
     t = Table(title=f"{lens.name or Path(lens.source).name}  (lengths in mm)")
     for col in ("#", "radius", "thickness", "material", "nd", "conic", "clear s.d.", "note"):
@@ -83,12 +115,17 @@ def info(
 def convert(
     lens_file: str = LENS_ARG,
     output: Path = typer.Option(..., "-o", "--output", help="Native lens file to write (.json or .yaml)."),
+    match_glass: bool = typer.Option(False, "--match-glass", help=MATCH_GLASS_HELP),
+    glass_makers: Optional[str] = typer.Option(None, "--glass-makers", help=GLASS_MAKERS_HELP),
 ) -> None:
     """Convert any supported lens file to lensim's native format.
 
     Example: lensim lens convert design.zmx -o design.yaml
     """
-    lens = load_lens(lens_file)
+    makers = _glass_makers(glass_makers, match_glass)
+    if output.suffix.lower() not in (".json", ".yaml", ".yml"):
+        raise InputError(str(output), "--output", "expected a .json, .yaml or .yml file name for a native lens file")
+    lens, _ = _load(lens_file, match_glass, makers)
     save_lens(lens, output)
     console.print(f"wrote {output}")
 

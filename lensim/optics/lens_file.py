@@ -17,12 +17,13 @@
 Surface keys: radius (mm, 'infinity' or omitted for a plane) or curvature (1/mm),
 thickness (mm to the next vertex; negative after a mirror, or in air to place a stop
 or dummy surface behind the next vertex, as in Zemax), material (glass name,
-name@Catalog, air, {nd, vd} model glass or {n} constant index), conic, asphere
+name@Catalog, air, {nd, vd[, dpgf]} model glass or {n} constant index), conic, asphere
 ({r2..r20: coefficient}), clear_semi_diameter (vignetting), obscuration (central
 obscuration radius), semi_diameter (drawing only), stop, mirror, comment.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import warnings
@@ -32,7 +33,7 @@ from typing import Any
 from lensim.errors import InputError
 from lensim.io import atomic_write_text
 from lensim.optics.lens import Lens
-from lensim.optics.materials import Air, Material, material_from_spec
+from lensim.optics.materials import Air, Material, ModelGlass, material_from_spec, nearest_catalog_glass
 from lensim.optics.surfaces import Surface
 
 TOP_KEYS = {"name", "description", "units", "object", "aperture", "fields", "wavelengths", "surfaces", "image", "notes", "source"}
@@ -218,6 +219,34 @@ def lens_to_dict(lens: Lens) -> dict:
     if lens.notes:
         out["notes"] = list(lens.notes)
     return out
+
+
+def match_glasses(lens: Lens, makers: list[str] | None = None) -> tuple[Lens, list[dict]]:
+    """Replace every model glass (nd/Vd/dPgF) of a lens by its nearest catalogue glass.
+
+    Nearest: the smallest RMS index difference over 400-700 nm (materials.nearest_catalog_glass),
+    searched in `makers`' catalogues (default every catalogue). Returns the new lens, with a
+    note per replaced surface, and one record per replaced surface: surface (0-based index),
+    model {nd, vd, dpgf}, glass, catalog, nd, vd, rms_index_difference.
+    """
+    surfaces, matches, notes = [], [], list(lens.notes)
+    found: dict[ModelGlass, tuple] = {}
+    for i, s in enumerate(lens.surfaces):
+        m = s.material
+        if not isinstance(m, ModelGlass) or s.is_mirror:
+            surfaces.append(s)
+            continue
+        if m not in found:
+            found[m] = nearest_catalog_glass(m, makers)
+        glass, rms = found[m]
+        surfaces.append(dataclasses.replace(s, material=glass))
+        matches.append({"surface": i, "model": {"nd": m.nd_value, "vd": m.vd_value, "dpgf": m.dpgf_value},
+                        "glass": glass.name, "catalog": glass.catalog, "nd": glass.nd, "vd": glass.vd,
+                        "rms_index_difference": rms})
+        notes.append(f"surfaces[{i}]: model glass nd {m.nd_value:.5f}, Vd {m.vd_value:.2f}, dPgF {m.dpgf_value:+.4f} "
+                     f"replaced by the nearest catalogue glass {glass.name} ({glass.catalog}; nd {glass.nd:.5f}, "
+                     f"Vd {glass.vd:.2f}; RMS index difference {rms:.1e} over 400-700 nm)")
+    return lens.with_changes(surfaces=surfaces, notes=notes), matches
 
 
 def save_lens(lens: Lens, path: str | Path) -> None:

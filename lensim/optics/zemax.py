@@ -11,8 +11,8 @@ solves whose results the file already holds) is ignored. Surface 0 is the object
 object distance), the last surface the image; DIAM is the drawn semi-diameter, and
 clips rays only with FLAP (floating aperture) or FLOA (the stop's size).
 
-Glass: MIRROR makes a mirror; ___BLANK a model glass from the line's nd and Vd (Vd 0:
-constant index); other names are looked up in the file's GCAT catalogues, then in every
+Glass: MIRROR makes a mirror; ___BLANK a model glass from the line's nd, Vd and dPgF
+(GLAS ___BLANK 1 0 nd Vd dPgF ...; Vd 0: constant index); other names are looked up in the file's GCAT catalogues, then in every
 catalogue, then by glass family (notes record substitutions); a name found nowhere falls
 back to the line's nd/Vd as a model glass (with a note) when the line carries real
 values, otherwise it is an error listing close names. Lengths in mm, wavelengths in um.
@@ -271,31 +271,32 @@ class _Reader:
         def opt_num(i: int) -> float | None:
             return self.num(s.glas_line, what, t, i) if len(t) > i else None
 
-        nd, vd = opt_num(3), opt_num(4)
+        nd, vd, dpgf = opt_num(3), opt_num(4), opt_num(5) or 0.0
         if name.upper() == "___BLANK":
             if nd is None or vd is None:
-                raise self.err(s.glas_line, what, "expected a model glass line 'GLAS ___BLANK 1 0 nd Vd ...'")
-            return self.model(s, nd, vd), False
+                raise self.err(s.glas_line, what, "expected a model glass line 'GLAS ___BLANK 1 0 nd Vd dPgF ...'")
+            return self.model(s, nd, vd, dpgf), False
         try:
             mat, note = resolve_glass(name, self.catalogs)
         except UnknownGlassError as e:
             if nd is not None and vd is not None and nd > 1.0 and vd >= 0.0 and (nd, vd) != PLACEHOLDER_ND_VD:
                 self.notes.append(f"glass {name} is in no catalogue; using a model glass with the file's "
                                   f"nd {nd:.5f}, Vd {vd:.2f}")
-                return self.model(s, nd, vd, name), False
+                return self.model(s, nd, vd, dpgf, name), False
             model = "" if nd is None or vd is None else f" and the line's nd/Vd ({nd:g}, {vd:g}) are Zemax's placeholders"
             raise InputError(self.src, what, f"{e.message}{model}") from None
         if note:
             self.notes.append(note)
         return mat, False
 
-    def model(self, s: _Surf, nd: float, vd: float, name: str | None = None) -> Material:
-        if not (1.0 < nd < 5.0) or vd < 0:
-            raise self.err(s.glas_line, f"SURF {s.number} GLAS", f"expected model glass 1 < nd < 5 and Vd >= 0, "
-                                                                 f"got nd {nd}, Vd {vd}")
+    def model(self, s: _Surf, nd: float, vd: float, dpgf: float, name: str | None = None) -> Material:
+        """Zemax's MODEL glass (nd, Vd, dPgF); Vd 0 is a constant index."""
+        if not (1.0 < nd < 5.0) or vd < 0 or not abs(dpgf) < 0.2:
+            raise self.err(s.glas_line, f"SURF {s.number} GLAS", f"expected model glass 1 < nd < 5, Vd >= 0 and "
+                                                                 f"|dPgF| < 0.2, got nd {nd}, Vd {vd}, dPgF {dpgf}")
         if vd == 0:
             return ConstantIndex(nd)
-        return ModelGlass(nd, vd, name=name or f"model {nd:.5f}/{vd:.2f}")
+        return ModelGlass(nd, vd, dpgf, name=name or f"model {nd:.5f}/{vd:.2f}")
 
     def fields(self) -> tuple[str, list[float]]:
         ftyp, nf, _, _ = self.ftyp if self.ftyp else (0, None, None, 0)
