@@ -15,6 +15,8 @@ The supported subset is what CODE V writes for plain rotationally symmetric lens
                     NSSK2_SCHOTT, a bare name searched in every catalogue, or REFL = mirror)
     STO             the current surface is the stop;  SI c t: image surface, t = defocus
     K k; ASP; A..H, J coefficients (r^4..r^20);  CIR r (clear semi-diameter)
+    SPS ODD [0|1]   odd polynomial asphere (no normalization radius), with SCO K k and
+                    SCO AR1..AR20 (the r^1..r^20 coefficients), or SCO C1 (= K), C2..C21 (= AR1..AR20)
     PIM             paraxial image solve: the last thickness is set to the paraxial focus
     CCY/THC/CCX codes, INI, DER, GO: ignored
 
@@ -31,7 +33,7 @@ from pathlib import Path
 from lensim.errors import InputError, UnknownGlassError
 from lensim.optics.lens import Lens
 from lensim.optics.materials import CATALOGS, Air, Material, resolve_glass
-from lensim.optics.surfaces import Surface
+from lensim.optics.surfaces import MAX_ASPHERE_POWER, Surface
 
 INFINITE_THICKNESS_MM = 1e10
 _TOKEN = re.compile(r"'[^']*'|\"[^\"]*\"|[^\s,]+")
@@ -54,6 +56,7 @@ class _SurfaceData:
     asphere: dict[int, float] = field(default_factory=dict)
     clear_radius: float | None = None
     pim: bool = False
+    odd: bool = False  # SPS ODD: SCO coefficients allowed
 
 
 def _split_commands(text: str) -> list[tuple[int, list[str]]]:
@@ -220,6 +223,10 @@ class _Reader:
         elif cmd in _ASPHERE_LETTERS:
             s = self.current(lineno, cmd)
             s.asphere[_ASPHERE_LETTERS[cmd]] = self.nums(lineno, f"S {s.number} {cmd}", args)[0]
+        elif cmd == "SPS":
+            self.special_surface(lineno, args)
+        elif cmd == "SCO":
+            self.special_coefficient(lineno, args)
         elif cmd == "CIR":
             s = self.current(lineno, cmd)
             r = self.nums(lineno, f"S {s.number} CIR", args)[0]
@@ -228,6 +235,39 @@ class _Reader:
             s.clear_radius = r
         else:
             raise self.err(lineno, cmd, f"unsupported CODE V command {tokens[0]!r}")
+
+    def special_surface(self, lineno: int, args: list[str]) -> None:
+        """SPS ODD [NRADIUS]: an odd polynomial asphere (CODE V's ODD special surface)."""
+        s = self.current(lineno, "SPS")
+        kind = args[0].upper() if args else ""
+        if kind != "ODD":
+            raise self.err(lineno, f"S {s.number} SPS", f"unsupported special surface {kind or 'nothing'}; "
+                                                        "lensim reads SPS ODD (odd polynomial asphere) only")
+        if len(args) > 1 and self.num(lineno, f"S {s.number} SPS ODD", args[1]) not in (0.0, 1.0):
+            raise self.err(lineno, f"S {s.number} SPS ODD", f"normalization radius {args[1]} is not supported; "
+                                                            "expected 0 or 1 (coefficients of r in mm)")
+        s.odd = True
+
+    def special_coefficient(self, lineno: int, args: list[str]) -> None:
+        """SCO K k | SCO ARn v | SCO Cn v of an SPS ODD surface (C1 = K, C(n+1) = ARn)."""
+        s = self.current(lineno, "SCO")
+        what = f"S {s.number} SCO"
+        if not s.odd:
+            raise self.err(lineno, what, "expected SPS ODD before its SCO coefficients")
+        if len(args) != 2:
+            raise self.err(lineno, what, f"expected 'SCO name value', got {' '.join(args) or 'nothing'}")
+        name, value = args[0].upper(), self.num(lineno, what, args[1])
+        m = re.fullmatch(r"(AR|C)(\d+)", name)
+        power = None if m is None else int(m.group(2)) - (1 if m.group(1) == "C" else 0)
+        if name == "K" or power == 0:
+            s.conic = value
+        elif power is not None and value == 0.0:
+            s.asphere.pop(power, None)  # CODE V writes unused terms as zero
+        elif power is not None and 1 <= power <= MAX_ASPHERE_POWER:
+            s.asphere[power] = value
+        else:
+            raise self.err(lineno, what, f"unsupported coefficient {args[0]}; expected K, AR1..AR{MAX_ASPHERE_POWER} "
+                                         f"or C1..C{MAX_ASPHERE_POWER + 1}")
 
     # ---- building ----------------------------------------------------------------
     def curvature(self, value: float) -> float:

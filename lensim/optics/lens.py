@@ -13,7 +13,7 @@ import numpy as np
 
 from lensim.errors import InputError
 from lensim.optics.materials import Air, Material
-from lensim.optics.surfaces import Surface
+from lensim.optics.surfaces import MAX_ASPHERE_POWER, Surface
 
 ApertureType = Literal["epd", "fno", "stop_semi_diameter"]
 FieldType = Literal["angle", "object_height", "paraxial_image_height", "real_image_height"]
@@ -115,8 +115,8 @@ class Lens:
                 raise self._err(f"surfaces[{i}].obscuration",
                                 f"expected a central obscuration radius >= 0 mm{within}, got {s.obscuration_radius:g}")
             for p in s.asphere:
-                if p % 2 or not (2 <= p <= 20):
-                    raise self._err(f"surfaces[{i}].asphere", f"expected even powers r2..r20, got r{p}")
+                if not (1 <= p <= MAX_ASPHERE_POWER):
+                    raise self._err(f"surfaces[{i}].asphere", f"expected powers r1..r{MAX_ASPHERE_POWER}, got r{p}")
         self._check_air_gaps(media, dirs)
 
     def is_dummy(self, i: int, media: list[Material] | None = None) -> bool:

@@ -18,7 +18,8 @@ Surface keys: radius (mm, 'infinity' or omitted for a plane) or curvature (1/mm)
 thickness (mm to the next vertex; negative after a mirror, or in air to place a stop
 or dummy surface behind the next vertex, as in Zemax), material (glass name,
 name@Catalog, air, {nd, vd[, dpgf]} model glass or {n} constant index), conic, asphere
-({r2..r20: coefficient}), clear_semi_diameter (vignetting), obscuration (central
+({r1..r20: coefficient}; even powers only: an even asphere, any odd power: an odd
+asphere), clear_semi_diameter (vignetting), obscuration (central
 obscuration radius), semi_diameter (drawing only), stop, mirror, comment.
 """
 from __future__ import annotations
@@ -34,7 +35,7 @@ from lensim.errors import InputError
 from lensim.io import atomic_write_text
 from lensim.optics.lens import Lens
 from lensim.optics.materials import Air, Material, ModelGlass, material_from_spec, nearest_catalog_glass
-from lensim.optics.surfaces import Surface
+from lensim.optics.surfaces import MAX_ASPHERE_POWER, Surface
 
 TOP_KEYS = {"name", "description", "units", "object", "aperture", "fields", "wavelengths", "surfaces", "image", "notes", "source"}
 SURFACE_KEYS = {"radius", "curvature", "thickness", "material", "conic", "asphere", "clear_semi_diameter",
@@ -123,8 +124,9 @@ def lens_from_dict(data: dict, source: str = "<lens>") -> Lens:
         asphere = {}
         for k, v in asph_raw.items():
             ks = str(k).lower().lstrip("ra")
-            if not ks.isdigit() or int(ks) % 2 or not 2 <= int(ks) <= 20:
-                raise InputError(src, f"{f}.asphere.{k}", "expected a key r2, r4, ... r20")
+            if not ks.isdigit() or not 1 <= int(ks) <= MAX_ASPHERE_POWER:
+                raise InputError(src, f"{f}.asphere.{k}", f"expected a key r1, r2, ... r{MAX_ASPHERE_POWER} "
+                                                          "(even powers: an even asphere; any odd power: an odd asphere)")
             asphere[int(ks)] = _number(src, f"{f}.asphere.{k}", v)
         try:
             material = material_from_spec(sd.get("material", "air"), notes=notes)

@@ -2,7 +2,11 @@
 
 Even asphere (the paper's Eq. 2; Zemax EVENASPH):
     z(r) = c r^2 / (1 + sqrt(1 - (1+k) c^2 r^2)) + A2 r^2 + A4 r^4 + ... + A20 r^20
-Lengths in mm, all coordinates local to the surface vertex.
+Odd asphere (Zemax ODDASPHE, PARM 1..8 = b1..b8; CODE V SPS ODD, SCO AR1..):
+    z(r) = c r^2 / (1 + sqrt(1 - (1+k) c^2 r^2)) + b1 r + b2 r^2 + b3 r^3 + ... + b20 r^20
+Both are one Surface whose `asphere` maps each power to its coefficient; any odd power
+makes it an odd asphere (Surface.kind). Lengths in mm, all coordinates local to the
+surface vertex.
 """
 from __future__ import annotations
 
@@ -15,6 +19,10 @@ from lensim.optics.materials import Air, Material
 
 NEWTON_MAX_ITER = 30
 NEWTON_TOL_MM = 1e-12
+MAX_ASPHERE_POWER = 20
+# below this radius (mm) an r^1 term's slope over r is evaluated at this radius: the tip of
+# the cone it makes has no normal, and x * slope_over_r stays finite (0 on the axis)
+_MIN_RADIUS_MM = 1e-150
 
 
 def sqrt_nonneg(u: torch.Tensor) -> torch.Tensor:
@@ -22,6 +30,20 @@ def sqrt_nonneg(u: torch.Tensor) -> torch.Tensor:
     tensor above 2048 elements across threads (its rsqrt does not), and on a busy 2-core
     machine every such parallel region waits milliseconds for a descheduled thread."""
     return u * torch.rsqrt(torch.clamp(u, min=1e-300))
+
+
+def _split_powers(asphere: dict[int, float], shift: int) -> tuple[dict[int, float], dict[int, float]]:
+    """{power: a} -> (even, odd) Horner terms of sum a * r^(power - shift) in r2 = r^2:
+    even {m: a} for power - shift = 2m, odd {m: a} for power - shift = 2m + 1 (times r).
+    shift 0 gives the sag's terms; the slope over r uses shift 2 with a * power."""
+    even: dict[int, float] = {}
+    odd: dict[int, float] = {}
+    for p, a in asphere.items():
+        if not a:
+            continue
+        q = p - shift
+        (odd if q % 2 else even)[q // 2] = (odd if q % 2 else even).get(q // 2, 0.0) + a
+    return even, odd
 
 
 def _power_series(r2: torch.Tensor, terms: dict[int, float]) -> torch.Tensor:
@@ -44,7 +66,8 @@ class Surface:
     curvature: 1/R (1/mm), 0 for a plane. thickness: signed distance (mm) to the next
     surface vertex (negative after a mirror, as in Zemax; in air also to place a stop or
     dummy surface behind the next vertex, see Lens.virtual_steps). asphere: {power: coefficient}
-    with even powers 2..20 (coefficients in mm^(1-power)). clear_radius: semi-diameter of
+    with powers 1..20 (coefficients in mm^(1-power)); even powers only: an even asphere,
+    any odd power: an odd asphere. clear_radius: semi-diameter of
     the clear aperture that vignettes rays (None: unlimited). obscuration_radius: central
     obscuration (rays with r below it are blocked). semi_diameter: drawn size only.
     """
@@ -69,24 +92,45 @@ class Surface:
     def is_aspheric(self) -> bool:
         return any(v != 0.0 for v in self.asphere.values())
 
+    @property
+    def kind(self) -> str:
+        """'plane', 'sphere', 'conic', 'even asphere' or 'odd asphere' (any odd power)."""
+        if any(v != 0.0 and p % 2 for p, v in self.asphere.items()):
+            return "odd asphere"
+        if self.is_aspheric:
+            return "even asphere"
+        if self.curvature == 0.0:
+            return "plane"
+        return "sphere" if self.conic == 0.0 else "conic"
+
     def sag(self, r2: torch.Tensor) -> torch.Tensor:
         """Sag z (mm) at squared radius r2 (mm^2). NaN-free: outside the conic's domain
         the square root is clamped (callers mask such rays)."""
         c, k = self.curvature, self.conic
         root = sqrt_nonneg(torch.clamp(1.0 - (1.0 + k) * c * c * r2, min=0.0))
         z = c * r2 / (1.0 + root)
-        terms = {p // 2: coef for p, coef in self.asphere.items() if coef}
-        if terms:
-            z = z + _power_series(r2, terms)
+        even, odd = _split_powers(self.asphere, 0)
+        if even:
+            z = z + _power_series(r2, even)
+        if odd:  # sum b_p r^p over odd p = r * sum b_p r2^((p-1)/2)
+            z = z + sqrt_nonneg(r2) * _power_series(r2, odd)
         return z
 
     def sag_slope_over_r(self, r2: torch.Tensor) -> torch.Tensor:
         """(dz/dr) / r, so that dz/dx = x * this and dz/dy = y * this."""
         c, k = self.curvature, self.conic
         g = c * torch.rsqrt(torch.clamp(1.0 - (1.0 + k) * c * c * r2, min=1e-30))
-        terms = {p // 2 - 1: coef * p for p, coef in self.asphere.items() if coef}
-        if terms:
-            g = g + _power_series(r2, terms)
+        slope = {p: coef * p for p, coef in self.asphere.items() if coef}
+        b1 = slope.pop(1, 0.0)
+        even, odd = _split_powers(slope, 2)  # p a_p r^(p-2): even p in r2, odd p >= 3 as r * (...)
+        if even:
+            g = g + _power_series(r2, even)
+        if odd or b1:
+            r = torch.clamp(sqrt_nonneg(r2), min=_MIN_RADIUS_MM)
+            if odd:
+                g = g + r * _power_series(r2, odd)
+            if b1:
+                g = g + b1 / r
         return g
 
     def in_domain(self, r2: torch.Tensor) -> torch.Tensor:

@@ -1,7 +1,7 @@
 """Import Zemax OpticStudio sequential lens files (.zmx, ASCII/UTF-8 or UTF-16 LE/BE).
 
-Read: surfaces (TYPE STANDARD or EVENASPH only; CURV, CONI, PARM 1..8 = r^2..r^16
-coefficients, DISZ, GLAS, STOP, DIAM, CLAP, OBSC, FLAP, COMM), the system aperture (ENPD,
+Read: surfaces (TYPE STANDARD, EVENASPH or ODDASPHE only; CURV, CONI, PARM 1..8 = the
+r^2..r^16 coefficients of EVENASPH and the r^1..r^8 coefficients of ODDASPHE, DISZ, GLAS, STOP, DIAM, CLAP, OBSC, FLAP, COMM), the system aperture (ENPD,
 FNUM image-space or paraxial working F/# for an object at infinity, FLOA), UNIT (MM only),
 NAME, GCAT, FTYP (field type, numbers of fields and wavelengths; telecentric object space
 and afocal image space are refused), XFLN/YFLN (older XFLD/YFLD), WAVM (older WAVL/WWGT),
@@ -28,7 +28,9 @@ from lensim.optics.lens import Lens
 from lensim.optics.materials import CATALOGS, Air, ConstantIndex, Material, ModelGlass, resolve_glass
 from lensim.optics.surfaces import Surface
 
-SUPPORTED_TYPES = ("STANDARD", "EVENASPH")
+SUPPORTED_TYPES = ("STANDARD", "EVENASPH", "ODDASPHE")
+# PARM k's power: EVENASPH r^(2k), ODDASPHE (Zemax's "Odd Asphere") r^k
+_PARM_POWER = {"EVENASPH": 2, "ODDASPHE": 1}
 FIELD_TYPES = {0: "angle", 1: "object_height", 2: "paraxial_image_height", 3: "real_image_height"}
 # Zemax's default nd/Vd on a catalogue glass's GLAS line: no real model data.
 PLACEHOLDER_ND_VD = (1.5, 40.0)
@@ -215,10 +217,11 @@ class _Reader:
         sw = f"SURF {cur.number} {key}"
         if key == "TYPE":
             cur.type = tokens[1].upper() if len(tokens) > 1 else ""
+            cur.type = "ODDASPHE" if cur.type == "ODDASPH" else cur.type
             if cur.type not in SUPPORTED_TYPES:
                 raise InputError(self.src, f"SURF {cur.number} TYPE",
                                  f"unsupported surface type {cur.type or 'nothing'} (line {lineno}); "
-                                 f"lensim reads {' and '.join(SUPPORTED_TYPES)} surfaces only")
+                                 f"lensim reads {', '.join(SUPPORTED_TYPES)} surfaces only")
         elif key == "CURV":
             cur.curv = self.num(lineno, sw, tokens, 1)
         elif key == "CONI":
@@ -288,6 +291,22 @@ class _Reader:
         if note:
             self.notes.append(note)
         return mat, False
+
+    def asphere(self, s: _Surf) -> dict[int, float]:
+        """{power: coefficient} of an EVENASPH (PARM k: r^2k) or ODDASPHE (PARM k: r^k) surface."""
+        step = _PARM_POWER.get(s.type)
+        if step is None:
+            return {}
+        asphere: dict[int, float] = {}
+        for k, (v, line) in sorted(s.parms.items()):
+            if not 1 <= k <= 8:
+                if v != 0.0:
+                    raise self.err(line, f"SURF {s.number} PARM", f"expected PARM 1..8 (r^{step}..r^{8 * step}), "
+                                                                  f"got PARM {k}")
+                continue
+            if v != 0.0:
+                asphere[step * k] = v
+        return asphere
 
     def model(self, s: _Surf, nd: float, vd: float, dpgf: float, name: str | None = None) -> Material:
         """Zemax's MODEL glass (nd, Vd, dPgF); Vd 0 is a constant index."""
@@ -378,15 +397,7 @@ class _Reader:
         for s in optical:
             if not math.isfinite(s.disz):
                 raise InputError(self.src, f"SURF {s.number} DISZ", "expected a finite thickness (INFINITY is for the object)")
-            asphere: dict[int, float] = {}
-            if s.type == "EVENASPH":
-                for k, (v, line) in sorted(s.parms.items()):
-                    if not 1 <= k <= 8:
-                        if v != 0.0:
-                            raise self.err(line, f"SURF {s.number} PARM", f"expected PARM 1..8 (r^2..r^16), got PARM {k}")
-                        continue
-                    if v != 0.0:
-                        asphere[2 * k] = v
+            asphere = self.asphere(s)
             material, mirror = self.glass(s, medium)
             medium = material
             clear, obscuration = self.apertures(s)
