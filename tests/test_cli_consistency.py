@@ -42,8 +42,8 @@ def test_common_options_are_spelled_one_way(path: tuple[str, ...], cmd: Any) -> 
     assert not opts & FORBIDDEN, f"{' '.join(path)}: {sorted(opts & FORBIDDEN)}"
     if "--output" in opts:
         assert "-o" in opts, f"{' '.join(path)}: --output without -o"
-    if "--json" in opts and path not in {("lens", "info"), ("lens", "spot"), ("psf", "compute"), ("assets",),
-                                         ("raw", "info"), ("sensor", "from-raw")}:
+    if "--json" in opts and path not in {("lens", "info"), ("lens", "spot"), ("lens", "field"), ("psf", "compute"),
+                                         ("assets",), ("raw", "info"), ("sensor", "from-raw")}:
         assert "--quiet" in opts, f"{' '.join(path)}: long job with --json but no --quiet"
     assert "Example:" in (cmd.help or ""), f"{' '.join(path)}: --help has no example"
 

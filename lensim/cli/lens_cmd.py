@@ -144,6 +144,44 @@ class ReferenceChoice(str, Enum):
     centroid = "centroid"
 
 
+class PlotKind(str, Enum):
+    """What `lens plot` draws."""
+
+    layout = "layout"
+    distortion = "distortion"
+    lateral_colour = "lateral-colour"
+    illumination = "illumination"
+
+
+SENSOR_HELP = ("Sensor profile (file or built-in name) whose spectral response weights the lateral colour "
+               "of its R, G, B channels. Default: the default sensor's.")
+
+
+def _check_figure_name(output: Path) -> None:
+    """A one-line error for an image name matplotlib cannot write, before any work."""
+    from lensim.plots.figure import new_figure
+
+    fmt = output.suffix[1:].lower()
+    if fmt not in new_figure((1, 1)).canvas.get_supported_filetypes():
+        raise InputError(str(output), "--output", "expected an image name ending in .png, .pdf or .svg")
+
+
+def _channel_weights(sensor: Optional[str]):
+    """(wavelengths_nm, (3, W) channel weights) of the sensor's spectral response."""
+    from lensim.sensor.profile import load_sensor
+    from lensim.sensor.spectral import spectral_response
+
+    resp = spectral_response(None, load_sensor(sensor).spectral_response)
+    return resp.wavelengths_nm, resp.weights
+
+
+def _field_report(lens: Lens, fields: Optional[list[float]], sensor: Optional[str], aiming: str) -> dict:
+    from lensim.optics.field_analysis import field_report
+
+    wavelengths_nm, weights = _channel_weights(sensor)
+    return field_report(lens, fields, wavelengths_nm, weights, aiming=aiming)
+
+
 FIELD_HELP = ("Normalized field to show, 0..1 of the lens's maximum field along +y; repeat for several. "
               "Default: the lens's own fields.")
 FIELD_DEG_HELP = "Field to show as an object-space angle (deg, below 90); repeat for several."
@@ -184,17 +222,31 @@ def plot(
     field: Optional[list[float]] = typer.Option(None, "--field", help=FIELD_HELP),
     field_deg: Optional[list[float]] = typer.Option(None, "--field-deg", help=FIELD_DEG_HELP),
     image_height_mm: Optional[list[float]] = typer.Option(None, "--image-height-mm", help=IMAGE_HEIGHT_HELP),
+    kind: PlotKind = typer.Option(PlotKind.layout, "--kind", help="layout (ray fans), or against the field: "
+                                  "distortion (%), lateral-colour (um per sensor channel) or illumination."),
+    sensor: Optional[str] = typer.Option(None, "--sensor", help=SENSOR_HELP),
 ) -> None:
-    """Draw the lens layout: a y-z cross-section with a fan of rays per field.
+    """Draw the lens layout (a y-z cross-section with a fan of rays per field), or its
+    distortion, lateral colour or relative illumination against the field.
 
-    Lengths in mm, primary wavelength; vignetted rays end where they are blocked.
+    Layout: lengths in mm, primary wavelength; vignetted rays end where they are blocked.
+    The field curves use the fields given (default 21 from the axis to the maximum field).
 
     Example: lensim lens plot cooke_triplet -o layout.png --rays 9 --field 0 --field 0.7 --field 1
+    Example: lensim lens plot cooke_triplet --kind lateral-colour --sensor apsc_mirrorless -o lateral.png
     """
-    from lensim.plots.lens import plot_layout
-
     lens, fields = fields_to_show(load_lens(lens_file), field, field_deg, image_height_mm)
-    plot_layout(lens, fields=fields, rays_per_field=rays, aiming=aiming.value, path=output)
+    if kind is PlotKind.layout:
+        from lensim.plots.lens import plot_layout
+
+        if sensor is not None:
+            raise InputError(None, "--sensor", "applies to --kind lateral-colour (and the other field curves) only")
+        plot_layout(lens, fields=fields, rays_per_field=rays, aiming=aiming.value, path=output)
+    else:
+        from lensim.plots.field import field_figure
+
+        _check_figure_name(output)
+        field_figure(_field_report(lens, fields, sensor, aiming.value), kind.value, output)
     console.print(f"wrote {output}", highlight=False)
 
 
@@ -241,3 +293,76 @@ def spot(
         })
     else:
         console.print(f"wrote {output}", highlight=False)
+
+
+@lens_app.command("field")
+def field_command(
+    lens_file: str = LENS_ARG,
+    json_out: bool = typer.Option(False, "--json", help="Print the per-field records as JSON instead of a table."),
+    sensor: Optional[str] = typer.Option(None, "--sensor", help=SENSOR_HELP),
+    aiming: AimingChoice = typer.Option(AimingChoice.real, help="Ray aiming of the chief rays."),
+    field: Optional[list[float]] = typer.Option(None, "--field", help=FIELD_HELP.replace("Default: the lens's own "
+                                                "fields.", "Default: 21 fields from the axis to the maximum.")),
+    field_deg: Optional[list[float]] = typer.Option(None, "--field-deg", help=FIELD_DEG_HELP),
+    image_height_mm: Optional[list[float]] = typer.Option(None, "--image-height-mm", help=IMAGE_HEIGHT_HELP),
+) -> None:
+    """Lens-level outputs per field: the real chief-ray height at each wavelength, the
+    paraxial height, distortion (%), lateral colour of each sensor channel (its chief-ray
+    height weighted by the sensor's spectral response, minus green's, um) and relative
+    illumination.
+
+    Example: lensim lens field cooke_triplet --sensor apsc_mirrorless --json
+    """
+    lens, fields = fields_to_show(load_lens(lens_file), field, field_deg, image_height_mm)
+    report = _field_report(lens, fields, sensor, aiming.value)
+    if json_out:
+        print_json(report)
+        return
+    unit = report["field_unit"]
+    t = Table(title=f"{lens.name or Path(lens.source).name}: field outputs (heights in mm, lateral colour in um)")
+    for col in (f"field ({unit})", "real y", "paraxial y", "distortion %", "R - G", "B - G", "rel. illum."):
+        t.add_column(col, justify="right")
+    for r in report["fields"]:
+        t.add_row(f"{r['field']:.4g}", f"{r['channel_height_mm']['g']:.5f}", f"{r['paraxial_height_mm']:.5f}",
+                  f"{r['distortion_percent']:+.4f}", f"{r['lateral_colour_um']['r']:+.3f}",
+                  f"{r['lateral_colour_um']['b']:+.3f}", f"{r['relative_illumination']:.4f}")
+    console.print(t)
+
+
+@lens_app.command("lensfun")
+def lensfun_command(
+    lens_file: str = LENS_ARG,
+    maker: str = typer.Option(..., "--maker", help="Lens maker as lensfun shows it."),
+    model: str = typer.Option(..., "--model", help="Lens model name."),
+    mount: str = typer.Option(..., "--mount", help="Lens mount, as lensfun names it (e.g. 'Sony E', 'Generic')."),
+    crop_factor: float = typer.Option(..., "--crop-factor", help="Crop factor of the frame the profile is for "
+                                      "(full frame 1; the lens must cover the 3:2 frame's corner)."),
+    focal: float = typer.Option(..., "--focal", help="Focal length (mm) the profile is filed under."),
+    aperture: float = typer.Option(..., "--aperture", help="F-number: the lens is evaluated stopped to it."),
+    distance: Optional[float] = typer.Option(None, "--distance", help="Focus distance (m from the first vertex): the "
+                                             "lens is refocused there. Default: the lens file's object distance."),
+    output: Path = typer.Option(..., "-o", "--output", help="lensfun database file to write (.xml)."),
+    sensor: Optional[str] = typer.Option(None, "--sensor", help=SENSOR_HELP),
+    aiming: AimingChoice = typer.Option(AimingChoice.real, help="Ray aiming of the chief rays."),
+) -> None:
+    """Write a lensfun profile of the lens (for darktable, RawTherapee, Hugin): ptlens
+    distortion, poly3 lateral colour (from the sensor-channel-weighted chief rays) and pa
+    vignetting (from the relative illumination), fitted from the axis to the corner of a
+    3:2 frame at the crop factor.
+
+    Example: lensim lens lensfun cooke_triplet --maker lensim --model "Cooke triplet 50mm" --mount Generic
+    --crop-factor 1.5 --focal 50 --aperture 5.6 -o cooke.xml
+    """
+    from lensim.optics.lensfun import check_settings, lensfun_profile, write_profile
+
+    check_settings(maker, model, mount, crop_factor, focal, aperture, distance)
+    if output.suffix.lower() != ".xml":
+        raise InputError(str(output), "--output", "expected a .xml file name (a lensfun database file)")
+    lens = load_lens(lens_file)
+    wavelengths_nm, weights = _channel_weights(sensor)
+    profile = lensfun_profile(lens, maker, model, mount, crop_factor, focal, aperture, wavelengths_nm, weights,
+                              distance_m=distance, aiming=aiming.value)
+    write_profile(profile, output)
+    fit = profile.fit
+    console.print(f"wrote {output} (largest fit residuals: distortion {fit['distortion_um']:.3g} um, "
+                  f"lateral colour {fit['tca_um']:.3g} um, vignetting {fit['vignetting']:.2g})", highlight=False)

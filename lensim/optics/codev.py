@@ -32,6 +32,7 @@ from pathlib import Path
 
 from lensim.errors import InputError, UnknownGlassError
 from lensim.optics.lens import Lens
+from lensim.optics.paraxial import paraxial_focus_thickness
 from lensim.optics.materials import CATALOGS, Air, Material, resolve_glass
 from lensim.optics.surfaces import MAX_ASPHERE_POWER, Surface
 
@@ -380,21 +381,11 @@ class _Reader:
         if pim:
             if pim[-1] is not self.surfaces[-1]:
                 raise self.err(pim[-1].line, f"S {pim[-1].number} PIM", "expected PIM on the last surface before SI")
-            _apply_paraxial_image_solve(lens)
+            try:
+                lens.surfaces[-1].thickness = paraxial_focus_thickness(lens)
+            except InputError as e:
+                raise InputError(lens.source, "PIM", f"{e.message}; remove the PIM solve") from None
         return lens
-
-
-def _apply_paraxial_image_solve(lens: Lens) -> None:
-    """Set the last thickness so the image plane (before defocus) is at the paraxial focus
-    of the primary wavelength: where the paraxial marginal ray crosses the axis."""
-    from lensim.optics.paraxial import paraxial_data
-
-    para = paraxial_data(lens)
-    z_last = float(lens.vertex_z()[lens.num_surfaces - 1])
-    distance = para.paraxial_image_z_mm - z_last
-    if not math.isfinite(distance):
-        raise InputError(lens.source, "PIM", "the lens has no finite paraxial image (afocal); remove the PIM solve")
-    lens.surfaces[-1].thickness = float(distance)
 
 
 def read_seq(path: str | Path) -> Lens:

@@ -1,4 +1,5 @@
-"""Field-dependent analyses: distortion and relative illumination.
+"""Field-dependent analyses: distortion, lateral colour, relative illumination and a
+per-field report of all three (the lens-level outputs of `lensim lens field`).
 
 Fields are given in the lens's field unit (degrees for angle fields, mm for object or
 image heights) and default to 21 equal steps from 0 to the lens's maximum field.
@@ -234,4 +235,98 @@ def relative_illumination(
         "n2_projected_solid_angle_sr": (solid * n_img * n_img).tolist()[pick],
         "unvignetted_fraction": unvignetted[pick],
         "image_height_mm": P[:, 0, 1].tolist()[pick],
+    }
+
+
+def chief_ray_heights(lens: Lens, launch: list[float], wavelengths_um: list[float] | np.ndarray,
+                      aiming: Aiming = "real", para: ParaxialData | None = None) -> np.ndarray:
+    """Real chief-ray image heights y (mm), shape (W, F), for launch field values (angle
+    deg or object height mm, lens.launch_field_type) at each wavelength (um), each chief
+    ray aimed at its own wavelength. Raises RayTraceError naming the first failed ray."""
+    para = para or paraxial_data(lens)
+    probe = lens.launch_lens()
+    rays, wlt = generate_rays(probe, launch, torch.zeros(1, 2, dtype=DTYPE), list(wavelengths_um), aiming, para)
+    res = trace(probe, rays, wlt)
+    if not bool(res.rays.valid.all()):
+        bad = torch.nonzero(~res.rays.valid.reshape(len(wavelengths_um), len(launch)))[0]
+        raise RayTraceError(describe_failure(probe, launch[int(bad[1])], res.first_failure(), "chief ray"))
+    return res.rays.position[:, :, 0, 1].numpy().copy()
+
+
+def lateral_colour(
+    lens: Lens,
+    fields: list[float] | np.ndarray | None,
+    wavelengths_nm: np.ndarray,
+    channel_weights: np.ndarray,
+    aiming: Aiming = "real",
+) -> dict:
+    """Lateral colour as a sensor sees it: per field, the real chief-ray height at every
+    wavelength and its average over each colour channel weighted by the channel's spectral
+    response (e.g. lensim.sensor.spectral.SpectralResponse: wavelengths_nm (W,), weights
+    (3, W), rows R, G, B, each summing to 1).
+
+    fields: lens units (default 0..max in 21 steps). Returns a dict: fields, field_unit,
+    launch, wavelengths_nm, real_height_mm (F, W), channel_height_mm (F, 3: R, G, B) and
+    lateral_colour_um (F, 3): each channel's height minus green's, in um (G is 0).
+    """
+    flds = _default_fields(lens, fields)
+    weights = np.asarray(channel_weights, dtype=np.float64)
+    wl_nm = np.asarray(wavelengths_nm, dtype=np.float64).reshape(-1)
+    if weights.shape != (3, wl_nm.size):
+        raise InputError(lens.source, "channel_weights", f"expected (3, {wl_nm.size}) weights, got {weights.shape}")
+    para = paraxial_data(lens)
+    launch = [object_field(lens, f, aiming, para) for f in flds]
+    heights = chief_ray_heights(lens, launch, wl_nm / 1000.0, aiming, para).T  # (F, W)
+    channel = heights @ (weights / weights.sum(axis=1, keepdims=True)).T  # (F, 3)
+    return {
+        "fields": flds,
+        "field_unit": _field_unit(lens),
+        "launch": launch,
+        "wavelengths_nm": wl_nm.tolist(),
+        "real_height_mm": heights.tolist(),
+        "channel_height_mm": channel.tolist(),
+        "lateral_colour_um": ((channel - channel[:, 1:2]) * 1000.0).tolist(),
+    }
+
+
+def field_report(
+    lens: Lens,
+    fields: list[float] | np.ndarray | None,
+    wavelengths_nm: np.ndarray,
+    channel_weights: np.ndarray,
+    aiming: Aiming = "real",
+    ri_samples: int = 32,
+) -> dict:
+    """Lens-level outputs per field: real chief-ray height at each wavelength, paraxial
+    height and distortion (primary wavelength), channel-weighted heights and lateral colour
+    (see lateral_colour) and relative illumination (primary wavelength, ri_samples pupil
+    samples across). Returns a dict: name, source, aiming, field_unit, wavelengths_nm,
+    primary_wavelength_nm and fields, a list of one record per field (field, launch,
+    real_height_mm {nm: mm}, paraxial_height_mm, distortion_percent, channel_height_mm and
+    lateral_colour_um {r, g, b}, relative_illumination)."""
+    flds = _default_fields(lens, fields)
+    dist = distortion(lens, flds, aiming)
+    colour = lateral_colour(lens, flds, wavelengths_nm, channel_weights, aiming)
+    ri = relative_illumination(lens, flds, samples=ri_samples, aiming=aiming)
+    records = []
+    for i, f in enumerate(flds):
+        records.append({
+            "field": f,
+            "launch": dist["launch"][i],
+            "real_height_mm": {f"{w:g}": h for w, h in zip(colour["wavelengths_nm"], colour["real_height_mm"][i])},
+            "paraxial_height_mm": dist["paraxial_height_mm"][i],
+            "distortion_percent": dist["distortion_percent"][i],
+            "channel_height_mm": dict(zip("rgb", colour["channel_height_mm"][i])),
+            "lateral_colour_um": dict(zip("rgb", colour["lateral_colour_um"][i])),
+            "relative_illumination": ri["relative_illumination"][i],
+        })
+    return {
+        "name": lens.name,
+        "source": lens.source,
+        "aiming": aiming,
+        "field_unit": _field_unit(lens),
+        "launch_unit": "deg" if lens.launch_field_type == "angle" else "mm",
+        "wavelengths_nm": colour["wavelengths_nm"],
+        "primary_wavelength_nm": lens.primary_wavelength_um * 1000.0,
+        "fields": records,
     }

@@ -12,6 +12,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from lensim.errors import InputError
 from lensim.optics.lens import Lens
 
 
@@ -162,3 +163,15 @@ def paraxial_image_height(lens: Lens, field_value: float, para: ParaxialData | N
     y0, nu0 = paraxial_chief_ray_start(lens, field_value, para)
     ys, nu = trace_yu(lens, y0, nu0, para.wavelength_um)
     return float(ys[-1] + (lens.surfaces[-1].thickness + lens.image_defocus) * nu / n[-1])
+
+
+def paraxial_focus_thickness(lens: Lens) -> float:
+    """The last surface's thickness (mm) that puts the image plane (before defocus) at the
+    paraxial focus of the primary wavelength, where the paraxial marginal ray crosses the
+    axis (CODE V's PIM solve; refocusing after the object distance changes)."""
+    para = paraxial_data(lens)
+    z_last = float(lens.vertex_z()[lens.num_surfaces - 1])
+    distance = para.paraxial_image_z_mm - z_last
+    if not math.isfinite(distance):
+        raise InputError(lens.source, "image", "the lens has no finite paraxial image (afocal)")
+    return float(distance)
