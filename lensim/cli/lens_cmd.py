@@ -83,7 +83,7 @@ def info(
     for i, s in enumerate(lens.surfaces):
         mat = "MIRROR" if s.is_mirror else ("" if isinstance(s.material, Air) else s.material.name)
         nd = "" if isinstance(s.material, Air) or s.is_mirror else f"{s.material.index(nd_wl).item():.5f}"
-        note = ", ".join(x for x in ("STOP" if s.is_stop else "", "asphere" if s.is_aspheric else "",
+        note = ", ".join(x for x in ("STOP" if s.is_stop else "", s.kind if s.is_aspheric else "",
                                      f"obsc {s.obscuration_radius:g}" if s.obscuration_radius else "") if x)
         t.add_row(str(i + 1), _fmt(s.radius), _fmt(s.thickness), mat, nd, _fmt(s.conic) if s.conic else "",
                   _fmt(s.clear_radius) if s.clear_radius is not None else "", note)
@@ -305,18 +305,21 @@ def field_command(
                                                 "fields.", "Default: 21 fields from the axis to the maximum.")),
     field_deg: Optional[list[float]] = typer.Option(None, "--field-deg", help=FIELD_DEG_HELP),
     image_height_mm: Optional[list[float]] = typer.Option(None, "--image-height-mm", help=IMAGE_HEIGHT_HELP),
+    match_glass: bool = typer.Option(False, "--match-glass", help=MATCH_GLASS_HELP),
+    glass_makers: Optional[str] = typer.Option(None, "--glass-makers", help=GLASS_MAKERS_HELP),
 ) -> None:
     """Lens-level outputs per field: the real chief-ray height at each wavelength, the
     paraxial height, distortion (%), lateral colour of each sensor channel (its chief-ray
     height weighted by the sensor's spectral response, minus green's, um) and relative
-    illumination.
+    illumination. With --match-glass, of the lens with catalogue glasses for its model glasses.
 
     Example: lensim lens field cooke_triplet --sensor apsc_mirrorless --json
     """
-    lens, fields = fields_to_show(load_lens(lens_file), field, field_deg, image_height_mm)
+    lens, matches = _load(lens_file, match_glass, _glass_makers(glass_makers, match_glass))
+    lens, fields = fields_to_show(lens, field, field_deg, image_height_mm)
     report = _field_report(lens, fields, sensor, aiming.value)
     if json_out:
-        print_json(report)
+        print_json(report | {"glass_matches": matches} if match_glass else report)
         return
     unit = report["field_unit"]
     t = Table(title=f"{lens.name or Path(lens.source).name}: field outputs (heights in mm, lateral colour in um)")
@@ -327,6 +330,9 @@ def field_command(
                   f"{r['distortion_percent']:+.4f}", f"{r['lateral_colour_um']['r']:+.3f}",
                   f"{r['lateral_colour_um']['b']:+.3f}", f"{r['relative_illumination']:.4f}")
     console.print(t)
+    if matches:  # match_glasses added one note per replaced surface, last
+        for note in lens.notes[-len(matches):]:
+            console.print(f"note: {note}", highlight=False)
 
 
 @lens_app.command("lensfun")
@@ -344,6 +350,8 @@ def lensfun_command(
     output: Path = typer.Option(..., "-o", "--output", help="lensfun database file to write (.xml)."),
     sensor: Optional[str] = typer.Option(None, "--sensor", help=SENSOR_HELP),
     aiming: AimingChoice = typer.Option(AimingChoice.real, help="Ray aiming of the chief rays."),
+    match_glass: bool = typer.Option(False, "--match-glass", help=MATCH_GLASS_HELP),
+    glass_makers: Optional[str] = typer.Option(None, "--glass-makers", help=GLASS_MAKERS_HELP),
 ) -> None:
     """Write a lensfun profile of the lens (for darktable, RawTherapee, Hugin): ptlens
     distortion, poly3 lateral colour (from the sensor-channel-weighted chief rays) and pa
@@ -358,7 +366,7 @@ def lensfun_command(
     check_settings(maker, model, mount, crop_factor, focal, aperture, distance)
     if output.suffix.lower() != ".xml":
         raise InputError(str(output), "--output", "expected a .xml file name (a lensfun database file)")
-    lens = load_lens(lens_file)
+    lens, _ = _load(lens_file, match_glass, _glass_makers(glass_makers, match_glass))
     wavelengths_nm, weights = _channel_weights(sensor)
     profile = lensfun_profile(lens, maker, model, mount, crop_factor, focal, aperture, wavelengths_nm, weights,
                               distance_m=distance, aiming=aiming.value)
