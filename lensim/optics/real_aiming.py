@@ -17,8 +17,10 @@ move the ray's aim).
 3. Every other pupil point starts from the chief ray's linear model of the pupil (the
    chief ray plus the inverse of its Jacobian times the target): near-exact for a real
    pupil that is shifted, scaled or stretched, as wide-angle pupils are.
-4. A pupil ray that still fails is continued from the chief ray: its target is walked
-   out in CONTINUATION_STEPS steps, each solved from the previous solution.
+4. A pupil ray that fails from there is tried from the paraxial pupil point, and one that
+   still fails is continued from the chief ray: its target is walked out in
+   CONTINUATION_STEPS steps, each solved from the previous solution. Rays that do not
+   exist (they miss a surface before the stop whatever their aim) end unconverged.
 
 Shapes: fields F, wavelengths W (tensor (W, 1, 1)), pupil points P; lengths in mm.
 """
@@ -38,6 +40,7 @@ AIM_MAX_ITER = 25
 BACKTRACK_HALVINGS = 8
 SEARCH_SAMPLES = 4097  # rays across the first surface in the meridian search (a steep beam is narrow)
 CONTINUATION_STEPS = 4
+STALL_ITERATIONS = 5  # Newton gives a ray up after this many full steps without a 10 % gain
 
 
 class _Problem:
@@ -85,36 +88,70 @@ def _newton(pb: _Problem, x: torch.Tensor, target: torch.Tensor, max_iter: int =
     """Damped Newton iteration with backtracking on entrance-plane points x (..., 2) so
     each ray meets the stop at target (broadcast to x). A ray within the tolerance is
     polished while its miss still shrinks (so the same ray aimed from two starts agrees
-    to rounding). Returns (x, converged)."""
+    to rounding); one whose full steps gain nothing STALL_ITERATIONS times is given up (a
+    target out of its reach). Once fewer than a quarter of the rays still move, only those
+    are traced. Returns (x, converged)."""
     s0, v0 = pb.stop_xy(x)
     miss = (s0 - target).abs().amax(-1)
     final = torch.zeros_like(v0)  # polished to rounding, or no step keeps the ray
-    for _ in range(max_iter):
+    stall = torch.zeros(v0.shape, dtype=torch.int16, device=v0.device)  # iterations without progress
+    for it in range(max_iter):
         final = final | (v0 & (miss < pb.tol * 1e-4))
-        if not bool((v0 & ~final).any()):
+        todo = v0 & ~final
+        if not bool(todo.any()):
             break
+        if todo.numel() >= 256 and int(todo.sum()) * 4 < todo.numel():  # a few stragglers: trace only them
+            sub, idx = _subset(pb, todo)
+            xs, ok = _newton(sub, x[idx], target.expand(todo.shape + (2,))[idx], max_iter - it)
+            x, conv = x.clone(), v0 & (miss < pb.tol)
+            x[idx], conv[idx] = xs, ok
+            return x, conv
         jac, probes_ok = pb.jacobian(x, s0)
         step, inv_ok = _solve2(jac, s0 - target)
         norm = torch.linalg.norm(step, dim=-1, keepdim=True)
         limit = 0.5 * pb.scale  # far from the solution the map can be strongly non-linear
+        clipped = (norm > limit).squeeze(-1)
         step = torch.where(norm > limit, step * limit / norm, step)
         active = v0 & probes_ok & inv_ok & ~final
         if not bool(active.any()):
             break
-        for _ in range(BACKTRACK_HALVINGS):
-            cand = torch.where(active.unsqueeze(-1), x - step, x)
-            sc, vc = pb.stop_xy(cand)
-            lost = active & ~vc
-            if not bool(lost.any()):
-                break
-            step = torch.where(lost.unsqueeze(-1), 0.5 * step, step)
+        cand = torch.where(active.unsqueeze(-1), x - step, x)
+        sc, vc = pb.stop_xy(cand)
+        lost = active & ~vc
+        if bool(lost.any()):
+            cand, sc, vc = _backtrack(pb, x, step, lost, cand, sc, vc)
         miss_c = (sc - target).abs().amax(-1)
         accept = active & vc & ((miss_c < miss) | (miss >= pb.tol))  # within tolerance: only improvements
-        final = final | (active & ~accept)
+        progress = accept & (clipped | (miss_c < 0.9 * miss))  # a damped step is progress
+        stall = torch.where(progress, torch.zeros_like(stall), stall + 1)
+        final = final | (active & ~accept) | (stall >= STALL_ITERATIONS)  # a target out of reach: give up
         x = torch.where(accept.unsqueeze(-1), cand, x)
         s0 = torch.where(accept.unsqueeze(-1), sc, s0)
         miss = torch.where(accept, miss_c, miss)
     return x, v0 & (miss < pb.tol)
+
+
+def _backtrack(pb: _Problem, x: torch.Tensor, step: torch.Tensor, lost: torch.Tensor, cand: torch.Tensor,
+               sc: torch.Tensor, vc: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Halve the steps of the rays that a full step lost (lost: a mask over x's batch) until
+    their rays trace again, at most BACKTRACK_HALVINGS times, tracing only those rays.
+    Returns updated copies of (cand, sc, vc)."""
+    sub, idx = _subset(pb, lost)
+    xs, ss = x[idx], step[idx]
+    found = torch.zeros(xs.shape[:-1], dtype=torch.bool, device=x.device)
+    s_found = torch.zeros_like(xs)
+    for _ in range(BACKTRACK_HALVINGS):
+        ss = torch.where(found.unsqueeze(-1), ss, 0.5 * ss)
+        s_try, v_try = sub.stop_xy(xs - ss)
+        s_found = torch.where((v_try & ~found).unsqueeze(-1), s_try, s_found)
+        found = found | v_try
+        if bool(found.all()):
+            break
+    cand, sc, vc = cand.clone(), sc.clone(), vc.clone()
+    cand[idx] = torch.where(found.unsqueeze(-1), xs - ss, cand[idx])
+    sc[idx] = torch.where(found.unsqueeze(-1), s_found, sc[idx])
+    vc[idx] = found
+    return cand, sc, vc
 
 
 def _first_surface_reach(lens: Lens, para: ParaxialData) -> float:
@@ -188,28 +225,51 @@ def _aim_chief(lens: Lens, field: torch.Tensor, wl: torch.Tensor, n: torch.Tenso
     return x, ok
 
 
-def _continue_from_chief(pb_all: _Problem, x: torch.Tensor, conv: torch.Tensor, chief: torch.Tensor,
+def _subset(pb: _Problem, todo: torch.Tensor) -> tuple[_Problem, tuple[torch.Tensor, ...]]:
+    """The rays where todo (W, F, P) is True as a flat problem (K rays), and their indices."""
+    idx = torch.nonzero(todo, as_tuple=True)
+    n = pb.n.expand((pb.n.shape[0],) + todo.shape)[(slice(None),) + idx]
+    return _Problem(pb.lens, pb.field.expand(todo.shape)[idx], pb.wl.expand(todo.shape)[idx], n, pb.para), idx
+
+
+def _retry_from(pb: _Problem, x: torch.Tensor, conv: torch.Tensor, todo: torch.Tensor, start: torch.Tensor,
+                target: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Newton again for the rays where todo (W, F, P) holds, from start (W, F, P, 2); the
+    ones that converge replace x. Returns updated copies of (x, conv)."""
+    if not bool(todo.any()):
+        return x, conv
+    sub, idx = _subset(pb, todo)
+    xs, ok = _newton(sub, start[idx], target.expand(todo.shape + (2,))[idx])
+    x, conv = x.clone(), conv.clone()
+    x[idx] = torch.where(ok.unsqueeze(-1), xs, x[idx])
+    conv[idx] = ok
+    return x, conv
+
+
+def _continue_from_chief(pb: _Problem, x: torch.Tensor, conv: torch.Tensor, chief: torch.Tensor,
                          chief_ok: torch.Tensor, jac: torch.Tensor, target: torch.Tensor):
     """Walk the targets of the unconverged rays (whose chief ray converged) out from the
-    chief ray in CONTINUATION_STEPS steps. x, conv: (W, F, P, ...) in; updated copies out."""
+    chief ray in CONTINUATION_STEPS steps, dropping a ray at the first step it fails.
+    x, conv: (W, F, P, ...); returns updated copies."""
     todo = ~conv & chief_ok
     if not bool(todo.any()):
         return x, conv
-    wi, fi, pi = torch.nonzero(todo, as_tuple=True)
-    field = pb_all.field.expand(todo.shape)[wi, fi, pi]
-    n = pb_all.n.expand((pb_all.n.shape[0],) + todo.shape)[:, wi, fi, pi]
-    wl = pb_all.wl.expand(todo.shape)[wi, fi, pi]
-    pb = _Problem(pb_all.lens, field, wl, n, pb_all.para)
-    goal, J = target.expand(todo.shape + (2,))[wi, fi, pi], jac[wi, fi, 0]
-    xk, ok = chief[wi, fi, 0], torch.ones(wi.shape, dtype=torch.bool, device=x.device)
+    sub, idx = _subset(pb, todo)
+    wi, fi = idx[0], idx[1]
+    goal = target.expand(todo.shape + (2,))[idx]
+    d, _ = _solve2(jac[wi, fi, 0], goal / CONTINUATION_STEPS)  # the linear model's step per stage
+    xk, alive = chief[wi, fi, 0], torch.ones(wi.shape, dtype=torch.bool, device=x.device)
     for k in range(1, CONTINUATION_STEPS + 1):
-        step_goal = goal * (k / CONTINUATION_STEPS)
-        d, _ = _solve2(J, goal / CONTINUATION_STEPS)
-        xk, conv_k = _newton(pb, torch.where(ok.unsqueeze(-1), xk + d, xk), step_goal, max_iter=12)
-        ok = ok & conv_k
+        live = torch.nonzero(alive)[:, 0]
+        part = _Problem(pb.lens, sub.field[live], sub.wl[live], sub.n[:, live], pb.para)
+        xs, ok = _newton(part, xk[live] + d[live], goal[live] * (k / CONTINUATION_STEPS))
+        xk = xk.index_copy(0, live, xs)
+        alive = alive.index_copy(0, live, ok)
+        if not bool(alive.any()):
+            break
     x, conv = x.clone(), conv.clone()
-    x[wi, fi, pi] = torch.where(ok.unsqueeze(-1), xk, x[wi, fi, pi])
-    conv[wi, fi, pi] = ok
+    x[idx] = torch.where(alive.unsqueeze(-1), xk, x[idx])
+    conv[idx] = alive
     return x, conv
 
 
@@ -225,7 +285,8 @@ def aim_real(lens: Lens, field: torch.Tensor, pupil: torch.Tensor, wl: torch.Ten
     s_chief, _ = pb.stop_xy(chief)
     jac, jac_ok = pb.jacobian(chief, s_chief)
     model, inv_ok = _solve2(jac, target.reshape(1, 1, P, 2))  # the chief ray's linear pupil model
-    use_model = (chief_ok & jac_ok & inv_ok).unsqueeze(-1)
+    use_model = (chief_ok & jac_ok & inv_ok).expand(W, F, P)
     paraxial = (pupil.to(DTYPE) * (para.epd_mm / 2.0)).expand(W, F, P, 2)
-    x, conv = _newton(pb, torch.where(use_model, chief + model, paraxial), target)
+    x, conv = _newton(pb, torch.where(use_model.unsqueeze(-1), chief + model, paraxial), target)
+    x, conv = _retry_from(pb, x, conv, ~conv & use_model, paraxial, target)  # the paraxial start, as before
     return _continue_from_chief(pb, x, conv, chief, chief_ok & jac_ok, jac, target)
