@@ -24,7 +24,7 @@ from scipy.optimize import brentq
 from scipy.special import j1
 
 from lensim.errors import InputError
-from lensim.optics.field_analysis import relative_illumination
+from lensim.optics.field_analysis import chief_ray_heights, relative_illumination
 from lensim.optics.lens import Lens
 from lensim.optics.lens_file import load_lens
 from lensim.optics.paraxial import paraxial_data
@@ -151,6 +151,16 @@ def test_hubble_psf_is_its_annulus():
     r = i + 0.5 * (y0 - y2) / (y0 - 2 * y1 + y2)
     fno = paraxial_data(lens).fno
     assert r == pytest.approx(annulus_first_zero(eps) * 0.6328 * fno / math.pi, rel=0.01)
+
+
+def test_hubble_chief_rays_cross_the_obscuration_in_lens_level_outputs():
+    # lens field's chief-ray heights: the axial chief ray meets the obscuration's centre;
+    # at 0.04 deg the height is EFL tan(field) up to the design's 8e-6 distortion
+    lens = load_lens(REFERENCE_LENSES / "hubble_rc.yaml")
+    heights = chief_ray_heights(lens, [0.0, 0.04], [0.6328])
+    efl = paraxial_data(lens).efl_mm
+    assert heights[0, 0] == 0.0
+    assert heights[0, 1] == pytest.approx(efl * math.tan(math.radians(0.04)), rel=1e-4)
 
 
 @pytest.mark.slow

@@ -13,7 +13,8 @@ import numpy as np
 import torch
 
 from lensim.errors import InputError, RayTraceError
-from lensim.optics.aiming import Aiming, chief_ray_image_height, describe_failure, generate_rays, object_field
+from lensim.optics.aiming import (Aiming, chief_ray_image_height, describe_failure, generate_rays, object_field,
+                                  trace_chief_rays)
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import ParaxialData, paraxial_data, paraxial_image_height
 from lensim.optics.trace import DTYPE, TraceResult, trace
@@ -246,10 +247,7 @@ def chief_ray_heights(lens: Lens, launch: list[float], wavelengths_um: list[floa
     para = para or paraxial_data(lens)
     probe = lens.launch_lens()
     rays, wlt = generate_rays(probe, launch, torch.zeros(1, 2, dtype=DTYPE), list(wavelengths_um), aiming, para)
-    res = trace(probe, rays, wlt)
-    if not bool(res.rays.valid.all()):
-        bad = torch.nonzero(~res.rays.valid.reshape(len(wavelengths_um), len(launch)))[0]
-        raise RayTraceError(describe_failure(probe, launch[int(bad[1])], res.first_failure(), "chief ray"))
+    res = trace_chief_rays(probe, rays, wlt, list(launch), aiming, para)  # a reference ray: obscurations pass it
     return res.rays.position[:, :, 0, 1].numpy().copy()
 
 
