@@ -84,8 +84,8 @@ def test_model_indices_against_a_dozen_catalogue_glasses(dozen):
 
 
 def modelled(lens, on_normal_line: bool):
-    surfaces = [s if isinstance(s.material, Air) else dataclasses.replace(s, material=s.material.as_model(on_normal_line))
-                for s in lens.surfaces]
+    surfaces = [s if isinstance(s.material, Air) else
+                dataclasses.replace(s, material=s.material.as_model(on_normal_line)) for s in lens.surfaces]
     return lens.with_changes(surfaces=surfaces)
 
 
@@ -131,7 +131,8 @@ def test_zemax_blank_glass_reads_dpgf(tmp_path, reference_lenses):
     text = (reference_lenses / "US08427765-1.zmx").read_bytes().decode("ascii")
     assert "GLAS SF11 0 0 1.5 4.0E+1" in text
     p = tmp_path / "m.zmx"
-    p.write_bytes(text.replace("GLAS SF11 0 0 1.5 4.0E+1", "GLAS ___BLANK 1 0 1.78472 2.576E+1 1.2E-2", 1).encode("ascii"))
+    blank = text.replace("GLAS SF11 0 0 1.5 4.0E+1", "GLAS ___BLANK 1 0 1.78472 2.576E+1 1.2E-2", 1)
+    p.write_bytes(blank.encode("ascii"))
     from lensim.optics.zemax import read_zmx
 
     m = read_zmx(p).surfaces[5].material
@@ -165,8 +166,8 @@ def test_match_glass_replaces_model_glasses_and_reports_them(tmp_path, capsys, m
     assert code == 0 and [r["glass"] for r in report["glass_matches"]] == [r["glass"] for r in records]
     assert report["fields"][0]["lateral_colour_um"]["b"] != 0.0
     target = tmp_path / "matched.yaml"
-    code, _, _ = run_cli(["lens", "convert", "phone_wide", "--match-glass", "--glass-makers", "Schott", "-o", str(target)],
-                         capsys, monkeypatch)
+    code, _, _ = run_cli(["lens", "convert", "phone_wide", "--match-glass", "--glass-makers", "Schott",
+                          "-o", str(target)], capsys, monkeypatch)
     assert code == 0 and "N-BK7@Schott" in target.read_text()
 
 

@@ -11,6 +11,7 @@ from rich.table import Table
 
 from lensim.cli.common import console, print_json
 from lensim.errors import InputError
+from lensim.optics.aiming import Aiming
 from lensim.optics.analysis import first_order_summary
 from lensim.optics.lens import Lens
 from lensim.optics.lens_file import load_lens, match_glasses, save_lens
@@ -175,11 +176,12 @@ def _channel_weights(sensor: Optional[str]):
     return resp.wavelengths_nm, resp.weights
 
 
-def _field_report(lens: Lens, fields: Optional[list[float]], sensor: Optional[str], aiming: str) -> dict:
+def _field_report(lens: Lens, fields: Optional[list[float]], sensor: Optional[str], aiming: AimingChoice) -> dict:
     from lensim.optics.field_analysis import field_report
 
     wavelengths_nm, weights = _channel_weights(sensor)
-    return field_report(lens, fields, wavelengths_nm, weights, aiming=aiming)
+    aim: Aiming = "real" if aiming is AimingChoice.real else "paraxial"
+    return field_report(lens, fields, wavelengths_nm, weights, aiming=aim)
 
 
 FIELD_HELP = ("Normalized field to show, 0..1 of the lens's maximum field along +y; repeat for several. "
@@ -246,7 +248,7 @@ def plot(
         from lensim.plots.field import field_figure
 
         _check_figure_name(output)
-        field_figure(_field_report(lens, fields, sensor, aiming.value), kind.value, output)
+        field_figure(_field_report(lens, fields, sensor, aiming), kind.value, output)
     console.print(f"wrote {output}", highlight=False)
 
 
@@ -317,7 +319,7 @@ def field_command(
     """
     lens, matches = _load(lens_file, match_glass, _glass_makers(glass_makers, match_glass))
     lens, fields = fields_to_show(lens, field, field_deg, image_height_mm)
-    report = _field_report(lens, fields, sensor, aiming.value)
+    report = _field_report(lens, fields, sensor, aiming)
     if json_out:
         print_json(report | {"glass_matches": matches} if match_glass else report)
         return

@@ -206,12 +206,12 @@ def profile_xml(profile: LensfunProfile) -> str:
     cal.append(ET.Comment(f" lensim: fitted to real chief rays of {Path(profile.source).name}; largest residuals: "
                           f"distortion {profile.fit['distortion_um']:.3g} um, TCA {profile.fit['tca_um']:.3g} um, "
                           f"vignetting {profile.fit['vignetting']:.2g} "))
-    focal = _num(profile.focal_mm)
-    ET.SubElement(cal, "distortion", model="ptlens", focal=focal,
-                  **{k: _num(v) for k, v in profile.distortion.items()})
-    ET.SubElement(cal, "tca", model="poly3", focal=focal, **{k: _num(v) for k, v in profile.tca.items()})
-    ET.SubElement(cal, "vignetting", model="pa", focal=focal, aperture=_num(profile.aperture),
-                  distance=_num(profile.distance_m), **{k: _num(v) for k, v in profile.vignetting.items()})
+    focal = {"focal": _num(profile.focal_mm)}
+    vignetting_at = focal | {"aperture": _num(profile.aperture), "distance": _num(profile.distance_m)}
+    models = (("distortion", "ptlens", focal, profile.distortion), ("tca", "poly3", focal, profile.tca),
+              ("vignetting", "pa", vignetting_at, profile.vignetting))
+    for tag, model, at, terms in models:
+        ET.SubElement(cal, tag, attrib={"model": model} | at | {k: _num(v) for k, v in terms.items()})
     ET.indent(root, space="    ")
     return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
 

@@ -282,7 +282,8 @@ def _catalog_index_table(catalog: str) -> tuple[tuple[str, ...], np.ndarray]:
     return tuple(names), np.array(rows)
 
 
-def nearest_catalog_glass(material: Material, makers: list[str] | tuple[str, ...] | None = None) -> tuple[CatalogGlass, float]:
+def nearest_catalog_glass(material: Material,
+                          makers: list[str] | tuple[str, ...] | None = None) -> tuple[CatalogGlass, float]:
     """The catalogue glass closest to `material` and the RMS index difference to it.
 
     Closest as in Zemax's "best fit glass": the smallest root-mean-square difference of the
