@@ -14,7 +14,7 @@ import numpy as np
 import torch
 
 from lensim.errors import InputError
-from lensim.io import atomic_write_bytes
+from lensim.io import atomic_write_bytes, atomic_writer
 
 READ_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg")
 WRITE_SUFFIXES = (".png", ".tif", ".tiff")
@@ -103,28 +103,39 @@ def write_image(path: str | Path, image: torch.Tensor, bits: int = 8, srgb_tag: 
         raise InputError(str(path), "format", f"expected one of {', '.join(WRITE_SUFFIXES)} for output")
     if bits not in (8, 16):
         raise InputError(str(path), "bit depth", f"expected 8 or 16, got {bits}")
-    arr = image.detach().cpu().clamp(0, 1).numpy().transpose(1, 2, 0)
-    maxv = 255 if bits == 8 else 65535
-    q = np.round(arr * maxv).astype(np.uint8 if bits == 8 else np.uint16)
-    buf = io.BytesIO()
-    if path.suffix.lower() == ".png":
-        if bits == 8:
-            from PIL import Image
-
-            Image.fromarray(q, "RGB").save(buf, format="PNG")
-        else:
-            import png  # pypng: 16-bit RGB PNG (Pillow cannot write it)
-
-            h, w, _ = q.shape
-            png.Writer(w, h, greyscale=False, bitdepth=16).write(buf, iter(q.reshape(h, w * 3)))  # rows, no list copy
-    else:
+    q = _quantized(image, bits)
+    if path.suffix.lower() != ".png":
         import tifffile
 
-        tifffile.imwrite(buf, q, photometric="rgb", iccprofile=srgb_icc_profile() if srgb_tag else None)
+        with atomic_writer(path, suffix=path.suffix) as fh:  # straight to the file: no second copy in memory
+            tifffile.imwrite(fh, q, photometric="rgb", iccprofile=srgb_icc_profile() if srgb_tag else None)
+        return
+    buf = io.BytesIO()
+    if bits == 8:
+        from PIL import Image
+
+        Image.fromarray(q, "RGB").save(buf, format="PNG")
+    else:
+        import png  # pypng: 16-bit RGB PNG (Pillow cannot write it)
+
+        h, w, _ = q.shape
+        png.Writer(w, h, greyscale=False, bitdepth=16).write(buf, iter(q.reshape(h, w * 3)))  # rows, no list copy
     data = buf.getvalue()
-    if srgb_tag and path.suffix.lower() == ".png":
+    if srgb_tag:
         data = _with_png_srgb_chunk(data)
     atomic_write_bytes(path, data)
+
+
+def _quantized(image: torch.Tensor, bits: int, block_rows: int = 256) -> np.ndarray:
+    """(3, H, W) float in [0, 1] -> (H, W, 3) uint8 or uint16, round(clip(x) * max), in
+    blocks of rows so that a large frame needs no float copies of itself."""
+    _, h, w = image.shape
+    q = np.empty((h, w, 3), dtype=np.uint8 if bits == 8 else np.uint16)
+    maxv = 255 if bits == 8 else 65535
+    for y0 in range(0, h, block_rows):
+        blk = image[:, y0:y0 + block_rows].detach().cpu().clamp(0, 1).numpy().transpose(1, 2, 0)
+        q[y0:y0 + block_rows] = np.round(blk * maxv)
+    return q
 
 
 def srgb_icc_profile() -> bytes:

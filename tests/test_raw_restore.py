@@ -75,6 +75,19 @@ def test_raw_restore_equals_the_in_memory_chain(run, tmp_path: Path, capsys, mon
     assert float((again - expected)[inside].abs().max()) < 3e-3
 
 
+def test_developing_in_strips_is_developing_the_frame(tmp_path: Path):
+    from lensim.raw import read_raw
+    from lensim.raw.develop import develop_raw
+    from lensim.raw.restore import develop_in_strips
+
+    raw, params = capture(4, size=(70, 64))
+    sensor = small_sensor()
+    shot = read_raw(write_capture_dng(tmp_path / "s.dng", raw, sensor, params))
+    whole, _ = develop_raw(shot, sensor, bits=None, orient=False)
+    strips, used = develop_in_strips(shot, sensor, rows=20)  # 4 strips, the last one short
+    assert float((strips - whole).abs().max()) < 1e-6 and used.r_gain == pytest.approx(params.r_gain)
+
+
 def test_other_camera_is_refused_then_allowed(run, tmp_path: Path, capsys, monkeypatch):
     folder, _ = run
     raw, params = capture(1)
@@ -104,6 +117,8 @@ def test_batch_is_checked_before_output_and_resumes(run, tmp_path: Path, capsys,
     code, _, err = run_cli(args, capsys, monkeypatch)
     assert code == 2 and "bad.dng" in err and len(err.strip().splitlines()) == 1
     assert not out.exists() or not any(out.iterdir())
+    code, _, err = run_cli(args + ["--sensor-offset", "0,0"], capsys, monkeypatch)  # a raw's place is its active area
+    assert code == 2 and "--sensor-offset" in err
     (raws / "bad.dng").unlink()
     code, _, err = run_cli(args, capsys, monkeypatch)
     assert code == 0, err

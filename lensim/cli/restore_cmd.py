@@ -98,6 +98,9 @@ def restore_command(
     raws, photos = _split_inputs(images)
     if dng and not raws:
         raise InputError("--dng", None, "applies to camera raw inputs; none were given")
+    if offset is not None and raws:
+        raise InputError("--sensor-offset", None, "applies to developed photos; a raw file's place on the sensor is its "
+                         "active area (or the place a simulated DNG records)")
     written = []
     if raws:
         from lensim.raw.restore import RestoreSettings

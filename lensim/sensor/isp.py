@@ -511,14 +511,16 @@ def process(cam: torch.Tensor, params: CaptureParams, bits: int | None = 8, whit
     return x if bits is None else quantize(x, bits)
 
 
-def raw_to_srgb(raw: torch.Tensor, params: CaptureParams, method: str = "ahd", bits: int | None = 8) -> torch.Tensor:
+def raw_to_srgb(raw: torch.Tensor, params: CaptureParams, method: str = "ahd", bits: int | None = 8,
+                **demosaic_options: Any) -> torch.Tensor:
     """The camera's side of the pipeline on a normalized raw mosaic (..., H, W): white
     balance on the mosaic, demosaic (``method``; AHD measures homogeneity in CIELab through
     sRGB->XYZ @ params.ccm), CCM, sRGB curve, rounding to ``bits``. White balance comes
     before demosaicing, as in a camera (for the linear bilinear method the order does not
-    matter; AHD, Malvar and Menon assume balanced channels)."""
+    matter; AHD, Malvar and Menon assume balanced channels). ``demosaic_options`` go to
+    :func:`demosaic` (AHD's block_rows and workers: memory and speed, not the result)."""
     wb = white_balance_mosaic(raw, params.bayer_pattern, params.r_gain, params.b_gain)
-    kwargs: dict[str, Any] = {}
+    kwargs: dict[str, Any] = dict(demosaic_options)
     if str(method).lower() == "ahd":  # AHD's CIELab through the camera's own colour matrix
         kwargs["rgb_to_xyz"] = torch.from_numpy(SRGB_TO_XYZ) @ torch.tensor(params.ccm, dtype=torch.float64)
     rgb = demosaic(wb, params.bayer_pattern, method, **kwargs)
