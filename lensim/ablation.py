@@ -9,7 +9,7 @@ from typing import Callable
 
 from lensim.data.manifest import read_held_out, read_pairs_manifest
 from lensim.errors import InputError
-from lensim.io import atomic_write_json, read_json
+from lensim.io import atomic_write_json, folder_lock, read_json
 from lensim.restore.network import FieldAwareUNet, count_parameters, plain_unet_width
 from lensim.restore.train import TrainConfig, budget_progress, train
 
@@ -29,9 +29,8 @@ def run_ablation(pairs_dir: str | Path, out_dir: str | Path, time_budget_s: floa
     """Train every variant (cached: a finished run is reused) and evaluate it on the held-out
     photos of the first run's split; returns {"variants": {name: {params, train, metrics}}}.
     say(stage) announces each training and the evaluation; progress(done, total) reports
-    training seconds and evaluated crops within them."""
-    from lensim.evaluate.harness import checkpoint_method, evaluate
-
+    training seconds and evaluated crops within them. out_dir is locked while it runs
+    (lensim.io.folder_lock)."""
     names = variants or list(VARIANTS)
     unknown = [n for n in names if n not in VARIANTS]
     if unknown:
@@ -39,9 +38,17 @@ def run_ablation(pairs_dir: str | Path, out_dir: str | Path, time_budget_s: floa
     if time_budget_s <= 0:
         raise InputError(None, "time_budget_s", f"expected a positive number of seconds, got {time_budget_s:g}")
     manifest = read_pairs_manifest(pairs_dir)
-    say = say or (lambda m: None)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    with folder_lock(out_dir):
+        return _run_variants(pairs_dir, manifest, Path(out_dir), time_budget_s, width, crop, seed, names,
+                             say or (lambda m: None), device, progress)
+
+
+def _run_variants(pairs_dir: str | Path, manifest: dict, out: Path, time_budget_s: float, width: int,
+                  crop: int | None, seed: int, names: list[str], say: Callable[[str], None], device: str,
+                  progress: Callable[[float, float], None] | None) -> dict:
+    """run_ablation's training and evaluation, the output folder locked."""
+    from lensim.evaluate.harness import checkpoint_method, evaluate
+
     full_params = count_parameters(FieldAwareUNet(width=width))
     results: dict[str, dict] = {}
     held_out = None

@@ -21,7 +21,7 @@ from lensim.assets.images import available_sample_images, read_sample_image
 from lensim.errors import InputError
 from lensim.images import write_image
 from lensim.optics.analysis import first_order_summary
-from lensim.io import atomic_write_json, read_json
+from lensim.io import atomic_write_json, folder_lock, read_json
 from lensim.optics.lens_file import load_lens
 from lensim.sensor.profile import DEFAULT_SENSOR, SensorProfile, load_sensor
 
@@ -124,7 +124,15 @@ def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: i
              device: str = "cpu", progress: StageProgress | None = None) -> dict:
     """Run the demo into out_dir; returns the report's JSON (also written). device: where the
     networks train and run ("cpu", "cuda", "cuda:N"). say(stage) announces each stage and
-    progress(done, total) reports within it."""
+    progress(done, total) reports within it. out_dir is locked while the demo runs
+    (lensim.io.folder_lock: a second demo into it is refused at once)."""
+    with folder_lock(out_dir):
+        return _run_demo(Path(out_dir), quick, seed, workers, say, device, progress)
+
+
+def _run_demo(out: Path, quick: bool, seed: int, workers: int, say: Say | None, device: str,
+              progress: StageProgress | None) -> dict:
+    """run_demo's stages, the folder locked."""
     from lensim.data.pairs import make_dataset
     from lensim.plots.bank import write_bank_figures
     from lensim.plots.lens import plot_layout, plot_spots
@@ -133,8 +141,6 @@ def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: i
 
     say = say or (lambda msg: None)
     step = progress or (lambda done, total: None)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     settings = DemoSettings.make(quick)
     _claim_folder(out, settings, quick, seed)
     timings: dict[str, float] = {}

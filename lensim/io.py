@@ -6,12 +6,16 @@ permissions (0666 minus the umask, not mkstemp's 0600) and is renamed over the
 destination (``os.replace``). Readers see the old file or the new one, never a partial
 one; a failed or killed write leaves at most a hidden ``.NAME.*`` temporary file, and a
 failure inside the ``with`` block removes it.
+
+One writer at a time per output folder: :func:`folder_lock` (an flock on
+FOLDER/.lensim.lock, the one file written in place, since a lock must keep its inode).
 """
 from __future__ import annotations
 
 import contextlib
 import json
 import os
+import socket
 import tempfile
 from pathlib import Path
 from typing import IO, Any, Iterator
@@ -98,4 +102,86 @@ def read_json(path: str | Path, what: str = "file") -> Any:
         raise InputError(str(path), None, f"could not read the {what}: {e.strerror or e}") from None
 
 
-__all__ = ["atomic_write_bytes", "atomic_write_json", "atomic_write_text", "atomic_writer", "read_json"]
+LOCK_NAME = ".lensim.lock"
+_held_locks: dict[Path, int] = {}  # folders this process holds: how many nested holds
+
+
+def _lock_holder(path: Path) -> str:
+    """Who holds a lock file, as its text says ('pid P on HOST'), for error messages."""
+    try:
+        pid, host = path.read_text(encoding="utf-8").split()[:2]
+        return f"pid {pid} on {host}"
+    except (OSError, ValueError, UnicodeDecodeError):
+        return "another process"
+
+
+def _acquire(folder: Path) -> int:
+    """Open and flock FOLDER/.lensim.lock without waiting; the open descriptor (the lock
+    lasts while it is open). Retries when the file was removed between open and flock
+    (its last holder finished), so two processes never hold different inodes."""
+    import fcntl
+
+    path = folder / LOCK_NAME
+    while True:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, _umask_mode())
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise InputError(str(folder), None, f"another lensim run ({_lock_holder(path)}) is writing into this "
+                             "folder; expected one writer at a time: wait for it to finish or choose another "
+                             "folder") from None
+        try:
+            same = os.stat(path).st_ino == os.fstat(fd).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            os.ftruncate(fd, 0)
+            os.write(fd, f"{os.getpid()} {socket.gethostname()}\n".encode())
+            return fd
+        os.close(fd)
+
+
+@contextlib.contextmanager
+def folder_lock(folder: str | Path) -> Iterator[Path]:
+    """Hold the one-writer lock of an output folder for the block (the folder is created).
+
+    The lock is an ``fcntl.flock`` on FOLDER/.lensim.lock, which holds the holder's pid
+    and host: the kernel drops it when the process dies, so a killed run never leaves it
+    stuck. A second process taking the same folder's lock gets a one-line InputError at
+    once naming the folder and the other pid. Nested holds of one folder in one process
+    are allowed (the demo's stages). On release the lock file is removed, and so is the
+    folder when this hold created it and it is left empty (a refused run leaves nothing)."""
+    folder = Path(folder)
+    key = folder.resolve()
+    if key in _held_locks:
+        _held_locks[key] += 1
+        try:
+            yield folder
+        finally:
+            _held_locks[key] -= 1
+        return
+    created = not folder.exists()
+    folder.mkdir(parents=True, exist_ok=True)
+    try:
+        fd = _acquire(folder)
+    except BaseException:
+        if created:
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+        raise
+    _held_locks[key] = 1
+    try:
+        yield folder
+    finally:
+        del _held_locks[key]
+        with contextlib.suppress(OSError):
+            os.unlink(folder / LOCK_NAME)  # before unlocking: a waiting opener retries on the new file
+        os.close(fd)
+        if created:
+            with contextlib.suppress(OSError):
+                folder.rmdir()  # only succeeds when empty
+
+
+__all__ = ["LOCK_NAME", "atomic_write_bytes", "atomic_write_json", "atomic_write_text", "atomic_writer",
+           "folder_lock", "read_json"]

@@ -141,6 +141,36 @@ def test_resume_recomputes_only_missing_fields_and_refuses_other_settings(lens, 
         compute_bank(lens.with_changes(image_defocus=0.01), PITCH, KERNEL, out_dir=d, **SETTINGS)
 
 
+def test_truncated_or_foreign_field_files_are_named_by_readers_and_recomputed_on_resume(lens, bank_dir, tmp_path):
+    d = tmp_path / "copy"
+    shutil.copytree(bank_dir, d)
+    before = PSFBank.load(d)
+    good = (d / field_file(1)).read_bytes()
+    (d / field_file(1)).write_bytes(good[:len(good) // 2])  # a write cut short (not by lensim.io)
+    with pytest.raises(InputError) as err:
+        PSFBank.load(d)
+    assert str(err.value).startswith(str(d / field_file(1))) and "BadZipFile" in str(err.value)
+    # a field of another bank's settings (same field, same kernel size) in this bank
+    other = tmp_path / "other"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        compute_bank(lens, PITCH, KERNEL, out_dir=other, **{**SETTINGS, "pupil_samples": 40})
+    shutil.copy(other / field_file(3), d / field_file(3))
+    (d / field_file(1)).write_bytes(good)
+    with pytest.raises(InputError, match=f"{field_file(3)}: settings_key: computed with other settings"):
+        PSFBank.load(d)
+    (d / field_file(1)).write_bytes(good[:100])
+    calls = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        again = compute_bank(lens, PITCH, KERNEL, out_dir=d, progress=lambda done, total: calls.append(done),
+                             **SETTINGS)
+    assert calls == [2, 3, 4]  # fields 1 and 3 recomputed
+    for a, b in zip(PSFBank.load(d).fields, before.fields):
+        np.testing.assert_array_equal(a.rgb, b.rgb)
+    assert [f.settings_key for f in again.fields] == [before.fields[0].settings_key] * 4 != [""] * 4
+
+
 def test_too_small_kernel_is_refused_and_the_empty_bank_can_be_redone(lens, tmp_path):
     kw = dict(fields=[1.0], wavelengths_nm=[550.0], pupil_samples=32, out_dir=tmp_path / "b")
     # 3 px of 4 um hold 20 % of the full-field spot (RMS radius 12.9 um)

@@ -73,6 +73,21 @@ def test_resume_recomputes_only_unfinished_images(setup):
     assert m["pairs"] == 4
 
 
+def test_a_corrupt_record_is_recomputed_and_a_corrupt_settings_file_is_named(setup):
+    first, _ = _run(setup, "k")
+    rec = setup[0] / "k" / "records" / "000000.json"
+    rec.write_text(rec.read_text()[:40])  # cut short by something other than lensim
+    m, calls = _run(setup, "k")
+    assert calls[0] == (1, 2) and m["records"] == first["records"]
+    settings = setup[0] / "k" / "settings.json"
+    settings.write_text('{"seed": 3, "cro')
+    with pytest.raises(InputError, match=f"^{settings}: expected a pairs settings record in JSON"):
+        _run(setup, "k")
+    settings.write_text('[1, 2]')
+    with pytest.raises(InputError, match=f"^{settings}: format: expected the 'lensim-pairs' settings record"):
+        _run(setup, "k")
+
+
 def test_changed_settings_are_refused(setup):
     _run(setup, "c")
     base, sharp, sensor, bank = setup

@@ -6,6 +6,7 @@ from pathlib import Path
 import typer
 
 from lensim.cli.common import console, print_json, progress_bar
+from lensim.io import folder_lock
 
 
 def develop_command(
@@ -43,7 +44,8 @@ def develop_command(
     if prog:
         prog.start()
     try:
-        records = develop_files(paths, output, sensor, choice, bits, fmt, progress=callback)
+        with folder_lock(output):  # one writer at a time
+            records = develop_files(paths, output, sensor, choice, bits, fmt, progress=callback)
     finally:
         if prog:
             prog.stop()

@@ -13,6 +13,7 @@ import typer
 
 from lensim.cli.common import console, print_json, progress_bar
 from lensim.errors import InputError
+from lensim.io import folder_lock
 
 
 def _parse_pair(text: str, option: str) -> tuple[int, int]:
@@ -102,16 +103,16 @@ def restore_command(
         raise InputError("--sensor-offset", None, "applies to developed photos; a raw file's place on the sensor is its "
                          "active area (or the place a simulated DNG records)")
     written = []
-    if raws:
-        from lensim.raw.restore import RestoreSettings
+    with folder_lock(output):  # one writer at a time
+        if raws:
+            from lensim.raw.restore import RestoreSettings
 
-        settings = RestoreSettings(checkpoint=info["path"], sensor=dict(sensor_data), tile=tile, overlap=overlap,
-                                   device=device, allow_other_camera=allow_other_camera)
-        written += _restore_raws(raws, output, model, settings, dng, workers, quiet or json_out)
-    output.mkdir(parents=True, exist_ok=True)
-    for path in photos:
-        written.append(_restore_photo(path, output, model, (sensor_w, sensor_h), offset, tile, overlap, bits,
-                                      quiet or json_out))
+            settings = RestoreSettings(checkpoint=info["path"], sensor=dict(sensor_data), tile=tile, overlap=overlap,
+                                       device=device, allow_other_camera=allow_other_camera)
+            written += _restore_raws(raws, output, model, settings, dng, workers, quiet or json_out)
+        for path in photos:
+            written.append(_restore_photo(path, output, model, (sensor_w, sensor_h), offset, tile, overlap, bits,
+                                          quiet or json_out))
     if json_out:
         print_json({"checkpoint": info["path"], "images": written})
 

@@ -16,9 +16,10 @@ uniform position leaves small photos on a large sensor mostly in the middle zone
 
 Determinism: image i's random stream is seeded from (seed, i, file name); results do not
 depend on worker count or order. Resumability: an image is done when its JSON record
-exists; it is written last, atomically, after its PNGs (also atomic), so a killed job is
-re-run from the first unfinished image. The manifest (settings + every record) is
-rewritten at the end.
+exists and reads back as this image's (a corrupt record is recomputed); it is written
+last, atomically, after its PNGs (also atomic), so a killed job is re-run from the first
+unfinished image. The manifest (settings + every record) is rewritten at the end. One
+writer at a time: the folder is locked (lensim.io.folder_lock) while pairs are made.
 
 Parallelism: `workers > 1` starts a local dask.distributed cluster (one thread per
 worker process); `scheduler` connects to an existing Dask cluster instead.
@@ -27,7 +28,8 @@ from __future__ import annotations
 
 import hashlib
 import math
-from dataclasses import dataclass
+import os
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
@@ -36,11 +38,12 @@ import torch
 from lensim.data.manifest import FORMAT, MANIFEST
 from lensim.errors import InputError
 from lensim.images import READ_SUFFIXES, read_image, write_image
-from lensim.io import atomic_write_json, read_json
+from lensim.io import atomic_write_json, folder_lock, read_json
 from lensim.psf.bank import PSFBank
 from lensim.render.mapping import native_mapping
 from lensim.render.pipeline import simulate
 from lensim.sensor.profile import SensorProfile, load_sensor
+from lensim.workers import exit_with_parent
 
 
 
@@ -59,6 +62,7 @@ class PairJob:
     noise: bool
     demosaic: str
     placements: int = 1
+    parent_pid: int | None = None  # set for a local cluster's workers: they exit when it dies
 
 
 def image_seed(seed: int, index: int, name: str) -> int:
@@ -108,6 +112,8 @@ def place_on_sensor(h: int, w: int, sensor: SensorProfile, k: int, placements: i
 
 def make_pairs_for_image(job: PairJob) -> dict:
     """Simulate one photo and write its crops; returns (and writes) its record."""
+    if job.parent_pid is not None:
+        exit_with_parent(job.parent_pid)  # a killed `dataset make` leaves no worker computing
     torch.set_num_threads(1)
     out = Path(job.out_dir)
     sensor = load_sensor(job.sensor)
@@ -181,15 +187,31 @@ def make_dataset(
     settings = {"format": FORMAT, "seed": seed, "crops": crops, "placements": placements, "size": size,
                 "noise": noise, "demosaic": demosaic, "sensor": sensor.to_dict(), "sensor_name": sensor_name,
                 "lens": bank.manifest.get("lens"), "bank": str(bank.directory), "sources": [str(p) for p in files]}
-    _claim_folder(out, settings)
     jobs = [PairJob(i, str(p), str(out), str(bank.directory), sensor_name, image_seed(seed, i, p.name), crops, size,
                     noise, demosaic, placements) for i, p in enumerate(files)]
-    todo = [j for j in jobs if not record_path(out, j.index).exists()]
-    _run_jobs(todo, len(jobs), workers, scheduler, progress)
-    records = [read_json(record_path(out, j.index), "photo record") for j in jobs]
-    manifest = {**settings, "records": records, "pairs": sum(len(r["crops"]) for r in records)}
-    atomic_write_json(out / MANIFEST, manifest)
+    with folder_lock(out):
+        _claim_folder(out, settings)
+        todo = [j for j in jobs if _read_record(j) is None]
+        _run_jobs(todo, len(jobs), workers, scheduler, progress)
+        records = [read_json(record_path(out, j.index), "photo record") for j in jobs]
+        manifest = {**settings, "records": records, "pairs": sum(len(r["crops"]) for r in records)}
+        atomic_write_json(out / MANIFEST, manifest)
     return manifest
+
+
+def _read_record(job: PairJob) -> dict | None:
+    """The finished record of a job's photo, or None when it is still to be made: missing,
+    or unreadable or not this job's (a corrupt per-photo record is recomputed)."""
+    path = record_path(Path(job.out_dir), job.index)
+    if not path.exists():
+        return None
+    try:
+        record = read_json(path, "photo record")
+    except InputError:
+        return None
+    ok = isinstance(record, dict) and record.get("index") == job.index and record.get("seed") == job.seed \
+        and isinstance(record.get("crops"), list)
+    return record if ok else None
 
 
 def _claim_folder(out: Path, settings: dict) -> None:
@@ -201,6 +223,9 @@ def _claim_folder(out: Path, settings: dict) -> None:
         atomic_write_json(path, settings)
         return
     prev = read_json(path, "pairs settings record")
+    if not isinstance(prev, dict) or prev.get("format") != FORMAT:
+        raise InputError(str(path), "format", f"expected the {FORMAT!r} settings record of `lensim dataset make`; "
+                         "delete the file (or choose a new output folder) to start afresh")
     diff = sorted(k for k in settings if k != "bank" and prev.get(k) != settings[k])
     if diff:
         raise InputError(str(out), ", ".join(diff), "differs from the dataset already in this folder; expected the "
@@ -230,6 +255,8 @@ def _run_jobs(todo: list[PairJob], total: int, workers: int, scheduler: str | No
 
     cluster = None if scheduler else LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                                   dashboard_address=None)
+    if cluster is not None:  # our own worker processes: tie them to this one
+        todo = [replace(j, parent_pid=os.getpid()) for j in todo]
     try:
         with Client(scheduler or cluster) as client:
             for fut in as_completed(client.map(make_pairs_for_image, todo, pure=False)):

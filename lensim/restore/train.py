@@ -33,7 +33,9 @@ float16 with a gradient scaler). Multi-GPU: launch with ``torchrun --nproc_per_n
 """
 from __future__ import annotations
 
+import contextlib
 import math
+import os
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterator
@@ -44,6 +46,7 @@ from torch.utils.data import DataLoader
 
 from lensim.data.manifest import read_pairs_manifest
 from lensim.errors import InputError
+from lensim.io import folder_lock
 from lensim.restore.checkpoint import (
     BEST,
     LAST,
@@ -412,12 +415,22 @@ def train(
             taken from the checkpoint (a differing explicit value is an InputError);
             epochs, time_budget_s, device, amp and val_batch_size may change.
         progress: called with a TrainProgress after every step and every validation.
+        The run folder is locked while training (lensim.io.folder_lock: a second writer
+        is refused at once).
 
     Returns:
         TrainResult (final and best validation metrics, steps, whether the time budget
         stopped the run, and the per-epoch history rows).
     """
     run = Path(run_dir)
+    writer = int(os.environ.get("RANK", "0")) == 0  # rank 0 writes the run folder (torchrun)
+    with folder_lock(run) if writer else contextlib.nullcontext(run):
+        return _train(dataset_dir, run, config, resume, progress, overrides)
+
+
+def _train(dataset_dir: str | Path, run: Path, config: TrainConfig | None, resume: bool,
+           progress: Callable[[TrainProgress], None] | None, overrides: dict[str, Any]) -> TrainResult:
+    """train() with the run folder locked."""
     ckpt = read_resume_checkpoint(run) if resume else None
     if ckpt is None:
         refuse_existing_run(run)

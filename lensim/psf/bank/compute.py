@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import io
 import math
+import os
 import warnings
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -16,6 +17,8 @@ import numpy as np
 import torch
 
 from lensim.errors import InputError
+from lensim.io import folder_lock
+from lensim.workers import exit_with_parent
 from lensim.optics.lens import Lens
 from lensim.optics.lens_file import lens_to_dict
 from lensim.optics.paraxial import ParaxialData, paraxial_data, paraxial_image_height
@@ -186,7 +189,8 @@ def _compute_field(job: _Job, index: int, fld: float, para: ParaxialData | None 
     )
 
 
-def _init_worker() -> None:
+def _init_worker(parent_pid: int) -> None:
+    exit_with_parent(parent_pid)  # a killed `psf bank` leaves no worker computing
     torch.set_num_threads(1)
     warnings.simplefilter("ignore")  # sampling warnings travel back in BankField.warnings
 
@@ -214,7 +218,8 @@ def _run_fields(job: _Job, todo: list[tuple[int, float]], workers: int, para: Pa
     import multiprocessing as mp
 
     ctx = mp.get_context("spawn")  # no fork after torch's thread pools started
-    with ProcessPoolExecutor(max_workers=min(workers, len(todo)), mp_context=ctx, initializer=_init_worker) as ex:
+    with ProcessPoolExecutor(max_workers=min(workers, len(todo)), mp_context=ctx, initializer=_init_worker,
+                             initargs=(os.getpid(),)) as ex:
         futures = [ex.submit(_worker, job, i, fld) for i, fld in todo]
         try:
             for fut in as_completed(futures):
@@ -328,7 +333,8 @@ def compute_bank(
     directory (None: keep in memory only); progress(done, total): called once at the start
     (done = fields already on disk) and after each field computed.
 
-    Raises InputError when out_dir holds a bank made with different settings.
+    Raises InputError when out_dir holds a bank made with different settings, or when
+    another process is writing into out_dir (lensim.io.folder_lock, held while computing).
     """
     _check_arguments(lens, pixel_pitch_um, kernel_pixels, method, aiming, workers)
     flds = _check_fields(lens, fields)
@@ -343,7 +349,17 @@ def compute_bank(
     job = _Job(lens, wl_um, resp.weights, lens.primary_wavelength_um, float(pixel_pitch_um), int(kernel_pixels),
                oversampling_factor(pixel_pitch_um, max_spacing_um), method, int(pupil_samples), int(ri_samples), aiming)
     manifest = _manifest(job, flds, resp, max_spacing_um)
-    directory = Path(out_dir) if out_dir is not None else None
+    if out_dir is None:
+        return _compute_fields(job, flds, manifest, None, workers, para, progress)
+    with folder_lock(out_dir):
+        return _compute_fields(job, flds, manifest, Path(out_dir), workers, para, progress)
+
+
+def _compute_fields(job: _Job, flds: np.ndarray, manifest: dict, directory: Path | None, workers: int,
+                    para: ParaxialData, progress: Progress | None) -> PSFBank:
+    """The bank's fields: those already in ``directory`` (when given and made with these
+    settings) and the rest computed, each written there as it finishes."""
+    lens = job.lens
     done = open_bank_directory(directory, manifest, flds) if directory is not None else {}
     total = len(flds)
     if progress is not None:
@@ -351,12 +367,12 @@ def compute_bank(
 
     def finish(bf: BankField) -> None:
         if directory is not None:
-            write_field(directory, bf)
+            write_field(directory, bf, manifest)
         done[bf.index] = bf
         if bf.warnings:
             more = f" (and {len(bf.warnings) - 1} more)" if len(bf.warnings) > 1 else ""
             warnings.warn(f"{lens.source}: bank field {bf.field:.4f}: {bf.warnings[0]}{more}", PSFSamplingWarning,
-                          stacklevel=4)
+                          stacklevel=5)
         if progress is not None:
             progress(len(done), total)
 

@@ -4,6 +4,7 @@ each written atomically. Rerunning with the same settings finds the fields alrea
 disk (resume after a kill); a bank made with different settings is refused."""
 from __future__ import annotations
 
+import hashlib
 import json
 from pathlib import Path
 
@@ -62,13 +63,40 @@ def manifest_differences(old: dict, new: dict) -> list[str]:
     return sorted(k for k in set(a) | set(b) if a.get(k) != b.get(k))
 
 
+def settings_key(manifest: dict) -> str:
+    """A short hash of the settings that shape the kernels (the manifest without its
+    informative keys); every field file stores the key it was computed under, so a field
+    of another bank's settings is never taken for one of this bank."""
+    kept = {k: v for k, v in _normalized(manifest).items() if k not in _INFORMATIVE_KEYS}
+    return hashlib.sha256(json.dumps(kept, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def _read_field(path: Path, manifest: dict, index: int) -> BankField:
+    """Field ``index`` of a bank from its file, checked against the manifest (its field,
+    its kernel size and, when the file records one, its settings key); a one-line
+    InputError naming the file when it is unreadable or belongs to other settings."""
+    bf = BankField.from_npz(path)
+    expected = float(manifest["fields"][index])
+    size = int(manifest["kernel_pixels"])
+    if abs(bf.field - expected) > 1e-12:
+        raise InputError(str(path), "field", f"expected field {expected!r} as the manifest says, got {bf.field!r}")
+    if bf.rgb.shape != (3, size, size):
+        raise InputError(str(path), "rgb", f"expected a (3, {size}, {size}) kernel as the manifest says, got "
+                         f"{bf.rgb.shape}")
+    if bf.settings_key and bf.settings_key != settings_key(manifest):
+        raise InputError(str(path), "settings_key", f"computed with other settings than {MANIFEST} says (another "
+                         "bank's field); rerun `lensim psf bank` with the manifest's settings to recompute it")
+    return bf
+
+
 def open_bank_directory(directory: Path, manifest: dict, fields: np.ndarray) -> dict[int, BankField]:
     """Prepare `directory` for the bank `manifest` describes and return the fields already
     computed there, by index (a resumed run skips them).
 
     A directory holding field files made with other settings is refused (InputError naming
-    the differing keys); a manifest without any field file is replaced. Unreadable field
-    files, and files of another field or kernel size, are left to be recomputed."""
+    the differing keys); a manifest without any field file is replaced. Unreadable
+    (truncated) field files, and files of another field, kernel size or settings key, are
+    left to be recomputed."""
     old = read_manifest(directory)
     if old is not None and not any(directory.glob("field_*.npz")):
         old = None  # nothing computed under the old settings: start afresh
@@ -80,22 +108,21 @@ def open_bank_directory(directory: Path, manifest: dict, fields: np.ndarray) -> 
     else:
         directory.mkdir(parents=True, exist_ok=True)
         atomic_write_text(directory / MANIFEST, json.dumps(manifest, indent=2) + "\n")
-    size = int(manifest["kernel_pixels"])
     done: dict[int, BankField] = {}
-    for i, f in enumerate(fields):
+    for i in range(len(fields)):
         p = directory / field_file(i)
         if p.exists():
             try:
-                bf = BankField.from_npz(p)
+                done[i] = _read_field(p, manifest, i)
             except InputError:
-                continue  # unreadable: recompute
-            if abs(bf.field - f) <= 1e-12 and bf.rgb.shape == (3, size, size):
-                done[i] = bf
+                continue  # unreadable or foreign: recompute
     return done
 
 
-def write_field(directory: Path, bank_field: BankField) -> None:
-    """Write one computed field into the bank directory (atomically)."""
+def write_field(directory: Path, bank_field: BankField, manifest: dict) -> None:
+    """Write one computed field into the bank directory (atomically), stamped with the
+    settings key of the bank's ``manifest``."""
+    bank_field.settings_key = settings_key(manifest)
     atomic_write_bytes(directory / field_file(bank_field.index), bank_field.to_npz_bytes())
 
 
@@ -106,13 +133,10 @@ def load_bank(directory: str | Path) -> PSFBank:
     if manifest is None:
         raise InputError(str(d), MANIFEST, "missing; expected a PSF bank directory written by `lensim psf bank`")
     flds = []
-    for i, f in enumerate(manifest["fields"]):
+    for i in range(len(manifest["fields"])):
         p = d / field_file(i)
         if not p.exists():
             raise InputError(str(d), field_file(i), "missing: the bank is incomplete; rerun `lensim psf bank` with the "
                              "same settings to finish it")
-        bf = BankField.from_npz(p)
-        if abs(bf.field - f) > 1e-12:
-            raise InputError(str(p), "field", f"expected field {f!r} as the manifest says, got {bf.field!r}")
-        flds.append(bf)
+        flds.append(_read_field(p, manifest, i))
     return PSFBank(manifest, flds, d)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import io
 import json
 import math
+import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,7 +33,8 @@ class BankField:
     peak on the fine grid; NaN for the geometric method); working_fno: image-space
     F-number at the primary wavelength; primary_fine (kP, kP) float32: the fine PSF at the
     primary wavelength (energy per fine sample); warnings: sampling warnings raised while
-    computing this field.
+    computing this field; settings_key: the key of the bank settings it was computed with
+    (lensim.psf.bank.store.settings_key; '' in files written before keys were stored).
     """
 
     index: int
@@ -49,6 +51,7 @@ class BankField:
     working_fno: float
     primary_fine: np.ndarray
     warnings: list[str] = field(default_factory=list)
+    settings_key: str = ""
 
     def to_npz_bytes(self) -> bytes:
         """The field as an .npz file's bytes (the bank's field file, and what worker
@@ -60,7 +63,7 @@ class BankField:
             chief_offsets_mm=self.chief_offsets_mm, relative_illumination=self.relative_illumination,
             transmission=self.transmission, window_energy=self.window_energy, strehl=np.float64(self.strehl),
             working_fno=np.float64(self.working_fno), primary_fine=self.primary_fine.astype(np.float32),
-            warnings=np.array(json.dumps(self.warnings)),
+            warnings=np.array(json.dumps(self.warnings)), settings_key=np.array(self.settings_key),
         )
         return buf.getvalue()
 
@@ -77,10 +80,11 @@ class BankField:
                     transmission=z["transmission"], window_energy=z["window_energy"], strehl=float(z["strehl"]),
                     working_fno=float(z["working_fno"]), primary_fine=z["primary_fine"],
                     warnings=list(json.loads(str(z["warnings"]))),
+                    settings_key=str(z["settings_key"]) if "settings_key" in z.files else "",
                 )
-        except (OSError, KeyError, ValueError) as e:
+        except (OSError, EOFError, KeyError, ValueError, zipfile.BadZipFile) as e:  # truncated, foreign
             raise InputError(str(path), None, f"not a readable bank field file ({type(e).__name__}: {e}); "
-                             "delete it and rerun the bank to recompute it") from None
+                             "rerun `lensim psf bank` with the same settings to recompute it") from None
 
 
 @dataclass
