@@ -143,9 +143,11 @@ def test_parameter_counts_from_the_block_definitions(ws: tuple[int, ...], groups
         ({"use_fov": False}, dict(fov=False, deformable=dec, context=True)),
         ({"use_deformable": False}, dict(fov=True, deformable=0, context=True)),
         ({"use_context": False}, dict(fov=True, deformable=dec, context=False)),
-        ({"use_fov": False, "use_deformable": False, "use_context": False}, dict(fov=False, deformable=0, context=False)),
+        ({"use_fov": False, "use_deformable": False, "use_context": False},
+         dict(fov=False, deformable=0, context=False)),
         ({"deformable_scales": 1}, dict(fov=True, deformable=1, context=True)),
-        ({"deformable_scales": 1, "field_modulation": True}, dict(fov=True, deformable=1, context=True, modulation=True)),
+        ({"deformable_scales": 1, "field_modulation": True},
+         dict(fov=True, deformable=1, context=True, modulation=True)),
     ]
     with torch.device("meta"):
         for switches, hand in cases:
