@@ -3,7 +3,6 @@ mosaics, noise statistics, demosaicing (AHD vs Malvar on natural images), raw ou
 from __future__ import annotations
 
 import os
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -95,7 +94,7 @@ def test_round_trip_unprocess_process_within_one_code(natural, sensor):
     prof = load_sensor(sensor)
     g = torch.Generator().manual_seed(5)
     worst = 0
-    for name, a in natural.items():
+    for a in natural.values():
         x = _t(a)
         for _ in range(2):
             cam, params = isp.unprocess(x, prof, g)

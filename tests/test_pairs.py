@@ -1,6 +1,4 @@
 """Training-pair generation: determinism, resume, refusal of changed settings, dask."""
-import json
-from pathlib import Path
 
 import numpy as np
 import pytest

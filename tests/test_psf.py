@@ -1,6 +1,4 @@
 """PSF physics against analytic truth and between methods (tolerances per test)."""
-import math
-import warnings
 
 import numpy as np
 import pytest

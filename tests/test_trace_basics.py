@@ -1,7 +1,6 @@
 """Tracer checks against analytic truth (tolerances stated per test)."""
 import math
 
-import numpy as np
 import pytest
 import torch
 
@@ -12,7 +11,7 @@ from lensim.optics.materials import ConstantIndex
 from lensim.optics.paraxial import paraxial_data
 from lensim.optics.pupil import square_grid
 from lensim.optics.surfaces import Surface
-from lensim.optics.trace import MISSED, OK, TIR, VIGNETTED, trace
+from lensim.optics.trace import MISSED, TIR, VIGNETTED, trace
 
 
 def _singlet(n=1.5, r1=50.0, thickness=5.0, **kw):
