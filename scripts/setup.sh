@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Set up lensim on a fresh machine: a virtual environment in .venv with the CPU build of
-# PyTorch, lensim itself (editable) and the test-only peers (optiland, rayoptics).
+# PyTorch, lensim itself (editable), the test-only peers (optiland, rayoptics) and the
+# linters CI runs (ruff, mypy; pinned in the `test` extra).
 # Idempotent: a second run only checks that everything is installed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
