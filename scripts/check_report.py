@@ -24,6 +24,10 @@ for row in report["slanted_edge"]:
     for stage in ("before", "after"):
         if not math.isfinite(row[stage]["mtf_area"]):
             problems.append(f"slanted_edge: non-finite MTF area at field {row['normalized_field']}")
+raw_file = report.get("raw_file") or {}
+for key in ("developed_psnr_db", "restored_psnr_db"):  # the demo's raw stage: a DNG through `lensim restore`
+    if not isinstance(raw_file.get(key), (int, float)) or not math.isfinite(raw_file[key]):
+        problems.append(f"raw_file.{key}: expected a finite number, got {raw_file.get(key)!r}")
 page = (out / "report.html").read_text()
 images = re.findall(r'src="data:image/png;base64,([^"]+)"', page)
 if len(images) < 8:
