@@ -30,9 +30,7 @@ def read_image(path: str | Path) -> tuple[torch.Tensor, int]:
         raise InputError(src, None, "no such file")
     try:
         if path.suffix.lower() in (".tif", ".tiff"):
-            import tifffile
-
-            arr = tifffile.imread(path)
+            arr = _read_tiff(path, src)
         else:
             from PIL import Image
 
@@ -76,6 +74,24 @@ def read_image(path: str | Path) -> tuple[torch.Tensor, int]:
         raise InputError(src, "size", f"image is {arr.shape[1]}x{arr.shape[0]}; expected at least 16x16 pixels")
     img = torch.from_numpy(np.ascontiguousarray(arr.transpose(2, 0, 1)).astype(np.float32) / scale)
     return img, bits
+
+
+def _read_tiff(path: Path, src: str) -> np.ndarray:
+    """A TIFF's first series as (H, W) or (H, W, samples), planar RGB (one plane per
+    channel) included; CMYK (photometric "separated") is refused, never read as RGB."""
+    import tifffile
+
+    with tifffile.TiffFile(path) as tf:
+        page = tf.pages.first
+        if int(page.photometric) == int(tifffile.PHOTOMETRIC.SEPARATED):
+            raise InputError(src, "photometric", f"is a CMYK (separated) TIFF with {page.samplesperpixel} inks; "
+                             "expected RGB or grayscale (convert it to RGB first)")
+        arr = tf.asarray()  # the first series (all its pages), as tifffile.imread reads it
+        planar = int(page.planarconfig) == int(tifffile.PLANARCONFIG.SEPARATE)
+        rgb = int(page.photometric) == int(tifffile.PHOTOMETRIC.RGB)
+        if planar and rgb and arr.ndim == 3 and arr.shape[0] == page.samplesperpixel:
+            arr = np.moveaxis(arr, 0, -1)  # (samples, H, W) -> (H, W, samples)
+    return arr
 
 
 def _png_bit_depth(path: Path) -> int:

@@ -86,6 +86,57 @@ def atomic_write_json(path: str | Path, data: Any, indent: int = 1) -> None:
     atomic_write_text(path, json.dumps(data, indent=indent, default=str) + "\n")
 
 
+def read_bytes(path: str | Path, what: str = "file") -> bytes:
+    """The bytes of a file; a missing file, a folder or an unreadable file raises one
+    :class:`InputError` line naming the file and ``what`` it should have been."""
+    path = Path(path)
+    try:
+        return path.read_bytes()
+    except IsADirectoryError:
+        raise InputError(str(path), None, f"is a folder; expected a {what}") from None
+    except FileNotFoundError:
+        raise InputError(str(path), None, f"no such {what}") from None
+    except OSError as e:
+        raise InputError(str(path), None, f"could not read the {what}: {e.strerror or e}") from None
+
+
+_UTF16_BOMS = (b"\xff\xfe", b"\xfe\xff")
+
+
+def read_text(path: str | Path, what: str = "file") -> str:
+    """A UTF-8 text file (a byte-order mark allowed); a binary or UTF-16 file, a folder or
+    a missing file raises one :class:`InputError` line naming the file."""
+    raw = read_bytes(path, what)
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        found = "UTF-16 text" if raw.startswith(_UTF16_BOMS) else f"not UTF-8 text (byte {e.start} is 0x{raw[e.start]:02x})"
+        raise InputError(str(path), None, f"is {found}; expected a {what} in UTF-8 (save it as UTF-8)") from None
+
+
+def decode_text(raw: bytes, src: str) -> str:
+    """Text of a lens-design file from any of the encodings design programs write:
+    UTF-16 (by byte-order mark, or by NUL bytes), UTF-8, else Latin-1."""
+    try:
+        if raw.startswith(b"\xff\xfe"):
+            return raw[2:].decode("utf-16-le")
+        if raw.startswith(b"\xfe\xff"):
+            return raw[2:].decode("utf-16-be")
+        if raw.startswith(b"\xef\xbb\xbf"):
+            return raw[3:].decode("utf-8")
+        head = raw[:512]
+        if b"\x00" in head:
+            odd = sum(1 for i in range(1, len(head), 2) if head[i] == 0)
+            even = sum(1 for i in range(0, len(head), 2) if head[i] == 0)
+            return raw.decode("utf-16-le" if odd >= even else "utf-16-be")
+    except UnicodeDecodeError as e:
+        raise InputError(src, "encoding", f"not valid UTF-16 text ({e.reason} at byte {e.start})") from None
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError:
+        return raw.decode("latin-1")
+
+
 def read_json(path: str | Path, what: str = "file") -> Any:
     """Read a JSON document; an unreadable, non-UTF-8 or malformed file raises one
     :class:`InputError` line naming the file and ``what`` it should have been."""
@@ -184,4 +235,4 @@ def folder_lock(folder: str | Path) -> Iterator[Path]:
 
 
 __all__ = ["LOCK_NAME", "atomic_write_bytes", "atomic_write_json", "atomic_write_text", "atomic_writer",
-           "folder_lock", "read_json"]
+           "decode_text", "folder_lock", "read_bytes", "read_json", "read_text"]

@@ -195,8 +195,19 @@ def _raw_file_html(raw: Mapping[str, Any] | None) -> str:
 
 
 def write_report(out: Path, report: dict, figs: Path) -> Path:
-    """report.json (every figure of the report) and report.html (self-contained)."""
+    """report.json (every figure of the report), report.html (self-contained) and
+    figures/metrics.md. The page and the table are rendered before anything is written,
+    so a report lacking a figure raises (KeyError, TypeError) with the files untouched."""
+    page = _report_page(report, figs)
+    table = markdown_table(report["metrics"])
     atomic_write_text(out / "report.json", json.dumps(jsonable(report), indent=1, default=str) + "\n")
+    atomic_write_text(out / "report.html", page)
+    atomic_write_text(figs / "metrics.md", table)
+    return out / "report.html"
+
+
+def _report_page(report: dict, figs: Path) -> str:
+    """The self-contained HTML page of a report (figures from ``figs`` inlined)."""
     lens = report["lens"]
     sections = [
         ("Lens", f"<p>{html.escape(lens['name'])}: EFL {lens['efl_mm']:.2f} mm, F/{lens['fno']:.2f}, image height "
@@ -230,6 +241,4 @@ postprocessing using imaging simulation", ACM TOG 2021. Settings: {html.escape(j
 <p>Timings (s): {html.escape(json.dumps({k: round(v, 1) for k, v in report['timings_s'].items()}))}</p>
 </body></html>
 """
-    atomic_write_text(out / "report.html", page)
-    atomic_write_text(figs / "metrics.md", markdown_table(report["metrics"]))
-    return out / "report.html"
+    return page

@@ -93,7 +93,7 @@ def test_the_commands_ask_for_the_same_bank_with_the_same_options(tmp_path, aske
     common = ["--lens", "cooke_triplet", "--sensor", "apsc_mirrorless"]
     runner = CliRunner()
     for args in (["simulate", str(photos / "a.png"), "-o", str(tmp_path / "sim"), *common],
-                 ["dataset", "make", str(photos), "-o", str(tmp_path / "data"), *common],
+                 ["dataset", "make", str(photos), "-o", str(tmp_path / "data"), "--size", "32", *common],
                  ["psf", "bank", "-o", str(tmp_path / "bank"), *common]):
         res = runner.invoke(app, args)
         assert isinstance(res.exception, _Asked), (args, res.output)

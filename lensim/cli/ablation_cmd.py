@@ -8,6 +8,8 @@ from rich.table import Table
 
 from lensim.ablation import VARIANTS
 from lensim.cli.common import StageBars, console, print_json
+from lensim.cli.validate import at_least, choice, input_folder, output_folder, positive
+from lensim.cli.validate import device as check_device
 from lensim.restore.train import TrainConfig
 
 _D = TrainConfig()
@@ -35,8 +37,15 @@ def ablation_command(
     from lensim.evaluate.harness import format_score
     from lensim.evaluate.metrics import ZONES
 
+    names = [choice(v.strip(), list(VARIANTS), "--variants") for v in variants.split(",")]
+    positive(time_budget_s, "--time-budget-s", "s", "a training time per variant")
+    at_least(width, 1, "--width", "channels", "a width")
+    at_least(crop, 16, "--crop", "px", "a training crop")
+    check_device(device)
+    input_folder(dataset, what="pairs folder")
+    output_folder(output)
     with StageBars(show=not quiet and not json_out) as bars:
-        summary = run_ablation(dataset, output, time_budget_s, width, crop, seed, [v.strip() for v in variants.split(",")],
+        summary = run_ablation(dataset, output, time_budget_s, width, crop, seed, names,
                                bars.say, device=device, progress=bars.progress)
     if json_out:
         print_json(summary)

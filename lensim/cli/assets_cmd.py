@@ -9,6 +9,7 @@ from rich.table import Table
 from lensim import assets
 from lensim.assets.images import SAMPLE_IMAGES, available_sample_images
 from lensim.cli.common import console, print_json
+from lensim.cli.validate import output_folder
 
 
 def assets_command(
@@ -24,6 +25,7 @@ def assets_command(
         from lensim.assets.images import read_sample_image
         from lensim.images import write_image
 
+        output_folder(export_photos, "--export-photos")
         export_photos.mkdir(parents=True, exist_ok=True)
         for img in available_sample_images():
             write_image(export_photos / f"{img.name}.png", read_sample_image(img.name), 8)

@@ -53,6 +53,53 @@ def bank_settings(fields: int, wavelengths: str, pupil_samples: int, cache: Path
         raise InputError("<command line>", OPTION_NAMES.get(e.field or "", e.field), e.message) from None
 
 
+def check_response(settings: BankSettings, response: str | Path, illuminant: str = "E",
+                   sensor: SensorProfile | None = None) -> None:
+    """Refuse, before any work, a spectral response or illuminant the bank could not
+    use: an error names the sensor profile that asked for the response (its
+    spectral_response field), else the option (--response, --illuminant)."""
+    from lensim.sensor.spectral import spectral_response
+
+    try:
+        spectral_response(list(settings.wavelengths_nm), response, illuminant)
+    except InputError as e:
+        if e.source is not None:  # the CSV table named itself
+            raise
+        if e.field == "illuminant":
+            raise InputError("--illuminant", None, e.message) from None
+        if sensor is not None and sensor.path:
+            raise InputError(sensor.path, "spectral_response", e.message) from None
+        raise InputError("--response" if sensor is None else f"sensor {sensor.name!r}", None, e.message) from None
+
+
+def bank_for_lens(bank_dir: Path, lens_file: str | None) -> tuple[PSFBank, Lens]:
+    """The bank of ``--bank`` and the lens to simulate: the bank's own lens, or --lens
+    when given, which must then be the lens the bank was computed for (a bank of another
+    lens would be used silently otherwise)."""
+    from lensim.cli.validate import input_folder
+    from lensim.optics.lens_file import lens_from_dict, lens_to_dict, load_lens
+
+    bank = PSFBank.load(input_folder(bank_dir, "--bank", "bank folder"))
+    stored = bank.manifest.get("lens")
+    if lens_file is None:
+        if not isinstance(stored, dict):
+            raise InputError(str(bank_dir), "lens", "the bank records no lens; expected --lens")
+        return bank, lens_from_dict(stored, source=f"{bank_dir} (manifest lens)")
+    lens = load_lens(lens_file)
+    if isinstance(stored, dict) and _optics(lens_to_dict(lens)) != _optics(stored):
+        raise InputError("--lens", None, f"{lens_file} is not the lens the bank {bank_dir} was computed for "
+                         f"({stored.get('name') or 'unnamed'}); expected that lens, or no --lens")
+    return bank, lens
+
+
+def _optics(lens_data: dict) -> Any:
+    """A native lens mapping without its name, JSON-normalized (tuples as lists), for
+    comparing the optics of two lenses."""
+    import json
+
+    return json.loads(json.dumps({k: v for k, v in lens_data.items() if k != "name"}))
+
+
 def cached_bank(lens: Lens, pitch_um: float, sensor: SensorProfile, settings: BankSettings, workers: int,
                 quiet: bool) -> PSFBank:
     """The lens's bank at this pitch (um) with the sensor's spectral response, from the

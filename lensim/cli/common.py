@@ -8,26 +8,63 @@ import warnings
 
 import typer
 from rich.console import Console
+from rich.text import Text
 
 from lensim.errors import LensimError
 from lensim.jsonable import jsonable
 
-console = Console()
-err_console = Console(stderr=True)
+# markup off: file names and values such as "bad[bold]name.yaml" print as they are
+console = Console(markup=False)
+err_console = Console(stderr=True, markup=False)
+
+
+def plain_line(text: object) -> str:
+    """``text`` as one printable line: newlines become spaces, other control characters
+    (a NUL byte read from a binary file, an escape sequence in a file name) their Python
+    escapes, so a message can neither break the line nor drive the terminal."""
+    flat = " ".join(str(text).splitlines())
+    return "".join(ch if ch.isprintable() else ascii(ch)[1:-1] for ch in flat)
+
+
+def print_error_line(label: str, style: str, message: object) -> None:
+    """One line on stderr, ``LABEL: message``; the message is shown literally (file names
+    and values with square brackets are text, never rich markup)."""
+    err_console.print(Text.assemble((f"{label}:", style), " ", plain_line(message)), highlight=False, soft_wrap=True)
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):
-    err_console.print(f"[yellow]warning:[/yellow] {message}", highlight=False, soft_wrap=True)
+    print_error_line("warning", "yellow", message)
+
+
+def _usage_error_line(e: typer.TyperException) -> str:
+    """A click usage error (unknown option, missing argument, a value of the wrong type)
+    as one line naming the command and where its help is."""
+    ctx = getattr(e, "ctx", None)
+    where = ctx.command_path if ctx is not None else "lensim"
+    return f"{where}: {e.format_message()} (see {where} --help)"
 
 
 def run_guarded(app: typer.Typer) -> None:
-    """Run a Typer app; lensim errors become one line on stderr and exit status 2."""
+    """Run a Typer app; lensim errors and command-line usage errors become one line on
+    stderr and exit status 2 (usage errors keep click's status); a command's help
+    (asked for, or shown for a group given no command) is printed as usual."""
     warnings.showwarning = _show_warning
     try:
-        app(standalone_mode=True)
+        code = app(standalone_mode=False, prog_name="lensim")
+    except typer.TyperException as e:  # click's errors (typer vendors click)
+        ctx = getattr(e, "ctx", None)
+        if type(e).__name__ == "NoArgsIsHelpError" and ctx is not None:
+            console.print(ctx.get_help(), markup=False, highlight=False)
+        else:
+            print_error_line("error", "red", _usage_error_line(e))
+        sys.exit(getattr(e, "exit_code", 2))
+    except typer.Abort:
+        print_error_line("error", "red", "aborted")
+        sys.exit(1)
     except LensimError as e:
-        err_console.print(f"[red]error:[/red] {e}", highlight=False, soft_wrap=True)
+        print_error_line("error", "red", e)
         sys.exit(2)
+    sys.exit(code if isinstance(code, int) else 0)
 
 
 def print_json(data) -> None:

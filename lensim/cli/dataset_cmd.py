@@ -6,22 +6,40 @@ from pathlib import Path
 import typer
 
 from lensim import assets
-from lensim.cli.bank_options import (bank_settings, cache_option, cached_bank, fields_option, pupil_samples_option,
-                                     wavelengths_option)
+from lensim.cli.bank_options import (bank_for_lens, bank_settings, cache_option, cached_bank, check_response,
+                                     fields_option, pupil_samples_option, wavelengths_option)
 from lensim.cli.common import console, print_json, progress_bar
-from lensim.data.pairs import make_dataset
+from lensim.cli.validate import at_least, choice, even, input_folder, output_folder
+from lensim.data.pairs import check_photos, list_images, make_dataset
 from lensim.optics.lens_file import load_lens
-from lensim.psf.bank import PSFBank
 from lensim.sensor.profile import DEFAULT_SENSOR, load_sensor
 
 dataset_app = typer.Typer(help="Training data: aligned (aberrated, sharp) pairs.", no_args_is_help=True)
+
+
+def _check_options(sharp_dir: Path, output: Path, crops: int, size: int, placements: int, workers: int,
+                   demosaic: str, cache: Path | None) -> None:
+    """The command's folders and numbers, before any work (one-line errors naming the option)."""
+    from lensim.sensor.isp import DEMOSAIC_METHODS
+
+    input_folder(sharp_dir, what="folder of sharp photos")
+    output_folder(output)
+    if cache is not None:
+        output_folder(cache, "--cache")
+    at_least(crops, 1, "--crops", what="a number of crops per photo")
+    even(size, "--size", "a crop size in pixels")
+    at_least(size, 16, "--size", "px", "a crop size")
+    at_least(placements, 1, "--placements", what="a number of sensor positions per photo")
+    at_least(workers, 1, "--workers", what="a number of processes")
+    choice(demosaic, DEMOSAIC_METHODS, "--demosaic")
 
 
 @dataset_app.command("make")
 def make(
     sharp_dir: Path = typer.Argument(..., help="Folder of sharp photos (PNG, TIFF, JPEG)."),
     output: Path = typer.Option(..., "-o", "--output", help="Dataset folder (resumes if it exists with the same settings)."),
-    lens_file: str = typer.Option(assets.DEFAULT_LENS, "--lens", help="Lens file or built-in lens name."),
+    lens_file: str = typer.Option(None, "--lens", help="Lens file or built-in lens name (default: the bank's lens "
+                                  f"with --bank, else {assets.DEFAULT_LENS})."),
     sensor_file: str = typer.Option(DEFAULT_SENSOR, "--sensor", help="Sensor profile file or built-in name."),
     crops: int = typer.Option(8, "--crops", help="Crops per photo and placement."),
     placements: int = typer.Option(1, "--placements", help="Sensor positions per photo, stratified by field radius "
@@ -48,12 +66,15 @@ def make(
     Example: lensim dataset make photos/ --lens cooke_triplet --sensor apsc_mirrorless -o data/ --crops 8 --size 256 --placements 3
     """
     settings = bank_settings(fields, wavelengths, pupil_samples, cache)
-    lens = load_lens(lens_file)
+    _check_options(sharp_dir, output, crops, size, placements, workers, demosaic, cache)
     sensor = load_sensor(sensor_file)
     quiet = quiet or json_out
     if bank_dir is not None:
-        bank = PSFBank.load(bank_dir)
+        bank, _ = bank_for_lens(bank_dir, lens_file)
     else:
+        lens = load_lens(lens_file or assets.DEFAULT_LENS)
+        check_response(settings, sensor.spectral_response, sensor=sensor)
+        check_photos(list_images(sharp_dir), size)  # before the bank, which takes minutes
         bank = cached_bank(lens, sensor.pixel_pitch_um, sensor, settings, workers, quiet)
     prog, cb = progress_bar("pairs", "photos", quiet)
     if prog:

@@ -6,6 +6,8 @@ from pathlib import Path
 import typer
 
 from lensim.cli.common import StageBars, console, print_json
+from lensim.cli.validate import at_least, input_folder, output_folder
+from lensim.cli.validate import device as check_device
 
 
 def demo_command(
@@ -26,6 +28,9 @@ def demo_command(
     """
     from lensim.demo import run_demo
 
+    at_least(workers, 1, "--workers", what="a number of processes")
+    check_device(device)
+    output_folder(output)
     with StageBars(show=not quiet and not json_out) as bars:
         report = run_demo(output, quick=quick, seed=seed, workers=workers, say=bars.say, device=device,
                           progress=bars.progress)
@@ -47,8 +52,17 @@ def report_command(
     from lensim.io import read_json
     from lensim.report import write_report
 
+    input_folder(demo_dir, what="folder written by `lensim demo`")
     path = demo_dir / "report.json"
-    if not path.is_file():
+    if not path.exists():
         raise InputError(str(path), None, "missing; expected a folder written by `lensim demo`")
     report = read_json(path, "demo report")
-    console.print(f"wrote {write_report(demo_dir, report, demo_dir / 'figures')}", highlight=False)
+    if not isinstance(report, dict):
+        raise InputError(str(path), None, f"expected a JSON object (a demo report), got a {type(report).__name__}")
+    try:
+        written = write_report(demo_dir, report, demo_dir / "figures")
+    except KeyError as e:
+        raise InputError(str(path), str(e.args[0]), "missing; expected a report written by `lensim demo`") from None
+    except (TypeError, ValueError, AttributeError) as e:
+        raise InputError(str(path), None, f"not a report written by `lensim demo` ({e})") from None
+    console.print(f"wrote {written}", highlight=False)

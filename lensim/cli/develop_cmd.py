@@ -6,6 +6,8 @@ from pathlib import Path
 import typer
 
 from lensim.cli.common import console, print_json, progress_bar
+from lensim.cli.validate import choice as choose
+from lensim.cli.validate import output_folder
 from lensim.io import folder_lock
 
 
@@ -32,12 +34,11 @@ def develop_command(
     from lensim.raw.develop import parse_wb, plan_outputs
     from lensim.sensor.profile import load_sensor
 
+    choose(bits, (8, 16), "--bits")
+    choose(fmt, ("tif", "png"), "--format")
+    output_folder(output)
     sensor = load_sensor(sensor_file) if sensor_file is not None else None
     choice = parse_wb(wb)
-    if bits not in (8, 16):
-        from lensim.errors import InputError
-
-        raise InputError("--bits", None, f"expected 8 or 16, got {bits!r}")
     paths = raw_files(list(files))
     plan_outputs(paths, output, fmt)
     prog, callback = progress_bar("develop", "files", quiet or json_out)

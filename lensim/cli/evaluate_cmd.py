@@ -12,6 +12,8 @@ from typing import Any
 import typer
 
 from lensim.cli.common import console, print_json, progress_bar
+from lensim.cli.validate import at_least, finite, output_folder, positive
+from lensim.cli.validate import device as check_device
 from lensim.errors import InputError
 
 DEFAULT_METHODS = "input,wiener,rl,unsharp"
@@ -47,10 +49,13 @@ def evaluate_command(
     from lensim.evaluate import harness
 
     names = _method_names(methods, model, plain_unet)
+    _check_options(rl_iterations, unsharp_sigma, unsharp_amount, max_crops, device, output)
     manifest = read_pairs_manifest(pairs)
     keep = read_held_out(held_out) if held_out is not None else None
     if sources:
-        keep = (keep or []) + [s.strip() for s in sources.split(",") if s.strip()]
+        asked = [s.strip() for s in sources.split(",") if s.strip()]
+        _check_sources(pairs, manifest, asked)
+        keep = (keep or []) + asked
     runs = {"model": model, "plain-unet": plain_unet}
     options: dict[str, dict[str, Any]] = {"rl": {"iterations": rl_iterations}, "unsharp": {"sigma_px": unsharp_sigma, "amount": unsharp_amount}}
     table: dict[str, harness.Method] = {}
@@ -77,6 +82,33 @@ def evaluate_command(
         if output is not None:
             console.print(f"wrote {output / 'metrics.csv'}, {output / 'metrics.md'}, {output / 'metrics.json'}",
                           highlight=False)
+
+
+def _check_options(rl_iterations: int | None, unsharp_sigma: float | None, unsharp_amount: float | None,
+                   max_crops: int | None, device: str, output: Path | None) -> None:
+    """The numbers, the device and the output folder, before any work."""
+    if rl_iterations is not None:
+        at_least(rl_iterations, 1, "--rl-iterations", what="a number of iterations")
+    if unsharp_sigma is not None:
+        positive(unsharp_sigma, "--unsharp-sigma", "px", "a Gaussian sigma")
+    if unsharp_amount is not None:
+        finite(unsharp_amount, "--unsharp-amount")
+    if max_crops is not None:
+        at_least(max_crops, 1, "--max-crops", what="a number of crops")
+    check_device(device)
+    if output is not None:
+        output_folder(output)
+
+
+def _check_sources(pairs: Path, manifest: dict[str, Any], asked: list[str]) -> None:
+    """Every --sources name is a source photo of the dataset (its path or file name)."""
+    known = set()
+    for rec in manifest["records"]:
+        src = str(rec.get("source", ""))
+        known |= {src, Path(src).name}
+    unknown = [s for s in asked if s not in known]
+    if unknown:
+        raise InputError("--sources", None, f"{', '.join(unknown)} not among the source photos of {pairs}")
 
 
 def _method_names(methods: str | None, model: Path | None, plain_unet: Path | None) -> list[str]:

@@ -10,6 +10,7 @@ import typer
 from rich.table import Table
 
 from lensim.cli.common import console, print_json
+from lensim.cli.validate import AIMINGS, choice, output_file
 from lensim.errors import InputError
 from lensim.optics.aiming import Aiming
 from lensim.optics.analysis import first_order_summary
@@ -72,6 +73,7 @@ def info(
 
     Example: lensim lens info phone_wide --match-glass --glass-makers Ohara,Schott --json
     """
+    choice(aiming, AIMINGS, "--aiming")
     lens, matches = _load(lens_file, match_glass, _glass_makers(glass_makers, match_glass))
     summary = first_order_summary(lens, aiming=aiming)
     if json_out:
@@ -126,9 +128,10 @@ def convert(
     makers = _glass_makers(glass_makers, match_glass)
     if output.suffix.lower() not in (".json", ".yaml", ".yml"):
         raise InputError(str(output), "--output", "expected a .json, .yaml or .yml file name for a native lens file")
+    output_file(output)
     lens, _ = _load(lens_file, match_glass, makers)
     save_lens(lens, output)
-    console.print(f"wrote {output}")
+    console.print(f"wrote {output}", highlight=False)
 
 
 class AimingChoice(str, Enum):
@@ -159,12 +162,14 @@ SENSOR_HELP = ("Sensor profile (file or built-in name) whose spectral response w
 
 
 def _check_figure_name(output: Path) -> None:
-    """A one-line error for an image name matplotlib cannot write, before any work."""
+    """A one-line error for an image name matplotlib cannot write or a place it cannot
+    be written to, before any work."""
     from lensim.plots.figure import new_figure
 
     fmt = output.suffix[1:].lower()
     if fmt not in new_figure((1, 1)).canvas.get_supported_filetypes():
         raise InputError(str(output), "--output", "expected an image name ending in .png, .pdf or .svg")
+    output_file(output)
 
 
 def _channel_weights(sensor: Optional[str]):
@@ -237,6 +242,7 @@ def plot(
     Example: lensim lens plot cooke_triplet -o layout.png --rays 9 --field 0 --field 0.7 --field 1
     Example: lensim lens plot cooke_triplet --kind lateral-colour --sensor apsc_mirrorless -o lateral.png
     """
+    _check_figure_name(output)
     lens, fields = fields_to_show(load_lens(lens_file), field, field_deg, image_height_mm)
     if kind is PlotKind.layout:
         from lensim.plots.lens import plot_layout
@@ -247,7 +253,6 @@ def plot(
     else:
         from lensim.plots.field import field_figure
 
-        _check_figure_name(output)
         field_figure(_field_report(lens, fields, sensor, aiming), kind.value, output)
     console.print(f"wrote {output}", highlight=False)
 
@@ -277,6 +282,8 @@ def spot(
 
     if output is None and not json_out:
         raise InputError(None, "--output", "expected -o FILE (an image to write), --json, or both")
+    if output is not None:
+        _check_figure_name(output)
     lens, fields = fields_to_show(load_lens(lens_file), field, field_deg, image_height_mm)
     spots = spot_diagram(lens, fields, None, hexapolar(SPOT_RINGS), aiming.value)
     if output is not None:
@@ -368,6 +375,7 @@ def lensfun_command(
     check_settings(maker, model, mount, crop_factor, focal, aperture, distance)
     if output.suffix.lower() != ".xml":
         raise InputError(str(output), "--output", "expected a .xml file name (a lensfun database file)")
+    output_file(output)
     lens, _ = _load(lens_file, match_glass, _glass_makers(glass_makers, match_glass))
     wavelengths_nm, weights = _channel_weights(sensor)
     profile = lensfun_profile(lens, maker, model, mount, crop_factor, focal, aperture, wavelengths_nm, weights,

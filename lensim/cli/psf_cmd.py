@@ -7,8 +7,16 @@ from pathlib import Path
 import numpy as np
 import typer
 
-from lensim.cli.bank_options import bank_settings, fields_option, pupil_samples_option, wavelengths_option
+from lensim.cli.bank_options import (
+    bank_settings,
+    check_response,
+    fields_option,
+    pupil_samples_option,
+    wavelengths_option,
+)
 from lensim.cli.common import console, print_json, progress_bar
+from lensim.cli.validate import AIMINGS, at_least, choice, in_range, input_folder, output_file, output_folder, positive
+from lensim.cli.validate import wavelength_nm as wavelength_nm_checked
 from lensim.io import atomic_write_bytes
 from lensim.optics.lens_file import load_lens
 from lensim.psf.compute import METHODS, compute_psf
@@ -34,6 +42,15 @@ def compute(
 
     Example: lensim psf compute cooke_triplet --field 0.7 --wavelength-nm 550 -o psf.npy --json
     """
+    in_range(field, 0.0, 1.0, "--field", what="a normalized field")
+    wavelength_nm_checked(wavelength_nm)
+    choice(method, METHODS, "--method")
+    choice(aiming, AIMINGS, "--aiming")
+    at_least(pupil_samples, 2, "--pupil-samples", what="a number of pupil samples")
+    at_least(grid, 2, "--grid", "samples", "a PSF window")
+    positive(spacing_um, "--spacing-um", "um", "a sample spacing")
+    if output is not None:
+        output_file(output, suffixes=(".npy",))
     lens = load_lens(lens_file)
     psf = compute_psf(lens, field, wavelength_nm / 1000.0, method, pupil_samples, grid, spacing_um, aiming)
     if output is not None:
@@ -101,11 +118,22 @@ def bank(
         raise InputError("<command line>", "lens", "missing; expected a lens file or built-in name (argument or --lens)")
     if (sensor is None) == (pixel_um is None):
         raise InputError("<command line>", "--sensor/--pixel-um", "expected exactly one of them")
+    if pixel_um is not None:
+        positive(pixel_um, "--pixel-um", "um", "a pixel pitch")
+    if kernel:
+        at_least(kernel, 1, "--kernel", "px", "a kernel size")
+    choice(method, METHODS, "--method")
+    if max_spacing_um is not None:
+        positive(max_spacing_um, "--max-spacing-um", "um", "a PSF spacing")
+    at_least(workers, 1, "--workers", what="a number of processes")
+    output_folder(output)
     settings = bank_settings(fields, wavelengths_nm, pupil_samples, aiming=aiming, kernel_pixels=kernel or None)
     lens = load_lens(name)
     profile = load_sensor(sensor) if sensor is not None else None
     pitch = profile.pixel_pitch_um if profile is not None else float(pixel_um)
+    from_profile = response is None and profile is not None
     response = response or (profile.spectral_response if profile is not None else DEFAULT_CAMERA)
+    check_response(settings, response, illuminant, profile if from_profile else None)
     t0 = time.time()
     prog, report = progress_bar("PSF bank", "fields", quiet or json_out)
     with prog or contextlib.nullcontext():
@@ -140,6 +168,9 @@ def show(
     from lensim.plots.bank import write_bank_figures
     from lensim.psf.bank import PSFBank
 
+    positive(gamma, "--gamma", what="a display gamma")
+    input_folder(bank_dir, what="bank folder")
+    output_folder(output)
     paths = write_bank_figures(PSFBank.load(bank_dir), output, gamma=gamma)
     for p in paths:
         console.print(f"wrote {p}", highlight=False)

@@ -12,6 +12,8 @@ import torch
 import typer
 
 from lensim.cli.common import console, print_json, progress_bar
+from lensim.cli.validate import at_least, distinct_outputs, output_folder
+from lensim.cli.validate import device as check_device
 from lensim.errors import InputError
 from lensim.io import folder_lock
 
@@ -87,21 +89,28 @@ def restore_command(
     Example: lensim restore runs/a photo.png -o restored/;
     lensim restore runs/a raws/ -o restored/ --dng --workers 2
     """
-    if threads > 0:
-        torch.set_num_threads(threads)
     if bits not in (0, 8, 16):
         raise InputError("--bits", None, f"expected 8 or 16, got {bits}")
     if tile < 16 or not 0 <= overlap < tile:
         raise InputError("--tile/--overlap", None, f"expected a tile of at least 16 pixels and 0 <= overlap < tile, got "
                          f"tile {tile}, overlap {overlap}")
-    model, info, sensor_data, (sensor_w, sensor_h) = _load_model(checkpoint, lens_file, sensor_file, device)
+    at_least(workers, 1, "--workers", what="a number of processes")
+    at_least(threads, 0, "--threads", what="a number of threads (0: PyTorch's default)")
+    check_device(device)
     offset = _parse_pair(sensor_offset, "--sensor-offset") if sensor_offset else None
+    output_folder(output)
+    if not Path(checkpoint).exists():
+        raise InputError(str(checkpoint), None, "no such run folder or checkpoint file")
     raws, photos = _split_inputs(images)
     if dng and not raws:
         raise InputError("--dng", None, "applies to camera raw inputs; none were given")
     if offset is not None and raws:
         raise InputError("--sensor-offset", None, "applies to developed photos; a raw file's place on the sensor is its "
                          "active area (or the place a simulated DNG records)")
+    if threads > 0:
+        torch.set_num_threads(threads)
+    model, info, sensor_data, (sensor_w, sensor_h) = _load_model(checkpoint, lens_file, sensor_file, device)
+    _check_photos(photos, offset, (sensor_w, sensor_h))
     written = []
     with folder_lock(output):  # one writer at a time
         if raws:
@@ -115,6 +124,31 @@ def restore_command(
                                           quiet or json_out))
     if json_out:
         print_json({"checkpoint": info["path"], "images": written})
+
+
+def _photo_output_name(path: Path) -> str:
+    """OUT/<name> of a restored photo: .tif for TIFF input, else .png."""
+    return path.stem + (".tif" if path.suffix.lower() in (".tif", ".tiff") else ".png")
+
+
+def _check_photos(photos: list[Path], offset: tuple[int, int] | None, sensor_wh: tuple[int, int]) -> None:
+    """Every photo decodes (and fits on the sensor at --sensor-offset), and no two write
+    the same output, before the first output."""
+    from lensim.images import read_image
+
+    distinct_outputs(photos, _photo_output_name)
+    for path in photos:
+        _, h, w = read_image(path)[0].shape
+        _check_offset(path, offset, (w, h), sensor_wh)
+
+
+def _check_offset(path: Path, offset: tuple[int, int] | None, image_wh: tuple[int, int],
+                  sensor_wh: tuple[int, int]) -> None:
+    """A native-scale crop at (top, left) = offset must lie on the sensor."""
+    (w, h), (sensor_w, sensor_h) = image_wh, sensor_wh
+    if offset is not None and not (0 <= offset[0] <= sensor_h - h and 0 <= offset[1] <= sensor_w - w):
+        raise InputError(str(path), "--sensor-offset", f"a {w}x{h} image at (top, left) {offset} does not fit on "
+                         f"the {sensor_w}x{sensor_h} sensor")
 
 
 def _load_model(checkpoint: Path, lens_file: str | None, sensor_file: str | None,
@@ -155,9 +189,8 @@ def _restore_photo(path: Path, output: Path, model: torch.nn.Module, sensor_wh: 
             warnings.warn(f"{path}: {w}x{h} pixels mapped onto the {sensor_w}x{sensor_h} sensor at "
                           f"{scale:.3g} sensor pixels per image pixel; the network was trained at native scale "
                           f"(1), so blur sizes differ (give --sensor-offset for a native-scale crop)", UserWarning)
-    elif not (0 <= offset[0] <= sensor_h - h and 0 <= offset[1] <= sensor_w - w):
-        raise InputError(str(path), "--sensor-offset", f"a {w}x{h} image at (top, left) {offset} does not fit on "
-                         f"the {sensor_w}x{sensor_h} sensor")
+    else:
+        _check_offset(path, offset, (w, h), sensor_wh)
     top_left, size = image_sensor_geometry(h, w, (sensor_w, sensor_h), offset)
     prog, tiles_done = progress_bar(f"restoring {path.name}", "tiles", quiet)
     if prog is not None:
@@ -169,8 +202,7 @@ def _restore_photo(path: Path, output: Path, model: torch.nn.Module, sensor_wh: 
             prog.stop()
     del img  # bound peak memory: only the output lives while it is encoded
     out.clamp_(0, 1)
-    suffix = ".tif" if path.suffix.lower() in (".tif", ".tiff") else ".png"
-    dest = output / (path.stem + suffix)
+    dest = output / _photo_output_name(path)
     write_image(dest, out, bits or in_bits)
     if not quiet:
         console.print(f"restored {path} -> {dest}", highlight=False)

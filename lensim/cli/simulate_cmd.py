@@ -1,31 +1,38 @@
 """`lensim simulate`: what the camera would photograph."""
 from __future__ import annotations
 
+import dataclasses
 import json
+import re
+import warnings
 from pathlib import Path
 
 import torch
 import typer
 
 from lensim import assets
-from lensim.cli.bank_options import (bank_settings, cache_option, cached_bank, fields_option, pupil_samples_option,
-                                     wavelengths_option)
+from lensim.cli.bank_options import (bank_for_lens, bank_settings, cache_option, cached_bank, check_response,
+                                     fields_option, pupil_samples_option, wavelengths_option)
 from lensim.cli.common import console, print_json
+from lensim.cli.validate import at_least, choice, distinct_outputs, output_folder
 from lensim.errors import InputError
 from lensim.images import read_image, write_image
 from lensim.io import atomic_write_text
+from lensim.optics.lens import Lens
 from lensim.optics.lens_file import load_lens
-from lensim.psf.bank import PSFBank
+from lensim.psf.bank import BankSettings, PSFBank
 from lensim.render.kernels import check_bank_fits
 from lensim.render.mapping import map_to_sensor
 from lensim.render.pipeline import simulate
-from lensim.sensor.profile import load_sensor
+from lensim.sensor.profile import SensorProfile, load_sensor
 
 
 def simulate_command(
+    ctx: typer.Context,
     images: list[Path] = typer.Argument(..., help="Sharp sRGB photos (8/16-bit PNG, TIFF or JPEG)."),
     output: Path = typer.Option(..., "-o", "--output", help="Output folder."),
-    lens_file: str = typer.Option(assets.DEFAULT_LENS, "--lens", help="Lens file or built-in lens name."),
+    lens_file: str = typer.Option(None, "--lens", help="Lens file or built-in lens name (default: the bank's lens "
+                                  f"with --bank, else {assets.DEFAULT_LENS})."),
     sensor_file: str = typer.Option(None, "--sensor", help="Sensor profile file or built-in name (default: the built-in default)."),
     bank_dir: Path = typer.Option(None, "--bank", help="A PSF bank at the image's effective pitch (default: computed and cached)."),
     seed: int = typer.Option(0, "--seed", help="Seed of the colour temperature and noise draws."),
@@ -57,10 +64,15 @@ def simulate_command(
     Example: lensim simulate photo.png --lens cooke_triplet --sensor apsc_mirrorless -o sim/
     """
     settings = bank_settings(fields, wavelengths, pupil_samples, cache)
-    if fmt not in ("png", "tif"):
-        raise InputError("--format", None, f"expected png or tif, got {fmt!r}")
-    lens = load_lens(lens_file)
+    _check_options(output, fmt, bits, demosaic, workers, cache)
+    _check_photos(images, fmt)
+    if bank_dir is not None:
+        given_bank, lens = bank_for_lens(bank_dir, lens_file)
+    else:
+        given_bank, lens = None, load_lens(lens_file or assets.DEFAULT_LENS)
     sensor = load_sensor(sensor_file)
+    if given_bank is None and (blur or distortion):
+        check_response(settings, sensor.spectral_response, sensor=sensor)
     banks: dict[tuple[int, int], PSFBank] = {}
     results = []
     for i, path in enumerate(images):
@@ -69,12 +81,15 @@ def simulate_command(
         mapping = map_to_sensor(h, w, sensor)
         bank = None
         if blur or distortion:
-            if bank_dir is not None:
-                bank = banks.setdefault((h, w), PSFBank.load(bank_dir))
-                check_bank_fits(bank, mapping, str(bank_dir))
-            elif (h, w) not in banks:
-                banks[(h, w)] = cached_bank(lens, mapping.pitch_um, sensor, settings, workers, quiet or json_out)
-            bank = banks.get((h, w), bank)
+            if given_bank is not None:
+                check_bank_fits(given_bank, mapping, str(bank_dir))
+                bank = given_bank
+            else:
+                if (h, w) not in banks:
+                    pupil_given = ctx.get_parameter_source("pupil_samples").name != "DEFAULT"
+                    banks[(h, w)] = _photo_bank(path, (w, h), mapping.pitch_um, lens, sensor, settings, pupil_given,
+                                                workers, quiet or json_out)
+                bank = banks[(h, w)]
         gen = torch.Generator().manual_seed(seed + i)
         raw_path = output / (path.stem + ".dng") if raw else None
         out, params = simulate(img, bank, sensor, gen, blur=blur, noise=noise, relative_illumination=shading,
@@ -89,3 +104,54 @@ def simulate_command(
             console.print(f"wrote {target} (pitch {mapping.pitch_um:.3g} um, {params.kelvin:.0f} K)", highlight=False)
     if json_out:
         print_json(results)
+
+
+#: how check_sampling says how many pupil samples a kernel window needs
+_NEEDED_SAMPLES = re.compile(r"expected at least (\d+) pupil samples")
+
+
+def _photo_bank(path: Path, size_wh: tuple[int, int], pitch_um: float, lens: Lens, sensor: SensorProfile,
+                settings: BankSettings, pupil_given: bool, workers: int, quiet: bool) -> PSFBank:
+    """The cached bank for a photo mapped onto the sensor at ``pitch_um`` (um per photo
+    pixel). A small photo has coarse pixels whose kernel window the default pupil grid
+    cannot resolve without wrap-around: then the pupil sampling the window needs is
+    chosen (a warning says so), or, when --pupil-samples was given, named in the error."""
+    for _ in range(4):
+        try:
+            return cached_bank(lens, pitch_um, sensor, settings, workers, quiet)
+        except InputError as e:
+            found = _NEEDED_SAMPLES.search(e.message)
+            if found is None:
+                raise
+            need = -(-int(int(found.group(1)) * 1.15) // 8) * 8  # a margin, rounded up to a multiple of 8
+            where = f"a {size_wh[0]}x{size_wh[1]} photo maps onto the sensor at {pitch_um:.3g} um per pixel"
+            if pupil_given:
+                raise InputError(str(path), "--pupil-samples", f"{where}, too coarse for {settings.pupil_samples} "
+                                 f"pupil samples; expected --pupil-samples {need} or more (or leave it out to have it "
+                                 "chosen), or a larger photo") from None
+            warnings.warn(f"{path}: {where}; pupil samples raised from {settings.pupil_samples} to {need} for its "
+                          "PSF bank", UserWarning, stacklevel=2)
+            settings = dataclasses.replace(settings, pupil_samples=need)
+    raise InputError(str(path), "--pupil-samples", f"no pupil sampling up to {settings.pupil_samples} samples resolves "
+                     "the photo's kernels; expected a larger photo")
+
+
+def _check_options(output: Path, fmt: str, bits: int, demosaic: str, workers: int, cache: Path | None) -> None:
+    """The command's options, before any work (one-line errors naming the option)."""
+    from lensim.sensor.isp import DEMOSAIC_METHODS
+
+    choice(fmt, ("png", "tif"), "--format")
+    choice(bits, (8, 16), "--bits")
+    choice(demosaic, DEMOSAIC_METHODS, "--demosaic")
+    at_least(workers, 1, "--workers", what="a number of processes")
+    output_folder(output)
+    if cache is not None:
+        output_folder(cache, "--cache")
+
+
+def _check_photos(images: list[Path], fmt: str) -> None:
+    """Every photo readable and no two writing the same OUT/<name>, before the first
+    output (a bad last photo must not leave the earlier ones written)."""
+    distinct_outputs(images, lambda p: f"{p.stem}.{fmt}")
+    for path in images:
+        read_image(path)

@@ -8,6 +8,7 @@ Register in lensim/cli/__init__.py with
 from __future__ import annotations
 
 import math
+import shutil
 from pathlib import Path
 from typing import Any, Callable
 
@@ -15,6 +16,9 @@ import torch
 import typer
 
 from lensim.cli.common import console, print_json
+from lensim.cli.validate import at_least, choice, in_range, input_folder, output_folder, positive
+from lensim.cli.validate import device as check_device
+from lensim.errors import InputError
 from lensim.restore.train import FROZEN_ON_RESUME, TrainConfig, TrainProgress, TrainResult
 
 _D = TrainConfig()
@@ -67,6 +71,13 @@ def train_command(
     """
     from lensim.restore.train import train
 
+    _check_recipe(epochs, batch_size, lr, lr_halve_every, lr_schedule, val_fraction, steps_per_epoch, time_budget_s)
+    _check_network(width, depth, deformable_groups, deformable_scales, field_modulation, no_fov)
+    at_least(threads, 0, "--threads", what="a number of threads (0: PyTorch's default)")
+    check_device(device)
+    input_folder(dataset, what="pairs folder")
+    output_folder(output)
+    _check_crop(dataset, crop)
     if threads > 0:
         torch.set_num_threads(threads)
     overrides: dict[str, Any] = {
@@ -82,12 +93,57 @@ def train_command(
     if resume:  # the architecture and recipe come from the checkpoint
         overrides = {k: v for k, v in overrides.items() if k not in FROZEN_ON_RESUME}
     prog, callback = _progress(epochs, show=not quiet and not json_out)
+    new_run = not output.exists()
     try:
         result = train(dataset, output, TrainConfig(), resume=resume, progress=callback, **overrides)
+    except BaseException:
+        if new_run and not any(output.glob("*.pt")):
+            shutil.rmtree(output, ignore_errors=True)  # no checkpoint: leave no half-made run behind
+        raise
     finally:
         if prog is not None:
             prog.stop()
     _report(result, quiet, json_out)
+
+
+def _check_recipe(epochs: int, batch_size: int, lr: float, lr_halve_every: int, lr_schedule: str,
+                  val_fraction: float, steps_per_epoch: int, time_budget_s: float) -> None:
+    """The training recipe's options, before any work (one-line errors naming the option)."""
+    from lensim.restore.schedule import LR_SCHEDULES
+
+    at_least(epochs, 1, "--epochs", what="a number of epochs")
+    at_least(batch_size, 1, "--batch-size", what="a number of crops per step")
+    positive(lr, "--lr", what="a learning rate")
+    at_least(lr_halve_every, 1, "--lr-halve-every", what="a number of epochs")
+    choice(lr_schedule, LR_SCHEDULES, "--lr-schedule")
+    in_range(val_fraction, 0.0, 1.0, "--val-fraction", what="a share of the photos", high_open=True)
+    at_least(steps_per_epoch, 0, "--steps-per-epoch", what="a number of steps (0: whole epochs)")
+    at_least(time_budget_s, 0.0, "--time-budget-s", "s", "a time budget (0: none)")
+
+
+def _check_network(width: int, depth: int, groups: int, deformable_scales: int, field_modulation: bool,
+                   no_fov: bool) -> None:
+    """The network's options (lensim.restore.network.FieldAwareUNet's rules), before any work."""
+    at_least(width, 1, "--width", "channels", "a width")
+    at_least(depth, 2, "--depth", "scales", "a depth")
+    at_least(groups, 1, "--deformable-groups", what="a number of offset groups")
+    if width % groups:
+        raise InputError("--deformable-groups", None, f"expected a divisor of --width {width}, got {groups}")
+    in_range(deformable_scales, -1, depth - 1, "--deformable-scales", what="a number of decoder scales (-1: all)")
+    if field_modulation and no_fov:
+        raise InputError("--field-modulation", None, "is computed from the field-of-view input; expected it without "
+                         "--no-fov")
+
+
+def _check_crop(dataset: Path, crop: int) -> None:
+    """--crop: 0 (the stored crops) or at most the dataset's crop size."""
+    at_least(crop, 0, "--crop", "px", "a crop size (0: the stored crops)")
+    if crop:
+        from lensim.data.manifest import read_pairs_manifest
+
+        stored = read_pairs_manifest(dataset).get("size")
+        if isinstance(stored, int) and crop > stored:
+            raise InputError("--crop", None, f"expected at most the dataset's crop size {stored} px, got {crop} px")
 
 
 def _progress(epochs: int, show: bool) -> tuple[Any, Callable[[TrainProgress], None] | None]:

@@ -26,6 +26,7 @@ worker process); `scheduler` connects to an existing Dask cluster instead.
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import math
 import os
@@ -181,8 +182,9 @@ def make_dataset(
         raise InputError(None, "bank", "expected a bank stored on disk (workers load it)")
     if abs(bank.pixel_pitch_um / sensor.pixel_pitch_um - 1) > 1e-6:
         raise InputError(str(bank.directory), "pixel_pitch_um", f"the bank is at {bank.pixel_pitch_um:g} um; expected "
-                         f"the sensor's pitch {sensor.pixel_pitch_um:g} um")
+                         f"the pitch of the sensor {sensor_name} ({sensor.pixel_pitch_um:g} um)")
     files = list_images(sharp_dir)
+    check_photos(files, size)
     out = Path(out_dir)
     settings = {"format": FORMAT, "seed": seed, "crops": crops, "placements": placements, "size": size,
                 "noise": noise, "demosaic": demosaic, "sensor": sensor.to_dict(), "sensor_name": sensor_name,
@@ -190,9 +192,14 @@ def make_dataset(
     jobs = [PairJob(i, str(p), str(out), str(bank.directory), sensor_name, image_seed(seed, i, p.name), crops, size,
                     noise, demosaic, placements) for i, p in enumerate(files)]
     with folder_lock(out):
-        _claim_folder(out, settings)
+        claimed = _claim_folder(out, settings)
         todo = [j for j in jobs if _read_record(j) is None]
-        _run_jobs(todo, len(jobs), workers, scheduler, progress)
+        try:
+            _run_jobs(todo, len(jobs), workers, scheduler, progress)
+        except BaseException:
+            if claimed and not any(record_path(out, j.index).exists() for j in jobs):
+                _release_folder(out)  # nothing done: a corrected rerun starts afresh
+            raise
         records = [read_json(record_path(out, j.index), "photo record") for j in jobs]
         manifest = {**settings, "records": records, "pairs": sum(len(r["crops"]) for r in records)}
         atomic_write_json(out / MANIFEST, manifest)
@@ -214,14 +221,25 @@ def _read_record(job: PairJob) -> dict | None:
     return record if ok else None
 
 
-def _claim_folder(out: Path, settings: dict) -> None:
+def check_photos(files: list[Path], size: int) -> None:
+    """Every photo decodes and holds a size x size crop, before any output (one-line
+    errors naming the photo)."""
+    for path in files:
+        img, _ = read_image(path)
+        _, h, w = img.shape
+        if h < size or w < size:
+            raise InputError(str(path), "size", f"image is {w}x{h}; expected at least {size}x{size} pixels for "
+                             f"{size}-pixel crops (--size)")
+
+
+def _claim_folder(out: Path, settings: dict) -> bool:
     """Record the dataset's settings in OUT/settings.json, or check them against those
     already recorded there (a one-line InputError naming what differs; the bank folder
-    may move)."""
+    may move). True when this call made the record (a new dataset)."""
     path = out / "settings.json"
     if not path.exists():
         atomic_write_json(path, settings)
-        return
+        return True
     prev = read_json(path, "pairs settings record")
     if not isinstance(prev, dict) or prev.get("format") != FORMAT:
         raise InputError(str(path), "format", f"expected the {FORMAT!r} settings record of `lensim dataset make`; "
@@ -230,6 +248,16 @@ def _claim_folder(out: Path, settings: dict) -> None:
     if diff:
         raise InputError(str(out), ", ".join(diff), "differs from the dataset already in this folder; expected the "
                          "same settings to resume, or a new output folder")
+    return False
+
+
+def _release_folder(out: Path) -> None:
+    """Undo a claim that produced nothing: settings.json and the empty records and pairs
+    folders (folder_lock removes OUT itself when it made it and it is left empty)."""
+    (out / "settings.json").unlink(missing_ok=True)
+    for folder in (out / "records", out / "pairs"):
+        with contextlib.suppress(OSError):
+            folder.rmdir()  # only when empty
 
 
 def _run_jobs(todo: list[PairJob], total: int, workers: int, scheduler: str | None,

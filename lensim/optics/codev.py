@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from lensim.errors import InputError, UnknownGlassError
+from lensim.io import decode_text, read_bytes
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import paraxial_focus_thickness
 from lensim.optics.materials import CATALOGS, Air, Material, resolve_glass
@@ -391,11 +392,7 @@ class _Reader:
 def read_seq(path: str | Path) -> Lens:
     """Read a CODE V .seq file into a Lens (see the module docstring for the subset)."""
     path = Path(path)
-    raw = path.read_bytes()
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        text = raw.decode("latin-1")
+    text = decode_text(read_bytes(path, "CODE V lens file"), str(path))
     reader = _Reader(path)
     for lineno, tokens in _split_commands(text):
         reader.command(lineno, tokens)

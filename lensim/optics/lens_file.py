@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from lensim.errors import InputError
-from lensim.io import atomic_write_text
+from lensim.io import atomic_write_text, read_text
 from lensim.optics.lens import Lens
 from lensim.optics.materials import Air, Material, ModelGlass, material_from_spec, nearest_catalog_glass
 from lensim.optics.surfaces import MAX_ASPHERE_POWER, Surface
@@ -65,6 +65,20 @@ def _number(src: str, field: str, value: Any, allow_inf: bool = False) -> float:
     return x
 
 
+#: the largest thickness or finite object distance (mm) a lens file may give: 1 km; beyond
+#: it a value is a typo, and an object that far is at infinity for any camera lens
+MAX_LENGTH_MM = 1.0e6
+
+
+def _length(src: str, field: str, value: Any, allow_inf: bool = False) -> float:
+    """A length in mm within +-MAX_LENGTH_MM (or infinity where allowed)."""
+    x = _number(src, field, value, allow_inf=allow_inf)
+    if math.isfinite(x) and abs(x) > MAX_LENGTH_MM:
+        hint = "; give infinity for an object at infinity" if allow_inf else ""
+        raise InputError(src, field, f"expected a length within +-{MAX_LENGTH_MM:g} mm, got {x:g} mm{hint}")
+    return x
+
+
 def _check_keys(src: str, field: str, data: Any, allowed: set[str]) -> dict:
     if not isinstance(data, dict):
         raise InputError(src, field, f"expected a mapping, got {type(data).__name__}")
@@ -82,7 +96,7 @@ def lens_from_dict(data: dict, source: str = "<lens>") -> Lens:
     if units != "mm":
         raise InputError(src, "units", f"expected 'mm', got {units!r}")
     obj = _check_keys(src, "object", data.get("object", {}), {"distance", "material"})
-    distance = _number(src, "object.distance", obj.get("distance", "infinity"), allow_inf=True)
+    distance = _length(src, "object.distance", obj.get("distance", "infinity"), allow_inf=True)
     ap = _check_keys(src, "aperture", data.get("aperture", {}), {"type", "value"})
     if "value" not in ap:
         raise InputError(src, "aperture.value", "missing; expected the aperture size")
@@ -142,7 +156,7 @@ def lens_from_dict(data: dict, source: str = "<lens>") -> Lens:
                 raise InputError(src, f"{f}.{key}", f"expected true or false, got {sd[key]!r}")
         surfaces.append(Surface(
             curvature=curv,
-            thickness=_number(src, f + ".thickness", sd.get("thickness", 0.0)),
+            thickness=_length(src, f + ".thickness", sd.get("thickness", 0.0)),
             material=material,
             conic=_number(src, f + ".conic", sd.get("conic", 0.0)),
             asphere=asphere,
@@ -270,7 +284,7 @@ def _read_native(path: Path) -> dict:
     """Parse a native JSON/YAML file; syntax errors name the line and what was expected."""
     import yaml
 
-    text = path.read_text(encoding="utf-8")
+    text = read_text(path, "lens file")
     try:
         if path.suffix.lower() == ".json":
             return json.loads(text)

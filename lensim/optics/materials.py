@@ -70,6 +70,17 @@ class Air(Material):
         return np.ones_like(np.asarray(wavelength_um, dtype=np.float64))
 
 
+def _constant_index(value: object) -> float:
+    """A constant refractive index from a file: a finite number of at least 1."""
+    try:
+        n = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise InputError(None, "material", f"expected a refractive index n (a number), got {value!r}") from None
+    if not (math.isfinite(n) and n >= 1.0):
+        raise InputError(None, "material", f"expected a refractive index n of at least 1, got {value!r}")
+    return n
+
+
 @dataclass(frozen=True)
 class ConstantIndex(Material):
     """A non-dispersive medium (tests, ideal lenses)."""
@@ -349,7 +360,7 @@ def material_from_spec(spec, catalogs: list[str] | None = None, notes: list[str]
         return glass
     if isinstance(spec, dict):
         if "n" in spec:
-            return ConstantIndex(float(spec["n"]))
+            return ConstantIndex(_constant_index(spec["n"]))
         if "nd" in spec and "vd" in spec:
             return _model_glass_from_spec(spec)
         if "glass" in spec:

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from lensim.errors import InputError, UnknownGlassError
+from lensim.io import decode_text, read_bytes
 from lensim.optics.lens import Lens
 from lensim.optics.materials import CATALOGS, Air, ConstantIndex, Material, ModelGlass, resolve_glass
 from lensim.optics.surfaces import Surface
@@ -62,26 +63,6 @@ class _Surf:
     comment: str = ""
 
 
-def _decode(raw: bytes, src: str) -> str:
-    """Text of a .zmx file: UTF-16 (by BOM, or by NUL bytes), UTF-8 or Latin-1."""
-    try:
-        if raw.startswith(b"\xff\xfe"):
-            return raw[2:].decode("utf-16-le")
-        if raw.startswith(b"\xfe\xff"):
-            return raw[2:].decode("utf-16-be")
-        if raw.startswith(b"\xef\xbb\xbf"):
-            return raw[3:].decode("utf-8")
-        head = raw[:512]
-        if b"\x00" in head:
-            odd = sum(1 for i in range(1, len(head), 2) if head[i] == 0)
-            even = sum(1 for i in range(0, len(head), 2) if head[i] == 0)
-            return raw.decode("utf-16-le" if odd >= even else "utf-16-be")
-    except UnicodeDecodeError as e:
-        raise InputError(src, "encoding", f"not valid UTF-16 text ({e.reason} at byte {e.start})") from None
-    try:
-        return raw.decode("utf-8")
-    except UnicodeDecodeError:
-        return raw.decode("latin-1")
 
 
 class _Reader:
@@ -483,7 +464,7 @@ def read_zmx(path: str | Path) -> Lens:
     """Read a Zemax .zmx file into a Lens (see the module docstring for what is read)."""
     path = Path(path)
     reader = _Reader(path)
-    text = _decode(path.read_bytes(), str(path))
+    text = decode_text(read_bytes(path, "Zemax lens file"), str(path))
     for lineno, line in enumerate(text.splitlines(), start=1):
         reader.line(lineno, line)
     return reader.build()

@@ -52,6 +52,7 @@ import numpy as np
 import torch
 
 from lensim.errors import InputError, LensimError
+from lensim.io import read_text
 
 BAYER_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
 DEFAULT_SENSOR = "apsc_mirrorless"  # fits inside the default lens's image circle
@@ -287,7 +288,7 @@ def _ccm(src: str | None, ccm_raw: Any) -> tuple[tuple[float, float, float], ...
     invertible."""
     if not isinstance(ccm_raw, (list, tuple)) or len(ccm_raw) != 3 or any(
             not isinstance(r, (list, tuple)) or len(r) != 3 for r in ccm_raw):
-        raise InputError(src, "ccm", "expected a 3x3 matrix [[r_r, r_g, r_b], [g_r, ...], [b_r, ...]]")
+        raise InputError(src, "ccm", f"expected a 3x3 matrix [[r_r, r_g, r_b], [g_r, ...], [b_r, ...]], got {ccm_raw!r}")
     ccm = tuple(tuple(_number(src, f"ccm[{i}][{j}]", ccm_raw[i][j]) for j in range(3)) for i in range(3))
     for i, row in enumerate(ccm):
         if abs(sum(row) - 1.0) > CCM_ROW_SUM_TOL:
@@ -438,10 +439,7 @@ def sensor_path(name: str) -> Path | None:
 
 
 def _read(path: Path) -> Any:
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as e:
-        raise InputError(str(path), None, f"cannot read: {e.strerror or e}") from None
+    text = read_text(path, "sensor profile")
     try:
         if path.suffix.lower() == ".json":
             return json.loads(text)

@@ -132,8 +132,11 @@ def load_bank(directory: str | Path) -> PSFBank:
     manifest = read_manifest(d)
     if manifest is None:
         raise InputError(str(d), MANIFEST, "missing; expected a PSF bank directory written by `lensim psf bank`")
+    fields = manifest.get("fields")
+    if not isinstance(fields, list) or not fields:
+        raise InputError(str(d / MANIFEST), "fields", f"expected a non-empty list of field values, got {fields!r}")
     flds = []
-    for i in range(len(manifest["fields"])):
+    for i in range(len(fields)):
         p = d / field_file(i)
         if not p.exists():
             raise InputError(str(d), field_file(i), "missing: the bank is incomplete; rerun `lensim psf bank` with the "

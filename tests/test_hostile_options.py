@@ -1,0 +1,235 @@
+"""Hostile options and output paths, every command: numbers out of range or not finite
+(with their units in the message), unknown names (devices, methods, variants, formats),
+output paths that are the wrong kind, under a file or unwritable, and command-line usage
+errors. Same checks as test_hostile_inputs.py (tests/hostile_world.py)."""
+from __future__ import annotations
+
+import pytest
+
+from hostile_world import Case, case, check_case, folder, text
+
+PSF = "psf compute cooke_triplet "
+BANK = "psf bank --lens cooke_triplet --pixel-um 20 --fields 2 --wavelengths-nm 550 --pupil-samples 32 -o {t}/b "
+SIM = "simulate {w.photo} -o {t}/out --bank {w.bank} "
+DATASET = "dataset make {w.photos} -o {t}/d --bank {w.bank} --crops 1 --size 32 "
+TRAIN = "train {w.data} -o {t}/r --epochs 1 --width 4 --depth 2 --crop 32 "
+RESTORE = "restore {w.run} {w.photo} -o {t}/out "
+EVAL = "evaluate --pairs {w.data} --methods input "
+AFILE = text("afile", "a file, not a folder")
+UNWRITABLE = "/proc/lensim-hostile"
+
+PSF_COMPUTE = [
+    case("psf-field-above-1", PSF + "--field 1.5", "--field", "1.5"),
+    case("psf-field-negative", PSF + "--field -0.2", "--field", "-0.2"),
+    case("psf-field-nan", PSF + "--field nan", "--field", "nan"),
+    case("psf-wavelength-zero", PSF + "--wavelength-nm 0", "--wavelength-nm", "nm"),
+    case("psf-wavelength-huge", PSF + "--wavelength-nm 1e9", "--wavelength-nm", "nm"),
+    case("psf-wavelength-negative", PSF + "--wavelength-nm -550", "--wavelength-nm", "-550"),
+    case("psf-wavelength-inf", PSF + "--wavelength-nm inf", "--wavelength-nm"),
+    case("psf-method-unknown", PSF + "--method banana", "--method", "banana"),
+    case("psf-aiming-unknown", PSF + "--aiming banana", "--aiming", "banana"),
+    case("psf-pupil-samples-zero", PSF + "--pupil-samples 0", "--pupil-samples"),
+    case("psf-grid-zero", PSF + "--grid 0", "--grid"),
+    case("psf-grid-negative", PSF + "--grid -8", "--grid"),
+    case("psf-spacing-zero", PSF + "--spacing-um 0", "--spacing-um", "um"),
+    case("psf-spacing-nan", PSF + "--spacing-um nan", "--spacing-um"),
+    case("psf-output-txt", PSF + "-o {t}/psf.txt", "psf.txt", ".npy"),
+    case("psf-output-folder", PSF + "-o {t}/psf.npy", "psf.npy", make=folder("psf.npy")),
+    case("psf-output-under-file", PSF + "-o {t}/afile/psf.npy", "afile", make=AFILE),
+    case("psf-output-unwritable", PSF + "-o " + UNWRITABLE + "/psf.npy", UNWRITABLE),
+]
+
+PSF_BANK = [
+    case("bank-pixel-zero", "psf bank --lens cooke_triplet --pixel-um 0 -o {t}/b", "--pixel-um", "um"),
+    case("bank-pixel-negative", "psf bank --lens cooke_triplet --pixel-um -4 -o {t}/b", "--pixel-um"),
+    case("bank-pixel-nan", "psf bank --lens cooke_triplet --pixel-um nan -o {t}/b", "--pixel-um"),
+    case("bank-sensor-and-pixel", "psf bank --lens cooke_triplet --pixel-um 4 --sensor phone -o {t}/b", "--pixel-um"),
+    case("bank-neither-sensor-nor-pixel", "psf bank --lens cooke_triplet -o {t}/b", "--sensor"),
+    case("bank-no-lens", "psf bank --pixel-um 4 -o {t}/b", "lens"),
+    case("bank-lens-twice", "psf bank cooke_triplet --lens double_gauss --pixel-um 4 -o {t}/b", "lens"),
+    case("bank-kernel-even", BANK + "--kernel 4", "--kernel"),
+    case("bank-kernel-negative", BANK + "--kernel -3", "--kernel"),
+    case("bank-fields-one", "psf bank --lens cooke_triplet --pixel-um 4 --fields 1 -o {t}/b", "--fields"),
+    case("bank-fields-zero", "psf bank --lens cooke_triplet --pixel-um 4 --fields 0 -o {t}/b", "--fields"),
+    case("bank-wavelengths-text", "psf bank --lens cooke_triplet --pixel-um 4 --wavelengths-nm abc -o {t}/b",
+         "--wavelengths-nm", "abc"),
+    case("bank-wavelengths-zero", "psf bank --lens cooke_triplet --pixel-um 4 --wavelengths-nm 0 -o {t}/b",
+         "--wavelengths-nm"),
+    case("bank-wavelengths-reversed", "psf bank --lens cooke_triplet --pixel-um 4 --wavelengths-nm 700:400:10 -o {t}/b",
+         "--wavelengths-nm"),
+    case("bank-pupil-samples-zero", "psf bank --lens cooke_triplet --pixel-um 4 --pupil-samples 0 -o {t}/b",
+         "--pupil-samples"),
+    case("bank-response-missing-csv", BANK + "--response {t}/nofile.csv", "nofile.csv"),
+    case("bank-response-unknown", BANK + "--response 'Banana 9000'", "--response", "Banana 9000"),
+    case("bank-response-bad-csv", BANK + "--response {t}/r.csv", "r.csv", make=text("r.csv", "wavelength_nm,r,g,b\n1,x\n")),
+    case("bank-illuminant-unknown", BANK + "--illuminant banana", "--illuminant", "banana"),
+    case("bank-method-unknown", BANK + "--method banana", "--method", "banana"),
+    case("bank-aiming-unknown", BANK + "--aiming banana", "--aiming", "banana"),
+    case("bank-max-spacing-zero", BANK + "--max-spacing-um 0", "--max-spacing-um"),
+    case("bank-workers-zero", BANK + "--workers 0", "--workers"),
+    case("bank-output-file", BANK.replace("{t}/b", "{t}/afile"), "afile", make=AFILE),
+    case("bank-output-under-file", BANK.replace("{t}/b", "{t}/afile/b"), "afile", make=AFILE),
+    case("bank-output-unwritable", BANK.replace("{t}/b", UNWRITABLE + "/b"), UNWRITABLE),
+    case("bank-output-other-settings", "psf bank --lens cooke_triplet --sensor apsc_mirrorless --fields 3 "
+         "--wavelengths-nm 550 --pupil-samples 32 -o {w.bank}", "bank"),
+    case("show-gamma-zero", "psf show {w.bank} -o {t}/fig --gamma 0", "--gamma"),
+    case("show-gamma-nan", "psf show {w.bank} -o {t}/fig --gamma nan", "--gamma"),
+    case("show-output-file", "psf show {w.bank} -o {t}/afile", "afile", make=AFILE),
+    case("show-output-under-file", "psf show {w.bank} -o {t}/afile/fig", "afile", make=AFILE),
+]
+
+LENS = [
+    case("info-aiming-unknown", "lens info cooke_triplet --aiming banana", "--aiming", "banana"),
+    case("convert-output-folder", "lens convert cooke_triplet -o {t}/out.yaml", "out.yaml", make=folder("out.yaml")),
+    case("convert-output-under-file", "lens convert cooke_triplet -o {t}/afile/out.yaml", "afile", make=AFILE),
+    case("convert-output-suffix", "lens convert cooke_triplet -o {t}/out.txt", "out.txt"),
+    case("convert-output-unwritable", "lens convert cooke_triplet -o " + UNWRITABLE + "/l.yaml", UNWRITABLE),
+    case("plot-output-folder", "lens plot cooke_triplet -o {t}/p.png", "p.png", make=folder("p.png")),
+    case("plot-output-under-file", "lens plot cooke_triplet -o {t}/afile/p.png", "afile", make=AFILE),
+    case("plot-output-suffix", "lens plot cooke_triplet -o {t}/p.txt", "p.txt"),
+    case("plot-output-unwritable", "lens plot cooke_triplet -o " + UNWRITABLE + "/p.png", UNWRITABLE),
+    case("plot-field-above-1", "lens plot cooke_triplet -o {t}/p.png --field 1.5", "field", "between 0 and 1", "1.5"),
+    case("plot-field-deg-90", "lens plot cooke_triplet -o {t}/p.png --field-deg 95", "--field-deg"),
+    case("plot-two-field-kinds", "lens plot cooke_triplet -o {t}/p.png --field 0.5 --field-deg 3", "--field-deg"),
+    case("spot-nothing-asked", "lens spot cooke_triplet", "--output"),
+    case("spot-output-folder", "lens spot cooke_triplet -o {t}/s.png", "s.png", make=folder("s.png")),
+    case("spot-output-under-file", "lens spot cooke_triplet -o {t}/afile/s.png", "afile", make=AFILE),
+    case("spot-image-height-nan", "lens spot cooke_triplet --json --image-height-mm nan", "--image-height-mm"),
+]
+
+SIMULATE = [
+    case("simulate-format-jpg", SIM + "--format jpg", "--format", "jpg"),
+    case("simulate-raw-format-jpg", "simulate {w.photo} -o {t}/out --raw --format jpg", "--format", "jpg"),
+    case("simulate-bits-12", SIM + "--bits 12", "--bits", "12"),
+    case("simulate-demosaic-unknown", SIM + "--demosaic banana", "--demosaic", "banana"),
+    case("simulate-workers-zero", "simulate {w.photo} -o {t}/out --workers 0", "--workers"),
+    case("simulate-fields-one", "simulate {w.photo} -o {t}/out --fields 1", "--fields"),
+    case("simulate-pupil-samples-negative", "simulate {w.photo} -o {t}/out --pupil-samples -5", "--pupil-samples"),
+    case("simulate-wavelengths-text", "simulate {w.photo} -o {t}/out --wavelengths-nm x:y", "--wavelengths-nm"),
+    case("simulate-output-file", "simulate {w.photo} -o {t}/afile --no-blur", "afile", make=AFILE),
+    case("simulate-output-under-file", "simulate {w.photo} -o {t}/afile/out --no-blur", "afile", make=AFILE),
+    case("simulate-output-unwritable", "simulate {w.photo} -o " + UNWRITABLE + " --no-blur", UNWRITABLE),
+    case("simulate-cache-is-file", "simulate {w.photo} -o {t}/out --cache {t}/afile", "afile", make=AFILE),
+]
+
+DATASET_MAKE = [
+    case("dataset-crops-zero", DATASET.replace("--crops 1", "--crops 0"), "--crops"),
+    case("dataset-size-zero", DATASET.replace("--size 32", "--size 0"), "--size"),
+    case("dataset-size-odd", DATASET.replace("--size 32", "--size 31"), "--size"),
+    case("dataset-size-larger-than-photos", DATASET.replace("--size 32", "--size 512"), "--size"),
+    case("dataset-placements-zero", DATASET + "--placements 0", "--placements"),
+    case("dataset-workers-zero", DATASET + "--workers 0", "--workers"),
+    case("dataset-demosaic-unknown", DATASET + "--demosaic banana", "--demosaic", "banana"),
+    case("dataset-output-file", DATASET.replace("{t}/d", "{t}/afile"), "afile", make=AFILE),
+    case("dataset-output-under-file", DATASET.replace("{t}/d", "{t}/afile/d"), "afile", make=AFILE),
+    case("dataset-output-unwritable", DATASET.replace("{t}/d", UNWRITABLE), UNWRITABLE),
+    case("dataset-output-other-settings", "dataset make {w.photos} -o {w.data} --bank {w.bank} --crops 2 --size 32",
+         "data"),
+]
+
+TRAINING = [
+    case("train-epochs-zero", TRAIN + "--epochs 0", "--epochs"),
+    case("train-batch-zero", TRAIN + "--batch-size 0", "--batch-size"),
+    case("train-lr-zero", TRAIN + "--lr 0", "--lr"),
+    case("train-lr-nan", TRAIN + "--lr nan", "--lr"),
+    case("train-lr-schedule-unknown", TRAIN + "--lr-schedule banana", "--lr-schedule", "banana"),
+    case("train-lr-halve-zero", TRAIN + "--lr-halve-every 0", "--lr-halve-every"),
+    case("train-crop-negative", TRAIN + "--crop -2", "--crop"),
+    case("train-crop-larger-than-pairs", TRAIN.replace("--crop 32", "--crop 64"), "--crop"),
+    case("train-width-zero", TRAIN + "--width 0", "--width"),
+    case("train-depth-zero", TRAIN + "--depth 0", "--depth"),
+    case("train-deformable-groups-zero", TRAIN + "--deformable-groups 0", "--deformable-groups"),
+    case("train-val-fraction-above-1", TRAIN + "--val-fraction 1.5", "--val-fraction", "1.5"),
+    case("train-val-fraction-negative", TRAIN + "--val-fraction -0.1", "--val-fraction"),
+    case("train-time-budget-negative", TRAIN + "--time-budget-s -1", "--time-budget-s", "s"),
+    case("train-time-budget-nan", TRAIN + "--time-budget-s nan", "--time-budget-s"),
+    case("train-steps-negative", TRAIN + "--steps-per-epoch -1", "--steps-per-epoch"),
+    case("train-threads-negative", TRAIN + "--threads -2", "--threads"),
+    case("train-device-banana", TRAIN + "--device banana", "--device", "banana"),
+    case("train-device-cuda9", TRAIN + "--device cuda:9", "--device", "cuda:9"),
+    case("train-output-file", TRAIN.replace("{t}/r", "{t}/afile"), "afile", make=AFILE),
+    case("train-output-under-file", TRAIN.replace("{t}/r", "{t}/afile/r"), "afile", make=AFILE),
+    case("train-output-unwritable", TRAIN.replace("{t}/r", UNWRITABLE), UNWRITABLE),
+]
+
+RESTORING = [
+    case("restore-bits-12", RESTORE + "--bits 12", "--bits", "12"),
+    case("restore-tile-small", RESTORE + "--tile 8", "--tile"),
+    case("restore-overlap-negative", RESTORE + "--overlap -1", "--overlap"),
+    case("restore-overlap-above-tile", RESTORE + "--tile 64 --overlap 64", "--overlap"),
+    case("restore-offset-text", RESTORE + "--sensor-offset abc", "--sensor-offset", "abc"),
+    case("restore-offset-outside", RESTORE + "--sensor-offset 99999,0", "--sensor-offset"),
+    case("restore-device-banana", RESTORE + "--device banana", "--device", "banana"),
+    case("restore-device-cuda9", RESTORE + "--device cuda:9", "--device", "cuda:9"),
+    case("restore-workers-zero", "restore {w.run} {w.dng} -o {t}/out --workers 0", "--workers"),
+    case("restore-threads-negative", RESTORE + "--threads -1", "--threads"),
+    case("restore-dng-without-raws", RESTORE + "--dng", "--dng"),
+    case("restore-output-file", RESTORE.replace("{t}/out", "{t}/afile"), "afile", make=AFILE),
+    case("restore-output-under-file", RESTORE.replace("{t}/out", "{t}/afile/out"), "afile", make=AFILE),
+    case("restore-output-unwritable", RESTORE.replace("{t}/out", UNWRITABLE), UNWRITABLE),
+    case("develop-bits-12", "develop {w.dng} -o {t}/out --bits 12", "--bits", "12"),
+    case("develop-format-jpg", "develop {w.dng} -o {t}/out --format jpg", "--format", "jpg"),
+    case("develop-wb-unknown", "develop {w.dng} -o {t}/out --wb banana", "--wb", "banana"),
+    case("develop-wb-zero-kelvin", "develop {w.dng} -o {t}/out --wb 0K", "--wb", "0K"),
+    case("develop-output-file", "develop {w.dng} -o {t}/afile", "afile", make=AFILE),
+    case("develop-output-under-file", "develop {w.dng} -o {t}/afile/out", "afile", make=AFILE),
+    case("from-raw-output-suffix", "sensor from-raw {w.dng} --pixel-um 4 -o {t}/cam.txt", "cam.txt"),
+    case("from-raw-pixel-zero", "sensor from-raw {w.dng} --pixel-um 0 -o {t}/cam.yaml", "--pixel-um", "um"),
+    case("from-raw-pixel-nan", "sensor from-raw {w.dng} --pixel-um nan -o {t}/cam.yaml", "--pixel-um"),
+    case("from-raw-output-folder", "sensor from-raw {w.dng} --pixel-um 4 -o {t}/cam.yaml", "cam.yaml",
+         make=folder("cam.yaml")),
+    case("from-raw-output-under-file", "sensor from-raw {w.dng} --pixel-um 4 -o {t}/afile/cam.yaml", "afile",
+         make=AFILE),
+]
+
+EVALUATING = [
+    case("evaluate-method-unknown", "evaluate --pairs {w.data} --methods input,banana", "--methods", "banana"),
+    case("evaluate-model-without-run", "evaluate --pairs {w.data} --methods model", "--methods", "model"),
+    case("evaluate-model-missing", "evaluate --pairs {w.data} --methods model --model {t}/norun", "norun"),
+    case("evaluate-rl-iterations-negative", EVAL + "--rl-iterations -3", "--rl-iterations", "-3"),
+    case("evaluate-unsharp-sigma-zero", EVAL + "--unsharp-sigma 0", "--unsharp-sigma"),
+    case("evaluate-unsharp-amount-nan", EVAL + "--unsharp-amount nan", "--unsharp-amount"),
+    case("evaluate-max-crops-zero", EVAL + "--max-crops 0", "--max-crops"),
+    case("evaluate-device-banana", "evaluate --pairs {w.data} --methods model --model {w.run} --device banana",
+         "--device", "banana"),
+    case("evaluate-sources-unknown", EVAL + "--sources nophoto.png", "nophoto.png"),
+    case("evaluate-output-file", EVAL + "-o {t}/afile", "afile", make=AFILE),
+    case("evaluate-output-under-file", EVAL + "-o {t}/afile/e", "afile", make=AFILE),
+    case("ablation-variant-unknown", "ablation {w.data} -o {t}/a --variants full,banana", "--variants", "banana"),
+    case("ablation-budget-negative", "ablation {w.data} -o {t}/a --time-budget-s -1", "--time-budget-s"),
+    case("ablation-width-zero", "ablation {w.data} -o {t}/a --width 0", "--width"),
+    case("ablation-crop-tiny", "ablation {w.data} -o {t}/a --crop 8", "--crop"),
+    case("ablation-device-banana", "ablation {w.data} -o {t}/a --device banana", "--device", "banana"),
+    case("ablation-output-file", "ablation {w.data} -o {t}/afile", "afile", make=AFILE),
+    case("demo-workers-zero", "demo -o {t}/demo --quick --workers 0", "--workers"),
+    case("demo-device-banana", "demo -o {t}/demo --quick --device banana", "--device", "banana"),
+    case("demo-device-cuda9", "demo -o {t}/demo --quick --device cuda:9", "--device", "cuda:9"),
+    case("demo-output-file", "demo -o {t}/afile --quick", "afile", make=AFILE),
+    case("demo-output-under-file", "demo -o {t}/afile/demo --quick", "afile", make=AFILE),
+    case("assets-export-file", "assets --export-photos {t}/afile", "afile", make=AFILE),
+    case("assets-export-under-file", "assets --export-photos {t}/afile/p", "afile", make=AFILE),
+    case("assets-export-unwritable", "assets --export-photos " + UNWRITABLE, UNWRITABLE),
+]
+
+USAGE = [
+    case("usage-unknown-option", "lens info cooke_triplet --bogus", "--bogus"),
+    case("usage-missing-argument", "lens info", "lens_file"),
+    case("usage-unknown-command", "lens banana", "banana"),
+    case("usage-unknown-top-command", "simulat", "simulat"),
+    case("usage-not-an-integer", "psf bank --lens cooke_triplet --pixel-um 4 --fields abc -o {t}/b", "--fields"),
+    case("usage-not-a-number", "psf compute cooke_triplet --field abc", "--field"),
+    case("usage-option-without-value", "simulate {w.photo} -o", "-o"),
+    case("usage-out-of-range-rays", "lens plot cooke_triplet -o {t}/p.png --rays 0", "--rays"),
+    case("usage-bad-choice", "lens spot cooke_triplet --json --reference banana", "--reference", "banana"),
+]
+
+ALL: list[Case] = PSF_COMPUTE + PSF_BANK + LENS + SIMULATE + DATASET_MAKE + TRAINING + RESTORING + EVALUATING + USAGE
+
+
+@pytest.mark.parametrize("c", ALL, ids=[c.id for c in ALL])
+def test_bad_option(c: Case, world, tmp_path, capsys, monkeypatch) -> None:
+    check_case(c, tmp_path, world, capsys, monkeypatch)
+
+
+def test_case_ids_are_unique() -> None:
+    assert len({c.id for c in ALL}) == len(ALL)
