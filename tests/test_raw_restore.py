@@ -78,13 +78,12 @@ def test_raw_restore_equals_the_in_memory_chain(run, tmp_path: Path, capsys, mon
 def test_developing_in_strips_is_developing_the_frame(tmp_path: Path):
     from lensim.raw import read_raw
     from lensim.raw.develop import develop_raw
-    from lensim.raw.restore import develop_in_strips
 
     raw, params = capture(4, size=(70, 64))
     sensor = small_sensor()
     shot = read_raw(write_capture_dng(tmp_path / "s.dng", raw, sensor, params))
-    whole, _ = develop_raw(shot, sensor, bits=None, orient=False)
-    strips, used = develop_in_strips(shot, sensor, rows=20)  # 4 strips, the last one short
+    whole, _ = develop_raw(shot, sensor, orient=False, strip_rows=10 ** 6)  # one strip: the whole frame
+    strips, used = develop_raw(shot, sensor, orient=False, strip_rows=20)  # 4 strips, the last one short
     assert float((strips - whole).abs().max()) < 1e-6 and used.r_gain == pytest.approx(params.r_gain)
 
 

@@ -8,7 +8,7 @@ For each raw file (:func:`restore_raw_files`):
    refused in one line naming both (``allow_other_camera`` lets it through);
 2. develop it in the sensor's orientation (lensim.raw.develop.develop_raw with the
    profile's CCM and the as-shot white balance, no rounding: what the network was trained
-   on), in strips of rows to bound memory (:func:`develop_in_strips`);
+   on), in strips of rows to bound memory;
 3. restore it tile by tile (lensim.restore.infer.restore_image), each tile fed the
    field-of-view coordinates of its place on the sensor (:func:`raw_geometry`): the active
    area is the whole sensor, the optical axis at its centre; a DNG written by `lensim
@@ -158,39 +158,6 @@ def _dng_colour(raw: Any, r_gain: float, b_gain: float) -> Any:
     return colour
 
 
-DEVELOP_STRIP_ROWS = 256
-DEVELOP_HALO_ROWS = 16  # even (keeps the CFA phase) and beyond AHD's reach (8 rows with one median pass)
-DEVELOP_AHD_BLOCK_ROWS = 64  # AHD needs about 430 bytes per pixel of a block (and one block per thread)
-
-
-def develop_in_strips(raw: Any, sensor: SensorProfile, rows: int = DEVELOP_STRIP_ROWS) -> tuple[torch.Tensor, Any]:
-    """lensim.raw.develop.develop_raw(raw, sensor, bits=None, orient=False) strip by strip:
-    the same functions (capture_params, normalized_mosaic, lensim.sensor.isp.raw_to_srgb)
-    on strips of ``rows`` rows, each with DEVELOP_HALO_ROWS rows of context above and below,
-    which the chain's reach (pointwise levels, white balance, CCM and curve; AHD and its
-    median filter within 8 rows) never crosses, so the result is the whole frame's; AHD runs
-    in blocks of DEVELOP_AHD_BLOCK_ROWS rows. Peak memory: the (3, H, W) float32 output plus
-    one strip's temporaries (a 24-megapixel frame, measured: about 0.5 GB above the 0.3 GB
-    output, against 2.3 GB for strips of 512 rows with AHD's default 256-row blocks on two
-    threads). Returns ((3, H, W) sRGB float32, the capture
-    parameters)."""
-    from dataclasses import replace
-
-    from lensim.raw.develop import capture_params, normalized_mosaic
-    from lensim.sensor.isp import raw_to_srgb
-
-    params = capture_params(raw, sensor)
-    h, w = raw.height, raw.width
-    step = max(2, rows // 2 * 2)
-    out = torch.empty(3, h, w, dtype=torch.float32)
-    for y0 in range(0, h, step):
-        y1 = min(h, y0 + step)
-        a, b = max(0, y0 - DEVELOP_HALO_ROWS), min(h, y1 + DEVELOP_HALO_ROWS)
-        strip = normalized_mosaic(replace(raw, mosaic=raw.mosaic[a:b]))
-        out[:, y0:y1] = raw_to_srgb(strip, params, bits=None, block_rows=DEVELOP_AHD_BLOCK_ROWS)[:, y0 - a:y1 - a]
-    return out, params
-
-
 def validate(jobs: list[RawJob], sensor: SensorProfile, settings: RestoreSettings) -> None:
     """Read and check every unfinished job's raw (camera, size, develop settings) before
     anything is written; one-line InputError on the first bad file."""
@@ -215,14 +182,14 @@ def restore_raw(job: RawJob, model: FieldAwareUNet, sensor: SensorProfile, setti
     record: input, outputs, size, whether it was native, the develop's capture parameters."""
     from lensim.images import write_image
     from lensim.raw import read_raw
-    from lensim.raw.develop import apply_orientation
+    from lensim.raw.develop import apply_orientation, develop_raw
     from lensim.raw.dng import DngCamera, DngExif, read_simulation_record, write_srgb_as_linear_dng
     from lensim.restore.infer import restore_image
 
     raw = read_raw(job.source)
     placement = read_simulation_record(job.source)
     native = check_camera(raw, sensor, placement, settings.checkpoint, settings.allow_other_camera)
-    img, params = develop_in_strips(raw, sensor)
+    img, params = develop_raw(raw, sensor, orient=False)
     top_left, size = raw_geometry(raw, sensor, placement, native)
     out = restore_image(model, img, top_left, size, tile=settings.tile, overlap=settings.overlap, progress=progress)
     del img  # bound peak memory
