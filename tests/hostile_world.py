@@ -242,6 +242,7 @@ def check_case(c: Case, t: Path, w: World, capsys, monkeypatch) -> None:
     line = out.lines[0]
     assert line.startswith("error: "), line
     assert line.isprintable(), f"{c.id}: control characters in {line!r}"
+    assert "weights_only=False" not in line and "weights_only` set to `False" not in line, line  # unsafe advice
     assert "Traceback" not in out.stderr
     missing = [s for s in c.expect if s not in line]
     assert not missing, f"{c.id}: {missing} not in: {line}"

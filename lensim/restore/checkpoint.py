@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import json
 import math
+import pickle
 import random
 import warnings
 from dataclasses import dataclass
@@ -55,6 +56,16 @@ def atomic_torch_save(obj: Any, path: str | Path) -> None:
         torch.save(obj, fh)
 
 
+def _load_failure(e: Exception) -> str:
+    """Why torch.load failed, in a few words. Torch's advice to retry with
+    weights_only=False (running whatever code the file holds) is not passed on."""
+    text = str(e).strip().splitlines()[0] if str(e).strip() else ""
+    if "weights_only" in text or isinstance(e, pickle.UnpicklingError):
+        return (f"{type(e).__name__}: not data a safe load reads (damaged, or objects other than tensors and "
+                "plain values)")
+    return f"{type(e).__name__}: {text[:200]}"
+
+
 def read_checkpoint(path: str | Path) -> dict[str, Any]:
     """The dict stored in a lensim checkpoint (loaded with weights_only=True on CPU);
     one-line InputError naming the file when it is missing, corrupt or not ours."""
@@ -65,8 +76,7 @@ def read_checkpoint(path: str | Path) -> dict[str, Any]:
     try:
         data = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as e:  # truncated zip, pickle garbage, foreign objects
-        msg = str(e).strip().splitlines()[0] if str(e).strip() else ""
-        raise InputError(src, None, f"is corrupt or not a lensim checkpoint ({type(e).__name__}: {msg[:200]})") from None
+        raise InputError(src, None, f"is corrupt or not a lensim checkpoint ({_load_failure(e)})") from None
     if not isinstance(data, dict) or data.get("format") != CHECKPOINT_FORMAT:
         raise InputError(src, "format", f"expected a {CHECKPOINT_FORMAT!r} dict from `lensim train`")
     missing = [k for k in REQUIRED_KEYS if k not in data]
