@@ -213,9 +213,15 @@ def folder_lock(folder: str | Path) -> Iterator[Path]:
             _held_locks[key] -= 1
         return
     created = not folder.exists()
-    folder.mkdir(parents=True, exist_ok=True)
     try:
+        folder.mkdir(parents=True, exist_ok=True)
         fd = _acquire(folder)
+    except OSError as e:  # a file in the way, no permission, read-only file system
+        if created:
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+        raise InputError(str(folder), None, f"cannot use it as an output folder ({e.strerror or e}); expected a "
+                         "writable folder") from None
     except BaseException:
         if created:
             with contextlib.suppress(OSError):

@@ -65,3 +65,16 @@ def test_a_failed_run_removes_the_folder_it_created_when_left_empty(tmp_path):
     with folder_lock(existing):
         pass
     assert existing.is_dir() and not any(existing.iterdir())
+
+
+def test_a_folder_that_cannot_be_written_is_one_line(tmp_path):
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    with pytest.raises(InputError, match=f"^{afile / 'out'}: cannot use it as an output folder"), \
+            folder_lock(afile / "out"):
+        pass
+    if os.geteuid() != 0:  # root writes anywhere
+        locked = tmp_path / "ro"
+        locked.mkdir(mode=0o500)
+        with pytest.raises(InputError, match="cannot use it as an output folder"), folder_lock(locked):
+            pass

@@ -3,17 +3,26 @@ into the same folder is refused at once, and a resumed run ends with the very ar
 an uninterrupted one. The jobs run as `lensim` subprocesses on small sizes."""
 from __future__ import annotations
 
+import json
 import os
+import random
 import signal
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
+import numpy as np
 import pytest
+import torch
 from cli_runner import run_cli
+from test_train import make_pairs
 
 import lensim
+from lensim.assets.images import sample_image_path
+from lensim.images import read_image, write_image
+from lensim.restore.run_log import read_csv
 
 ROOT = Path(lensim.__file__).resolve().parents[1]  # the lensim the subprocesses run
 
@@ -95,3 +104,177 @@ def test_killed_bank_leaves_no_worker_and_a_second_writer_is_refused_meanwhile(t
         proc.send_signal(signal.SIGKILL)
         proc.communicate()
     assert wait_for(lambda: not any(alive(w) for w in workers), 5.0), "bank workers outlived their parent"
+
+
+# ----------------------------------------------------------------------------- kill and resume
+
+BANK = ["psf", "bank", "cooke_triplet", "--sensor", "apsc_mirrorless", "--kernel", "21", "--fields", "3",
+        "--wavelengths-nm", "500:600:100", "--pupil-samples", "40", "--quiet"]
+PAIRS = ["--sensor", "apsc_mirrorless", "--crops", "2", "--size", "64", "--seed", "3", "--quiet"]
+TRAIN = ["--width", "8", "--depth", "2", "--crop", "32", "--batch-size", "2", "--val-fraction", "0.25", "--seed", "3",
+         "--epochs", "2", "--steps-per-epoch", "3", "--checkpoint-every-steps", "1", "--threads", "1", "--quiet"]
+DEFAULT_SEEDS = [0]
+SLOW_SEEDS = [1, 2, 3]
+
+
+def kill_when(args: list[str], progressed, total: int, seed: int) -> int:
+    """Run `lensim ARGS` in a subprocess and SIGKILL it at a random point of its work: once
+    ``progressed()`` (units of work on disk) reaches k, drawn from 0..total-1 with ``seed``,
+    plus a random 0-0.4 s (mid-unit). Returns k, the units seen done at the kill (a job that
+    finished first is a failed test: the kill came too late)."""
+    rng = random.Random(seed)
+    k = rng.randrange(total)
+    proc = lensim_process(args)
+    try:
+        assert wait_for(lambda: progressed() >= k or proc.poll() is not None, 120)
+        time.sleep(rng.uniform(0.0, 0.4))
+        assert proc.poll() is None, f"the job ended before the kill: {proc.communicate()[1]}"
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.communicate()
+    return progressed()
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """Uninterrupted runs (in this process) of the three jobs, and their inputs."""
+    base = tmp_path_factory.mktemp("reference")
+    sharp = base / "sharp"
+    for name in ("kodim23", "coffee"):
+        img, _ = read_image(sample_image_path(name))
+        write_image(sharp / f"{name}.png", img[:, :160, :192])
+    pairs = make_pairs(base / "train-pairs")
+    threads = torch.get_num_threads()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            assert cli([*BANK, "-o", str(base / "bank")]) == 0
+            assert cli(["dataset", "make", str(sharp), "-o", str(base / "pairs"), "--bank", str(base / "bank"),
+                        *PAIRS]) == 0
+            assert cli(["train", str(pairs), "-o", str(base / "run"), *TRAIN]) == 0
+    finally:
+        torch.set_num_threads(threads)
+    return base
+
+
+def cli(args: list[str]) -> int:
+    """`lensim ARGS` in this process; its exit status."""
+    from typer.testing import CliRunner
+
+    from lensim.cli import app
+
+    res = CliRunner().invoke(app, args)
+    assert res.exception is None or isinstance(res.exception, SystemExit), res.exception
+    return res.exit_code
+
+
+def npz_arrays(folder: Path, pattern: str) -> dict[str, dict[str, np.ndarray]]:
+    out = {}
+    for p in sorted(folder.glob(pattern)):
+        with np.load(p) as z:
+            out[p.name] = {k: z[k] for k in z.files}
+    return out
+
+
+def assert_same_tree(a: Path, b: Path, pattern: str, context: str) -> None:
+    """The files matching ``pattern`` under both folders: the same names, the same bytes."""
+    names = sorted(p.relative_to(a) for p in a.glob(pattern))
+    assert names and names == sorted(p.relative_to(b) for p in b.glob(pattern)), context
+    for n in names:
+        assert (a / n).read_bytes() == (b / n).read_bytes(), f"{n}, {context}"
+
+
+def _bank_kill_resume(reference: Path, tmp_path: Path, seed: int) -> None:
+    out = tmp_path / "bank"
+    fields = kill_when([*BANK, "-o", str(out)], lambda: len(list(out.glob("field_*.npz"))), 3, seed)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert cli([*BANK, "-o", str(out)]) == 0
+    ref, got = npz_arrays(reference / "bank", "field_*.npz"), npz_arrays(out, "field_*.npz")
+    assert list(got) == list(ref), f"killed at {fields} fields"
+    for name, arrays in ref.items():
+        for key, value in arrays.items():
+            np.testing.assert_array_equal(got[name][key], value, err_msg=f"{name}:{key}, killed at {fields} fields")
+
+
+def _pairs_kill_resume(reference: Path, tmp_path: Path, seed: int) -> None:
+    out = tmp_path / "pairs"
+    args = ["dataset", "make", str(reference / "sharp"), "-o", str(out), "--bank", str(reference / "bank"), *PAIRS]
+    photos = kill_when(args, lambda: len(list((out / "records").glob("*.json"))), 2, seed)
+    assert cli(args) == 0
+    assert_same_tree(reference / "pairs", out, "pairs/*.png", f"killed at {photos} photos")
+    assert_same_tree(reference / "pairs", out, "records/*.json", f"killed at {photos} photos")
+    assert _manifest(out) == _manifest(reference / "pairs")
+
+
+def _train_kill_resume(reference: Path, tmp_path: Path, seed: int) -> None:
+    run = tmp_path / "run"
+    pairs = reference / "train-pairs"
+    steps = kill_when(["train", str(pairs), "-o", str(run), *TRAIN], lambda: _rows(run / "steps.csv"), 6, seed)
+    threads = torch.get_num_threads()
+    try:
+        code = cli(["train", str(pairs), "-o", str(run), "--resume", "--quiet"] if (run / "last.pt").exists()
+                   else ["train", str(pairs), "-o", str(run), *TRAIN])
+    finally:
+        torch.set_num_threads(threads)
+    assert code == 0
+    ref = torch.load(reference / "run" / "last.pt", weights_only=True)
+    got = torch.load(run / "last.pt", weights_only=True)
+    assert got["step"] == ref["step"] == 6, f"killed at step {steps}"
+    for key, value in ref["model_state"].items():
+        assert torch.equal(got["model_state"][key], value), f"{key}, killed at step {steps}"
+    assert _losses(run) == _losses(reference / "run")
+
+
+def _manifest(pairs: Path) -> dict:
+    """A pairs folder's manifest but for the bank folder's path."""
+    return {k: v for k, v in json.loads((pairs / "manifest.json").read_text()).items() if k != "bank"}
+
+
+def _losses(run: Path) -> list[tuple[float, float]]:
+    """(step, loss) of every row of a run's steps.csv."""
+    return [(r["step"], r["loss"]) for r in read_csv(run / "steps.csv")]
+
+
+def _rows(path: Path) -> int:
+    """Data rows of a CSV log (0 while it does not exist)."""
+    try:
+        return max(0, len(path.read_text().splitlines()) - 1)
+    except OSError:
+        return 0
+
+
+JOBS = {"bank": _bank_kill_resume, "pairs": _pairs_kill_resume, "train": _train_kill_resume}
+
+
+@pytest.mark.parametrize("seed", DEFAULT_SEEDS)
+@pytest.mark.parametrize("job", list(JOBS))
+def test_killed_job_resumes_to_the_arrays_of_an_uninterrupted_run(reference, tmp_path, job, seed):
+    JOBS[job](reference, tmp_path, seed)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", SLOW_SEEDS)
+@pytest.mark.parametrize("job", list(JOBS))
+def test_killed_job_resumes_to_the_arrays_of_an_uninterrupted_run_more_kill_points(reference, tmp_path, job, seed):
+    JOBS[job](reference, tmp_path, seed)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
+def test_killed_dataset_make_leaves_no_dask_worker(reference, tmp_path):
+    sharp = tmp_path / "sharp"
+    img, _ = read_image(sample_image_path("kodim23"))
+    for k in range(4):  # whole photos: a few seconds each
+        write_image(sharp / f"p{k}.png", img)
+    args = ["dataset", "make", str(sharp), "-o", str(tmp_path / "pairs"), "--bank", str(reference / "bank"),
+            "--workers", "2", *PAIRS]
+    proc = lensim_process(args)
+    try:
+        assert wait_for(lambda: len(workers_of(proc.pid, "spawn_main")) >= 2, 120)
+        workers = workers_of(proc.pid, "spawn_main")
+        assert wait_for(lambda: (tmp_path / "pairs" / "pairs").is_dir(), 120)  # photos are being simulated
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.communicate()
+    assert wait_for(lambda: not any(alive(w) for w in workers), 5.0), "Dask workers outlived their parent"

@@ -32,6 +32,21 @@ def test_report_on_a_folder_without_json_is_one_line(tmp_path):
     assert "report.json" in str(res.exception or res.output)
 
 
+def test_report_with_a_missing_key_is_one_line_and_rewrites_nothing(tmp_path, capsys, monkeypatch):
+    from cli_runner import run_cli
+
+    (tmp_path / "figures").mkdir()
+    write_report(tmp_path, _report(), tmp_path / "figures")
+    for broken, what in (({k: v for k, v in _report().items() if k != "metrics"}, "metrics: missing"),
+                         ([1, 2], "expected a JSON object")):
+        (tmp_path / "report.json").write_text(json.dumps(broken))
+        before = {p.name: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+        code, _, err = run_cli(["report", str(tmp_path)], capsys, monkeypatch)
+        assert code == 2 and err.count("\n") == 1 and "Traceback" not in err
+        assert f"{tmp_path / 'report.json'}: {what}" in err
+        assert {p.name: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == before
+
+
 def test_demo_refuses_a_folder_made_with_other_settings(tmp_path, capsys, monkeypatch):
     """A default-size demo folder rerun with --quick stops at once with one line naming the
     marker and the differing settings (nothing is computed)."""

@@ -215,8 +215,8 @@ def test_cosine_schedule_anneals_over_the_epochs_and_resumes_exactly(pairs: Path
     assert cosine_lr(1e-3, 0.0) == 1e-3 and cosine_lr(1e-3, 1.5) == 0.0
     r = train(pairs, tmp_path / "mid", epochs=3, time_budget_s=0.0, **kw)
     assert r.stopped_early and r.step == 1
-    # a resume without a budget continues the same epoch-based schedule
-    train(pairs, tmp_path / "mid", epochs=3, resume=True)
+    # a resume that lifts the budget continues the same epoch-based schedule
+    train(pairs, tmp_path / "mid", epochs=3, resume=True, time_budget_s=None)
     ref = read_csv(tmp_path / "straight" / "steps.csv")
     mid = read_csv(tmp_path / "mid" / "steps.csv")
     assert [(g["step"], g["loss"], g["lr"]) for g in mid] == [(e["step"], e["loss"], e["lr"]) for e in ref]
@@ -232,6 +232,67 @@ def test_time_budget_counts_the_calls_before_a_resume(pairs: Path, tmp_path: Pat
     r = train(pairs, tmp_path / "run", epochs=50, resume=True, time_budget_s=spent)
     assert r.stopped_early and r.step == 2
     assert torch.load(tmp_path / "run" / "last.pt", weights_only=True)["train_seconds"] > spent
+
+
+def test_a_resume_keeps_the_stored_epochs_and_budget_unless_told_otherwise(pairs: Path, tmp_path: Path):
+    kw = dict(TINY, max_steps_per_epoch=2)
+    r = train(pairs, tmp_path / "run", epochs=3, time_budget_s=0.0, **kw)
+    assert r.stopped_early and r.step == 1
+    r = train(pairs, tmp_path / "run", resume=True)  # the budget is spent: one step, then stop
+    assert r.stopped_early and r.step == 2
+    r = train(pairs, tmp_path / "run", resume=True, time_budget_s=None)  # lifted: the stored 3 epochs, not 30
+    assert not r.stopped_early and r.epochs_done == 3 and r.step == 6
+    saved = torch.load(tmp_path / "run" / "last.pt", weights_only=True)["train_config"]
+    assert saved["epochs"] == 3 and saved["time_budget_s"] is None
+
+
+def test_cli_resume_takes_the_run_settings_not_the_option_defaults(pairs: Path, tmp_path: Path, capsys,
+                                                                    monkeypatch: pytest.MonkeyPatch):
+    from cli_runner import run_cli
+
+    run = tmp_path / "run"
+    args = ["train", str(pairs), "-o", str(run), "--quiet"]
+    tiny = ["--width", "8", "--depth", "2", "--crop", "32", "--batch-size", "2", "--val-fraction", "0.25",
+            "--seed", "3", "--steps-per-epoch", "1"]
+    assert run_cli([*args, *tiny, "--epochs", "2"], capsys, monkeypatch)[0] == 0
+    code, out, _ = run_cli([*args, "--resume", "--json"], capsys, monkeypatch)
+    assert code == 0 and json.loads(out)["steps"] == 2  # nothing left: 2 epochs (not the default 30), 1 step each
+    code, out, _ = run_cli([*args, "--resume", "--json", "--epochs", "3"], capsys, monkeypatch)
+    assert code == 0 and json.loads(out)["steps"] == 3
+    code, _, err = run_cli([*args, "--resume", "--width", "16"], capsys, monkeypatch)
+    assert code == 2 and "width" in err and err.count("\n") == 1
+
+
+def test_a_truncated_checkpoint_is_named_in_one_line(pairs: Path, tmp_path: Path, capsys,
+                                                    monkeypatch: pytest.MonkeyPatch):
+    from cli_runner import run_cli
+
+    run = tmp_path / "run"
+    train(pairs, run, epochs=1, max_steps_per_epoch=1, **TINY)
+    data = (run / "last.pt").read_bytes()
+    (run / "last.pt").write_bytes(data[:len(data) // 2])
+    for args in (["train", str(pairs), "-o", str(run), "--resume"], ["restore", str(run / "last.pt"),
+                                                                       str(tmp_path / "x.png"), "-o", str(tmp_path / "o")]):
+        code, _, err = run_cli(args, capsys, monkeypatch)
+        assert code == 2 and err.count("\n") == 1, err
+        assert f"{run / 'last.pt'}: is corrupt or not a lensim checkpoint" in err
+
+
+def test_checkpoints_within_an_epoch_every_n_steps(pairs: Path, tmp_path: Path):
+    from lensim.restore.train import TrainProgress
+
+    run = tmp_path / "run"
+    seen: list[int | None] = []
+
+    def look(p: TrainProgress) -> None:
+        if p.kind == "step":
+            last = run / "last.pt"
+            seen.append(torch.load(last, weights_only=True)["step"] if last.exists() else None)
+
+    train(pairs, run, epochs=1, max_steps_per_epoch=4, checkpoint_every_steps=2, progress=look, **TINY)
+    assert seen == [None, None, 2, 2]  # written after steps 2 (mid-epoch) and 4 (the epoch's end)
+    ckpt = torch.load(run / "last.pt", weights_only=True)
+    assert ckpt["step"] == 4 and ckpt["epoch"] == 1
 
 
 def test_budget_progress_reports_seconds_against_the_budget(pairs: Path, tmp_path: Path):

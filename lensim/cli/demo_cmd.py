@@ -49,7 +49,7 @@ def report_command(
     Example: lensim report lensim-demo/
     """
     from lensim.errors import InputError
-    from lensim.io import read_json
+    from lensim.io import folder_lock, read_json
     from lensim.report import write_report
 
     input_folder(demo_dir, what="folder written by `lensim demo`")
@@ -59,10 +59,11 @@ def report_command(
     report = read_json(path, "demo report")
     if not isinstance(report, dict):
         raise InputError(str(path), None, f"expected a JSON object (a demo report), got a {type(report).__name__}")
-    try:
-        written = write_report(demo_dir, report, demo_dir / "figures")
-    except KeyError as e:
-        raise InputError(str(path), str(e.args[0]), "missing; expected a report written by `lensim demo`") from None
-    except (TypeError, ValueError, AttributeError) as e:
-        raise InputError(str(path), None, f"not a report written by `lensim demo` ({e})") from None
+    with folder_lock(demo_dir):  # not while a demo writes there
+        try:
+            written = write_report(demo_dir, report, demo_dir / "figures")
+        except KeyError as e:
+            raise InputError(str(path), str(e.args[0]), "missing; expected a report written by `lensim demo`") from None
+        except (TypeError, ValueError, AttributeError) as e:
+            raise InputError(str(path), None, f"not a report written by `lensim demo` ({e})") from None
     console.print(f"wrote {written}", highlight=False)

@@ -19,12 +19,14 @@ from lensim.cli.common import console, print_json
 from lensim.cli.validate import at_least, choice, in_range, input_folder, output_folder, positive
 from lensim.cli.validate import device as check_device
 from lensim.errors import InputError
-from lensim.restore.train import FROZEN_ON_RESUME, TrainConfig, TrainProgress, TrainResult
+from lensim.io import LOCK_NAME
+from lensim.restore.train import TrainConfig, TrainProgress, TrainResult
 
 _D = TrainConfig()
 
 
 def train_command(
+    ctx: typer.Context,
     dataset: Path = typer.Argument(..., help="Pairs folder from `lensim dataset make`."),
     output: Path = typer.Option(..., "-o", "--output", help="Run folder (checkpoints, logs)."),
     epochs: int = typer.Option(_D.epochs, "--epochs", help="Epochs in total (paper: 30)."),
@@ -55,7 +57,14 @@ def train_command(
                                         help="Cap on steps per epoch (0: whole epochs)."),
     time_budget_s: float = typer.Option(_D.time_budget_s or 0.0, "--time-budget-s", help="Stop cleanly once the "
                                         "run has trained this many seconds in all, resumes included (0: none)."),
-    resume: bool = typer.Option(False, "--resume", help="Continue the run in OUTPUT from last.pt."),
+    checkpoint_every_s: float = typer.Option(_D.checkpoint_every_s or 0.0, "--checkpoint-every-s", help="Also "
+                                             "write last.pt within an epoch every N seconds of training (0: at "
+                                             "epoch ends only)."),
+    checkpoint_every_steps: int = typer.Option(_D.checkpoint_every_steps or 0, "--checkpoint-every-steps",
+                                               help="Also write last.pt every N optimizer steps (0: off)."),
+    resume: bool = typer.Option(False, "--resume", help="Continue the run in OUTPUT from last.pt with its stored "
+                                "settings; options given change those that may change (--epochs, --time-budget-s, "
+                                "--device, --no-amp, checkpoint intervals), others must match."),
     seed: int = typer.Option(_D.seed, "--seed", help="Seed of initialisation, data order, crops and augmentation."),
     device: str = typer.Option(_D.device, "--device", help="cpu, cuda or cuda:N (mixed precision on CUDA)."),
     no_amp: bool = typer.Option(not _D.amp, "--no-amp", help="Full float32 on CUDA."),
@@ -74,10 +83,13 @@ def train_command(
     _check_recipe(epochs, batch_size, lr, lr_halve_every, lr_schedule, val_fraction, steps_per_epoch, time_budget_s)
     _check_network(width, depth, deformable_groups, deformable_scales, field_modulation, no_fov)
     at_least(threads, 0, "--threads", what="a number of threads (0: PyTorch's default)")
+    at_least(checkpoint_every_s, 0.0, "--checkpoint-every-s", "s", "an interval (0: at epoch ends only)")
+    at_least(checkpoint_every_steps, 0, "--checkpoint-every-steps", what="a number of steps (0: off)")
     check_device(device)
     input_folder(dataset, what="pairs folder")
     output_folder(output)
-    _check_crop(dataset, crop)
+    if not resume or _given(ctx, "crop"):  # a resumed run has its own crop
+        _check_crop(dataset, crop)
     if threads > 0:
         torch.set_num_threads(threads)
     overrides: dict[str, Any] = {
@@ -88,16 +100,17 @@ def train_command(
         "field_modulation": field_modulation, "use_deformable": not no_deformable, "use_context": not no_context,
         "val_fraction": val_fraction, "max_steps_per_epoch": steps_per_epoch or None,
         "time_budget_s": time_budget_s if time_budget_s > 0 else None, "seed": seed, "device": device,
-        "amp": not no_amp,
+        "amp": not no_amp, "checkpoint_every_s": checkpoint_every_s if checkpoint_every_s > 0 else None,
+        "checkpoint_every_steps": checkpoint_every_steps or None,
     }
-    if resume:  # the architecture and recipe come from the checkpoint
-        overrides = {k: v for k, v in overrides.items() if k not in FROZEN_ON_RESUME}
+    if resume:  # the checkpoint's settings, changed only where an option is given
+        overrides = {k: v for k, v in overrides.items() if _given(ctx, _OPTION_OF.get(k, k))}
     prog, callback = _progress(epochs, show=not quiet and not json_out)
     new_run = not output.exists()
     try:
         result = train(dataset, output, TrainConfig(), resume=resume, progress=callback, **overrides)
     except BaseException:
-        if new_run and not any(output.glob("*.pt")):
+        if new_run and not any(output.glob("*.pt")) and not (output / LOCK_NAME).exists():  # not another's run
             shutil.rmtree(output, ignore_errors=True)  # no checkpoint: leave no half-made run behind
         raise
     finally:
@@ -144,6 +157,19 @@ def _check_crop(dataset: Path, crop: int) -> None:
         stored = read_pairs_manifest(dataset).get("size")
         if isinstance(stored, int) and crop > stored:
             raise InputError("--crop", None, f"expected at most the dataset's crop size {stored} px, got {crop} px")
+
+
+# TrainConfig fields whose option's parameter has another name
+_OPTION_OF = {"use_fov": "no_fov",
+              "use_deformable": "no_deformable", "use_context": "no_context", "max_steps_per_epoch": "steps_per_epoch",
+              "amp": "no_amp"}
+
+
+def _given(ctx: typer.Context, parameter: str) -> bool:
+    """Whether the user gave the option of ``parameter`` (not left at its default). By the
+    source's name: typer may bring its own copy of click's ParameterSource."""
+    source = ctx.get_parameter_source(parameter)
+    return source is not None and source.name not in ("DEFAULT", "DEFAULT_MAP")
 
 
 def _progress(epochs: int, show: bool) -> tuple[Any, Callable[[TrainProgress], None] | None]:

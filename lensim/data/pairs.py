@@ -29,8 +29,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import math
-import os
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
@@ -44,7 +43,6 @@ from lensim.psf.bank import PSFBank
 from lensim.render.mapping import native_mapping
 from lensim.render.pipeline import simulate
 from lensim.sensor.profile import SensorProfile, load_sensor
-from lensim.workers import exit_with_parent
 
 
 
@@ -63,7 +61,6 @@ class PairJob:
     noise: bool
     demosaic: str
     placements: int = 1
-    parent_pid: int | None = None  # set for a local cluster's workers: they exit when it dies
 
 
 def image_seed(seed: int, index: int, name: str) -> int:
@@ -113,8 +110,6 @@ def place_on_sensor(h: int, w: int, sensor: SensorProfile, k: int, placements: i
 
 def make_pairs_for_image(job: PairJob) -> dict:
     """Simulate one photo and write its crops; returns (and writes) its record."""
-    if job.parent_pid is not None:
-        exit_with_parent(job.parent_pid)  # a killed `dataset make` leaves no worker computing
     torch.set_num_threads(1)
     out = Path(job.out_dir)
     sensor = load_sensor(job.sensor)
@@ -283,8 +278,6 @@ def _run_jobs(todo: list[PairJob], total: int, workers: int, scheduler: str | No
 
     cluster = None if scheduler else LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                                   dashboard_address=None)
-    if cluster is not None:  # our own worker processes: tie them to this one
-        todo = [replace(j, parent_pid=os.getpid()) for j in todo]
     try:
         with Client(scheduler or cluster) as client:
             for fut in as_completed(client.map(make_pairs_for_image, todo, pure=False)):

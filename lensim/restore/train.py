@@ -16,7 +16,8 @@ Run folder:
                       completed), step (optimizer steps done), loss (mean training MSE
                       of the epoch's steps in this call), val_psnr (dB), val_ssim, lr
                       (used during the epoch), seconds (since this call started)
-    RUN/last.pt       latest checkpoint (every epoch and when stopped)
+    RUN/last.pt       latest checkpoint (every epoch, when stopped, and within an epoch
+                      every TrainConfig.checkpoint_every_s seconds / _steps steps)
     RUN/best.pt       checkpoint with the best validation PSNR so far
 Checkpoints (format, atomic writes, resume): lensim.restore.checkpoint. Learning-rate
 schedules and the time budget's clock: lensim.restore.schedule.
@@ -94,6 +95,10 @@ class TrainConfig:
     time_budget_s: stop cleanly (checkpoint, log row) once the run has trained this many
         seconds in all, counting the calls before a resume (None: no limit).
     max_steps_per_epoch: cap on steps per epoch (None: the whole epoch), for quick runs.
+    checkpoint_every_s: also write RUN/last.pt within an epoch once this many seconds of
+        training passed since the last checkpoint (None: at epoch ends only), so a kill
+        loses at most that much work; a resume from it continues the same batches.
+    checkpoint_every_steps: likewise every this many optimizer steps (None: off).
     """
 
     epochs: int = 30
@@ -118,6 +123,8 @@ class TrainConfig:
     amp: bool = True
     time_budget_s: float | None = None
     max_steps_per_epoch: int | None = None
+    checkpoint_every_s: float | None = 300.0
+    checkpoint_every_steps: int | None = None
 
     def model_kwargs(self) -> dict[str, Any]:
         return {"width": self.width, "depth": self.depth, "use_fov": self.use_fov,
@@ -231,17 +238,21 @@ def evaluate_pairs(model: torch.nn.Module, loader: Iterator[dict[str, torch.Tens
 
 def _resolve_config(config: TrainConfig | None, overrides: dict[str, Any], ckpt: dict[str, Any] | None,
                     source: str) -> TrainConfig:
-    """The run's settings: ``config`` with ``overrides``; when resuming, the settings of
-    FROZEN_ON_RESUME come from the checkpoint (a differing explicit value is an InputError
-    naming ``source``). Checked before any work starts."""
-    cfg = TrainConfig(**{**asdict(config or TrainConfig()), **overrides})
-    if ckpt is not None:
-        saved = ckpt["train_config"]
+    """The run's settings: ``config`` with ``overrides``. When resuming, every setting comes
+    from the checkpoint (``config`` is not used) and ``overrides`` change only those outside
+    FROZEN_ON_RESUME (a differing value of a frozen one is an InputError naming ``source``),
+    so a resumed run keeps its epochs and time budget unless told otherwise. Checked
+    before any work starts."""
+    if ckpt is None:
+        cfg = TrainConfig(**{**asdict(config or TrainConfig()), **overrides})
+    else:
+        known = set(asdict(TrainConfig()))
+        saved = {k: v for k, v in ckpt["train_config"].items() if k in known}
         diff = [k for k in FROZEN_ON_RESUME if k in overrides and overrides[k] != saved.get(k)]
         if diff:
             raise InputError(source, ", ".join(diff), f"differs from the run being resumed "
                              f"({', '.join(f'{k}={saved.get(k)!r}' for k in diff)}); expected the same value or none")
-        cfg = TrainConfig(**{**saved, **{k: v for k, v in asdict(cfg).items() if k not in FROZEN_ON_RESUME}})
+        cfg = TrainConfig(**{**saved, **{k: v for k, v in overrides.items() if k not in FROZEN_ON_RESUME}})
     if cfg.epochs < 1 or cfg.batch_size < 1 or cfg.lr <= 0 or cfg.lr_halve_every < 1:
         raise InputError(None, "config", f"expected epochs, batch_size, lr_halve_every >= 1 and lr > 0, got "
                          f"epochs={cfg.epochs}, batch_size={cfg.batch_size}, lr={cfg.lr}, "
@@ -327,7 +338,29 @@ class _Loop:
     log: RunLog | None  # rank 0 only
     clock: BudgetClock
     progress: Callable[[TrainProgress], None] | None
+    run: Path
+    context: dict[str, Any]  # what checkpoints record besides the training state
     last_loss: float = math.nan
+    checkpoint_s: float = 0.0  # clock.call_s() at the last checkpoint
+    checkpoint_step: int = 0  # the optimizer step of the last checkpoint
+    val_metrics: dict[str, float] = field(default_factory=dict)  # of the last validation
+
+
+def _checkpoint_due(loop: _Loop) -> bool:
+    """Whether TrainConfig.checkpoint_every_s / _steps ask for a checkpoint now (rank 0)."""
+    cfg = loop.cfg
+    steps = cfg.checkpoint_every_steps
+    every_s = cfg.checkpoint_every_s
+    return bool((steps and loop.state.step - loop.checkpoint_step >= steps)
+                or (every_s and loop.clock.call_s() - loop.checkpoint_s >= every_s))
+
+
+def _save_checkpoint(loop: _Loop, best: bool) -> None:
+    """Write RUN/last.pt (and RUN/best.pt when ``best``) with the last validation's figures."""
+    metrics = loop.val_metrics
+    loop.state.save(loop.run, loop.clock.run_s(), {**loop.context, "val_psnr": metrics.get("psnr"),
+                                                   "val_ssim": metrics.get("ssim")}, best=best)
+    loop.checkpoint_s, loop.checkpoint_step = loop.clock.call_s(), loop.state.step
 
 
 def _optimizer_step(loop: _Loop, batch: dict[str, torch.Tensor]) -> float:
@@ -368,13 +401,14 @@ def _train_epoch(loop: _Loop, batches: list[list[int]]) -> tuple[bool, float]:
         if loop.progress is not None and loop.ranks.main:
             loop.progress(TrainProgress("step", state.epoch, cfg.epochs, state.step, state.batch_in_epoch,
                                         len(batches), loop.last_loss, loop.lr.lr, seconds))
+        if loop.ranks.main and state.batch_in_epoch < len(batches) and _checkpoint_due(loop):
+            _save_checkpoint(loop, best=False)  # within the epoch: a kill loses at most the interval
         if rank0_decides(loop.clock.spent(), loop.ranks, loop.device) and state.batch_in_epoch < len(batches):
             return True, sum(losses) / len(losses)
     return False, sum(losses) / len(losses) if losses else loop.last_loss
 
 
-def _validate(loop: _Loop, run: Path, mean_loss: float, epoch_lr: float,
-              context: dict[str, Any]) -> tuple[dict[str, Any], dict[str, float]]:
+def _validate(loop: _Loop, mean_loss: float, epoch_lr: float) -> tuple[dict[str, Any], dict[str, float]]:
     """Rank 0 after an epoch (or a budget stop): validation metrics, a log row, last.pt and,
     when validation PSNR improved (or there is none yet), best.pt. Returns (the log row,
     the metrics of evaluate_pairs; empty without validation photos)."""
@@ -388,8 +422,8 @@ def _validate(loop: _Loop, run: Path, mean_loss: float, epoch_lr: float,
     improved = math.isfinite(vp) and vp > state.best_val_psnr
     if improved:
         state.best_val_psnr = vp
-    state.save(run, loop.clock.run_s(), {**context, "val_psnr": metrics.get("psnr"), "val_ssim": metrics.get("ssim")},
-               best=improved or not (run / BEST).exists())
+    loop.val_metrics = metrics
+    _save_checkpoint(loop, best=improved or not (loop.run / BEST).exists())
     return row, metrics
 
 
@@ -411,9 +445,10 @@ def train(
         run_dir: output folder (created); must not hold a run unless ``resume``.
         config: settings (TrainConfig); keyword ``overrides`` replace single fields, e.g.
             ``train(ds, run, epochs=2, width=8)``.
-        resume: continue from RUN/last.pt. The settings listed in FROZEN_ON_RESUME are
-            taken from the checkpoint (a differing explicit value is an InputError);
-            epochs, time_budget_s, device, amp and val_batch_size may change.
+        resume: continue from RUN/last.pt with the settings stored there (``config`` is
+            not used): ``overrides`` may change epochs, time_budget_s, device, amp,
+            val_batch_size and the checkpoint intervals; a differing value of one listed in
+            FROZEN_ON_RESUME is an InputError.
         progress: called with a TrainProgress after every step and every validation.
         The run folder is locked while training (lensim.io.folder_lock: a second writer
         is refused at once).
@@ -449,7 +484,8 @@ def _train(dataset_dir: str | Path, run: Path, config: TrainConfig | None, resum
                      state.step if ckpt is not None else None)
     val_loader = DataLoader(data.val, batch_size=cfg.val_batch_size, shuffle=False, collate_fn=_collate)
     loop = _Loop(cfg, state, lr, net, autocast, ranks, device, data, val_loader, log,
-                 BudgetClock(cfg.time_budget_s, state.train_seconds), progress)
+                 BudgetClock(cfg.time_budget_s, state.train_seconds), progress, run, context,
+                 checkpoint_step=state.step)
     history: list[dict[str, Any]] = []
     metrics: dict[str, float] = {}
     stopped = False
@@ -464,7 +500,7 @@ def _train(dataset_dir: str | Path, run: Path, config: TrainConfig | None, resum
             state.batch_in_epoch = 0
             lr.after_epoch()
         if ranks.main:
-            row, metrics = _validate(loop, run, mean_loss, epoch_lr, context)
+            row, metrics = _validate(loop, mean_loss, epoch_lr)
             history.append(row)
             if progress is not None:
                 progress(TrainProgress("stop" if stopped else "epoch", state.epoch - (0 if stopped else 1), cfg.epochs,
