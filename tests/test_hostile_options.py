@@ -97,6 +97,27 @@ LENS = [
     case("spot-image-height-nan", "lens spot cooke_triplet --json --image-height-mm nan", "--image-height-mm"),
 ]
 
+LENSFUN = ("lens lensfun cooke_triplet --maker m --model x --mount Generic --crop-factor 1.5 --focal 50 "
+           "--aperture 5.6 -o {t}/p.xml ")
+LENS_OUTPUTS = [
+    case("field-sensor-missing", "lens field cooke_triplet --sensor {t}/nofile.yaml", "nofile.yaml"),
+    case("field-sensor-utf16", "lens field cooke_triplet --sensor {t}/s.yaml", "s.yaml",
+         make=text("s.yaml", "name: x\n", "utf-16")),
+    case("field-field-above-1", "lens field cooke_triplet --field 2", "field", "2"),
+    case("field-image-height-inf", "lens field cooke_triplet --image-height-mm inf", "--image-height-mm"),
+    case("plot-kind-output-folder", "lens plot cooke_triplet --kind distortion -o {t}/d.png", "d.png",
+         make=folder("d.png")),
+    case("plot-layout-with-sensor", "lens plot cooke_triplet -o {t}/p.png --sensor phone", "--sensor"),
+    case("lensfun-output-folder", LENSFUN, "p.xml", make=folder("p.xml")),
+    case("lensfun-output-under-file", LENSFUN.replace("{t}/p.xml", "{t}/afile/p.xml"), "afile", make=AFILE),
+    case("lensfun-output-suffix", LENSFUN.replace("p.xml", "p.txt"), "p.txt"),
+    case("lensfun-crop-factor-zero", LENSFUN.replace("--crop-factor 1.5", "--crop-factor 0"), "crop"),
+    case("lensfun-aperture-negative", LENSFUN.replace("--aperture 5.6", "--aperture -2"), "aperture"),
+    case("lensfun-focal-nan", LENSFUN.replace("--focal 50", "--focal nan"), "focal"),
+    case("lensfun-distance-negative", LENSFUN + "--distance -1", "distance"),
+    case("lensfun-sensor-missing", LENSFUN + "--sensor {t}/nofile.yaml", "nofile.yaml"),
+]
+
 SIMULATE = [
     case("simulate-format-jpg", SIM + "--format jpg", "--format", "jpg"),
     case("simulate-raw-format-jpg", "simulate {w.photo} -o {t}/out --raw --format jpg", "--format", "jpg"),
@@ -223,7 +244,7 @@ USAGE = [
     case("usage-bad-choice", "lens spot cooke_triplet --json --reference banana", "--reference", "banana"),
 ]
 
-ALL: list[Case] = PSF_COMPUTE + PSF_BANK + LENS + SIMULATE + DATASET_MAKE + TRAINING + RESTORING + EVALUATING + USAGE
+ALL: list[Case] = PSF_COMPUTE + PSF_BANK + LENS + LENS_OUTPUTS + SIMULATE + DATASET_MAKE + TRAINING + RESTORING + EVALUATING + USAGE
 
 
 @pytest.mark.parametrize("c", ALL, ids=[c.id for c in ALL])
@@ -233,3 +254,13 @@ def test_bad_option(c: Case, world, tmp_path, capsys, monkeypatch) -> None:
 
 def test_case_ids_are_unique() -> None:
     assert len({c.id for c in ALL}) == len(ALL)
+
+
+def test_warnings_and_errors_print_text_literally(capsys) -> None:
+    """Square brackets are text, not rich markup; control characters are escaped."""
+    from lensim.cli.common import _show_warning, print_error_line
+
+    _show_warning("bad[bold]name.yaml: ccm [[1, 2], [3, 4]]", UserWarning, "x.py", 1)
+    print_error_line("error", "red", "a\x00b [red]c[/red]\nd")
+    assert capsys.readouterr().err.splitlines() == ["warning: bad[bold]name.yaml: ccm [[1, 2], [3, 4]]",
+                                                    "error: a\\x00b [red]c[/red] d"]

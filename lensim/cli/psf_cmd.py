@@ -118,15 +118,7 @@ def bank(
         raise InputError("<command line>", "lens", "missing; expected a lens file or built-in name (argument or --lens)")
     if (sensor is None) == (pixel_um is None):
         raise InputError("<command line>", "--sensor/--pixel-um", "expected exactly one of them")
-    if pixel_um is not None:
-        positive(pixel_um, "--pixel-um", "um", "a pixel pitch")
-    if kernel:
-        at_least(kernel, 1, "--kernel", "px", "a kernel size")
-    choice(method, METHODS, "--method")
-    if max_spacing_um is not None:
-        positive(max_spacing_um, "--max-spacing-um", "um", "a PSF spacing")
-    at_least(workers, 1, "--workers", what="a number of processes")
-    output_folder(output)
+    _check_bank_options(pixel_um, kernel, method, max_spacing_um, workers, output)
     settings = bank_settings(fields, wavelengths_nm, pupil_samples, aiming=aiming, kernel_pixels=kernel or None)
     lens = load_lens(name)
     profile = load_sensor(sensor) if sensor is not None else None
@@ -152,6 +144,20 @@ def bank(
                       f"{info['kernel_pixels']}x{info['kernel_pixels']} px of {info['pixel_pitch_um']:g} um, fine grid "
                       f"{info['oversampling']}x per pixel ({info['fine_spacing_um']:.4g} um), response {info['response']} "
                       f"under {info['illuminant']}, {info['seconds']:.1f} s", highlight=False)
+
+
+def _check_bank_options(pixel_um: float | None, kernel: int, method: str, max_spacing_um: float | None, workers: int,
+                        output: Path) -> None:
+    """psf bank's numbers, method and output folder, before any work."""
+    if pixel_um is not None:
+        positive(pixel_um, "--pixel-um", "um", "a pixel pitch")
+    if kernel:
+        at_least(kernel, 1, "--kernel", "px", "a kernel size")
+    choice(method, METHODS, "--method")
+    if max_spacing_um is not None:
+        positive(max_spacing_um, "--max-spacing-um", "um", "a PSF spacing")
+    at_least(workers, 1, "--workers", what="a number of processes")
+    output_folder(output)
 
 
 @psf_app.command("show")

@@ -89,18 +89,8 @@ def restore_command(
     Example: lensim restore runs/a photo.png -o restored/;
     lensim restore runs/a raws/ -o restored/ --dng --workers 2
     """
-    if bits not in (0, 8, 16):
-        raise InputError("--bits", None, f"expected 8 or 16, got {bits}")
-    if tile < 16 or not 0 <= overlap < tile:
-        raise InputError("--tile/--overlap", None, f"expected a tile of at least 16 pixels and 0 <= overlap < tile, got "
-                         f"tile {tile}, overlap {overlap}")
-    at_least(workers, 1, "--workers", what="a number of processes")
-    at_least(threads, 0, "--threads", what="a number of threads (0: PyTorch's default)")
-    check_device(device)
+    _check_options(bits, tile, overlap, workers, threads, device, output, checkpoint)
     offset = _parse_pair(sensor_offset, "--sensor-offset") if sensor_offset else None
-    output_folder(output)
-    if not Path(checkpoint).exists():
-        raise InputError(str(checkpoint), None, "no such run folder or checkpoint file")
     raws, photos = _split_inputs(images)
     if dng and not raws:
         raise InputError("--dng", None, "applies to camera raw inputs; none were given")
@@ -124,6 +114,22 @@ def restore_command(
                                           quiet or json_out))
     if json_out:
         print_json({"checkpoint": info["path"], "images": written})
+
+
+def _check_options(bits: int, tile: int, overlap: int, workers: int, threads: int, device: str, output: Path,
+                   checkpoint: Path) -> None:
+    """restore's numbers, device, output folder and checkpoint path, before any work."""
+    if bits not in (0, 8, 16):
+        raise InputError("--bits", None, f"expected 8 or 16, got {bits}")
+    if tile < 16 or not 0 <= overlap < tile:
+        raise InputError("--tile/--overlap", None, f"expected a tile of at least 16 pixels and 0 <= overlap < tile, got "
+                         f"tile {tile}, overlap {overlap}")
+    at_least(workers, 1, "--workers", what="a number of processes")
+    at_least(threads, 0, "--threads", what="a number of threads (0: PyTorch's default)")
+    check_device(device)
+    output_folder(output)
+    if not Path(checkpoint).exists():
+        raise InputError(str(checkpoint), None, "no such run folder or checkpoint file")
 
 
 def _photo_output_name(path: Path) -> str:
