@@ -19,6 +19,11 @@ class InputError(LensimError):
         parts = [p for p in (source, field, message) if p]
         super().__init__(": ".join(str(p) for p in parts).replace("\n", " "))
 
+    def __reduce__(self):
+        """Pickle by the three parts, so an error raised in a worker process (psf bank and
+        dataset make --workers) reaches the parent as the same one-line error."""
+        return self.__class__, (self.source, self.field, self.message)
+
 
 class UnknownGlassError(InputError):
     """A material name that no catalogue knows."""

@@ -74,3 +74,16 @@ def test_failed_train_leaves_no_run_without_a_checkpoint(world, tmp_path, capsys
         run_cli(["train", str(world.data), "-o", str(tmp_path / "r"), "--epochs", "1", "--width", "4", "--depth", "2",
                  "--crop", "32", "--quiet"], capsys, monkeypatch)
     assert not (tmp_path / "r").exists()
+
+
+def test_input_errors_cross_process_boundaries() -> None:
+    """Worker processes (psf bank, dataset make --workers) send errors to the parent pickled."""
+    import pickle
+
+    from lensim.errors import InputError, UnknownGlassError
+
+    for err in (InputError("a.yaml", "surfaces[1].radius", "expected a number, got 'x'"),
+                UnknownGlassError(None, "material", "unknown glass 'N-BKK7'")):
+        back = pickle.loads(pickle.dumps(err))
+        assert type(back) is type(err) and str(back) == str(err)
+        assert (back.source, back.field, back.message) == (err.source, err.field, err.message)
