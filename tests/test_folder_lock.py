@@ -78,3 +78,32 @@ def test_a_folder_that_cannot_be_written_is_one_line(tmp_path):
         locked.mkdir(mode=0o500)
         with pytest.raises(InputError, match="cannot use it as an output folder"), folder_lock(locked):
             pass
+
+
+@pytest.mark.parametrize("command", ["demo", "train", "ablation", "report"])
+def test_commands_refuse_a_folder_another_run_writes(command, tmp_path, capsys, monkeypatch):
+    """The lock is wired into the commands: each stops at once (before any work) with one
+    line naming the folder and the other pid, and leaves the folder as it was."""
+    from cli_runner import run_cli
+    from test_train import make_pairs
+
+    folder = tmp_path / "out"
+    pairs = make_pairs(tmp_path / "pairs") if command in ("train", "ablation") else None
+    if command == "report":
+        folder.mkdir()
+        (folder / "report.json").write_text("{}")
+    args = {"demo": ["demo", "--quick", "--quiet", "-o", str(folder)],
+            "train": ["train", str(pairs), "-o", str(folder), "--width", "8", "--depth", "2", "--crop", "32",
+                      "--quiet"],
+            "ablation": ["ablation", str(pairs), "-o", str(folder), "--time-budget-s", "1", "--crop", "32"],
+            "report": ["report", str(folder)]}[command]
+    proc = _hold_in_subprocess(folder)
+    try:
+        before = sorted(p.name for p in folder.iterdir())
+        code, _, err = run_cli(args, capsys, monkeypatch)
+        assert code == 2 and err.count("\n") == 1, err
+        assert f"{folder}: another lensim run (pid {proc.pid} on " in err
+        assert sorted(p.name for p in folder.iterdir()) == before
+    finally:
+        proc.kill()
+        proc.wait()
