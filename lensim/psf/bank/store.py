@@ -22,13 +22,10 @@ _INFORMATIVE_KEYS = ("lens_file", "lensim_version")
 
 
 def lensim_version() -> str:
-    """The installed lensim version recorded in manifests ('unknown' from a source tree)."""
-    try:
-        from importlib.metadata import version
+    """The lensim version recorded in manifests (lensim.__version__, its one home)."""
+    from lensim import __version__
 
-        return version("lensim")
-    except Exception:  # not installed (source tree on sys.path)
-        return "unknown"
+    return __version__
 
 
 def field_file(index: int) -> str:
