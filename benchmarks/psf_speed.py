@@ -112,9 +112,9 @@ def optiland_round(lens: Lens, para: ParaxialData, aiming: str, best: dict) -> N
     """Time optiland's whole HuygensPSF and its pupil tracing alone once for one aiming
     mode, keeping the minimum per stage in `best` (s); also the NCC of lensim's PSF on
     optiland's sample points against optiland's."""
+    import optiland.backend as be
     from optiland.psf import HuygensPSF
     from optiland.wavefront import Wavefront
-    import optiland.backend as be
 
     o = optiland_cooke(aiming, para.stop_semi_diameter_mm)
     pitch = SPACING_UM * 1e-3 * (GRID - 1) / GRID  # optiland's spacing is pitch N/(N-1)

@@ -20,8 +20,8 @@ from lensim.assets import DEFAULT_LENS
 from lensim.assets.images import available_sample_images, read_sample_image
 from lensim.errors import InputError
 from lensim.images import write_image
-from lensim.optics.analysis import first_order_summary
 from lensim.io import atomic_write_json, folder_lock, read_json
+from lensim.optics.analysis import first_order_summary
 from lensim.optics.lens_file import load_lens
 from lensim.sensor.profile import DEFAULT_SENSOR, SensorProfile, load_sensor
 

@@ -185,8 +185,8 @@ def optiland_cooke(aiming: str = "paraxial", stop_semi_diameter_mm: float | None
 def optiland_pupil(rings: int = 6) -> torch.Tensor:
     """optiland's hexapolar pupil points (its SpotDiagram's pattern: centre, then rings of
     6, 12, ... points) as normalized pupil coordinates (P, 2) for lensim."""
-    from optiland.distribution import HexagonalDistribution
     import optiland.backend as be
+    from optiland.distribution import HexagonalDistribution
 
     d = HexagonalDistribution()
     d.generate_points(rings)
@@ -196,8 +196,8 @@ def optiland_pupil(rings: int = 6) -> torch.Tensor:
 def optiland_rms(op, hy: Sequence[float], rings: int = 6) -> tuple[np.ndarray, np.ndarray]:
     """optiland's RMS spot radii (F, W) in mm at the normalized fields (0, hy) and the
     number of rays it kept (F, W): its SpotDiagram over all wavelengths."""
-    from optiland.analysis import SpotDiagram
     import optiland.backend as be
+    from optiland.analysis import SpotDiagram
 
     sd = SpotDiagram(op, fields=[(0.0, h) for h in hy], wavelengths="all", num_rings=rings)
     rms = np.array([[float(r) for r in per_field] for per_field in sd.rms_spot_radius()])

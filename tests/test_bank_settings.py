@@ -4,8 +4,8 @@ asking for the same cached bank with the same options (no bank is computed here)
 from __future__ import annotations
 
 import numpy as np
-import torch
 import pytest
+import torch
 from typer.testing import CliRunner
 
 from lensim.cli import app

@@ -20,11 +20,11 @@ from lensim.optics.lens import Lens
 from lensim.optics.lens_file import lens_from_dict, load_lens
 from lensim.optics.materials import ConstantIndex
 from lensim.optics.paraxial import paraxial_data
-from lensim.plots.lens import plot_layout, plot_spots, trace_ray_paths
 from lensim.optics.pupil import hexapolar
 from lensim.optics.spot import spot_diagram
 from lensim.optics.surfaces import Surface
 from lensim.optics.trace import VIGNETTED
+from lensim.plots.lens import plot_layout, plot_spots, trace_ray_paths
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 

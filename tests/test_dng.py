@@ -10,8 +10,17 @@ import pytest
 import torch
 
 from lensim.errors import InputError
-from lensim.raw.dng import (DngCamera, DngColour, DngExif, profile_colour, read_simulation_record, write_capture_dng,
-                            write_cfa_dng, write_linear_dng, write_srgb_as_linear_dng)
+from lensim.raw.dng import (
+    DngCamera,
+    DngColour,
+    DngExif,
+    profile_colour,
+    read_simulation_record,
+    write_capture_dng,
+    write_cfa_dng,
+    write_linear_dng,
+    write_srgb_as_linear_dng,
+)
 from lensim.sensor import isp
 from lensim.sensor.calibration import ccm_from_dng_color_matrix, dng_color_matrix_from_ccm
 from lensim.sensor.profile import load_sensor

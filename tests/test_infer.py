@@ -14,8 +14,8 @@ from typer.testing import CliRunner
 
 from lensim.errors import InputError
 from lensim.images import read_image, write_image
-from lensim.restore.fov import fov_channels
 from lensim.restore.checkpoint import load_checkpoint
+from lensim.restore.fov import fov_channels
 from lensim.restore.infer import image_sensor_geometry, restore_image, tile_starts
 from lensim.restore.network import FieldAwareUNet
 from lensim.restore.train import train

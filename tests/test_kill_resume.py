@@ -16,13 +16,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from cli_runner import run_cli
-from test_train import make_pairs
 
 import lensim
+from cli_runner import run_cli
 from lensim.assets.images import sample_image_path
 from lensim.images import read_image, write_image
 from lensim.restore.run_log import read_csv
+from test_train import make_pairs
 
 ROOT = Path(lensim.__file__).resolve().parents[1]  # the lensim the subprocesses run
 

@@ -9,8 +9,8 @@ import warnings
 
 import numpy as np
 import pytest
-from cli_runner import run_cli
 
+from cli_runner import run_cli
 from lensim.optics.aiming import chief_ray_image_height
 from lensim.optics.field_analysis import distortion, relative_illumination
 from lensim.optics.lens_file import load_lens

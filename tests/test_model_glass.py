@@ -10,8 +10,8 @@ import warnings
 
 import numpy as np
 import pytest
-from cli_runner import run_cli
 
+from cli_runner import run_cli
 from lensim.errors import InputError
 from lensim.optics.aiming import chief_ray_image_height
 from lensim.optics.lens_file import lens_from_dict, lens_to_dict, load_lens, match_glasses

@@ -28,7 +28,6 @@ from lensim.optics.pupil import hexapolar, square_grid
 from lensim.optics.surfaces import Surface
 from lensim.optics.trace import MISSED, OK, VIGNETTED, trace, trace_reference
 from lensim.optics.zemax import read_zmx
-
 from optiland_models import assert_agrees_with_optiland
 
 TOL_MM = 1e-12

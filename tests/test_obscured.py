@@ -31,7 +31,6 @@ from lensim.optics.paraxial import paraxial_data
 from lensim.optics.spot import spot_diagram
 from lensim.optics.surfaces import Surface
 from lensim.psf.compute import compute_psf
-
 from reference_lenses import REFERENCE_LENSES
 
 WL = 0.55

@@ -5,8 +5,8 @@ import pytest
 import torch
 
 from lensim.assets.images import sample_image_path
-from lensim.errors import InputError
 from lensim.data.pairs import crop_capture, make_dataset, place_on_sensor
+from lensim.errors import InputError
 from lensim.images import read_image, write_image
 from lensim.optics.lens_file import load_lens
 from lensim.psf.bank import compute_bank

@@ -40,10 +40,9 @@ import math
 import warnings
 
 import numpy as np
+import optiland.backend as be
 import pytest
 import torch
-
-import optiland.backend as be
 from optiland.analysis import SpotDiagram
 from optiland.fileio import load_zemax_file
 from optiland.materials import AbbeMaterial
@@ -53,11 +52,10 @@ from optiland.rays.ray_aiming.initialization import RealReferenceStrategy
 from lensim.optics.aiming import generate_rays, object_field
 from lensim.optics.lens import Lens
 from lensim.optics.lens_file import GlassSubstitutionWarning, load_lens
-from lensim.optics.materials import Air, CatalogGlass, WAVELENGTH_D_UM
+from lensim.optics.materials import WAVELENGTH_D_UM, Air, CatalogGlass
 from lensim.optics.paraxial import paraxial_data
 from lensim.optics.spot import rms_spot_radius
 from lensim.optics.trace import trace
-
 from optiland_models import COOKE_TABLE, lensim_glass, lensim_rms, optiland_cooke, optiland_pupil, optiland_rms
 from reference_lenses import REFERENCE_LENSES
 

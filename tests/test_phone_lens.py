@@ -15,7 +15,6 @@ import warnings
 
 import pytest
 import torch
-from optiland_models import assert_agrees_with_optiland  # imports optiland only when used
 
 from lensim.assets import lens_names
 from lensim.errors import InputError, RayTraceError
@@ -29,6 +28,7 @@ from lensim.optics.trace import trace
 from lensim.render.kernels import check_bank_fits
 from lensim.render.mapping import SensorMapping, map_to_sensor
 from lensim.sensor.profile import load_sensor
+from optiland_models import assert_agrees_with_optiland  # imports optiland only when used
 
 # the patent's stated values (Table 5)
 PATENT_EFL_MM = 3.35

@@ -72,9 +72,8 @@ import math
 from collections.abc import Iterator
 
 import numpy as np
-import pytest
-
 import optiland.backend as be
+import pytest
 from optiland.materials import Material
 from optiland.psf import HuygensPSF
 from optiland.psf.huygens_fresnel import ScalarHuygensPSF, image_vertex_grid
@@ -86,7 +85,6 @@ from lensim.optics.lens import Lens
 from lensim.optics.lens_file import load_lens
 from lensim.optics.paraxial import paraxial_data
 from lensim.psf.compute import compute_psf
-
 from optiland_models import COOKE_TABLE, optiland_cooke
 
 WAVELENGTH_UM = 0.55

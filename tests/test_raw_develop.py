@@ -14,12 +14,12 @@ import numpy as np
 import pytest
 import tifffile
 import torch
-from cli_runner import run_cli
-from raw_fixtures import random_mosaic, write_dng
 
+from cli_runner import run_cli
 from lensim.assets.images import read_sample_image
 from lensim.raw import apply_orientation, develop_raw, read_raw
 from lensim.sensor import isp, load_sensor, sensor_from_dict
+from raw_fixtures import random_mosaic, write_dng
 
 SENSOR = "apsc_mirrorless"  # Sony ILCE-7 colour: raw_fixtures.SONY_ILCE7_MATRIX is its DNG matrix
 

@@ -11,10 +11,10 @@ import json
 import numpy as np
 import pytest
 import yaml
-from cli_runner import run_cli
-from raw_fixtures import random_mosaic, write_dng
 
+from cli_runner import run_cli
 from lensim.sensor import load_sensor
+from raw_fixtures import random_mosaic, write_dng
 
 BLACK, WHITE = 512, 16383
 

@@ -8,11 +8,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from cli_runner import run_cli
-from raw_fixtures import SONY_ILCE7_MATRIX, random_mosaic, write_dng
 
+from cli_runner import run_cli
 from lensim.errors import InputError
 from lensim.raw import read_raw
+from raw_fixtures import SONY_ILCE7_MATRIX, random_mosaic, write_dng
 
 INFO_KEYS = {"make", "model", "lens", "width", "height", "cfa_pattern", "black_level", "white_level",
              "as_shot_wb_gains", "color_matrix", "focal_length_mm", "fno", "focus_distance_m", "iso", "exposure_s",

@@ -50,8 +50,8 @@ def test_report_with_a_missing_key_is_one_line_and_rewrites_nothing(tmp_path, ca
 def test_demo_refuses_a_folder_made_with_other_settings(tmp_path, capsys, monkeypatch):
     """A default-size demo folder rerun with --quick stops at once with one line naming the
     marker and the differing settings (nothing is computed)."""
-    from lensim.demo import DemoSettings, _claim_folder
     from cli_runner import run_cli
+    from lensim.demo import DemoSettings, _claim_folder
 
     _claim_folder(tmp_path, DemoSettings.make(False), quick=False, seed=0)
     _claim_folder(tmp_path, DemoSettings.make(False), quick=False, seed=0)  # the same: resumes

@@ -9,8 +9,7 @@ from lensim.errors import InputError
 from lensim.evaluate.edge_target import make_slanted_edge
 from lensim.evaluate.slanted_edge import mtf_area_ratio, mtf_from_psf, slanted_edge_mtf
 from lensim.optics.lens_file import load_lens
-from lensim.psf.bank import compute_bank
-from lensim.psf.bank import suggest_kernel_pixels
+from lensim.psf.bank import compute_bank, suggest_kernel_pixels
 from lensim.render.kernels import check_bank_fits
 from lensim.render.mapping import SensorMapping, map_to_sensor, native_mapping
 from lensim.render.pipeline import blur_energy_image, simulate

@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 import torch
 
-from lensim.images import write_image
 from lensim.data.manifest import read_pairs_manifest
+from lensim.images import write_image
+from lensim.restore.checkpoint import atomic_torch_save
 from lensim.restore.dataset import PairDataset, crop_refs, split_sources
 from lensim.restore.fov import fov_channels, invert_augment
-from lensim.restore.checkpoint import atomic_torch_save
 from lensim.restore.run_log import read_csv
 from lensim.restore.train import train
 

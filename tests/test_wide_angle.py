@@ -27,7 +27,6 @@ from lensim.optics.paraxial import paraxial_data
 from lensim.optics.spot import spot_diagram
 from lensim.optics.surfaces import Surface
 from lensim.optics.trace import trace
-
 from reference_lenses import REFERENCE_LENSES
 
 WL = 0.5876

@@ -3,10 +3,10 @@ from __future__ import annotations
 
 import typer
 
-from lensim.cli.allocator import keep_freed_memory
-from lensim.cli.common import run_guarded
 from lensim.cli.ablation_cmd import ablation_command
+from lensim.cli.allocator import keep_freed_memory
 from lensim.cli.assets_cmd import assets_command
+from lensim.cli.common import run_guarded
 from lensim.cli.dataset_cmd import dataset_app
 from lensim.cli.demo_cmd import demo_command, report_command
 from lensim.cli.develop_cmd import develop_command

@@ -6,8 +6,16 @@ from pathlib import Path
 import typer
 
 from lensim import assets
-from lensim.cli.bank_options import (bank_for_lens, bank_settings, cache_option, cached_bank, check_response,
-                                     fields_option, pupil_samples_option, wavelengths_option)
+from lensim.cli.bank_options import (
+    bank_for_lens,
+    bank_settings,
+    cache_option,
+    cached_bank,
+    check_response,
+    fields_option,
+    pupil_samples_option,
+    wavelengths_option,
+)
 from lensim.cli.common import console, print_json, progress_bar
 from lensim.cli.validate import at_least, choice, even, input_folder, output_folder
 from lensim.data.pairs import check_photos, list_images, make_dataset

@@ -11,8 +11,16 @@ import torch
 import typer
 
 from lensim import assets
-from lensim.cli.bank_options import (bank_for_lens, bank_settings, cache_option, cached_bank, check_response,
-                                     fields_option, pupil_samples_option, wavelengths_option)
+from lensim.cli.bank_options import (
+    bank_for_lens,
+    bank_settings,
+    cache_option,
+    cached_bank,
+    check_response,
+    fields_option,
+    pupil_samples_option,
+    wavelengths_option,
+)
 from lensim.cli.common import console, print_json
 from lensim.cli.validate import at_least, choice, distinct_outputs, output_folder
 from lensim.errors import InputError

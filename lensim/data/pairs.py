@@ -45,7 +45,6 @@ from lensim.render.pipeline import simulate
 from lensim.sensor.profile import SensorProfile, load_sensor
 
 
-
 @dataclass
 class PairJob:
     """Everything one worker needs for one image (picklable)."""

@@ -33,8 +33,8 @@ from pathlib import Path
 from lensim.errors import InputError, UnknownGlassError
 from lensim.io import decode_text, read_bytes
 from lensim.optics.lens import Lens
-from lensim.optics.paraxial import paraxial_focus_thickness
 from lensim.optics.materials import CATALOGS, Air, Material, resolve_glass
+from lensim.optics.paraxial import paraxial_focus_thickness
 from lensim.optics.surfaces import MAX_ASPHERE_POWER, Surface
 
 INFINITE_THICKNESS_MM = 1e10

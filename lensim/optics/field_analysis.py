@@ -13,8 +13,14 @@ import numpy as np
 import torch
 
 from lensim.errors import InputError, RayTraceError
-from lensim.optics.aiming import (Aiming, chief_ray_image_height, describe_failure, generate_rays, object_field,
-                                  trace_chief_rays)
+from lensim.optics.aiming import (
+    Aiming,
+    chief_ray_image_height,
+    describe_failure,
+    generate_rays,
+    object_field,
+    trace_chief_rays,
+)
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import ParaxialData, paraxial_data, paraxial_image_height
 from lensim.optics.trace import DTYPE, TraceResult, trace

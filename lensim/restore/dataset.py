@@ -37,6 +37,7 @@ from lensim.errors import InputError
 from lensim.images import read_image
 from lensim.restore.fov import augment, fov_channels
 
+
 @dataclass(frozen=True)
 class CropRef:
     """One stored pair: file paths (absolute), sensor position of its top-left pixel, and

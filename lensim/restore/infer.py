@@ -36,7 +36,6 @@ import torch
 from lensim.restore.fov import fov_channels
 from lensim.restore.network import FieldAwareUNet
 
-
 # ----------------------------------------------------------------------------- geometry
 
 

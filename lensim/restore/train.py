@@ -47,6 +47,7 @@ from torch.utils.data import DataLoader
 
 from lensim.data.manifest import read_pairs_manifest
 from lensim.errors import InputError
+from lensim.evaluate.metrics import psnr_batch, ssim_batch
 from lensim.io import folder_lock
 from lensim.restore.checkpoint import (
     BEST,
@@ -66,7 +67,6 @@ from lensim.restore.distributed import (
     shutdown,
     wrap_model,
 )
-from lensim.evaluate.metrics import psnr_batch, ssim_batch
 from lensim.restore.network import FieldAwareUNet
 from lensim.restore.run_log import RunLog
 from lensim.restore.schedule import LR_SCHEDULES, BudgetClock, LearningRate

@@ -32,8 +32,13 @@ Units: lengths mm, pixel pitch and PSF spacing um, wavelengths nm in the manifes
 API of this module (um inside the optics code), angles in degrees.
 """
 from lensim.psf.bank.compute import alias_free_pixels, build_bank, compute_bank, embed_centred
-from lensim.psf.bank.settings import (DEFAULT_FIELDS, BankSettings, default_fields, parse_wavelengths_nm,
-                                      suggest_kernel_pixels)
+from lensim.psf.bank.settings import (
+                                      DEFAULT_FIELDS,
+                                      BankSettings,
+                                      default_fields,
+                                      parse_wavelengths_nm,
+                                      suggest_kernel_pixels,
+)
 from lensim.psf.bank.store import FORMAT, FORMAT_VERSION, MANIFEST, field_file, read_manifest
 from lensim.psf.bank.types import BankField, Progress, PSFBank
 

@@ -18,13 +18,18 @@ import torch
 
 from lensim.errors import InputError
 from lensim.io import folder_lock
-from lensim.workers import exit_with_parent
 from lensim.optics.lens import Lens
 from lensim.optics.lens_file import lens_to_dict
 from lensim.optics.paraxial import ParaxialData, paraxial_data, paraxial_image_height
 from lensim.psf.bank.settings import BankSettings, default_fields
-from lensim.psf.bank.store import (FORMAT, FORMAT_VERSION, lensim_version, open_bank_directory, read_manifest,
-                                   write_field)
+from lensim.psf.bank.store import (
+    FORMAT,
+    FORMAT_VERSION,
+    lensim_version,
+    open_bank_directory,
+    read_manifest,
+    write_field,
+)
 from lensim.psf.bank.types import BankField, Progress, PSFBank
 from lensim.psf.compute import METHODS, PSFSamplingWarning, check_sampling, field_in_lens_units
 from lensim.psf.fourier import fft_psf, geometric_psf
@@ -33,6 +38,7 @@ from lensim.psf.metrics import strehl_ratio
 from lensim.psf.pixels import integrate_pixels, oversampling_factor
 from lensim.psf.pupil_field import PupilField, pupil_field
 from lensim.sensor.spectral import SpectralResponse, spectral_response
+from lensim.workers import exit_with_parent
 
 
 @dataclass
