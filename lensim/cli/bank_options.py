@@ -104,11 +104,5 @@ def cached_bank(lens: Lens, pitch_um: float, sensor: SensorProfile, settings: Ba
                 quiet: bool) -> PSFBank:
     """The lens's bank at this pitch (um) with the sensor's spectral response, from the
     cache or computed into it, with a progress bar unless quiet."""
-    prog, cb = progress_bar("PSF bank", "fields", quiet)
-    if prog:
-        prog.start()
-    try:
+    with progress_bar("PSF bank", "fields", quiet) as cb:
         return ensure_bank(lens, pitch_um, settings, response=sensor.spectral_response, workers=workers, progress=cb)
-    finally:
-        if prog:
-            prog.stop()

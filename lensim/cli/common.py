@@ -1,10 +1,12 @@
 """Shared CLI helpers: consoles, one-line error handling, JSON output."""
 from __future__ import annotations
 
+import contextlib
 import json
 import sys
 import time
 import warnings
+from collections.abc import Callable, Iterator
 
 import typer
 from rich.console import Console
@@ -72,19 +74,25 @@ def print_json(data) -> None:
     sys.stdout.write(json.dumps(jsonable(data), indent=2) + "\n")
 
 
-def progress_bar(label: str, unit: str, quiet: bool):
-    """A rich progress bar and its callback(done, total); (None, None) when quiet."""
+@contextlib.contextmanager
+def progress_bar(label: str, unit: str, quiet: bool) -> Iterator[Callable[[int, int], None] | None]:
+    """A rich progress bar shown while the ``with`` block runs; yields its callback(done,
+    total), or None when quiet. The label is shown literally (no markup)."""
     if quiet:
-        return None, None
+        yield None
+        return
+    from rich.markup import escape
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-    prog = Progress(TextColumn(label), BarColumn(), TextColumn("{task.completed}/{task.total} " + unit),
+    prog = Progress(TextColumn(escape(label)), BarColumn(), TextColumn("{task.completed}/{task.total} " + escape(unit)),
                     TimeElapsedColumn(), TimeRemainingColumn(), console=console, transient=True)
     task = prog.add_task(label, total=None)
 
     def callback(done: int, total: int) -> None:
         prog.update(task, completed=done, total=total)
-    return prog, callback
+
+    with prog:
+        yield callback
 
 
 class StageBars:

@@ -84,15 +84,9 @@ def make(
         check_response(settings, sensor.spectral_response, sensor=sensor)
         check_photos(list_images(sharp_dir), size)  # before the bank, which takes minutes
         bank = cached_bank(lens, sensor.pixel_pitch_um, sensor, settings, workers, quiet)
-    prog, cb = progress_bar("pairs", "photos", quiet)
-    if prog:
-        prog.start()
-    try:
+    with progress_bar("pairs", "photos", quiet) as cb:
         manifest = make_dataset(sharp_dir, output, bank, sensor_file, sensor, crops=crops, size=size, seed=seed,
                                 placements=placements, noise=noise, demosaic=demosaic, workers=workers, scheduler=scheduler, progress=cb)
-    finally:
-        if prog:
-            prog.stop()
     summary = {"output": str(output), "photos": len(manifest["records"]), "pairs": manifest["pairs"],
                "bank": str(bank.directory), "seed": seed}
     if json_out:

@@ -41,15 +41,8 @@ def develop_command(
     choice = parse_wb(wb)
     paths = raw_files(list(files))
     plan_outputs(paths, output, fmt)
-    prog, callback = progress_bar("develop", "files", quiet or json_out)
-    if prog:
-        prog.start()
-    try:
-        with folder_lock(output):  # one writer at a time
-            records = develop_files(paths, output, sensor, choice, bits, fmt, progress=callback)
-    finally:
-        if prog:
-            prog.stop()
+    with progress_bar("develop", "files", quiet or json_out) as callback, folder_lock(output):  # one writer at a time
+        records = develop_files(paths, output, sensor, choice, bits, fmt, progress=callback)
     if json_out:
         print_json(records)
     elif not quiet:

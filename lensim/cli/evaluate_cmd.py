@@ -64,15 +64,9 @@ def evaluate_command(
             table[n] = harness.checkpoint_method(runs[n], manifest.get("lens"), manifest.get("sensor"), device=device)
         elif n != "input":
             table[n] = harness.builtin_method(n, **{k: v for k, v in options.get(n, {}).items() if v is not None})
-    prog, cb = progress_bar("evaluate", "crops", quiet or json_out)
-    if prog:
-        prog.start()
     rows: list[dict[str, Any]] = []
-    try:
+    with progress_bar("evaluate", "crops", quiet or json_out) as cb:
         summary = harness.evaluate(pairs, table, bank=bank, sources=keep, max_crops=max_crops, progress=cb, rows=rows)
-    finally:
-        if prog:
-            prog.stop()
     if output is not None:
         _write_outputs(output, pairs, rows, summary)
     if json_out:

@@ -1,7 +1,6 @@
 """`lensim psf ...`: compute single PSFs (and PSF banks)."""
 from __future__ import annotations
 
-import contextlib
 from pathlib import Path
 
 import numpy as np
@@ -127,8 +126,7 @@ def bank(
     response = response or (profile.spectral_response if profile is not None else DEFAULT_CAMERA)
     check_response(settings, response, illuminant, profile if from_profile else None)
     t0 = time.time()
-    prog, report = progress_bar("PSF bank", "fields", quiet or json_out)
-    with prog or contextlib.nullcontext():
+    with progress_bar("PSF bank", "fields", quiet or json_out) as report:
         result = build_bank(lens, pitch, settings, response=response, out_dir=output, workers=workers, progress=report,
                             method=method, max_spacing_um=max_spacing_um, illuminant=illuminant)
     m = result.manifest

@@ -40,14 +40,8 @@ def _restore_raws(files: list[Path], output: Path, model, settings, dng: bool, w
     """Restore raw files with a progress bar over the batch (lensim.raw.restore)."""
     from lensim.raw.restore import restore_raw_files
 
-    prog, step = progress_bar("restoring raw files", "files", quiet)
-    if prog is not None:
-        prog.start()
-    try:
+    with progress_bar("restoring raw files", "files", quiet) as step:
         records = restore_raw_files(files, output, model, settings, dng=dng, workers=workers, progress=step)
-    finally:
-        if prog is not None:
-            prog.stop()
     if not quiet:
         for r in records:
             what = "skipped (done)" if r["skipped"] else "->"
@@ -198,14 +192,8 @@ def _restore_photo(path: Path, output: Path, model: torch.nn.Module, sensor_wh: 
     else:
         _check_offset(path, offset, (w, h), sensor_wh)
     top_left, size = image_sensor_geometry(h, w, (sensor_w, sensor_h), offset)
-    prog, tiles_done = progress_bar(f"restoring {path.name}", "tiles", quiet)
-    if prog is not None:
-        prog.start()
-    try:
+    with progress_bar(f"restoring {path.name}", "tiles", quiet) as tiles_done:
         out = restore_image(model, img, top_left, size, tile=tile, overlap=overlap, progress=tiles_done)
-    finally:
-        if prog is not None:
-            prog.stop()
     del img  # bound peak memory: only the output lives while it is encoded
     out.clamp_(0, 1)
     dest = output / _photo_output_name(path)
