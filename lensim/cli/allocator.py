@@ -2,7 +2,7 @@
 
 PyTorch on CPU frees and reallocates large activation buffers at every training step. With
 glibc's defaults each such buffer is a fresh mmap that the kernel must zero, then an
-munmap: on the 2-core machines measured (shared/FACTS.md) this made system time dominate.
+munmap: on the 2-core machines measured (the project notes' FACTS.md) this made system time dominate.
 Serving large blocks from the heap and never trimming it (the effect of the environment
 variables MALLOC_MMAP_MAX_=0 and MALLOC_TRIM_THRESHOLD_=1e11) sped a training step of the
 default field-aware network up 1.13x at 96-px crops and 1.4x with deformable blocks at two
