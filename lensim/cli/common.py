@@ -75,7 +75,7 @@ def print_json(data) -> None:
 
 
 @contextlib.contextmanager
-def progress_bar(label: str, unit: str, quiet: bool) -> Iterator[Callable[[int, int], None] | None]:
+def progress_bar(label: str, unit: str, quiet: bool) -> Iterator[Callable[[float, float], None] | None]:
     """A rich progress bar shown while the ``with`` block runs; yields its callback(done,
     total), or None when quiet. The label is shown literally (no markup)."""
     if quiet:
@@ -88,7 +88,7 @@ def progress_bar(label: str, unit: str, quiet: bool) -> Iterator[Callable[[int, 
                     TimeElapsedColumn(), TimeRemainingColumn(), console=console, transient=True)
     task = prog.add_task(label, total=None)
 
-    def callback(done: int, total: int) -> None:
+    def callback(done: float, total: float) -> None:
         prog.update(task, completed=done, total=total)
 
     with prog:
