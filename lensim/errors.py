@@ -25,6 +25,18 @@ class InputError(LensimError):
         return self.__class__, (self.source, self.field, self.message)
 
 
+class PupilSamplingError(InputError):
+    """A pupil grid too coarse for the PSF window: its PSF would wrap around. ``needed``
+    is the number of pupil samples across that the window needs."""
+
+    def __init__(self, source: str | None, field: str | None, message: str, needed: int):
+        super().__init__(source, field, message)
+        self.needed = needed
+
+    def __reduce__(self):
+        return self.__class__, (self.source, self.field, self.message, self.needed)
+
+
 class UnknownGlassError(InputError):
     """A material name that no catalogue knows."""
 

@@ -87,3 +87,14 @@ def test_input_errors_cross_process_boundaries() -> None:
         back = pickle.loads(pickle.dumps(err))
         assert type(back) is type(err) and str(back) == str(err)
         assert (back.source, back.field, back.message) == (err.source, err.field, err.message)
+
+
+def test_pupil_sampling_error_carries_the_needed_samples_across_processes():
+    """The bank's sampling error names the pupil samples its window needs as a number
+    (simulate raises the sampling from it), also after pickling from a worker process."""
+    import pickle
+
+    from lensim.errors import InputError, PupilSamplingError
+
+    err = pickle.loads(pickle.dumps(PupilSamplingError("lens.yaml", "pupil_samples", "expected at least 90", 90)))
+    assert isinstance(err, InputError) and err.needed == 90 and str(err) == "lens.yaml: pupil_samples: expected at least 90"

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import re
 import warnings
 from pathlib import Path
 
@@ -23,7 +22,7 @@ from lensim.cli.bank_options import (
 )
 from lensim.cli.common import console, print_json
 from lensim.cli.validate import at_least, choice, distinct_outputs, output_folder
-from lensim.errors import InputError
+from lensim.errors import InputError, PupilSamplingError
 from lensim.images import read_image, write_image
 from lensim.io import atomic_write_text
 from lensim.optics.lens import Lens
@@ -114,10 +113,6 @@ def simulate_command(
         print_json(results)
 
 
-#: how check_sampling says how many pupil samples a kernel window needs
-_NEEDED_SAMPLES = re.compile(r"expected at least (\d+) pupil samples")
-
-
 def _photo_bank(path: Path, size_wh: tuple[int, int], pitch_um: float, lens: Lens, sensor: SensorProfile,
                 settings: BankSettings, pupil_given: bool, workers: int, quiet: bool) -> PSFBank:
     """The cached bank for a photo mapped onto the sensor at ``pitch_um`` (um per photo
@@ -127,11 +122,8 @@ def _photo_bank(path: Path, size_wh: tuple[int, int], pitch_um: float, lens: Len
     for _ in range(4):
         try:
             return cached_bank(lens, pitch_um, sensor, settings, workers, quiet)
-        except InputError as e:
-            found = _NEEDED_SAMPLES.search(e.message)
-            if found is None:
-                raise
-            need = -(-int(int(found.group(1)) * 1.15) // 8) * 8  # a margin, rounded up to a multiple of 8
+        except PupilSamplingError as e:
+            need = -(-int(e.needed * 1.15) // 8) * 8  # a margin, rounded up to a multiple of 8
             where = f"a {size_wh[0]}x{size_wh[1]} photo maps onto the sensor at {pitch_um:.3g} um per pixel"
             if pupil_given:
                 raise InputError(str(path), "--pupil-samples", f"{where}, too coarse for {settings.pupil_samples} "

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from lensim.errors import InputError
+from lensim.errors import InputError, PupilSamplingError
 from lensim.optics.aiming import Aiming, object_field
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import paraxial_data, paraxial_image_height
@@ -60,8 +60,9 @@ def check_sampling(lens: Lens, pf: PupilField, grid: int, spacing_um: float, met
         period_um = lam_um / du
         if window_um > period_um:
             need = math.ceil(pf.samples * window_um / period_um)
-            raise InputError(src, "pupil_samples", f"{pf.samples} pupil samples repeat the PSF every {period_um:.1f} um but the "
-                             f"window is {window_um:.1f} um wide; expected at least {need} pupil samples or a smaller window")
+            raise PupilSamplingError(src, "pupil_samples", f"{pf.samples} pupil samples repeat the PSF every "
+                                     f"{period_um:.1f} um but the window is {window_um:.1f} um wide; expected at least "
+                                     f"{need} pupil samples or a smaller window", need)
         # wavefront sampling: phase step between neighbouring pupil samples
         airy_um = 1.22 * pf.wavelength_um * pf.working_fno()
         if spacing_um > airy_um:

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from lensim.errors import InputError
+from lensim.errors import InputError, PupilSamplingError
 from lensim.io import folder_lock
 from lensim.optics.lens import Lens
 from lensim.optics.lens_file import lens_to_dict
@@ -119,6 +119,10 @@ class _FieldWork:
             warnings.simplefilter("always")
             try:
                 check_sampling(self.lens, pf, sub_grid, job.spacing_um, job.method, offset)
+            except PupilSamplingError as e:
+                raise PupilSamplingError(self.lens.source, f"field {self.fld:g} at {wl_um * 1e3:g} nm",
+                                         f"{e.message} (kernel {job.kernel_pixels} px of {job.pixel_pitch_um:g} um)",
+                                         e.needed) from None
             except InputError as e:
                 raise InputError(self.lens.source, f"field {self.fld:g} at {wl_um * 1e3:g} nm",
                                  f"{e.message} (kernel {job.kernel_pixels} px of {job.pixel_pitch_um:g} um)") from None
