@@ -32,6 +32,8 @@ class Lens:
     aperture_value: entrance-pupil diameter (mm), image-space F-number (EFL / EPD), or
     stop semi-diameter (mm), as aperture_type says. fields: field points along +y in the
     unit of field_type (degrees or mm). wavelengths_um with weights; primary indexes them.
+    configurations: zoom or focus positions, an ordered mapping of name -> {0-based surface
+    index: thickness (mm)} (lensim.optics.configurations; apply_configuration picks one).
     """
 
     surfaces: list[Surface]
@@ -49,6 +51,7 @@ class Lens:
     name: str = ""
     source: str = "<lens>"
     notes: list[str] = field(default_factory=list)
+    configurations: dict[str, dict[int, float]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.wavelength_weights is None:
@@ -118,6 +121,10 @@ class Lens:
                 if not (1 <= p <= MAX_ASPHERE_POWER):
                     raise self._err(f"surfaces[{i}].asphere", f"expected powers r1..r{MAX_ASPHERE_POWER}, got r{p}")
         self._check_air_gaps(media, dirs)
+        if self.configurations:
+            from lensim.optics.configurations import check_configurations
+
+            check_configurations(self)
 
     def is_dummy(self, i: int, media: list[Material] | None = None) -> bool:
         """Surface i bends no ray: air on both sides and not a mirror (a stop in air, a

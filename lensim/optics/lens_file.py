@@ -13,6 +13,9 @@
       - {radius: 5.6, conic: -0.8, asphere: {r4: 1.1e-5, r6: 1.8e-7}, clear_semi_diameter: 3.2}
       - {radius: -120, thickness: -30, mirror: true, obscuration: 5}
     image: {defocus: 0.0}
+    configurations:                # optional: zoom/focus positions, chosen by name or 1-based number
+      wide: {thicknesses: {1: 6.0, 4: 40.2}}   # 0-based surface index: thickness (mm)
+      tele: {thicknesses: {1: 0.8, 4: 52.7}}
 
 Surface keys: radius (mm, 'infinity' or omitted for a plane) or curvature (1/mm),
 thickness (mm to the next vertex; negative after a mirror, or in air to place a stop
@@ -37,7 +40,9 @@ from lensim.optics.lens import Lens
 from lensim.optics.materials import Air, Material, ModelGlass, material_from_spec, nearest_catalog_glass
 from lensim.optics.surfaces import MAX_ASPHERE_POWER, Surface
 
-TOP_KEYS = {"name", "description", "units", "object", "aperture", "fields", "wavelengths", "surfaces", "image", "notes", "source"}
+TOP_KEYS = {"name", "description", "units", "object", "aperture", "fields", "wavelengths", "surfaces", "image", "notes",
+            "source", "configurations"}
+CONFIGURATION_KEYS = {"thicknesses"}
 SURFACE_KEYS = {"radius", "curvature", "thickness", "material", "conic", "asphere", "clear_semi_diameter",
                 "obscuration", "semi_diameter", "stop", "mirror", "comment"}
 
@@ -183,8 +188,37 @@ def lens_from_dict(data: dict, source: str = "<lens>") -> Lens:
         name=str(data.get("name", "")),
         source=source,
         notes=notes,
+        configurations=_configurations_from_data(src, data.get("configurations", {})),
     )
     return lens
+
+
+def _configurations_from_data(src: str, data: Any) -> dict[str, dict[int, float]]:
+    """The ``configurations`` block: {name: {thicknesses: {surface index: mm}}} (indices
+    0-based, as integers or digit strings, JSON's keys being strings). The Lens checks the
+    indices' range and each configuration's lens."""
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise InputError(src, "configurations", f"expected a mapping of configuration name: {{thicknesses: ...}}, "
+                                                f"got {type(data).__name__}")
+    out: dict[str, dict[int, float]] = {}
+    for name, conf in data.items():
+        fld = f"configurations.{name}"
+        conf = _check_keys(src, fld, conf if conf is not None else {}, CONFIGURATION_KEYS)
+        thick = conf.get("thicknesses", {})
+        if not isinstance(thick, dict):
+            raise InputError(src, f"{fld}.thicknesses", f"expected a mapping of surface index: thickness (mm), "
+                                                        f"got {thick!r}")
+        values: dict[int, float] = {}
+        for index, value in thick.items():
+            text = str(index).strip()
+            if isinstance(index, bool) or not text.isdigit():
+                raise InputError(src, f"{fld}.thicknesses", f"expected 0-based surface indices (as in surfaces[i]), "
+                                                            f"got {index!r}")
+            values[int(text)] = _length(src, f"{fld}.thicknesses.{text}", value)
+        out[str(name)] = values
+    return out
 
 
 def _material_spec(m: Material):
@@ -234,6 +268,9 @@ def lens_to_dict(lens: Lens) -> dict:
         out["image"]["clear_semi_diameter"] = lens.image_clear_radius
     if lens.notes:
         out["notes"] = list(lens.notes)
+    if lens.configurations:
+        out["configurations"] = {name: {"thicknesses": dict(sorted(t.items()))}
+                                 for name, t in lens.configurations.items()}
     return out
 
 
