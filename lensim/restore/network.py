@@ -28,6 +28,14 @@ Architecture (scales s = 0 .. depth-1 with widths[s] channels, s = 0 at full res
   symmetric lens: the PSF's size follows the radius and its orientation the azimuth
   (cos 2 theta, sin 2 theta). The deformable blocks see the modulated features, so their
   offsets can follow the local PSF directly. It adds about 1 % to the parameters;
+* shooting settings, when ``settings_dim`` k > 0 (issue 16; lensim.restore.conditioning):
+  the k-vector (normalized F-number, focus dioptres, focal length over the trained range)
+  enters as k constant input channels, and at the bottleneck and every decoder scale the
+  features get a per-channel FiLM, feat * (1 + gamma) + beta with (gamma, beta) from an MLP
+  of the vector (Linear k -> 32, ReLU, Linear 32 -> 2C, last layer zero-initialised); with
+  field modulation its MLP also sees the k values, so the position-dependent modulation
+  follows the settings too (how far the PSF grows towards the corner depends on the
+  aperture). With k = 0 none of this exists and the network is exactly the one before;
 * tail: a 3x3 conv to 3 channels, **zero-initialised** (``zero_init_tail=True``), whose
   output is added to the input RGB: restored = rgb + residual, so the untrained network is
   exactly the identity.
@@ -56,6 +64,7 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
+from lensim.restore.conditioning import batch_settings, settings_planes
 from lensim.restore.deform import ModulatedDeformConv2d
 
 KERNEL_TAPS = 9  # 3x3 deformable kernels
@@ -110,19 +119,41 @@ def field_features(fov: torch.Tensor) -> torch.Tensor:
 
 class FieldModulation(nn.Module):
     """feat * (1 + gamma) + beta, (gamma, beta) = MLP(field features) per pixel; the identity
-    at initialisation. forward(feat (B, ch, H, W), feats (B, 5, H, W)) -> (B, ch, H, W)."""
+    at initialisation. forward(feat (B, ch, H, W), feats (B, 5 + extra, H, W)) -> (B, ch, H, W);
+    ``extra``: further per-pixel inputs (the settings planes of a conditioned network, so the
+    modulation is a joint function of position and settings)."""
 
     HIDDEN = 16
 
-    def __init__(self, ch: int) -> None:
+    def __init__(self, ch: int, extra: int = 0) -> None:
         super().__init__()
-        self.hidden = nn.Conv2d(FIELD_FEATURES, self.HIDDEN, 1)
+        self.hidden = nn.Conv2d(FIELD_FEATURES + extra, self.HIDDEN, 1)
         self.out = nn.Conv2d(self.HIDDEN, 2 * ch, 1)
         nn.init.zeros_(self.out.weight)
         nn.init.zeros_(self.out.bias)
 
     def forward(self, feat: torch.Tensor, feats: torch.Tensor) -> torch.Tensor:
         gamma, beta = self.out(F.relu(self.hidden(feats))).chunk(2, dim=1)
+        return feat * (1.0 + gamma) + beta
+
+
+class SettingsModulation(nn.Module):
+    """FiLM by the shooting settings: feat * (1 + gamma) + beta with per-channel (gamma,
+    beta) = MLP(settings vector) (Linear k -> 32, ReLU, Linear 32 -> 2ch, the last layer
+    zero-initialised: the identity at initialisation).
+    forward(feat (B, ch, H, W), settings (B, k)) -> (B, ch, H, W)."""
+
+    HIDDEN = 32
+
+    def __init__(self, ch: int, settings_dim: int) -> None:
+        super().__init__()
+        self.hidden = nn.Linear(settings_dim, self.HIDDEN)
+        self.out = nn.Linear(self.HIDDEN, 2 * ch)
+        nn.init.zeros_(self.out.weight)
+        nn.init.zeros_(self.out.bias)
+
+    def forward(self, feat: torch.Tensor, settings: torch.Tensor) -> torch.Tensor:
+        gamma, beta = self.out(F.relu(self.hidden(settings)))[:, :, None, None].chunk(2, dim=1)
         return feat * (1.0 + gamma) + beta
 
 
@@ -208,8 +239,14 @@ class FieldAwareUNet(nn.Module):
             decoder scale only) trains about twice as fast as all.
         field_modulation: position-dependent feature modulation at the bottleneck and every
             decoder scale (see the module docstring; requires use_fov).
+        settings_dim: k, the length of the shooting-settings vector the network is conditioned
+            on (lensim.restore.conditioning; 0: none). The k values enter as constant input
+            channels (settings_planes) and as per-channel FiLM (SettingsModulation) at the
+            bottleneck and every decoder scale; with field_modulation the field MLP also
+            sees them, so the position-dependent modulation depends on the settings.
 
-    forward(rgb (B, 3, H, W), fov (B, 2, H, W) or (2, H, W), required iff use_fov) ->
+    forward(rgb (B, 3, H, W), fov (B, 2, H, W) or (2, H, W), required iff use_fov,
+    settings (B, k) or (k,), required iff settings_dim > 0) ->
     restored (B, 3, H, W), same dtype as rgb. Values are whatever range the caller trains
     with (the network adds a residual; nothing is clamped).
     """
@@ -227,6 +264,7 @@ class FieldAwareUNet(nn.Module):
         dcn_backend: str = "auto",
         deformable_scales: int | None = None,
         field_modulation: bool = False,
+        settings_dim: int = 0,
     ) -> None:
         super().__init__()
         if field_modulation and not use_fov:
@@ -234,6 +272,8 @@ class FieldAwareUNet(nn.Module):
         ws = tuple(int(w) for w in widths) if widths is not None else tuple(width * 2**s for s in range(depth))
         if len(ws) < 2:
             raise ValueError(f"need at least 2 scales, got widths {ws}")
+        if settings_dim < 0:
+            raise ValueError(f"settings_dim must be >= 0, got {settings_dim}")
         if any(w < 1 for w in ws):
             raise ValueError(f"widths must be positive, got {ws}")
         if use_deformable:
@@ -253,8 +293,9 @@ class FieldAwareUNet(nn.Module):
         self.deformable_groups = deformable_groups
         self.zero_init_tail = zero_init_tail
         self.dcn_backend = dcn_backend
+        self.settings_dim = int(settings_dim)
 
-        self.head = _conv3(5 if use_fov else 3, ws[0])
+        self.head = _conv3((5 if use_fov else 3) + self.settings_dim, ws[0])
         self.enc0 = ResBlock(ws[0])
         self.down = nn.ModuleList(
             nn.Sequential(_conv3(ws[s - 1], ws[s], stride=2), nn.ReLU(), ResBlock(ws[s])) for s in range(1, len(ws))
@@ -271,8 +312,11 @@ class FieldAwareUNet(nn.Module):
             for i, s in enumerate(dec_scales)
         )
         # modulations listed coarse to fine: the bottleneck, then the decoder scales
-        self.modulate = nn.ModuleList(FieldModulation(ws[s]) for s in [len(ws) - 1, *dec_scales]) \
+        self.modulate = nn.ModuleList(FieldModulation(ws[s], self.settings_dim) for s in [len(ws) - 1, *dec_scales]) \
             if field_modulation else None
+        # settings FiLM, likewise the bottleneck then the decoder scales (none when settings_dim is 0)
+        self.film = nn.ModuleList(SettingsModulation(ws[s], self.settings_dim) for s in [len(ws) - 1, *dec_scales]) \
+            if self.settings_dim else None
         self.tail = _conv3(ws[0], 3)
         if zero_init_tail:
             nn.init.zeros_(self.tail.weight)
@@ -296,15 +340,14 @@ class FieldAwareUNet(nn.Module):
             "dcn_backend": self.dcn_backend,
             "deformable_scales": self.deformable_scales,
             "field_modulation": self.field_modulation,
+            "settings_dim": self.settings_dim,
         }
 
-    def forward(self, rgb: torch.Tensor, fov: torch.Tensor | None = None) -> torch.Tensor:
-        """(B, 3, H, W) [+ FOV (B, 2, H, W) or (2, H, W)] -> (B, 3, H, W)."""
-        if rgb.dim() != 4 or rgb.shape[1] != 3:
-            raise ValueError(f"rgb must be (B, 3, H, W), got {tuple(rgb.shape)}")
-        b, _, h, w = rgb.shape
-        m = self.size_multiple
-        ph, pw = (-h) % m, (-w) % m
+    def _inputs(self, rgb: torch.Tensor, fov: torch.Tensor | None, settings: torch.Tensor | None,
+                ph: int, pw: int) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor | None]:
+        """The padded input stack (RGB [+ FOV] [+ settings planes]), the padded FOV channels
+        and the (B, k) settings (None where unused)."""
+        b = rgb.shape[0]
         x = _pad_bottom_right(rgb, ph, pw, linear=False)
         if self.use_fov:
             if fov is None:
@@ -316,22 +359,43 @@ class FieldAwareUNet(nn.Module):
                                  f"got {tuple(fov.shape)}")
             fov = _pad_bottom_right(fov.to(rgb.dtype), ph, pw, linear=True)
             x = torch.cat((x, fov), dim=1)
+        s = batch_settings(settings, b, self.settings_dim, rgb)
+        if s is not None:
+            x = torch.cat((x, settings_planes(s, x.shape[-2], x.shape[-1])), dim=1)
+        return x, fov, s
 
+    def _modulate(self, i: int, feat: torch.Tensor, fov: torch.Tensor | None, s: torch.Tensor | None) -> torch.Tensor:
+        """The field and settings modulations of level i (0: the bottleneck, i: decoder step i),
+        where the network has them."""
+        if self.modulate is not None:
+            assert fov is not None
+            factor = self.size_multiple // 2 ** i
+            pooled = field_features(F.avg_pool2d(fov, factor) if factor > 1 else fov)
+            if s is not None:
+                pooled = torch.cat((pooled, settings_planes(s, pooled.shape[-2], pooled.shape[-1])), dim=1)
+            feat = self.modulate[i](feat, pooled)
+        if self.film is not None:
+            assert s is not None
+            feat = self.film[i](feat, s)
+        return feat
+
+    def forward(self, rgb: torch.Tensor, fov: torch.Tensor | None = None,
+                settings: torch.Tensor | None = None) -> torch.Tensor:
+        """(B, 3, H, W) [+ FOV (B, 2, H, W) or (2, H, W)] [+ settings (B, k) or (k,)] -> (B, 3, H, W)."""
+        if rgb.dim() != 4 or rgb.shape[1] != 3:
+            raise ValueError(f"rgb must be (B, 3, H, W), got {tuple(rgb.shape)}")
+        _, _, h, w = rgb.shape
+        m = self.size_multiple
+        x, fov, s = self._inputs(rgb, fov, settings, (-h) % m, (-w) % m)
         feat = self.enc0(self.head(x))
         skips = [feat]
         for down in self.down:
             feat = down(feat)
             skips.append(feat)
-        feat = self.context(skips.pop())
-        if self.modulate is not None:
-            feat = self.modulate[0](feat, field_features(F.avg_pool2d(fov, m)))
+        feat = self._modulate(0, self.context(skips.pop()), fov, s)
         offset: torch.Tensor | None = None
         for i, (up, fuse, dec) in enumerate(zip(self.up, self.fuse, self.dec)):
-            feat = fuse(torch.cat((up(feat), skips.pop()), dim=1))
-            if self.modulate is not None:
-                factor = m // 2 ** (i + 1)
-                pooled = F.avg_pool2d(fov, factor) if factor > 1 else fov
-                feat = self.modulate[i + 1](feat, field_features(pooled))
+            feat = self._modulate(i + 1, fuse(torch.cat((up(feat), skips.pop()), dim=1)), fov, s)
             if isinstance(dec, DeformResBlock):
                 feat, offset = dec(feat, offset)
             else:
@@ -389,6 +453,7 @@ __all__ = [
     "FieldAwareUNet",
     "FieldModulation",
     "ResBlock",
+    "SettingsModulation",
     "count_parameters",
     "field_features",
     "plain_unet_matching",
