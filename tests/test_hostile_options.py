@@ -230,6 +230,9 @@ EVALUATING = [
     case("assets-export-file", "assets --export-photos {t}/afile", "afile", make=AFILE),
     case("assets-export-under-file", "assets --export-photos {t}/afile/p", "afile", make=AFILE),
     case("assets-export-unwritable", "assets --export-photos " + UNWRITABLE, UNWRITABLE),
+    case("assets-export-test-file", "assets --export-test-photos {t}/afile", "afile", make=AFILE),
+    case("assets-export-test-same", "assets --export-photos {t}/p --export-test-photos {t}/p",
+         "--export-test-photos", "--export-photos"),
 ]
 
 USAGE = [

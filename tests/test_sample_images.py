@@ -1,9 +1,12 @@
 """Built-in sample photos (lensim.assets.images): every listed photo that is installed
 reads as an 8-bit sRGB image; a missing package only removes its photos; a photo's scale
 resamples it as Pillow does, on an always-installed photo (and on Debian's wallpapers,
-the scaled ones, where they are installed)."""
+the scaled ones, where they are installed); the unseen test split shares nothing with the
+training photos, covers its scene types, and its dark scenes are 3 stops under in linear
+light."""
 from __future__ import annotations
 
+import hashlib
 from pathlib import Path
 
 import numpy as np
@@ -12,9 +15,17 @@ import torch
 from PIL import Image
 
 from lensim.assets import images
-from lensim.assets.images import SAMPLE_IMAGES, available_sample_images, read_sample_image, sample_image_path
+from lensim.assets.images import (
+    SAMPLE_IMAGES,
+    TEST_IMAGES,
+    available_sample_images,
+    read_sample_image,
+    sample_image_path,
+    unseen_photos,
+)
 from lensim.errors import InputError
 from lensim.images import read_image
+from lensim.sensor.isp import srgb_to_linear
 
 
 def test_python_package_photos_are_installed_by_setup() -> None:
@@ -86,12 +97,78 @@ def test_export_writes_every_installed_photo_at_its_scale(tmp_path: Path, capsys
 
 
 @pytest.mark.skipif(not any(i.package.startswith("debian:") for i in available_sample_images()),
-                    reason="Debian's mate-backgrounds is not installed (scripts/setup.sh installs it where it can)")
-def test_debian_photos_are_halved() -> None:
-    """The Debian wallpapers carry scale 0.5 and read at half their file size, as Pillow
-    reduces them (1e-5)."""
+                    reason="Debian's wallpapers are not installed (scripts/setup.sh installs them where it can)")
+def test_debian_photos_are_reduced_at_their_scale() -> None:
+    """The Debian wallpapers carry a scale below 1 and read at that scale, as Pillow reduces
+    them (1e-5): one installed photo of each package."""
     debian = [i for i in SAMPLE_IMAGES if i.package.startswith("debian:")]
-    assert debian and all(i.scale == 0.5 for i in debian)
-    img = next(i for i in available_sample_images() if i.package.startswith("debian:"))
-    full, _ = read_image(sample_image_path(img.name))
-    np.testing.assert_allclose(read_sample_image(img.name).numpy(), _pillow_resized(full, 0.5), atol=1e-5, rtol=0)
+    assert len(debian) == 37 and all(0.2 <= i.scale < 1 for i in debian)
+    seen = set()
+    for img in available_sample_images():
+        if not img.package.startswith("debian:") or img.package in seen:
+            continue
+        seen.add(img.package)
+        full, _ = read_image(sample_image_path(img.name))
+        np.testing.assert_allclose(read_sample_image(img.name).numpy(), _pillow_resized(full, img.scale), atol=1e-5,
+                                   rtol=0)
+
+
+def _digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def test_unseen_split_is_disjoint_from_every_training_source() -> None:
+    """No test photo is a training photo: names, (package, file) entries and, for every
+    installed file, its content differ; the test photos come from packages that hold no
+    training photo (scikit-learn, matplotlib) or from scikit-image files other than its
+    training ones; no Debian wallpaper or sporco photo is a test photo; the training
+    listing (what the demo and `--export-photos` use) never holds one."""
+    train_names = {i.name for i in SAMPLE_IMAGES}
+    assert not train_names & {i.name for i in TEST_IMAGES}
+    assert not {(i.package, i.relative_path) for i in SAMPLE_IMAGES} & {(i.package, i.relative_path) for i in TEST_IMAGES}
+    train_packages = {i.package for i in SAMPLE_IMAGES}
+    assert {i.package for i in TEST_IMAGES} - train_packages == {"sklearn", "matplotlib"}
+    assert {i.package for i in TEST_IMAGES} & train_packages == {"skimage"}
+    assert not any(i.package.startswith("debian:") or i.package == "sporco" for i in TEST_IMAGES)
+    train_files = {_digest(sample_image_path(i.name)) for i in available_sample_images()}
+    assert not train_files & {_digest(sample_image_path(i.name)) for i in unseen_photos()}
+    assert {i.name for i in available_sample_images()} <= train_names
+
+
+def test_unseen_photos_are_installed_and_cover_the_scene_types() -> None:
+    """scikit-learn (the test extra) and matplotlib are installed by scripts/setup.sh: all 11
+    test photos exist, and they cover architecture, foliage, text, faces and dark scenes."""
+    assert [i.name for i in unseen_photos()] == [i.name for i in TEST_IMAGES] and len(TEST_IMAGES) == 11
+    contents = " ".join(i.content for i in TEST_IMAGES)
+    for kind in ("architecture", "foliage", "text", "face", "dark"):
+        assert kind in contents, kind
+    for img in unseen_photos():
+        arr = read_sample_image(img.name)
+        assert arr.shape[0] == 3 and min(arr.shape[1:]) >= 128 and img.licence and img.credit
+
+
+def test_dark_test_photos_are_three_stops_under_in_linear_light() -> None:
+    """test-china-dark is test-china with its linear light divided by 8 (exposure -3 EV), to
+    within the sRGB curve's round trip; its mean sRGB value is far below the original's."""
+    bright, dark = read_sample_image("test-china"), read_sample_image("test-china-dark")
+    assert bright.shape == dark.shape
+    np.testing.assert_allclose(srgb_to_linear(dark).numpy(), srgb_to_linear(bright).numpy() / 8, atol=2e-6, rtol=1e-4)
+    assert float(dark.mean()) < 0.45 * float(bright.mean())
+
+
+def test_export_test_photos_keeps_them_apart(tmp_path: Path, capsys: pytest.CaptureFixture,
+                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    """`--export-test-photos` writes the test photos only; the same folder as
+    `--export-photos` is refused in one line, before anything is written."""
+    from cli_runner import run_cli
+
+    monkeypatch.setattr(images, "SAMPLE_IMAGES", (COFFEE,))
+    monkeypatch.setattr(images, "TEST_IMAGES", tuple(i for i in TEST_IMAGES if i.name in ("test-text", "test-page")))
+    code, out, err = run_cli(["assets", "--export-photos", str(tmp_path / "a"), "--export-test-photos",
+                              str(tmp_path / "b")], capsys, monkeypatch)
+    assert code == 0, err
+    assert sorted(p.name for p in (tmp_path / "a").iterdir()) == ["coffee.png"]
+    assert sorted(p.name for p in (tmp_path / "b").iterdir()) == ["test-page.png", "test-text.png"]
+    code, out, err = run_cli(["assets", "--export-photos", str(tmp_path / "c"), "--export-test-photos",
+                              str(tmp_path / "c")], capsys, monkeypatch)
+    assert code == 2 and "--export-test-photos" in err and not (tmp_path / "c").exists()

@@ -1,10 +1,22 @@
-"""Built-in natural sample photos that may be redistributed, with their licences.
+"""Built-in natural sample photos that may be redistributed, with their licences, in two
+splits that never meet:
+
+* the training photos (:data:`SAMPLE_IMAGES`, :func:`available_sample_images`): what
+  `lensim assets --export-photos`, the demo and the benchmarks train on;
+* the unseen test photos (:data:`TEST_IMAGES`, :func:`unseen_photos`): scenes unlike the
+  training photos (architecture, foliage, text, faces, dark and noisy scenes), from
+  packages that hold no training photo (scikit-learn, matplotlib) and from scikit-image
+  photos of other collections than its four training photos. Nothing trains on them;
+  `lensim assets --export-test-photos` writes them for `lensim dataset make` and
+  `lensim evaluate`.
 
 They are not copied into this repository: they ship inside packages that the set-up
-command installs (scikit-image and sporco from the Python package registry; Debian's
-`mate-backgrounds`, 12 nature photos of 1.3-4.1 megapixels, GPL-2+, when the machine
-has apt and root) and are read from there. No image is downloaded at run time. A package
-that is missing only removes its photos from :func:`available_sample_images`.
+command installs (scikit-image, sporco, scikit-learn and matplotlib from the Python
+package registry; where the machine has apt and root, Debian's `mate-backgrounds`
+(12 nature photos, GPL-2+), `plasma-workspace-wallpapers` (11 KDE photos, GPL-2+ / LGPL-3)
+and `lomiri-wallpapers-16.04` (14 photos of the Ubuntu 18.04 wallpaper contest, CC-BY-4.0,
+CC-BY-SA-4.0 or CC0 per photo)) and are read from there. No image is downloaded at run
+time. A package that is missing only removes its photos.
 """
 from __future__ import annotations
 
@@ -23,23 +35,56 @@ from lensim.images import read_image
 class SampleImage:
     """One photo: ``package`` is an importable Python package, or ``debian:NAME`` for a
     Debian package whose files lie under :data:`DEBIAN_ROOTS`; ``relative_path`` is the
-    file inside it."""
+    file inside it. ``scale`` resamples it when read (the file is left as is);
+    ``exposure_ev`` changes its exposure by that many stops in linear light when read
+    (negative: a darker scene, which the simulated camera then records with more noise
+    relative to the signal)."""
 
     name: str
     package: str
     relative_path: str
     licence: str
     credit: str
-    scale: float = 1.0  # resampling factor read_sample_image applies (the file is left as is)
+    scale: float = 1.0
+    exposure_ev: float = 0.0
+    content: str = ""  # what the photo shows (the test split's categories)
 
 
-DEBIAN_ROOTS = {"mate-backgrounds": Path("/usr/share/backgrounds/mate")}
+DEBIAN_ROOTS = {"mate-backgrounds": Path("/usr/share/backgrounds/mate"),
+                "plasma-workspace-wallpapers": Path("/usr/share/wallpapers"),
+                "lomiri-wallpapers-16.04": Path("/usr/share/backgrounds")}
 _MATE_CREDITS = {
     "Aqua": "Charles Barbin", "Blinds": "Lennart Poettering, Andrea Cimitan", "Dune": "Marco Cogoni, Hylke Bons",
     "FreshFlower": "Jens Ansorg", "Garden": "Charles Barbin", "GreenMeadow": "Timothy Schellhase, Lapo Calamandrei",
     "LadyBird": "Charles Barbin", "RainDrops": "blackcombwhistler07", "Storm": "Sergey Nazarov",
     "TwoWings": "Charles Barbin, Hylke Bons", "Wood": "Jean-François Fortin Tam", "YellowFlower": "Charles Barbin",
 }
+# KDE Plasma 5.27's photographic wallpapers (the others are renders and drawings); authors and
+# licence from each wallpaper's metadata.json (LGPLv3), the package's debian/copyright says GPL-2+
+_KDE_CREDITS = {
+    "BytheWater": "Maciej Wiklo", "ColdRipple": "Risto Saukonpää", "ColorfulCups": "Dmitri Popov",
+    "DarkestHour": "Risto Saukonpää", "EveningGlow": "Ian Hex", "FallenLeaf": "Martin Klapetek", "Grey": "Sigi Sagi",
+    "Kite": "Risto Saukonpää", "OneStandsOut": "Risto Saukonpää", "Path": "Risto Saukonpää",
+    "summer_1am": "Risto Saukonpää",
+}
+# Lomiri (Ubuntu Touch) 16.04 wallpapers, all photographs but umang (a render); licence per
+# file from debian/copyright; scale brings each to about 1-1.6 megapixels, where it is sharp
+_LOMIRI = (
+    ("Bridge_by_Sander_Klootwijk", "Sander Klootwijk", "CC-BY-SA-4.0", 0.25),
+    ("Dragonfly_by_Bolly", "Bolly", "CC-BY-SA-4.0", 0.25),
+    ("Picture_0B_by_freespace", "Trevor \"Freespace\"", "CC-BY-4.0", 0.5),
+    ("Picture_1A_by_freespace", "Trevor \"Freespace\"", "CC-BY-4.0", 0.75),
+    ("Wine_by_Jakkub_Mede", "Jakub Mede", "CC-BY-4.0", 0.4),
+    ("aitzgorri_by_Aitzol_Berasategi", "Aitzol Berasategi", "CC-BY-4.0", 0.4),
+    ("analogpattern_by_Peter_Nerlich", "Peter Nerlich", "CC-BY-SA-4.0", 0.4),
+    ("free_by_Peter_Nerlich", "Peter Nerlich", "CC-BY-SA-4.0", 0.4),
+    ("friends_by_Aitzol_Berasategi", "Aitzol Berasategi", "CC-BY-4.0", 0.4),
+    ("greentock_by_Peter_Nerlich", "Peter Nerlich", "CC-BY-SA-4.0", 0.4),
+    ("life_by_Aitzol_Berasategi", "Aitzol Berasategi", "CC-BY-4.0", 0.4),
+    ("picosdeeuropa_by_Aitzol_Berasategi", "Aitzol Berasategi", "CC-BY-4.0", 0.4),
+    ("seeding_by_Clements_Engelhardt", "Clemens Engelhardt", "CC0-1.0", 0.25),
+    ("sunset_by_Aitzol_Berasategi", "Aitzol Berasategi", "CC-BY-4.0", 0.25),
+)
 
 
 SAMPLE_IMAGES: tuple[SampleImage, ...] = (
@@ -60,6 +105,44 @@ SAMPLE_IMAGES: tuple[SampleImage, ...] = (
     SampleImage(f"mate-{stem.lower()}", "debian:mate-backgrounds", f"nature/{stem}.jpg", "GPL-2+",
                 f"{who} (Debian mate-backgrounds)", scale=0.5)
     for stem, who in _MATE_CREDITS.items()
+) + tuple(
+    SampleImage(f"kde-{stem.lower().replace('_', '')}", "debian:plasma-workspace-wallpapers",
+                f"{stem}/contents/images/2560x1600.jpg", "LGPL-3 (wallpaper metadata; Debian: GPL-2+)",
+                f"{who} (Debian plasma-workspace-wallpapers)", scale=0.5)
+    for stem, who in _KDE_CREDITS.items()
+) + tuple(
+    SampleImage(f"lomiri-{stem.split('_by_')[0].lower().replace('_', '')}", "debian:lomiri-wallpapers-16.04",
+                f"{stem}.jpg", licence, f"{who} (Debian lomiri-wallpapers-16.04)", scale=scale)
+    for stem, who, licence, scale in _LOMIRI
+)
+
+_SKIMAGE = "scikit-image data"
+#: The unseen test split: never trained on (tests/test_sample_images.py checks that it shares
+#: no photo, file or package entry with SAMPLE_IMAGES); two dark scenes are made from
+#: well-exposed photos by lowering their exposure 3 stops in linear light.
+TEST_IMAGES: tuple[SampleImage, ...] = (
+    SampleImage("test-china", "sklearn", "datasets/images/china.jpg", "CC-BY-2.0",
+                "Daniel Buechele (scikit-learn data)", content="architecture, fine detail"),
+    SampleImage("test-flower", "sklearn", "datasets/images/flower.jpg", "CC-BY-2.0",
+                "vultilion (scikit-learn data)", content="close-up flower and foliage"),
+    SampleImage("test-grace-hopper", "matplotlib", "mpl-data/sample_data/grace_hopper.jpg", "public domain (US Navy)",
+                "US Navy (matplotlib sample data)", content="face, portrait"),
+    SampleImage("test-cameraman", "skimage", "data/camera.png", "CC0", f"Lav Varshney ({_SKIMAGE})",
+                content="face, buildings, grey"),
+    SampleImage("test-motorcycle", "skimage", "data/motorcycle_left.png", "Middlebury 2014 stereo data set",
+                f"Middlebury College ({_SKIMAGE})", content="indoor detail, clutter"),
+    SampleImage("test-text", "skimage", "data/text.png", "public domain", f"Wikipedia ({_SKIMAGE})",
+                content="text, grey"),
+    SampleImage("test-page", "skimage", "data/page.png", "BSD-3-Clause (scikit-image)", f"scikit-image ({_SKIMAGE})",
+                content="printed text, grey"),
+    SampleImage("test-grass", "skimage", "data/grass.png", "CC0", f"linolafett ({_SKIMAGE})",
+                content="foliage texture, grey"),
+    SampleImage("test-hubble", "skimage", "data/hubble_deep_field.jpg", "public domain (NASA)",
+                f"NASA, ESA ({_SKIMAGE})", content="dark scene"),
+    SampleImage("test-china-dark", "sklearn", "datasets/images/china.jpg", "CC-BY-2.0",
+                "Daniel Buechele (scikit-learn data)", exposure_ev=-3.0, content="dark, noisy (3 stops under)"),
+    SampleImage("test-motorcycle-dark", "skimage", "data/motorcycle_left.png", "Middlebury 2014 stereo data set",
+                f"Middlebury College ({_SKIMAGE})", exposure_ev=-3.0, content="dark indoor, noisy (3 stops under)"),
 )
 
 
@@ -74,11 +157,12 @@ def _package_dir(package: str) -> Path | None:
 
 
 def _sample(name: str) -> SampleImage:
-    """The built-in photo called name; a clear error naming the choices if there is none."""
-    for img in SAMPLE_IMAGES:
+    """The built-in photo (either split) called name; a clear error naming the choices if there is none."""
+    for img in SAMPLE_IMAGES + TEST_IMAGES:
         if img.name == name:
             return img
-    raise InputError(name, "sample image", f"unknown; expected one of {', '.join(i.name for i in SAMPLE_IMAGES)}")
+    raise InputError(name, "sample image", "unknown; expected one of "
+                     f"{', '.join(i.name for i in SAMPLE_IMAGES + TEST_IMAGES)}")
 
 
 def sample_image_path(name: str) -> Path:
@@ -93,24 +177,39 @@ def sample_image_path(name: str) -> Path:
 
 
 def read_sample_image(name: str) -> torch.Tensor:
-    """A built-in photo as (3, H, W) float32 sRGB in [0, 1], resampled by its ``scale``.
+    """A built-in photo as (3, H, W) float32 sRGB in [0, 1], resampled by its ``scale`` and
+    brought to its ``exposure_ev`` (linear light times 2**ev, back to sRGB).
 
-    The Debian wallpapers are JPEGs of 1.3-4.1 megapixels that are soft at full size; they
-    are halved (antialiased bilinear), which makes them sharp at the pixel level, as a
-    ground truth for training pairs should be."""
+    The Debian wallpapers are JPEGs of 1.3 to 16 megapixels that are soft at full size;
+    they are reduced (antialiased bilinear), which makes them sharp at the pixel level, as
+    a ground truth for training pairs should be."""
+    from lensim.sensor.isp import linear_to_srgb, srgb_to_linear
+
     arr, _ = read_image(sample_image_path(name))
-    scale = _sample(name).scale
-    if scale != 1.0:
-        arr = F.interpolate(arr[None], scale_factor=scale, mode="bilinear", antialias=True,
+    img = _sample(name)
+    if img.scale != 1.0:
+        arr = F.interpolate(arr[None], scale_factor=img.scale, mode="bilinear", antialias=True,
                             align_corners=False)[0].clamp(0.0, 1.0)
+    if img.exposure_ev:
+        arr = linear_to_srgb(srgb_to_linear(arr) * 2.0 ** img.exposure_ev)
     return arr
 
 
-def available_sample_images() -> list[SampleImage]:
-    """The sample images whose package is installed."""
+def _installed(images: tuple[SampleImage, ...]) -> list[SampleImage]:
     out = []
-    for img in SAMPLE_IMAGES:
+    for img in images:
         base = _package_dir(img.package)
         if base is not None and (base / img.relative_path).is_file():
             out.append(img)
     return out
+
+
+def available_sample_images() -> list[SampleImage]:
+    """The training photos whose package is installed (never a test photo)."""
+    return _installed(SAMPLE_IMAGES)
+
+
+def unseen_photos() -> list[SampleImage]:
+    """The unseen test photos whose package is installed (:data:`TEST_IMAGES`): for
+    evaluation only; no default of lensim trains on them."""
+    return _installed(TEST_IMAGES)
