@@ -14,8 +14,9 @@ from cli_runner import run_cli
 from lensim.optics.aiming import chief_ray_image_height
 from lensim.optics.field_analysis import distortion, relative_illumination
 from lensim.optics.lens_file import load_lens
-from lensim.optics.lensfun import CORNER_IN_SHORT_HALF_SIDES, lens_at_settings
+from lensim.optics.lensfun import CORNER_IN_SHORT_HALF_SIDES
 from lensim.optics.paraxial import paraxial_image_height
+from lensim.optics.shooting import ShootingSettings, lens_at
 
 ASPHERIC = "US08427765-1.zmx"  # EFL 30.8 mm F/2.1, 13.6 mm image height: an APS-C lens
 CROP, FOCAL, APERTURE = 1.6, 30.8, 2.8
@@ -151,7 +152,7 @@ def test_lensfun_reproduces_lensims_distortion_and_lateral_colour(profile_file, 
                    flags=lensfunpy.ModifyFlags.DISTORTION | lensfunpy.ModifyFlags.TCA)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        lens = lens_at_settings(load_lens(reference_lenses / ASPHERIC), APERTURE, None)
+        lens = lens_at(load_lens(reference_lenses / ASPHERIC), ShootingSettings(fno=APERTURE))
     px, py = _probe_pixels()
     cx, cy, unit_px = (WIDTH - 1) / 2, (HEIGHT - 1) / 2, HEIGHT / 2
     dx, dy = px - cx, py - cy
@@ -188,7 +189,7 @@ def test_lensfun_vignetting_matches_relative_illumination(profile_file, referenc
     ri_lensfun = 0.25 / img[0, cols, 1]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        lens = lens_at_settings(load_lens(reference_lenses / ASPHERIC), APERTURE, None)
+        lens = lens_at(load_lens(reference_lenses / ASPHERIC), ShootingSettings(fno=APERTURE))
     height_mm = np.hypot(cols - (w - 1) / 2, (h - 1) / 2) / (h / 2) * (12.0 / CROP)
     by_height = lens.with_changes(field_type="real_image_height", fields=[float(height_mm.max())])
     ri = relative_illumination(by_height, list(height_mm), samples=32)["relative_illumination"]

@@ -354,8 +354,9 @@ def lensfun_command(
                                       "(full frame 1; the lens must cover the 3:2 frame's corner)."),
     focal: float = typer.Option(..., "--focal", help="Focal length (mm) the profile is filed under."),
     aperture: float = typer.Option(..., "--aperture", help="F-number: the lens is evaluated stopped to it."),
-    distance: Optional[float] = typer.Option(None, "--distance", help="Focus distance (m from the first vertex): the "
-                                             "lens is refocused there. Default: the lens file's object distance."),
+    distance: Optional[float] = typer.Option(None, "--distance", help="Focus distance (m from the image plane, as "
+                                             "cameras report it): the lens is refocused there. "
+                                             "Default: the lens file's object distance."),
     output: Path = typer.Option(..., "-o", "--output", help="lensfun database file to write (.xml)."),
     sensor: Optional[str] = typer.Option(None, "--sensor", help=SENSOR_HELP),
     aiming: AimingChoice = typer.Option(AimingChoice.real, help="Ray aiming of the chief rays."),

@@ -34,6 +34,10 @@ class Lens:
     unit of field_type (degrees or mm). wavelengths_um with weights; primary indexes them.
     configurations: zoom or focus positions, an ordered mapping of name -> {0-based surface
     index: thickness (mm)} (lensim.optics.configurations; apply_configuration picks one).
+    focus_thickness: the 0-based index of the surface whose thickness (an air gap) focusing
+    changes (a focus group), or None for unit focusing (the image plane moves);
+    focus_compensator: another air gap that changes by the opposite amount, so the group
+    moves between the two (None: only focus_thickness changes). lensim.optics.shooting.
     """
 
     surfaces: list[Surface]
@@ -52,6 +56,8 @@ class Lens:
     source: str = "<lens>"
     notes: list[str] = field(default_factory=list)
     configurations: dict[str, dict[int, float]] = field(default_factory=dict)
+    focus_thickness: int | None = None
+    focus_compensator: int | None = None
 
     def __post_init__(self) -> None:
         if self.wavelength_weights is None:
@@ -121,10 +127,31 @@ class Lens:
                 if not (1 <= p <= MAX_ASPHERE_POWER):
                     raise self._err(f"surfaces[{i}].asphere", f"expected powers r1..r{MAX_ASPHERE_POWER}, got r{p}")
         self._check_air_gaps(media, dirs)
+        self._check_focus(media)
         if self.configurations:
             from lensim.optics.configurations import check_configurations
 
             check_configurations(self)
+
+    def _check_focus(self, media: list[Material]) -> None:
+        """The focus group's gaps: surface indices in range, in air, distinct; a compensator
+        only with a focus thickness."""
+        n = len(self.surfaces)
+        if self.focus_thickness is None:
+            if self.focus_compensator is not None:
+                raise self._err("focus.compensator", "expected focus.thickness too (the gap the focus group moves in)")
+            return
+        for key, index in (("thickness", self.focus_thickness), ("compensator", self.focus_compensator)):
+            if index is None:
+                continue
+            if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < n:
+                raise self._err(f"focus.{key}", f"expected a surface index 0..{n - 1} (0-based, as in surfaces[i]), "
+                                                f"got {index!r}")
+            if not isinstance(media[index + 1], Air):
+                raise self._err(f"focus.{key}", f"expected an air gap, but surfaces[{index}] is followed by "
+                                                f"{media[index + 1].name}")
+        if self.focus_compensator == self.focus_thickness:
+            raise self._err("focus.compensator", f"expected another gap than focus.thickness ({self.focus_thickness})")
 
     def is_dummy(self, i: int, media: list[Material] | None = None) -> bool:
         """Surface i bends no ray: air on both sides and not a mirror (a stop in air, a

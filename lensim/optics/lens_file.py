@@ -16,6 +16,7 @@
     configurations:                # optional: zoom/focus positions, chosen by name or 1-based number
       wide: {thicknesses: {1: 6.0, 4: 40.2}}   # 0-based surface index: thickness (mm)
       tele: {thicknesses: {1: 0.8, 4: 52.7}}
+    focus: {thickness: 1, compensator: 4}   # optional: a focus group moving between gaps 1 and 4
 
 Surface keys: radius (mm, 'infinity' or omitted for a plane) or curvature (1/mm),
 thickness (mm to the next vertex; negative after a mirror, or in air to place a stop
@@ -41,7 +42,8 @@ from lensim.optics.materials import Air, Material, ModelGlass, material_from_spe
 from lensim.optics.surfaces import MAX_ASPHERE_POWER, Surface
 
 TOP_KEYS = {"name", "description", "units", "object", "aperture", "fields", "wavelengths", "surfaces", "image", "notes",
-            "source", "configurations"}
+            "source", "configurations", "focus"}
+FOCUS_KEYS = {"thickness", "compensator"}
 CONFIGURATION_KEYS = {"thicknesses"}
 SURFACE_KEYS = {"radius", "curvature", "thickness", "material", "conic", "asphere", "clear_semi_diameter",
                 "obscuration", "semi_diameter", "stop", "mirror", "comment"}
@@ -189,8 +191,29 @@ def lens_from_dict(data: dict, source: str = "<lens>") -> Lens:
         source=source,
         notes=notes,
         configurations=_configurations_from_data(src, data.get("configurations", {})),
+        **_focus_from_data(src, data.get("focus")),
     )
     return lens
+
+
+def _focus_from_data(src: str, data: Any) -> dict[str, int | None]:
+    """The ``focus`` block {thickness: i[, compensator: j]}: the focus group's gap (0-based
+    surface index) and the gap that compensates it. The Lens checks the indices."""
+    if data is None:
+        return {}
+    data = _check_keys(src, "focus", data, FOCUS_KEYS)
+    if "thickness" not in data:
+        raise InputError(src, "focus.thickness", "missing; expected the 0-based index of the surface whose thickness "
+                                                 "(an air gap) the focus group changes")
+    out: dict[str, int | None] = {}
+    for key, attr in (("thickness", "focus_thickness"), ("compensator", "focus_compensator")):
+        value = data.get(key)
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise InputError(src, f"focus.{key}", f"expected a 0-based surface index (an integer), got {value!r}")
+        out[attr] = value
+    return out
 
 
 def _configurations_from_data(src: str, data: Any) -> dict[str, dict[int, float]]:
@@ -271,6 +294,10 @@ def lens_to_dict(lens: Lens) -> dict:
     if lens.configurations:
         out["configurations"] = {name: {"thicknesses": dict(sorted(t.items()))}
                                  for name, t in lens.configurations.items()}
+    if lens.focus_thickness is not None:
+        out["focus"] = {"thickness": lens.focus_thickness}
+        if lens.focus_compensator is not None:
+            out["focus"]["compensator"] = lens.focus_compensator
     return out
 
 

@@ -20,7 +20,6 @@ Lengths in mm, wavelengths in nm at the interface.
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
@@ -33,7 +32,8 @@ from lensim.io import atomic_write_text
 from lensim.optics.aiming import Aiming, object_field
 from lensim.optics.field_analysis import distortion, lateral_colour, relative_illumination
 from lensim.optics.lens import Lens
-from lensim.optics.paraxial import paraxial_data, paraxial_focus_thickness
+from lensim.optics.paraxial import paraxial_data
+from lensim.optics.shooting import ShootingSettings, lens_at
 
 HALF_SHORT_SIDE_FULL_FRAME_MM = 12.0  # lensfun's distortion/TCA radius unit at crop factor 1
 CORNER_IN_SHORT_HALF_SIDES = math.sqrt(13.0) / 2.0  # 3:2 frame: corner radius / half short side
@@ -84,21 +84,6 @@ def check_settings(maker: str, model: str, mount: str, crop_factor: float, focal
             raise InputError(None, name, f"expected a positive number, got {value:g}")
     if distance_m is not None and not (math.isfinite(distance_m) and distance_m > 0):
         raise InputError(None, "--distance", f"expected a positive focus distance in metres, got {distance_m:g}")
-
-
-def lens_at_settings(lens: Lens, aperture: float, distance_m: float | None) -> Lens:
-    """The lens stopped to image-space F-number `aperture` and, when distance_m is given,
-    focused on an object that far from its first vertex (the image plane moved to the new
-    paraxial focus, keeping the lens's defocus)."""
-    out = lens.with_changes(aperture_type="fno", aperture_value=float(aperture))
-    if distance_m is None:
-        return out
-    surfaces = list(out.surfaces)
-    kind = "object_height" if lens.field_type == "object_height" else "angle"
-    out = out.with_changes(object_distance=distance_m * 1000.0, surfaces=surfaces, field_type=kind,
-                           fields=list(lens.fields) if kind == lens.field_type else [0.0])
-    surfaces[-1] = dataclasses.replace(surfaces[-1], thickness=paraxial_focus_thickness(out))
-    return out
 
 
 def _corner_launch(lens: Lens, corner_mm: float, crop_factor: float, aiming: Aiming) -> float:
@@ -155,11 +140,16 @@ def lensfun_profile(
     ri_samples: int = 32,
 ) -> LensfunProfile:
     """Fit lensfun's ptlens, poly3 and pa models to the lens at F-number `aperture` (and
-    focused at distance_m, default the lens's own object distance) over FIT_FIELDS fields
+    focused at distance_m metres from the image plane, default the lens's own object
+    distance; lensim.optics.shooting.lens_at) over FIT_FIELDS fields
     from the axis to the corner of a 3:2 frame at crop_factor. Lateral colour is weighted
     by channel_weights (3, W) at wavelengths_nm (W,), rows R, G, B (a SpectralResponse's)."""
     check_settings(maker, model, mount, crop_factor, focal_mm, aperture, distance_m)
-    set_lens = lens_at_settings(lens, aperture, distance_m)
+    try:
+        set_lens = lens_at(lens, ShootingSettings(fno=aperture, focus_m=distance_m))
+    except InputError as e:  # this command's options are --aperture and --distance
+        names = {"--fno": "--aperture", "--focus-m": "--distance", "--object-m": "--distance"}
+        raise InputError(e.source, names.get(e.field or "", e.field), e.message) from None
     unit = HALF_SHORT_SIDE_FULL_FRAME_MM / crop_factor
     corner = unit * CORNER_IN_SHORT_HALF_SIDES
     probe = set_lens.launch_lens()
@@ -182,7 +172,7 @@ def lensfun_profile(
            "tca_um": float(max(np.abs(red_fit - r_rgb[0]).max(), np.abs(blue_fit - r_rgb[2]).max()) * unit * 1000.0),
            "vignetting": float(np.abs(ri_fit - np.array(ri["relative_illumination"])).max())}
     distance = distance_m if distance_m is not None else (
-        INFINITY_DISTANCE_M if set_lens.infinite_object else set_lens.object_distance / 1000.0)
+        INFINITY_DISTANCE_M if set_lens.infinite_object else (set_lens.object_distance + set_lens.total_track) / 1000.0)
     samples = {"launch": list(map(float, launch)), "paraxial_height_mm": dist["paraxial_height_mm"],
                "channel_height_mm": np.array(colour["channel_height_mm"]).T.tolist(),
                "relative_illumination": ri["relative_illumination"]}
