@@ -1,19 +1,32 @@
-"""Worker processes that die with their parent.
+"""Worker processes: one engine for lensim's parallel jobs, and workers that die with
+their parent.
 
-The PSF bank's process pool starts worker processes; when the parent is killed (SIGKILL,
-out of memory) nothing tells them to stop, and they would compute on at full CPU for
-nobody. :func:`exit_with_parent`, called in each worker, ends the worker within ``poll_s``
-seconds of its parent's death through a daemon thread that watches the parent pid: a dead
-parent's children are re-parented, so ``os.getppid()`` changes. (Linux's
-``PR_SET_PDEATHSIG`` is not used: it fires when the *thread* that started the worker
-ends.) The local Dask cluster of ``dataset make`` needs no help: its workers end with
-their nanny, which lives in the parent (tests/test_kill_resume.py checks both).
+:func:`run_jobs` runs picklable jobs (``fn(job)`` for each job) in this process, on a
+local Dask cluster of worker processes (one torch thread each), or on an existing Dask
+cluster (``scheduler``: its address); `psf bank` and `dataset make` both run on it, so a
+cluster computes banks, grids of banks and training pairs alike (their ``--workers`` and
+``--scheduler`` options).
+
+Worker processes of a killed parent must not compute on at full CPU for nobody. The local
+cluster's workers are children of this process; they end with it twice over: Dask's
+nanny, which lives in the parent, holds a pipe to each of them that closes when the
+parent dies, and each job calls :func:`exit_with_parent` in its worker first, which ends
+the worker within ``poll_s`` seconds of its parent's death through a daemon thread that
+watches the parent pid (a dead parent's children are re-parented, so ``os.getppid()``
+changes). Linux's ``PR_SET_PDEATHSIG`` is not used: it fires when the *thread* that
+started the worker ends. tests/test_kill_resume.py checks both commands. Workers of a
+cluster given by address belong to that cluster and are left alone.
 """
 from __future__ import annotations
 
 import os
 import threading
 import time
+from collections.abc import Callable, Sequence
+from typing import Any, TypeVar
+
+J = TypeVar("J")
+R = TypeVar("R")
 
 _watching: set[int] = set()  # parent pids this process already watches
 
@@ -40,4 +53,88 @@ def exit_with_parent(parent_pid: int, poll_s: float = 0.25) -> None:
     threading.Thread(target=_watch, args=(parent_pid, poll_s), name="lensim-exit-with-parent", daemon=True).start()
 
 
-__all__ = ["exit_with_parent"]
+def _in_worker(fn: Callable[[Any], Any], job: Any, parent_pid: int | None) -> Any:
+    """fn(job) in a Dask worker: tied to its parent when that is a local cluster's
+    (parent_pid), with one torch thread (a job's tensors are small; more threads would
+    fight the other workers for cores) and warnings dropped (a job returns what its
+    parent should report)."""
+    import warnings
+
+    import torch
+
+    if parent_pid is not None:
+        exit_with_parent(parent_pid)
+    torch.set_num_threads(1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return fn(job)
+
+
+def run_jobs(fn: Callable[[J], R], jobs: Sequence[J], workers: int = 1, scheduler: str | None = None,
+             on_result: Callable[[J, R], None] | None = None) -> None:
+    """Run ``fn(job)`` for every job, calling ``on_result(job, result)`` in this process as
+    each finishes (in order of completion; results are not kept).
+
+    Where: with no scheduler and ``workers`` <= 1 or at most one job, in this process with
+    one torch thread (restored afterwards); with no scheduler, on a local Dask cluster of
+    min(workers, jobs) worker processes, one thread each, started here and closed on
+    return; with ``scheduler`` (an address such as ``tcp://host:8786``), on that cluster,
+    whose workers must be able to import lensim. ``fn`` and the jobs must be picklable (a
+    module-level function and plain data). An exception from a job (an InputError
+    crosses the process boundary as itself) cancels the rest and is raised here."""
+    import torch
+
+    if not jobs:
+        return
+    if scheduler is None and (workers <= 1 or len(jobs) <= 1):
+        threads = torch.get_num_threads()
+        torch.set_num_threads(1)
+        try:
+            for job in jobs:
+                result = fn(job)
+                if on_result is not None:
+                    on_result(job, result)
+        finally:
+            torch.set_num_threads(threads)
+        return
+    _run_on_dask(fn, jobs, min(workers, len(jobs)), scheduler, on_result)
+
+
+def _client(client_type: Any, address: Any) -> Any:
+    """A Dask client of the cluster (or at the address); a scheduler that does not answer
+    is a one-line InputError naming its address."""
+    from lensim.errors import InputError
+
+    try:
+        return client_type(address)
+    except OSError as e:  # TimeoutError included
+        reason = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise InputError(str(address), None, f"no Dask scheduler answered ({reason}); expected the address of a "
+                         "running scheduler (dask scheduler, or a cluster's scheduler_address)") from None
+
+
+def _run_on_dask(fn: Callable[[J], R], jobs: Sequence[J], workers: int, scheduler: str | None,
+                 on_result: Callable[[J, R], None] | None) -> None:
+    from distributed import Client, LocalCluster, as_completed
+
+    cluster = None if scheduler else LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                                  dashboard_address=None)
+    parent = os.getpid() if cluster is not None else None
+    try:
+        with _client(Client, scheduler or cluster) as client:
+            futures = client.map(_in_worker, [fn] * len(jobs), list(jobs), parent_pid=parent, pure=False)
+            job_of = {f.key: job for f, job in zip(futures, jobs, strict=True)}
+            try:
+                for fut in as_completed(futures):
+                    result = fut.result()
+                    if on_result is not None:
+                        on_result(job_of[fut.key], result)
+            except BaseException:
+                client.cancel(futures)
+                raise
+    finally:
+        if cluster is not None:
+            cluster.close()
+
+
+__all__ = ["exit_with_parent", "run_jobs"]

@@ -31,6 +31,15 @@ def pupil_samples_option() -> Any:
     return typer.Option(BankSettings.pupil_samples, "--pupil-samples", help="Pupil grid samples across the diameter.")
 
 
+def workers_option() -> Any:
+    return typer.Option(1, "--workers", help="Worker processes: a local Dask cluster when > 1 (one torch thread each).")
+
+
+def scheduler_option() -> Any:
+    return typer.Option(None, "--scheduler", help="Address of an existing Dask scheduler to compute on (e.g. "
+                        "tcp://10.0.0.5:8786) instead of local workers.")
+
+
 def cache_option() -> Any:
     return typer.Option(None, "--cache", help="Bank cache folder (default $LENSIM_CACHE or ~/.cache/lensim).")
 
@@ -101,8 +110,10 @@ def _optics(lens_data: dict) -> Any:
 
 
 def cached_bank(lens: Lens, pitch_um: float, sensor: SensorProfile, settings: BankSettings, workers: int,
-                quiet: bool) -> PSFBank:
+                quiet: bool, scheduler: str | None = None) -> PSFBank:
     """The lens's bank at this pitch (um) with the sensor's spectral response, from the
-    cache or computed into it, with a progress bar unless quiet."""
+    cache or computed into it (with `workers` local processes or on the Dask cluster at
+    `scheduler`), with a progress bar unless quiet."""
     with progress_bar("PSF bank", "fields", quiet) as cb:
-        return ensure_bank(lens, pitch_um, settings, response=sensor.spectral_response, workers=workers, progress=cb)
+        return ensure_bank(lens, pitch_um, settings, response=sensor.spectral_response, workers=workers, progress=cb,
+                           scheduler=scheduler)

@@ -14,10 +14,12 @@ from lensim.cli.bank_options import (
     check_response,
     fields_option,
     pupil_samples_option,
+    scheduler_option,
     wavelengths_option,
+    workers_option,
 )
 from lensim.cli.common import console, print_json, progress_bar
-from lensim.cli.validate import at_least, choice, even, input_folder, output_folder
+from lensim.cli.validate import at_least, choice, even, input_folder, output_folder, scheduler_address
 from lensim.data.pairs import check_photos, list_images, make_dataset
 from lensim.optics.lens_file import load_lens
 from lensim.sensor.profile import DEFAULT_SENSOR, load_sensor
@@ -60,8 +62,8 @@ def make(
     fields: int = fields_option(),
     wavelengths: str = wavelengths_option(),
     pupil_samples: int = pupil_samples_option(),
-    workers: int = typer.Option(1, "--workers", help="Worker processes (a local Dask cluster when > 1)."),
-    scheduler: str = typer.Option(None, "--scheduler", help="Address of an existing Dask scheduler to run on."),
+    workers: int = workers_option(),
+    scheduler: str = scheduler_option(),
     cache: Path = cache_option(),
     quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
     json_out: bool = typer.Option(False, "--json", help="Print a summary as JSON."),
@@ -75,6 +77,7 @@ def make(
     """
     settings = bank_settings(fields, wavelengths, pupil_samples, cache)
     _check_options(sharp_dir, output, crops, size, placements, workers, demosaic, cache)
+    scheduler_address(scheduler)
     sensor = load_sensor(sensor_file)
     quiet = quiet or json_out
     if bank_dir is not None:
@@ -83,7 +86,7 @@ def make(
         lens = load_lens(lens_file or assets.DEFAULT_LENS)
         check_response(settings, sensor.spectral_response, sensor=sensor)
         check_photos(list_images(sharp_dir), size)  # before the bank, which takes minutes
-        bank = cached_bank(lens, sensor.pixel_pitch_um, sensor, settings, workers, quiet)
+        bank = cached_bank(lens, sensor.pixel_pitch_um, sensor, settings, workers, quiet, scheduler)
     with progress_bar("pairs", "photos", quiet) as cb:
         manifest = make_dataset(sharp_dir, output, bank, sensor_file, sensor, crops=crops, size=size, seed=seed,
                                 placements=placements, noise=noise, demosaic=demosaic, workers=workers, scheduler=scheduler, progress=cb)

@@ -11,10 +11,22 @@ from lensim.cli.bank_options import (
     check_response,
     fields_option,
     pupil_samples_option,
+    scheduler_option,
     wavelengths_option,
+    workers_option,
 )
 from lensim.cli.common import console, print_json, progress_bar
-from lensim.cli.validate import AIMINGS, at_least, choice, in_range, input_folder, output_file, output_folder, positive
+from lensim.cli.validate import (
+    AIMINGS,
+    at_least,
+    choice,
+    in_range,
+    input_folder,
+    output_file,
+    output_folder,
+    positive,
+    scheduler_address,
+)
 from lensim.cli.validate import wavelength_nm as wavelength_nm_checked
 from lensim.io import atomic_write_bytes
 from lensim.optics.lens_file import load_lens
@@ -89,7 +101,8 @@ def bank(
     max_spacing_um: float = typer.Option(None, "--max-spacing-um",
                                          help="Largest fine PSF spacing in um (default: half the Airy radius at the shortest wavelength)."),
     aiming: str = typer.Option("real", "--aiming", help="Ray aiming: real or paraxial."),
-    workers: int = typer.Option(1, "--workers", help="Worker processes (one torch thread each)."),
+    workers: int = workers_option(),
+    scheduler: str = scheduler_option(),
     output: Path = typer.Option(..., "-o", "--output", help="Bank directory (created; an existing bank with the same settings is resumed)."),
     quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
     json_out: bool = typer.Option(False, "--json", help="Print a summary as JSON (no progress output)."),
@@ -100,6 +113,9 @@ def bank(
 
     The bank options and their defaults are those of `simulate` and `dataset make`
     (lensim.psf.bank.BankSettings).
+
+    The fields are computed here (--workers 1), on a local Dask cluster (--workers N) or on
+    an existing one (--scheduler ADDRESS); the parent writes every field file.
 
     Example: lensim psf bank --lens cooke_triplet --sensor apsc_mirrorless --fields 64 --workers 2 -o bank/
     """
@@ -118,6 +134,7 @@ def bank(
     if (sensor is None) == (pixel_um is None):
         raise InputError("<command line>", "--sensor/--pixel-um", "expected exactly one of them")
     _check_bank_options(pixel_um, kernel, method, max_spacing_um, workers, output)
+    scheduler_address(scheduler)
     settings = bank_settings(fields, wavelengths_nm, pupil_samples, aiming=aiming, kernel_pixels=kernel or None)
     lens = load_lens(name)
     profile = load_sensor(sensor) if sensor is not None else None
@@ -128,7 +145,7 @@ def bank(
     t0 = time.time()
     with progress_bar("PSF bank", "fields", quiet or json_out) as report:
         result = build_bank(lens, pitch, settings, response=response, out_dir=output, workers=workers, progress=report,
-                            method=method, max_spacing_um=max_spacing_um, illuminant=illuminant)
+                            scheduler=scheduler, method=method, max_spacing_um=max_spacing_um, illuminant=illuminant)
     m = result.manifest
     info = {"bank": str(output), "lens": lens.source, "sensor": sensor, "fields": len(m["fields"]),
             "wavelengths": len(m["wavelengths_nm"]), "kernel_pixels": m["kernel_pixels"],

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import tempfile
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
@@ -189,5 +190,26 @@ def device(name: str, option: str = "--device") -> str:
     return name
 
 
+#: the transports a Dask scheduler address may name (tcp://host:port, ...)
+DASK_PROTOCOLS = ("tcp", "tls", "ws", "wss", "ucx", "inproc")
+
+
+def scheduler_address(address: str | None, option: str = "--scheduler") -> str | None:
+    """A Dask scheduler address: [PROTOCOL://]HOST[:PORT] (PROTOCOL one of
+    DASK_PROTOCOLS, PORT 1..65535; an IPv6 host in brackets), or None. Whether a
+    scheduler answers there is known only when connecting (lensim.workers.run_jobs)."""
+    if address is None:
+        return None
+    text = address.strip()
+    m = re.fullmatch(r"(?:(?P<proto>[a-z]+)://)?(?P<host>\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9._-]+)(?::(?P<port>\d{1,5}))?",
+                     text)
+    ok = m is not None and (m["proto"] is None or m["proto"] in DASK_PROTOCOLS) and (
+        m["port"] is None or 1 <= int(m["port"]) <= 65535)
+    if not ok:
+        raise InputError(option, None, f"expected a Dask scheduler address such as tcp://10.0.0.5:8786 "
+                         f"([{'|'.join(DASK_PROTOCOLS)}://]HOST[:PORT]), got {address!r}")
+    return text
+
+
 __all__ = ["AIMINGS", "at_least", "choice", "device", "distinct_outputs", "even", "finite", "in_range", "input_file",
-           "input_folder", "output_file", "output_folder", "positive", "wavelength_nm"]
+           "input_folder", "output_file", "output_folder", "positive", "scheduler_address", "wavelength_nm"]

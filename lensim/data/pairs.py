@@ -21,8 +21,9 @@ last, atomically, after its PNGs (also atomic), so a killed job is re-run from t
 unfinished image. The manifest (settings + every record) is rewritten at the end. One
 writer at a time: the folder is locked (lensim.io.folder_lock) while pairs are made.
 
-Parallelism: `workers > 1` starts a local dask.distributed cluster (one thread per
-worker process); `scheduler` connects to an existing Dask cluster instead.
+Parallelism (lensim.workers.run_jobs, the engine of `psf bank` too): `workers > 1` starts
+a local dask.distributed cluster (one thread per worker process); `scheduler` connects to
+an existing Dask cluster instead.
 """
 from __future__ import annotations
 
@@ -43,6 +44,7 @@ from lensim.psf.bank import PSFBank
 from lensim.render.mapping import native_mapping
 from lensim.render.pipeline import simulate
 from lensim.sensor.profile import SensorProfile, load_sensor
+from lensim.workers import run_jobs
 
 
 @dataclass
@@ -256,34 +258,17 @@ def _release_folder(out: Path) -> None:
 
 def _run_jobs(todo: list[PairJob], total: int, workers: int, scheduler: str | None,
               progress: Callable[[int, int], None] | None) -> None:
-    """Run the unfinished jobs here (workers <= 1, no scheduler) or on a Dask cluster (a
-    local one of ``workers`` processes, or the one at ``scheduler``); progress(done, total)
-    counts photos, the ones finished before included."""
+    """Run the unfinished jobs through lensim.workers.run_jobs (here, on a local Dask
+    cluster of ``workers`` processes, or on the one at ``scheduler``); progress(done,
+    total) counts photos, the ones finished before included."""
     done = total - len(todo)
     if progress:
         progress(done, total)
-    if workers <= 1 and scheduler is None:
-        threads = torch.get_num_threads()
-        try:
-            for j in todo:
-                make_pairs_for_image(j)
-                done += 1
-                if progress:
-                    progress(done, total)
-        finally:
-            torch.set_num_threads(threads)
-        return
-    from distributed import Client, LocalCluster, as_completed
 
-    cluster = None if scheduler else LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                                  dashboard_address=None)
-    try:
-        with Client(scheduler or cluster) as client:
-            for fut in as_completed(client.map(make_pairs_for_image, todo, pure=False)):
-                fut.result()
-                done += 1
-                if progress:
-                    progress(done, total)
-    finally:
-        if cluster is not None:
-            cluster.close()
+    def finished(_job: PairJob, _record: dict) -> None:
+        nonlocal done
+        done += 1
+        if progress:
+            progress(done, total)
+
+    run_jobs(make_pairs_for_image, todo, workers, scheduler, finished)

@@ -21,12 +21,14 @@ def cached_bank_dir(lens: Lens, pitch_um: float, settings: BankSettings, respons
 
 
 def ensure_bank(lens: Lens, pitch_um: float, settings: BankSettings | None = None, response: str | Path | None = None,
-                workers: int = 1, progress: Progress | None = None) -> PSFBank:
+                workers: int = 1, progress: Progress | None = None, scheduler: str | None = None) -> PSFBank:
     """The bank `settings` ask for (default BankSettings()) for this lens at this pitch
     (um) and spectral response (a colour-science camera name or a CSV path; None: the
     default camera): loaded from the cache when complete, computed (or finished, after a
-    kill) otherwise, with `workers` processes; progress(done, total) per field."""
+    kill) otherwise, with `workers` processes or on the Dask cluster at `scheduler`;
+    progress(done, total) per field."""
     settings = settings or BankSettings()
     settings = dataclasses.replace(settings, kernel_pixels=settings.kernel_size(lens, pitch_um))  # sized once
     out = cached_bank_dir(lens, pitch_um, settings, response)
-    return build_bank(lens, pitch_um, settings, response=response, out_dir=out, workers=workers, progress=progress)
+    return build_bank(lens, pitch_um, settings, response=response, out_dir=out, workers=workers, progress=progress,
+                      scheduler=scheduler)

@@ -1,14 +1,12 @@
 """Computing a PSF bank: the per-field work (fine PSFs per wavelength, pixel integration,
-relative illumination, spectral weighting) and the executor that runs it in this process
-or in worker processes, writing each field as it finishes."""
+relative illumination, spectral weighting), run through lensim.workers.run_jobs (in this
+process, on a local Dask cluster or on a cluster given by address), each field written as
+it finishes."""
 from __future__ import annotations
 
-import io
 import math
-import os
 import warnings
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -38,7 +36,7 @@ from lensim.psf.metrics import strehl_ratio
 from lensim.psf.pixels import integrate_pixels, oversampling_factor
 from lensim.psf.pupil_field import PupilField, pupil_field
 from lensim.sensor.spectral import SpectralResponse, spectral_response
-from lensim.workers import exit_with_parent
+from lensim.workers import run_jobs
 
 
 @dataclass
@@ -199,45 +197,30 @@ def _compute_field(job: _Job, index: int, fld: float, para: ParaxialData | None 
     )
 
 
-def _init_worker(parent_pid: int) -> None:
-    exit_with_parent(parent_pid)  # a killed `psf bank` leaves no worker computing
-    torch.set_num_threads(1)
-    warnings.simplefilter("ignore")  # sampling warnings travel back in BankField.warnings
+@dataclass
+class FieldTask:
+    """One bank field to compute (picklable: a job of lensim.workers.run_jobs): the
+    bank's job, the field's index and normalized position, the lens's paraxial data."""
+
+    job: _Job
+    index: int
+    field: float
+    para: ParaxialData
 
 
-def _worker(job: _Job, index: int, fld: float) -> bytes:
-    return _compute_field(job, index, fld).to_npz_bytes()
+def compute_field_task(task: FieldTask) -> BankField:
+    """The field a FieldTask names (run in this process or in a worker)."""
+    return _compute_field(task.job, task.index, task.field, task.para)
 
 
 def _run_fields(job: _Job, todo: list[tuple[int, float]], workers: int, para: ParaxialData,
-                finish: Callable[[BankField], None]) -> None:
-    """Compute the (index, field) pairs in `todo`, calling finish(field) as each is done:
-    in this process with one torch thread (restored afterwards) when workers == 1 or only
-    one field is left, else in `workers` spawned processes."""
-    if workers == 1 or len(todo) <= 1:
-        # a field's tensors are small (a few thousand rays): one torch thread is fastest
-        # and does not fight other processes for cores
-        threads = torch.get_num_threads()
-        torch.set_num_threads(1)
-        try:
-            for i, fld in todo:
-                finish(_compute_field(job, i, fld, para))
-        finally:
-            torch.set_num_threads(threads)
-        return
-    import multiprocessing as mp
-
-    ctx = mp.get_context("spawn")  # no fork after torch's thread pools started
-    with ProcessPoolExecutor(max_workers=min(workers, len(todo)), mp_context=ctx, initializer=_init_worker,
-                             initargs=(os.getpid(),)) as ex:
-        futures = [ex.submit(_worker, job, i, fld) for i, fld in todo]
-        try:
-            for fut in as_completed(futures):
-                finish(BankField.from_npz(io.BytesIO(fut.result())))
-        except BaseException:
-            for f in futures:
-                f.cancel()
-            raise
+                finish: Callable[[BankField], None], scheduler: str | None = None) -> None:
+    """Compute the (index, field) pairs in `todo`, calling finish(field) as each is done,
+    through lensim.workers.run_jobs: in this process with one torch thread when workers
+    == 1 or only one field is left, else on a local Dask cluster of `workers` processes,
+    or on the Dask cluster at `scheduler`."""
+    tasks = [FieldTask(job, i, fld, para) for i, fld in todo]
+    run_jobs(compute_field_task, tasks, workers, scheduler, lambda _task, bf: finish(bf))
 
 
 def _check_fields(lens: Lens, fields: list[float] | np.ndarray | None) -> np.ndarray:
@@ -323,6 +306,7 @@ def compute_bank(
     progress: Progress | None = None,
     illuminant: str = "E",
     ri_samples: int = 32,
+    scheduler: str | None = None,
 ) -> PSFBank:
     """Compute an RGB PSF bank (see lensim.psf.bank).
 
@@ -335,10 +319,11 @@ def compute_bank(
     pupil grid across; max_spacing_um: the largest fine PSF sample spacing (um), default
     half the Airy radius 1.22 lambda_min N_w at the shortest wavelength (N_w the on-axis
     working F-number); the fine spacing is pitch / k with k the smallest odd integer that
-    meets it; aiming: real or paraxial; workers: processes (each with one torch thread;
-    started with the 'spawn' method, so a script that calls this with workers > 1 needs
-    the usual ``if __name__ == "__main__":`` guard; workers=1 computes in this process
-    with one torch thread, restored afterwards);
+    meets it; aiming: real or paraxial; workers: processes of a local Dask cluster (each
+    with one torch thread; started with the 'spawn' method, so a script that calls this
+    with workers > 1 needs the usual ``if __name__ == "__main__":`` guard; workers=1
+    computes in this process with one torch thread, restored afterwards); scheduler: the
+    address of a Dask cluster to compute the fields on instead (lensim.workers.run_jobs);
     ri_samples: pupil samples of the relative-illumination calculation; out_dir: bank
     directory (None: keep in memory only); progress(done, total): called once at the start
     (done = fields already on disk) and after each field computed.
@@ -360,15 +345,16 @@ def compute_bank(
                oversampling_factor(pixel_pitch_um, max_spacing_um), method, int(pupil_samples), int(ri_samples), aiming)
     manifest = _manifest(job, flds, resp, max_spacing_um)
     if out_dir is None:
-        return _compute_fields(job, flds, manifest, None, workers, para, progress)
+        return _compute_fields(job, flds, manifest, None, (workers, scheduler), para, progress)
     with folder_lock(out_dir):
-        return _compute_fields(job, flds, manifest, Path(out_dir), workers, para, progress)
+        return _compute_fields(job, flds, manifest, Path(out_dir), (workers, scheduler), para, progress)
 
 
-def _compute_fields(job: _Job, flds: np.ndarray, manifest: dict, directory: Path | None, workers: int,
-                    para: ParaxialData, progress: Progress | None) -> PSFBank:
+def _compute_fields(job: _Job, flds: np.ndarray, manifest: dict, directory: Path | None,
+                    where: tuple[int, str | None], para: ParaxialData, progress: Progress | None) -> PSFBank:
     """The bank's fields: those already in ``directory`` (when given and made with these
-    settings) and the rest computed, each written there as it finishes."""
+    settings) and the rest computed (where: workers and scheduler, as run_jobs takes
+    them), each written there as it finishes."""
     lens = job.lens
     done = open_bank_directory(directory, manifest, flds) if directory is not None else {}
     total = len(flds)
@@ -386,17 +372,19 @@ def _compute_fields(job: _Job, flds: np.ndarray, manifest: dict, directory: Path
         if progress is not None:
             progress(len(done), total)
 
-    _run_fields(job, [(i, float(flds[i])) for i in range(total) if i not in done], workers, para, finish)
+    _run_fields(job, [(i, float(flds[i])) for i in range(total) if i not in done], where[0], para, finish, where[1])
     return PSFBank(manifest if directory is None else (read_manifest(directory) or manifest),
                    [done[i] for i in range(total)], directory)
 
 
 def build_bank(lens: Lens, pixel_pitch_um: float, settings: BankSettings, response: str | Path | None = None,
                out_dir: str | Path | None = None, workers: int = 1, progress: Progress | None = None,
-               **options: Any) -> PSFBank:
+               scheduler: str | None = None, **options: Any) -> PSFBank:
     """The bank `settings` ask for, for this lens at this pixel pitch (um) and spectral
     response (compute_bank's): the kernel sized by settings.kernel_size, the fields,
-    wavelengths, pupil samples and aiming from the settings. options: compute_bank's
-    other keywords (method, max_spacing_um, illuminant, ri_samples)."""
+    wavelengths, pupil samples and aiming from the settings; workers, scheduler: where
+    the fields are computed (compute_bank's). options: compute_bank's other keywords
+    (method, max_spacing_um, illuminant, ri_samples)."""
     return compute_bank(lens, pixel_pitch_um, settings.kernel_size(lens, pixel_pitch_um), response=response,
-                        workers=workers, out_dir=out_dir, progress=progress, **settings.compute_options(), **options)
+                        workers=workers, out_dir=out_dir, progress=progress, scheduler=scheduler,
+                        **settings.compute_options(), **options)

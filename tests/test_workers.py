@@ -1,0 +1,83 @@
+"""lensim.workers.run_jobs, the one engine of `psf bank` and `dataset make`: jobs run here
+or on a Dask cluster given by address with the same results, errors cross as themselves,
+a scheduler that does not answer is one line. (Local clusters and their workers' death
+with the parent: tests/test_kill_resume.py.)"""
+from __future__ import annotations
+
+import socket
+import warnings
+
+import numpy as np
+import pytest
+import torch
+
+from lensim.errors import InputError
+from lensim.optics.lens_file import load_lens
+from lensim.psf.bank import compute_bank
+from lensim.workers import run_jobs
+
+
+def _square(x: int) -> int:
+    return x * x
+
+
+def _refuse(x: int) -> int:
+    if x == 2:
+        raise InputError("job.yaml", "x", f"expected anything but 2, got {x}")
+    return x
+
+
+@pytest.fixture(scope="module")
+def scheduler():
+    """The address of a Dask cluster with two worker threads in this process (a cluster
+    given by address, as `--scheduler` takes it)."""
+    distributed = pytest.importorskip("distributed")
+    threads = torch.get_num_threads()
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None) as c:
+        yield c.scheduler_address
+    torch.set_num_threads(threads)  # the jobs set one thread in their worker: this process
+
+
+def test_jobs_here_report_each_result_and_keep_torch_threads():
+    threads = torch.get_num_threads()
+    got = []
+    run_jobs(_square, [1, 2, 3], workers=1, on_result=lambda j, r: got.append((j, r)))
+    assert got == [(1, 1), (2, 4), (3, 9)] and torch.get_num_threads() == threads
+    run_jobs(_square, [], workers=4, on_result=lambda j, r: got.append((j, r)))  # nothing: no cluster
+    assert len(got) == 3
+
+
+def test_jobs_on_a_cluster_by_address(scheduler):
+    got = {}
+    run_jobs(_square, list(range(6)), scheduler=scheduler, on_result=lambda j, r: got.__setitem__(j, r))
+    assert got == {j: j * j for j in range(6)}
+    with pytest.raises(InputError, match="expected anything but 2") as e:
+        run_jobs(_refuse, [1, 2, 3], scheduler=scheduler)
+    assert (e.value.source, e.value.field) == ("job.yaml", "x")
+
+
+def test_bank_on_a_cluster_by_address_is_bitwise_the_bank_computed_here(scheduler, tmp_path):
+    lens = load_lens("cooke_triplet")
+    kw = dict(fields=[0.0, 0.7, 1.0], wavelengths_nm=[500.0, 600.0], pupil_samples=32)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        here = compute_bank(lens, 4.0, 15, **kw)
+        calls = []
+        there = compute_bank(lens, 4.0, 15, scheduler=scheduler, out_dir=tmp_path / "b",
+                             progress=lambda d, t: calls.append((d, t)), **kw)
+    assert calls[0] == (0, 3) and calls[-1] == (3, 3)
+    for a, b in zip(here.fields, there.fields, strict=True):
+        assert np.array_equal(a.rgb, b.rgb) and np.array_equal(a.primary_fine, b.primary_fine)
+        assert a.strehl == b.strehl
+
+
+def test_a_scheduler_that_does_not_answer_is_one_line():
+    dask = pytest.importorskip("dask")
+    with socket.socket() as s:  # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    address = f"tcp://127.0.0.1:{port}"
+    with dask.config.set({"distributed.comm.timeouts.connect": "0.5s"}), pytest.raises(InputError) as e:
+        run_jobs(_square, [1, 2], scheduler=address)
+    assert str(e.value).startswith(address) and "no Dask scheduler answered" in str(e.value)
+    assert "\n" not in str(e.value)
