@@ -266,3 +266,21 @@ def test_unit_focusing_of_a_mirror_lens() -> None:
     s_image = -(at.total_track - 100.0)
     assert 1 / s + 1 / s_image == pytest.approx(1 / 100.0, rel=1e-9)
     assert signed_indices(at, WL)[-1] < 0
+
+
+def test_zoom_positions_take_shooting_settings(reference_lenses) -> None:
+    # each position: F/2.8 is its widest aperture (FNUM 2.8 at every position), describe()
+    # gives its own focal length, and focusing and stopping down apply to that position
+    from lensim.optics.configurations import apply_configuration
+
+    lens = load_lens(reference_lenses / "nikon_80-200_zoom.zmx", warn=False)
+    for name in ("1", "2", "3"):
+        efl = paraxial_data(apply_configuration(lens, name)).efl_mm
+        d = describe(lens, ShootingSettings(config=name, fno=4, focus_m=3.0))
+        assert d["config"] == name and d["focal_mm"] == pytest.approx(efl, rel=1e-12)
+        assert d["fno"] == pytest.approx(4.0, rel=1e-12) and d["focus_m"] == 3.0
+        assert describe(lens, ShootingSettings(config=name))["fno"] == pytest.approx(2.8, rel=1e-12)
+        with pytest.raises(InputError, match="F/2 is faster than the lens's maximum aperture F/2.8"):
+            lens_at(lens, ShootingSettings(config=name, fno=2))
+    with pytest.raises(InputError, match=r"unknown configuration 'wide'; expected a name or a number 1..3"):
+        lens_at(lens, ShootingSettings(config="wide"))

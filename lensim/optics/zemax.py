@@ -5,8 +5,12 @@ r^2..r^16 coefficients of EVENASPH and the r^1..r^8 coefficients of ODDASPHE, DI
 FNUM image-space or paraxial working F/# for an object at infinity, FLOA), UNIT (MM only),
 NAME, GCAT, FTYP (field type, numbers of fields and wavelengths; telecentric object space
 and afocal image space are refused), XFLN/YFLN (older XFLD/YFLD), WAVM (older WAVL/WWGT),
-PWAV. Vignetting factors, ray aiming (RAIM) and multiple configurations are not applied;
-the lens's notes say so. Every other keyword (drawing, tolerancing, merit function,
+PWAV, and the multi-configuration editor: MNUM (number of configurations, the active one)
+and its THIC operands (``THIC surface configuration value ...``, one line per operand and
+configuration), read into ``Lens.configurations`` named 1..n (a zoom's positions; the
+lens data as saved are the active configuration's). Vignetting factors, ray aiming (RAIM)
+and other multi-configuration operands (curvatures, glasses, apertures, fields, the object
+distance's THIC 0, ...) are not applied; the lens's notes say so. Every other keyword (drawing, tolerancing, merit function,
 solves whose results the file already holds) is ignored. Surface 0 is the object (DISZ =
 object distance), the last surface the image; DIAM is the drawn semi-diameter, and
 clips rays only with FLAP (floating aperture) or FLOA (the stop's size).
@@ -41,6 +45,11 @@ _NON_CIRCULAR_APERTURES = {"SQAP": "rectangular aperture", "ELAP": "elliptical a
                            "UDAP": "user-defined aperture", "UDOB": "user-defined obscuration"}
 _RAY_AIMING = {1: "paraxial", 2: "real"}
 # per-field columns (older files: XFLD/YFLD)
+# multi-configuration operands other than THIC (noted as not applied when they are in the file)
+_MCE_OPERANDS = {"CRVT", "CONN", "GLSS", "PRAM", "PAR1", "PAR2", "PAR3", "PAR4", "PAR5", "PAR6", "PAR7", "PAR8",
+                 "APER", "WAVE", "WLWT", "PWAV", "XFIE", "YFIE", "FLWT", "FVDX", "FVDY", "FVCX", "FVCY", "FVAN",
+                 "SDIA", "CADX", "CADY", "CATX", "CATY", "CTIP", "TEMP", "PRES", "STPS", "PUCN", "SATP", "FLTP",
+                 "RAAM", "MOFF", "MIND", "MABB", "MDPG", "NPAR", "COTN", "IGNR", "LTTL", "XDAT", "YDAT"}
 _COLUMNS = {k: k for k in ("XFLN", "YFLN", "VDXN", "VDYN", "VCXN", "VCYN", "VANN")} | {"XFLD": "XFLN", "YFLD": "YFLN"}
 
 
@@ -79,6 +88,9 @@ class _Reader:
         self.wwgt: list[float] | None = None
         self.pwav: tuple[int, int] | None = None
         self.surfs: list[_Surf] = []
+        self.mnum: tuple[int, int, int] | None = None  # configurations, the active one, line
+        self.thic: dict[int, dict[int, tuple[float, int]]] = {}  # Zemax surface -> {config: (value, line)}
+        self.mce_other: set[str] = set()
 
     # ---- helpers -----------------------------------------------------------------
     def err(self, lineno: int, what: str, msg: str) -> InputError:
@@ -159,12 +171,32 @@ class _Reader:
                                   "caller asks (aiming='real' aims at the real stop)")
         elif key == "MNUM":
             n = self.integer(lineno, key, tokens, 1)
-            if n > 1:
-                self.notes.append(f"the file has {n} configurations; the lens data as saved (the active "
-                                  "configuration) are used")
+            active = self.integer(lineno, key, tokens, 2) if len(tokens) > 2 else 1
+            if n < 1 or not 1 <= active <= n:
+                raise self.err(lineno, key, f"expected a number of configurations >= 1 and the active one 1..n, "
+                                            f"got {n} {active}")
+            self.mnum = (n, active, lineno)
+        elif key == "THIC":
+            self.thickness_operand(lineno, tokens)
+        elif key in _MCE_OPERANDS and self.mnum is not None:
+            if key != "MOFF":
+                self.mce_other.add(key)
         else:
             return False
         return True
+
+    def thickness_operand(self, lineno: int, tokens: list[str]) -> None:
+        """A multi-configuration THIC operand: THIC surface configuration value ..."""
+        if self.mnum is None:
+            raise self.err(lineno, "THIC", "a multi-configuration operand before MNUM (the number of configurations)")
+        surface = self.integer(lineno, "THIC", tokens, 1)
+        config = self.integer(lineno, "THIC", tokens, 2)
+        value = self.num(lineno, "THIC", tokens, 3)
+        if not 1 <= config <= self.mnum[0]:
+            raise self.err(lineno, "THIC", f"expected a configuration number 1..{self.mnum[0]} (MNUM), got {config}")
+        if surface < 0:
+            raise self.err(lineno, "THIC", f"expected a surface number >= 0, got {surface}")
+        self.thic.setdefault(surface, {})[config] = (value, lineno)
 
     def glass_catalogues(self, tokens: list[str]) -> None:
         """GCAT: the catalogues to search, with a note naming those lensim does not have."""
@@ -399,6 +431,7 @@ class _Reader:
         aperture_type, aperture_value = self.system_aperture(stops[0], object_distance)
         field_type, fields = self.fields()
         wls, weights, primary = self.wavelengths()
+        configurations = self.configurations(len(optical))
         return Lens(
             surfaces=surfaces,
             aperture_type=aperture_type,
@@ -414,7 +447,40 @@ class _Reader:
             name=self.name or Path(self.src).stem,
             source=self.src,
             notes=self.notes,
+            configurations=configurations,
         )
+
+    def configurations(self, n_optical: int) -> dict[str, dict[int, float]]:
+        """Lens.configurations from the THIC operands: configuration k (named "k") sets
+        surfaces[s - 1].thickness for every operand on Zemax surface s = 1..n_optical (the
+        last one's thickness is the distance to the image); notes for what is not applied."""
+        if self.mnum is None or self.mnum[0] < 2:
+            return {}
+        n, active, _ = self.mnum
+        optical = {s: per for s, per in self.thic.items() if 1 <= s <= n_optical}
+        if 0 in self.thic:
+            self.notes.append("multi-configuration THIC 0 (the object distance per configuration) is not applied; "
+                              "the object distance as saved is used")
+        if self.mce_other:
+            self.notes.append(f"multi-configuration operand(s) {', '.join(sorted(self.mce_other))} not applied "
+                              "(lensim's configurations change thicknesses only)")
+        if not optical:
+            self.notes.append(f"the file has {n} configurations but no thickness operands (THIC) lensim applies; "
+                              f"the lens data as saved (configuration {active}) are used")
+            return {}
+        out: dict[str, dict[int, float]] = {}
+        for k in range(1, n + 1):
+            thicknesses = {}
+            for s, per in sorted(optical.items()):
+                if k not in per:
+                    line = next(iter(per.values()))[1]
+                    raise self.err(line, "THIC", f"surface {s} has no value for configuration {k} of {n}")
+                thicknesses[s - 1] = per[k][0]
+            out[str(k)] = thicknesses
+        self.notes.append(f"{n} configurations read from the multi-configuration editor (THIC operands on surfaces "
+                          f"{', '.join(str(s) for s in sorted(optical))}); the lens as saved is configuration "
+                          f"{active}; choose one with --config 1..{n}")
+        return out
 
     def apertures(self, s: _Surf) -> tuple[float | None, float | None]:
         """(clear_radius, obscuration_radius) of a surface from CLAP / FLAP / OBSC."""
