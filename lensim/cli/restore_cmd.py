@@ -68,6 +68,11 @@ def restore_command(
     allow_other_camera: bool = typer.Option(False, "--allow-other-camera", help="Restore raws from another camera or "
                                             "of another size than the checkpoint's sensor (as full frames of it)."),
     workers: int = typer.Option(1, "--workers", help="Raw inputs restored side by side (processes sharing the threads)."),
+    fno: float = typer.Option(None, "--fno", help="F-number the photos were taken at (overrides a raw's EXIF "
+                              "FNumber); needed by a network trained across F-numbers."),
+    focus_m: float = typer.Option(None, "--focus-m", help="Focus distance in metres from the sensor, inf for infinity "
+                                  "(overrides a raw's EXIF SubjectDistance)."),
+    focal_mm: float = typer.Option(None, "--focal-mm", help="Focal length in mm (overrides a raw's EXIF FocalLength)."),
     quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
     json_out: bool = typer.Option(False, "--json", help="Print what was written as JSON."),
 ) -> None:
@@ -80,10 +85,15 @@ def restore_command(
     checkpoint's sensor is refused unless --allow-other-camera. Every raw is checked
     before the first output; finished outputs are skipped, so a rerun resumes.
 
+    A network trained across shooting settings needs the photos' settings: a raw's EXIF
+    (FNumber, SubjectDistance, FocalLength) or --fno/--focus-m/--focal-mm (which override
+    it). Settings outside the trained range give a warning, far outside a refusal.
+
     Example: lensim restore runs/a photo.png -o restored/;
     lensim restore runs/a raws/ -o restored/ --dng --workers 2
     """
     _check_options(bits, tile, overlap, workers, threads, device, output, checkpoint)
+    shooting = _shooting(fno, focus_m, focal_mm)
     offset = _parse_pair(sensor_offset, "--sensor-offset") if sensor_offset else None
     raws, photos = _split_inputs(images)
     if dng and not raws:
@@ -95,17 +105,19 @@ def restore_command(
         torch.set_num_threads(threads)
     model, info, sensor_data, (sensor_w, sensor_h) = _load_model(checkpoint, lens_file, sensor_file, device)
     _check_photos(photos, offset, (sensor_w, sensor_h))
+    photo_settings = _photo_settings(photos, shooting, info)
     written = []
     with folder_lock(output):  # one writer at a time
         if raws:
             from lensim.raw.restore import RestoreSettings
 
             settings = RestoreSettings(checkpoint=info["path"], sensor=dict(sensor_data), tile=tile, overlap=overlap,
-                                       device=device, allow_other_camera=allow_other_camera)
+                                       device=device, allow_other_camera=allow_other_camera, shooting=shooting,
+                                       conditioning=info["conditioning"])
             written += _restore_raws(raws, output, model, settings, dng, workers, quiet or json_out)
         for path in photos:
-            written.append(_restore_photo(path, output, model, (sensor_w, sensor_h), offset, tile, overlap, bits,
-                                          quiet or json_out))
+            written.append(_restore_photo(path, output, model, (sensor_w, sensor_h), offset, (tile, overlap), bits,
+                                          quiet or json_out, photo_settings))
     if json_out:
         print_json({"checkpoint": info["path"], "images": written})
 
@@ -124,6 +136,35 @@ def _check_options(bits: int, tile: int, overlap: int, workers: int, threads: in
     output_folder(output)
     if not Path(checkpoint).exists():
         raise InputError(str(checkpoint), None, "no such run folder or checkpoint file")
+
+
+def _shooting(fno: float | None, focus_m: float | None, focal_mm: float | None) -> dict[str, float]:
+    """--fno/--focus-m/--focal-mm as a settings dict (those given), each checked."""
+    from lensim.restore.conditioning import OPTIONS, check_value
+
+    given = {"fno": fno, "focus_m": focus_m, "focal_mm": focal_mm}
+    return {k: check_value(k, v, OPTIONS[k], None) for k, v in given.items() if v is not None}
+
+
+def _photo_settings(photos: list[Path], shooting: dict[str, float], info: dict) -> torch.Tensor | None:
+    """The settings vector for the (non-raw) photos, which take their settings from the
+    options only: None for a network without settings inputs; the trained ranges checked
+    (a warning, or far outside a refusal) before any output."""
+    from lensim.restore.conditioning import OPTIONS, Conditioning
+
+    cond = Conditioning.from_dict(info["conditioning"], info["path"])
+    if not photos:
+        return None
+    for text in cond.check(shooting):
+        warnings.warn(text, UserWarning, stacklevel=2)
+    if not cond.dim:
+        return None
+    missing = [OPTIONS[k] for k in cond.keys if k not in shooting]
+    if missing:
+        raise InputError(", ".join(missing), None, f"{info['path']} was trained across shooting settings "
+                         f"({cond.describe()}) and needs the photos' {', '.join(cond.keys)}; give "
+                         f"{' '.join(m + ' ...' for m in missing)} (raw files take them from their EXIF)")
+    return cond.vector(shooting)
 
 
 def _photo_output_name(path: Path) -> str:
@@ -174,9 +215,12 @@ def _load_model(checkpoint: Path, lens_file: str | None, sensor_file: str | None
 
 
 def _restore_photo(path: Path, output: Path, model: torch.nn.Module, sensor_wh: tuple[int, int],
-                   offset: tuple[int, int] | None, tile: int, overlap: int, bits: int, quiet: bool) -> dict:
+                   offset: tuple[int, int] | None, tiling: tuple[int, int], bits: int, quiet: bool,
+                   settings: torch.Tensor | None) -> dict:
     """Restore one photo (a full frame, or a native-scale crop at ``offset`` = (top, left)
-    sensor pixels) into OUTPUT/<stem>.png (.tif for TIFF input); returns what was written."""
+    sensor pixels; tiling: (tile, overlap); settings: its settings vector for a conditioned
+    network) into OUTPUT/<stem>.png (.tif for TIFF input); returns what was written."""
+    tile, overlap = tiling
     from lensim.images import read_image, write_image
     from lensim.restore.infer import image_sensor_geometry, restore_image
 
@@ -193,7 +237,8 @@ def _restore_photo(path: Path, output: Path, model: torch.nn.Module, sensor_wh: 
         _check_offset(path, offset, (w, h), sensor_wh)
     top_left, size = image_sensor_geometry(h, w, (sensor_w, sensor_h), offset)
     with progress_bar(f"restoring {path.name}", "tiles", quiet) as tiles_done:
-        out = restore_image(model, img, top_left, size, tile=tile, overlap=overlap, progress=tiles_done)
+        out = restore_image(model, img, top_left, size, tile=tile, overlap=overlap, progress=tiles_done,
+                            settings=settings)
     del img  # bound peak memory: only the output lives while it is encoded
     out.clamp_(0, 1)
     dest = output / _photo_output_name(path)

@@ -51,6 +51,9 @@ def train_command(
     no_deformable: bool = typer.Option(not _D.use_deformable, "--no-deformable",
                                        help="Ablation: plain residual decoder blocks."),
     no_context: bool = typer.Option(not _D.use_context, "--no-context", help="Ablation: no context block."),
+    no_settings: bool = typer.Option(not _D.use_settings, "--no-settings", help="Pairs made across shooting settings: "
+                                     "train without the settings as inputs (an unconditioned network; the ranges are "
+                                     "still recorded and checked when restoring)."),
     val_fraction: float = typer.Option(_D.val_fraction, "--val-fraction",
                                        help="Share of source photos held out for validation."),
     steps_per_epoch: int = typer.Option(_D.max_steps_per_epoch or 0, "--steps-per-epoch",
@@ -101,7 +104,7 @@ def train_command(
         "val_fraction": val_fraction, "max_steps_per_epoch": steps_per_epoch or None,
         "time_budget_s": time_budget_s if time_budget_s > 0 else None, "seed": seed, "device": device,
         "amp": not no_amp, "checkpoint_every_s": checkpoint_every_s if checkpoint_every_s > 0 else None,
-        "checkpoint_every_steps": checkpoint_every_steps or None,
+        "checkpoint_every_steps": checkpoint_every_steps or None, "use_settings": not no_settings,
     }
     if resume:  # the checkpoint's settings, changed only where an option is given
         overrides = {k: v for k, v in overrides.items() if _given(ctx, _OPTION_OF.get(k, k))}
@@ -162,7 +165,7 @@ def _check_crop(dataset: Path, crop: int) -> None:
 # TrainConfig fields whose option's parameter has another name
 _OPTION_OF = {"use_fov": "no_fov",
               "use_deformable": "no_deformable", "use_context": "no_context", "max_steps_per_epoch": "steps_per_epoch",
-              "amp": "no_amp"}
+              "amp": "no_amp", "use_settings": "no_settings"}
 
 
 def _given(ctx: typer.Context, parameter: str) -> bool:

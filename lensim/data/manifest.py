@@ -10,7 +10,10 @@ DATASET/manifest.json (written last by lensim.data.pairs.make_dataset):
     records[i]   one per photo: ``source`` (the sharp photo's path), ``crops[k]`` =
                  {input, target, sensor_top, sensor_left, placement}: paths relative to
                  DATASET of the aberrated and sharp crops, and the absolute sensor pixel
-                 of the crop's top-left corner
+                 of the crop's top-left corner; ``settings`` (pairs made across a grid
+                 of shooting settings; all records or none): lensim.optics.shooting.describe's
+                 dict {fno, focus_m, object_m, focal_mm, config}, its fno / focus_m /
+                 focal_mm checked by lensim.restore.conditioning.record_settings
 RUN/split.json (written by lensim.restore.train): ``train`` and ``val`` lists of source
 photo names, ``val_fraction``, ``seed``.
 """
@@ -57,7 +60,21 @@ def read_pairs_manifest(pairs_dir: str | Path) -> dict[str, Any]:
         for k, crop in enumerate(crops):
             if not isinstance(crop, dict) or not all(key in crop for key in CROP_KEYS):
                 raise InputError(str(path), f"records[{i}].crops[{k}]", f"expected {{{', '.join(CROP_KEYS)}}}")
+    _check_settings(records, str(path))
     return manifest
+
+
+def _check_settings(records: list[dict[str, Any]], source: str) -> None:
+    """Shooting settings are on every record or on none, and each one's numbers are valid."""
+    from lensim.restore.conditioning import record_settings
+
+    have = [i for i, r in enumerate(records) if r.get("settings") is not None]
+    if have and len(have) != len(records):
+        lacking = next(i for i, r in enumerate(records) if r.get("settings") is None)
+        raise InputError(source, f"records[{lacking}].settings", f"missing, while records[{have[0]}] has shooting "
+                         "settings; expected settings on every record or on none")
+    for i in have:
+        record_settings(records[i]["settings"], source, f"records[{i}].settings")
 
 
 def read_held_out(run_dir: str | Path) -> list[str]:

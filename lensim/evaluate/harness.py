@@ -34,6 +34,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
@@ -67,7 +68,8 @@ class CropContext:
     dataset's sensor profile; bank: the PSF bank the pairs were simulated with (None when
     it could not be found); capture: the record's capture draw (ccm, white-balance gains,
     noise), or None; top, left: sensor pixel of the crop's top-left pixel; record, crop:
-    indices in the manifest."""
+    indices in the manifest; settings: the record's shooting settings (fno, focus_m,
+    focal_mm; lensim.restore.conditioning.record_settings), None for pairs without."""
 
     mapping: SensorMapping
     sensor: SensorProfile
@@ -77,6 +79,7 @@ class CropContext:
     left: int
     record: int
     crop: int
+    settings: Mapping[str, float] | None = None
 
 
 Method = Callable[[torch.Tensor, CropContext], torch.Tensor]
@@ -114,16 +117,29 @@ def checkpoint_method(run: str | Path, lens: Mapping[str, Any] | None = None, se
     """A trained network (`lensim train` run folder or checkpoint) as a method: each crop is
     restored by lensim.restore.infer.restore_image with its absolute sensor offset (native
     scale) and the sensor's size in pixels. lens / sensor (dataset settings) make
-    load_checkpoint warn when the checkpoint was trained for another camera."""
+    load_checkpoint warn when the checkpoint was trained for another camera. A network
+    conditioned on shooting settings gets each crop's record's settings vector (pairs
+    without settings are then an InputError); a crop whose settings lie outside the
+    checkpoint's trained ranges is warned about (UserWarning) or, far outside, refused for
+    a conditioned network (lensim.restore.conditioning.Conditioning.check)."""
     from lensim.restore.checkpoint import load_checkpoint
+    from lensim.restore.conditioning import Conditioning
     from lensim.restore.infer import restore_image
 
-    model, _ = load_checkpoint(run, lens=dict(lens) if lens else None, sensor=dict(sensor) if sensor else None,
-                               device=device)
+    model, info = load_checkpoint(run, lens=dict(lens) if lens else None, sensor=dict(sensor) if sensor else None,
+                                  device=device)
+    cond = Conditioning.from_dict(info["conditioning"], info["path"])
 
     def restore(image: torch.Tensor, ctx: CropContext) -> torch.Tensor:
+        vec = None
+        if ctx.settings is not None:
+            for text in cond.check(ctx.settings, str(run)):
+                warnings.warn(text, UserWarning, stacklevel=2)
+        if cond.dim:
+            vec = cond.vector(ctx.settings or {}, f"{run} on record {ctx.record} (pairs without settings)")
         return restore_image(model, image, (float(ctx.top), float(ctx.left)),
-                             (float(ctx.sensor.height), float(ctx.sensor.width)), tile=tile, overlap=overlap)
+                             (float(ctx.sensor.height), float(ctx.sensor.width)), tile=tile, overlap=overlap,
+                             settings=vec)
     return restore
 
 
@@ -143,6 +159,15 @@ def _load_bank(manifest: Mapping[str, Any], pairs_dir: Path, bank: PSFBank | str
         if (cand / BANK_MANIFEST).is_file():
             return PSFBank.load(cand)
     return None
+
+
+def _record_settings(record: Mapping[str, Any], pairs_dir: Path, index: int) -> dict[str, float] | None:
+    """A record's shooting settings for the methods (None when it has none)."""
+    from lensim.restore.conditioning import record_settings
+
+    if record.get("settings") is None:
+        return None
+    return record_settings(record["settings"], str(pairs_dir / MANIFEST), f"records[{index}].settings")
 
 
 def evaluate_rows(
@@ -191,7 +216,7 @@ def evaluate_rows(
         _, h, w = x.shape
         top, left = int(cr["sensor_top"]), int(cr["sensor_left"])
         ctx = CropContext(native_mapping(h, w, sensor, top, left), sensor, the_bank, crop_capture(rec, cr), top, left,
-                          ri, ci)
+                          ri, ci, _record_settings(rec, pairs_dir, ri))
         rho = normalized_radius(h, w, top, left, sensor.height, sensor.width)
         for name, method in all_methods.items():
             out = method(x, ctx)

@@ -115,7 +115,8 @@ class DngCamera:
 @dataclass(frozen=True)
 class DngExif:
     """Shooting data for the EXIF IFD; None fields are left out. Units: seconds, f-number,
-    ISO speed, millimetres, metres (focus distance, written as EXIF SubjectDistance)."""
+    ISO speed, millimetres, metres (focus distance, written as EXIF SubjectDistance; inf is
+    written as 0xFFFFFFFF/1, EXIF's infinity)."""
 
     exposure_s: float | None = None
     fno: float | None = None
@@ -196,7 +197,9 @@ def _exif_entries(exif: DngExif) -> list[tuple[int, int, int, bytes]]:
     rows: list[tuple[int, int, int, bytes]] = [(e["exif_version"], 7, 4, b"0231")]  # UNDEFINED
     for key in ("exposure_s", "fno", "focal_length_mm", "focus_distance_m"):
         value = getattr(exif, key)
-        if value is not None:
+        if key == "focus_distance_m" and value == np.inf:  # EXIF: 0xFFFFFFFF/n is infinity
+            rows.append((e[key], _RATIONAL, 1, struct.pack("<2I", 0xFFFFFFFF, 1)))
+        elif value is not None:
             rows.append((e[key], _RATIONAL, 1, struct.pack("<2I", *_rationals([value]))))
     if exif.iso is not None:
         rows.append((e["iso"], _SHORT, 1, struct.pack("<H", int(min(65535, round(float(exif.iso)))))))

@@ -13,6 +13,9 @@ For each raw file (:func:`restore_raw_files`):
    field-of-view coordinates of its place on the sensor (:func:`raw_geometry`): the active
    area is the whole sensor, the optical axis at its centre; a DNG written by `lensim
    simulate` records where its frame lay on the sensor (:func:`lensim.raw.dng.read_simulation_record`);
+   a network conditioned on shooting settings gets the file's (:func:`raw_settings`: EXIF
+   FNumber, SubjectDistance and FocalLength, each replaced by the command line's value when
+   one is given), checked against the ranges it was trained across;
 4. write OUT/<stem>.tif (16-bit sRGB, turned by the file's orientation) and, with
    ``dng``, OUT/<stem>.dng: the restored photo as LinearRaw camera RGB with the raw's
    colour matrix, as-shot white balance, orientation and EXIF (lensim.raw.dng).
@@ -25,7 +28,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -58,7 +61,9 @@ class RawJob:
 @dataclass(frozen=True)
 class RestoreSettings:
     """What every file shares: the checkpoint, the sensor trained for (profile mapping),
-    tiling, device and whether other cameras are allowed."""
+    tiling, device, whether other cameras are allowed, the shooting settings given on the
+    command line (``shooting``: {fno, focus_m, focal_mm}, overriding each file's EXIF) and
+    the checkpoint's conditioning (Conditioning.to_dict(); None: no settings)."""
 
     checkpoint: str
     sensor: dict[str, Any]
@@ -66,6 +71,8 @@ class RestoreSettings:
     overlap: int = 192
     device: str = "cpu"
     allow_other_camera: bool = False
+    shooting: dict[str, float] = field(default_factory=dict)
+    conditioning: dict[str, Any] | None = None
 
 
 def plan_jobs(files: list[Path], out_dir: Path, dng: bool) -> list[RawJob]:
@@ -158,9 +165,45 @@ def _dng_colour(raw: Any, r_gain: float, b_gain: float) -> Any:
     return colour
 
 
+def raw_settings(raw: Any, given: dict[str, float]) -> dict[str, float]:
+    """A raw's shooting settings {fno, focus_m, focal_mm}: EXIF FNumber, SubjectDistance
+    (lensim.raw.read: 0 is unknown, 0xFFFFFFFF infinity) and FocalLength (LibRaw's aperture
+    and focal length where the TIFF tags are missing), each replaced by ``given``'s value
+    when there is one; settings known from neither are left out."""
+    exif = {"fno": raw.fno, "focus_m": raw.focus_distance_m, "focal_mm": raw.focal_length_mm}
+    return {k: v for k, v in {**exif, **given}.items() if v is not None}
+
+
+def settings_vector(raw: Any, settings: RestoreSettings, warn: bool) -> torch.Tensor | None:
+    """The settings vector of a raw for the checkpoint's network (None when it is not
+    conditioned): its settings (:func:`raw_settings`) are checked against the trained
+    ranges (a UserWarning beyond the tolerance when ``warn``; an InputError far outside)
+    and a missing one is an InputError naming the file and the option that gives it."""
+    import warnings
+
+    from lensim.restore.conditioning import Conditioning
+
+    cond = Conditioning.from_dict(settings.conditioning, settings.checkpoint)
+    shot = raw_settings(raw, settings.shooting)
+    for text in cond.check(shot, raw.path):
+        if warn:
+            warnings.warn(text, UserWarning, stacklevel=2)
+    if not cond.dim:
+        return None
+    missing = [k for k in cond.keys if k not in shot]
+    if missing:
+        from lensim.restore.conditioning import OPTIONS
+
+        exif = {"fno": "FNumber", "focus_m": "SubjectDistance", "focal_mm": "FocalLength"}
+        raise InputError(raw.path, "settings", f"the network is conditioned on {', '.join(cond.keys)}; the file's EXIF "
+                         f"has no {', '.join(exif[k] for k in missing)}; give {' '.join(OPTIONS[k] for k in missing)}")
+    return cond.vector(shot, raw.path)
+
+
 def validate(jobs: list[RawJob], sensor: SensorProfile, settings: RestoreSettings) -> None:
-    """Read and check every unfinished job's raw (camera, size, develop settings) before
-    anything is written; one-line InputError on the first bad file."""
+    """Read and check every unfinished job's raw (camera, size, develop settings, shooting
+    settings for a conditioned network) before anything is written; one-line InputError on
+    the first bad file; range warnings (UserWarning) for every file."""
     from lensim.raw import read_raw
     from lensim.raw.develop import capture_params
     from lensim.raw.dng import read_simulation_record
@@ -171,6 +214,7 @@ def validate(jobs: list[RawJob], sensor: SensorProfile, settings: RestoreSetting
         raw = read_raw(job.source)
         check_camera(raw, sensor, read_simulation_record(job.source), settings.checkpoint, settings.allow_other_camera)
         capture_params(raw, sensor)  # the develop settings exist (as-shot white balance)
+        settings_vector(raw, settings, warn=True)
         if job.dng is not None and raw.color_matrix is None:
             raise InputError(str(job.source), "color_matrix", "the file has no colour matrix to carry into the "
                              "restored DNG; leave out --dng")
@@ -189,9 +233,11 @@ def restore_raw(job: RawJob, model: FieldAwareUNet, sensor: SensorProfile, setti
     raw = read_raw(job.source)
     placement = read_simulation_record(job.source)
     native = check_camera(raw, sensor, placement, settings.checkpoint, settings.allow_other_camera)
+    vec = settings_vector(raw, settings, warn=False)  # validate() warned
     img, params = develop_raw(raw, sensor, orient=False)
     top_left, size = raw_geometry(raw, sensor, placement, native)
-    out = restore_image(model, img, top_left, size, tile=settings.tile, overlap=settings.overlap, progress=progress)
+    out = restore_image(model, img, top_left, size, tile=settings.tile, overlap=settings.overlap, progress=progress,
+                        settings=vec)
     del img  # bound peak memory
     out.clamp_(0.0, 1.0)
     if job.dng is not None:
@@ -201,7 +247,7 @@ def restore_raw(job: RawJob, model: FieldAwareUNet, sensor: SensorProfile, setti
     write_image(job.tif, apply_orientation(out, raw.orientation), 16, srgb_tag=True)
     return {"input": str(job.source), "output": str(job.tif), "dng": None if job.dng is None else str(job.dng),
             "width": raw.width, "height": raw.height, "camera": raw.camera, "native": native, "skipped": False,
-            "capture": params.to_dict()}
+            "capture": params.to_dict(), "settings": raw_settings(raw, settings.shooting)}
 
 
 # ----------------------------------------------------------------------------- batches
@@ -262,5 +308,5 @@ def restore_raw_files(files: list[Path], out_dir: Path, model: FieldAwareUNet, s
     return records
 
 
-__all__ = ["RawJob", "RestoreSettings", "check_camera", "plan_jobs", "raw_geometry", "restore_raw",
-           "restore_raw_files", "validate"]
+__all__ = ["RawJob", "RestoreSettings", "check_camera", "plan_jobs", "raw_geometry", "raw_settings", "restore_raw",
+           "restore_raw_files", "settings_vector", "validate"]

@@ -13,6 +13,10 @@ A checkpoint is a ``torch.save`` of a dict, loadable with ``weights_only=True``:
     best_val_psnr, val_psnr, val_ssim  validation figures (dB; None before any)
     lens, sensor, sensor_name, dataset  the dataset's camera (from its manifest) and folder,
                               so inference warns when used on another camera
+    conditioning             the shooting settings the network is conditioned on and the
+                              ranges it was trained across (lensim.restore.conditioning.
+                              Conditioning.to_dict(); absent in checkpoints from before it:
+                              no settings)
 Inference needs only format, model_config and model_state (:data:`REQUIRED_KEYS`).
 
 Saving goes through lensim.io.atomic_writer (temporary file in the run folder, fsync,
@@ -34,6 +38,7 @@ import torch
 
 from lensim.errors import InputError
 from lensim.io import atomic_writer
+from lensim.restore.conditioning import checkpoint_conditioning
 from lensim.restore.network import FieldAwareUNet
 
 CHECKPOINT_FORMAT = "lensim-restore-checkpoint"
@@ -130,7 +135,9 @@ def load_checkpoint(
         device: where the model is put.
 
     Returns:
-        (model in eval mode, the checkpoint dict without optimizer/RNG state).
+        (model in eval mode, the checkpoint dict without optimizer/RNG state; its
+        ``conditioning`` is always there, Conditioning.to_dict(): {"keys": [], "ranges": {}}
+        for a checkpoint from before conditioning).
     Raises:
         InputError (one line, naming the file) for a missing, corrupt, foreign or
         mismatched checkpoint (state not matching its model config).
@@ -149,6 +156,7 @@ def load_checkpoint(
         detail = " ".join(line.strip() for line in first[:3])[:300]
         raise InputError(str(path), "model_state", f"does not match the model config it records ({detail})") from None
     model.to(device).eval()
+    conditioning = checkpoint_conditioning(data, int(getattr(model, "settings_dim", 0)), str(path))
     if lens is not None and data.get("lens") is not None and _canonical(lens) != _canonical(data["lens"]):
         warnings.warn(f"{path}: trained for lens {_describe_lens(data['lens'])!r}, used for lens "
                       f"{_describe_lens(lens)!r}; the restoration may be wrong", UserWarning, stacklevel=2)
@@ -157,6 +165,7 @@ def load_checkpoint(
                       f"{_describe_sensor(sensor)!r}; the restoration may be wrong", UserWarning, stacklevel=2)
     info = {k: v for k, v in data.items() if k not in TRAINING_STATE_KEYS}
     info["path"] = str(path)
+    info["conditioning"] = conditioning.to_dict()
     return model, info
 
 
@@ -225,7 +234,7 @@ class TrainingState:
             "best_val_psnr": best if math.isfinite(best) else None,
             "val_psnr": context.get("val_psnr"), "val_ssim": context.get("val_ssim"),
             "lens": context.get("lens"), "sensor": context.get("sensor"), "sensor_name": context.get("sensor_name"),
-            "dataset": context.get("dataset"),
+            "dataset": context.get("dataset"), "conditioning": context.get("conditioning"),
         }
 
     def save(self, run: Path, train_seconds: float, context: dict[str, Any], best: bool) -> None:

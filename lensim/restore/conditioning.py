@@ -72,7 +72,7 @@ def feature(key: str, value: float) -> float:
     raise KeyError(f"unknown setting {key!r}; expected one of {', '.join(SETTINGS_KEYS)}")
 
 
-def check_value(key: str, value: Any, source: str | None, where: str) -> float:
+def check_value(key: str, value: Any, source: str | None, where: str | None) -> float:
     """A setting's value as a float: fno and focal_mm positive and finite, focus_m
     positive (inf allowed: focused at infinity); a one-line InputError otherwise."""
     name, unit = LABELS[key]
@@ -217,6 +217,20 @@ class Conditioning:
         return warnings
 
 
+def checkpoint_conditioning(info: Mapping[str, Any], settings_dim: int, source: str | None = None) -> Conditioning:
+    """The Conditioning a checkpoint records (its ``conditioning``, else its train_config's;
+    none in checkpoints from before conditioning), checked against the network's
+    settings_dim: a one-line InputError naming ``source`` when they disagree."""
+    data = info.get("conditioning")
+    if data is None:
+        data = (info.get("train_config") or {}).get("conditioning")
+    cond = Conditioning.from_dict(data, source)
+    if cond.dim != settings_dim:
+        raise InputError(source, "conditioning", f"records {cond.dim} settings inputs ({', '.join(cond.keys)}) for a "
+                         f"network with settings_dim={settings_dim}; expected a checkpoint written by lensim train")
+    return cond
+
+
 def settings_planes(settings: torch.Tensor, h: int, w: int) -> torch.Tensor:
     """(B, k) settings vectors -> (B, k, h, w) constant channels (an expanded view)."""
     if settings.dim() != 2:
@@ -245,4 +259,4 @@ def batch_settings(settings: torch.Tensor | Sequence[float] | None, batch: int, 
 
 
 __all__ = ["LABELS", "OPTIONS", "REFUSE", "SETTINGS_KEYS", "TOLERANCE", "Conditioning", "batch_settings",
-           "check_value", "feature", "record_settings", "settings_planes"]
+           "check_value", "checkpoint_conditioning", "feature", "record_settings", "settings_planes"]

@@ -12,6 +12,9 @@ Every item is a dict
     fov    (2, h, w) float32            FOV channels of the crop's absolute sensor pixels
                                         (lensim.restore.fov.fov_channels), after augmentation
     index  int                          the item's index in this dataset
+    settings (k,) float32               the settings vector of the crop's record
+                                        (lensim.restore.conditioning), only when the
+                                        dataset is given a Conditioning with k > 0
 with h = w = ``crop`` when sub-cropping, else the stored crop size.
 
 Randomness (sub-crop position, dihedral op) is drawn from a generator seeded by
@@ -25,7 +28,7 @@ crops of one photo overlap and share content.
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -35,19 +38,22 @@ from torch.utils.data import Dataset
 from lensim.data.manifest import read_pairs_manifest
 from lensim.errors import InputError
 from lensim.images import read_image
+from lensim.restore.conditioning import Conditioning, record_settings
 from lensim.restore.fov import augment, fov_channels
 
 
 @dataclass(frozen=True)
 class CropRef:
-    """One stored pair: file paths (absolute), sensor position of its top-left pixel, and
-    the source photo it was cut from."""
+    """One stored pair: file paths (absolute), sensor position of its top-left pixel, the
+    source photo it was cut from and its record's shooting settings (record_settings: fno,
+    focus_m, focal_mm; None when the pairs carry none)."""
 
     input: Path
     target: Path
     sensor_top: int
     sensor_left: int
     source: str
+    settings: dict[str, float] | None = field(default=None, compare=False, hash=False)
 
 
 def sensor_hw(manifest: dict[str, Any]) -> tuple[int, int]:
@@ -67,8 +73,10 @@ def crop_refs(dataset_dir: str | Path, manifest: dict[str, Any]) -> list[CropRef
     out = []
     for i, r in enumerate(manifest["records"]):
         key = _source_key(r, i)
+        settings = None if r.get("settings") is None else record_settings(r["settings"], str(root), f"records[{i}]")
         for c in r["crops"]:
-            out.append(CropRef(root / c["input"], root / c["target"], int(c["sensor_top"]), int(c["sensor_left"]), key))
+            out.append(CropRef(root / c["input"], root / c["target"], int(c["sensor_top"]), int(c["sensor_left"]), key,
+                               settings))
     return out
 
 
@@ -107,6 +115,9 @@ class PairDataset(Dataset):
         augment: random dihedral op (0..7) with FOV-consistent channels.
         seed: seed of the per-item generators.
         cache: keep decoded images in memory (8-bit images as uint8: exact, 4x smaller).
+        conditioning: the settings the network is conditioned on; when it has inputs
+            (dim > 0) every item carries its record's settings vector (a record without
+            settings is then a one-line InputError).
     """
 
     def __init__(
@@ -117,6 +128,7 @@ class PairDataset(Dataset):
         augment: bool = False,
         seed: int = 0,
         cache: bool = True,
+        conditioning: Conditioning | None = None,
     ) -> None:
         if crop is not None and crop < 1:
             raise ValueError(f"crop must be positive, got {crop}")
@@ -128,6 +140,9 @@ class PairDataset(Dataset):
         self.epoch = 0
         self.cache = cache
         self._cache: dict[int, tuple[torch.Tensor, torch.Tensor]] = {}
+        self.settings: list[torch.Tensor] | None = None
+        if conditioning is not None and conditioning.dim:
+            self.settings = [conditioning.vector(r.settings or {}, str(r.input)) for r in self.refs]
 
     @classmethod
     def from_folder(cls, dataset_dir: str | Path, sources: Sequence[str] | None = None, **kwargs: Any) -> "PairDataset":
@@ -190,7 +205,10 @@ class PairDataset(Dataset):
         if op:
             both, fov = augment(torch.cat((inp, tgt)), fov, op)
             inp, tgt = both[:3], both[3:]
-        return {"input": inp.contiguous(), "target": tgt.contiguous(), "fov": fov, "index": i}
+        item = {"input": inp.contiguous(), "target": tgt.contiguous(), "fov": fov, "index": i}
+        if self.settings is not None:
+            item["settings"] = self.settings[i]
+        return item
 
 
 __all__ = ["CropRef", "PairDataset", "crop_refs", "item_generator", "sensor_hw", "split_sources"]

@@ -33,6 +33,7 @@ from typing import Callable
 
 import torch
 
+from lensim.restore.conditioning import batch_settings
 from lensim.restore.fov import fov_channels
 from lensim.restore.network import FieldAwareUNet
 
@@ -114,6 +115,7 @@ def restore_image(
     overlap: int = 192,
     margin: int | None = None,
     progress: Callable[[int, int], None] | None = None,
+    settings: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """Restore a (3, H, W) image of any size, tile by tile (see the module docstring).
 
@@ -128,6 +130,9 @@ def restore_image(
         margin: pixels next to an inner tile edge given weight 0 (default
             (overlap - overlap // 4) // 2, i.e. a linear ramp over the middle quarter).
         progress: called with (tiles done, tiles total).
+        settings: (k,) settings vector of the photo for a network conditioned on shooting
+            settings (Conditioning.vector; model.settings_dim = k), given to every tile;
+            None for an unconditioned network.
 
     Returns:
         (3, H, W) float32 restored image on the CPU (not clamped).
@@ -154,6 +159,7 @@ def restore_image(
     sh, sw = float(sensor_size[0]), float(sensor_size[1])
     total, done = len(ys) * len(xs), 0
     use_fov = bool(getattr(model, "use_fov", True))
+    vec = batch_settings(settings, 1, int(getattr(model, "settings_dim", 0)), param)
     for y0, wyy in zip(ys, wy):
         th = len(wyy)
         for x0, wxx in zip(xs, wx):
@@ -163,7 +169,7 @@ def restore_image(
             if use_fov:
                 fov = fov_channels(th, tw, top + y0, left + x0, sh, sw, dtype=param.dtype, device=param.device)
                 fov = fov.unsqueeze(0)
-            res = model(rgb, fov)[0].float().cpu()
+            res = (model(rgb, fov) if vec is None else model(rgb, fov, vec))[0].float().cpu()
             out[:, y0:y0 + th, x0:x0 + tw] += res * (wyy.view(1, th, 1) * wxx.view(1, 1, tw))
             done += 1
             if progress is not None:

@@ -56,6 +56,7 @@ from lensim.restore.checkpoint import (
     read_resume_checkpoint,
     refuse_existing_run,
 )
+from lensim.restore.conditioning import Conditioning
 from lensim.restore.dataset import PairDataset, crop_refs, sensor_hw, split_sources
 from lensim.restore.distributed import (
     Ranks,
@@ -99,6 +100,15 @@ class TrainConfig:
         training passed since the last checkpoint (None: at epoch ends only), so a kill
         loses at most that much work; a resume from it continues the same batches.
     checkpoint_every_steps: likewise every this many optimizer steps (None: off).
+    use_settings: condition the network on the shooting settings of pairs made across a
+        grid (lensim.restore.conditioning: the settings that vary over the training
+        records become its inputs). False trains an unconditioned network on the same
+        pairs; the ranges are still recorded (and checked when restoring). No effect on
+        pairs without settings.
+    conditioning: what the run is conditioned on, Conditioning.to_dict() ({"keys": the
+        inputs in vector order, "ranges": {key: [smallest, largest]} over the training
+        records}); None: derived from the training records when the run starts (and
+        recorded here, in RUN/config.json and in checkpoints).
     """
 
     epochs: int = 30
@@ -125,18 +135,21 @@ class TrainConfig:
     max_steps_per_epoch: int | None = None
     checkpoint_every_s: float | None = 300.0
     checkpoint_every_steps: int | None = None
+    use_settings: bool = True
+    conditioning: dict[str, Any] | None = None
 
     def model_kwargs(self) -> dict[str, Any]:
         return {"width": self.width, "depth": self.depth, "use_fov": self.use_fov,
                 "use_deformable": self.use_deformable, "use_context": self.use_context,
                 "deformable_groups": self.deformable_groups, "deformable_scales": self.deformable_scales,
-                "field_modulation": self.field_modulation}
+                "field_modulation": self.field_modulation,
+                "settings_dim": Conditioning.from_dict(self.conditioning).dim}
 
 
 # Settings that must not change when resuming (they would change the loss curve's meaning).
 FROZEN_ON_RESUME = ("batch_size", "lr", "lr_halve_every", "lr_schedule", "crop", "width", "depth", "use_fov",
                     "use_deformable", "use_context", "deformable_groups", "deformable_scales", "field_modulation",
-                    "seed", "augment", "val_fraction", "max_steps_per_epoch")
+                    "seed", "augment", "val_fraction", "max_steps_per_epoch", "use_settings", "conditioning")
 
 
 @dataclass
@@ -206,6 +219,16 @@ def epoch_batches(n: int, batch_size: int, seed: int, epoch: int, rank: int = 0,
     return batches[:max_batches] if max_batches else batches
 
 
+def model_inputs(batch: dict[str, torch.Tensor], device: torch.device) -> tuple[torch.Tensor, ...]:
+    """A batch's network arguments on ``device``: (input, fov) or, when the batch carries
+    settings vectors, (input, fov, settings)."""
+    args: tuple[torch.Tensor, ...] = (batch["input"].to(device, non_blocking=True),
+                                      batch["fov"].to(device, non_blocking=True))
+    if "settings" in batch:
+        args += (batch["settings"].to(device, non_blocking=True),)
+    return args
+
+
 def _collate(items: list[dict[str, Any]]) -> dict[str, torch.Tensor]:
     return {k: torch.stack([it[k] for it in items]) if k != "index" else torch.tensor([it[k] for it in items])
             for k in items[0]}
@@ -221,9 +244,10 @@ def evaluate_pairs(model: torch.nn.Module, loader: Iterator[dict[str, torch.Tens
     tot = {"psnr": 0.0, "ssim": 0.0, "input_psnr": 0.0, "input_ssim": 0.0}
     n = 0
     for batch in loader:
-        inp = batch["input"].to(device)
+        args = model_inputs(batch, device)
+        inp = args[0]
         tgt = batch["target"].to(device)
-        out = model(inp, batch["fov"].to(device)).float().clamp(0, 1)
+        out = model(*args).float().clamp(0, 1)
         tot["psnr"] += float(psnr_batch(out, tgt).clamp(max=100.0).sum())
         tot["ssim"] += float(ssim_batch(out, tgt).sum())
         tot["input_psnr"] += float(psnr_batch(inp, tgt).clamp(max=100.0).sum())
@@ -294,9 +318,13 @@ def _load_data(dataset_dir: str | Path, cfg: TrainConfig, ckpt: dict[str, Any] |
     else:
         train_src, val_src = split_sources(sources, cfg.val_fraction, cfg.seed)
     hw = sensor_hw(manifest)
-    train_ds = PairDataset([r for r in refs if r.source in set(train_src)], hw, crop=cfg.crop, augment=cfg.augment,
-                           seed=cfg.seed)
-    val_ds = PairDataset([r for r in refs if r.source in set(val_src)], hw, crop=None, augment=False, seed=cfg.seed)
+    train_refs = [r for r in refs if r.source in set(train_src)]
+    if cfg.conditioning is None:  # a new run: what its training records span
+        cfg.conditioning = Conditioning.from_records((r.settings for r in train_refs), cfg.use_settings).to_dict()
+    cond = Conditioning.from_dict(cfg.conditioning, str(dataset_dir))
+    train_ds = PairDataset(train_refs, hw, crop=cfg.crop, augment=cfg.augment, seed=cfg.seed, conditioning=cond)
+    val_ds = PairDataset([r for r in refs if r.source in set(val_src)], hw, crop=None, augment=False, seed=cfg.seed,
+                         conditioning=cond)
     if len(train_ds) < 1:
         raise InputError(str(dataset_dir), "records", "has no training crops; expected at least one")
     split = {"train": list(train_src), "val": list(val_src), "val_fraction": cfg.val_fraction, "seed": cfg.seed}
@@ -366,16 +394,15 @@ def _save_checkpoint(loop: _Loop, best: bool) -> None:
 def _optimizer_step(loop: _Loop, batch: dict[str, torch.Tensor]) -> float:
     """One Adam step on the MSE of a batch (autocast on CUDA); the loss, averaged over ranks."""
     device, state = loop.device, loop.state
-    inp = batch["input"].to(device, non_blocking=True)
+    args = model_inputs(batch, device)
     tgt = batch["target"].to(device, non_blocking=True)
-    fov = batch["fov"].to(device, non_blocking=True)
     state.optimizer.zero_grad(set_to_none=True)
     if loop.autocast is not None:
         with torch.autocast(device_type="cuda", dtype=loop.autocast):
-            out = loop.net(inp, fov)
+            out = loop.net(*args)
         loss = F.mse_loss(out.float(), tgt)
     else:
-        loss = F.mse_loss(loop.net(inp, fov), tgt)
+        loss = F.mse_loss(loop.net(*args), tgt)
     state.scaler.scale(loss).backward()
     state.scaler.step(state.optimizer)
     state.scaler.update()
@@ -471,11 +498,12 @@ def _train(dataset_dir: str | Path, run: Path, config: TrainConfig | None, resum
         refuse_existing_run(run)
     cfg = _resolve_config(config, overrides, ckpt, str(run / LAST))
     ranks, device = _device(cfg)
-    data = _load_data(dataset_dir, cfg, ckpt)
+    data = _load_data(dataset_dir, cfg, ckpt)  # sets cfg.conditioning for a new run
     state, lr, autocast = _build_state(cfg, device, ckpt, str(run / LAST))
     net = wrap_model(state.model, ranks, device)
     manifest = data.manifest
-    context = {"train_config": asdict(cfg), "split": data.split, "lens": manifest.get("lens"),
+    context = {"train_config": asdict(cfg), "split": data.split, "conditioning": cfg.conditioning,
+               "lens": manifest.get("lens"),
                "sensor": manifest.get("sensor"), "sensor_name": manifest.get("sensor_name"),
                "dataset": str(Path(dataset_dir).resolve())}
     log = None
@@ -518,4 +546,4 @@ def _train(dataset_dir: str | Path, run: Path, config: TrainConfig | None, resum
 
 
 __all__ = ["FROZEN_ON_RESUME", "TrainConfig", "TrainProgress", "TrainResult", "budget_progress", "epoch_batches",
-           "epoch_order", "evaluate_pairs", "train"]
+           "epoch_order", "evaluate_pairs", "model_inputs", "train"]
