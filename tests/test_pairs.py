@@ -137,3 +137,41 @@ def test_zero_placements_are_refused(setup):
     base, sharp, sensor, bank = setup
     with pytest.raises(InputError, match="placements"):
         make_dataset(sharp, base / "z", bank, SENSOR, sensor, crops=1, size=64, placements=0)
+
+
+def test_exposure_draws_darken_scene_and_target_together(setup):
+    """--exposure-ev -3,-1: each placement draws its own exposure in that range (recorded),
+    the target crop is the source photo at that exposure (linear light times 2**ev, to
+    8-bit rounding), the input is the camera's view of the same darker scene; the range is
+    recorded in the settings, and off (the default) leaves the folder as before: no key,
+    bit-identical pairs."""
+    from lensim.sensor.isp import expose, srgb_to_linear
+
+    base, sharp, sensor, bank = setup
+    m, _ = _run(setup, "ev", placements=2, exposure_ev=(-3.0, -1.0))
+    assert m["exposure_ev"] == [-3.0, -1.0]
+    for rec in m["records"]:
+        evs = [p["exposure_ev"] for p in rec["placements"]]
+        assert all(-3.0 <= e <= -1.0 for e in evs) and evs[0] != evs[1]
+        y0, x0, _, _ = rec["source_crop"]
+        src, _ = read_image(rec["source"])
+        for c in rec["crops"]:
+            ev = evs[c["placement"]]
+            target, _ = read_image(base / "ev" / c["target"])
+            inp, _ = read_image(base / "ev" / c["input"])
+            top, left = c["sensor_top"] - rec["placements"][c["placement"]]["sensor_top"], \
+                c["sensor_left"] - rec["placements"][c["placement"]]["sensor_left"]
+            want = expose(src[:, y0 + top:y0 + top + 64, x0 + left:x0 + left + 64], ev)
+            assert float((target - want).abs().max()) <= 0.5 / 255 + 1e-6
+            ratio = srgb_to_linear(target).mean() / srgb_to_linear(src[:, y0 + top:y0 + top + 64,
+                                                                      x0 + left:x0 + left + 64]).mean()
+            assert abs(float(ratio) - 2.0 ** ev) < 0.05 * 2.0 ** ev
+            assert abs(float(inp.mean() - target.mean())) < 0.1  # the camera saw the same darker scene
+    a, _ = _run(setup, "a")
+    off, _ = _run(setup, "ev0", exposure_ev=(0.0, 0.0))
+    assert "exposure_ev" not in off and all("exposure_ev" not in p for r in off["records"] for p in r["placements"])
+    for ra, ro in zip(a["records"], off["records"]):
+        for ca, co in zip(ra["crops"], ro["crops"]):
+            assert (base / "a" / ca["input"]).read_bytes() == (base / "ev0" / co["input"]).read_bytes()
+    with pytest.raises(InputError, match="exposure_ev"):
+        make_dataset(sharp, base / "bad", bank, SENSOR, sensor, crops=1, size=64, exposure_ev=(0.0, -1.0))

@@ -183,16 +183,14 @@ def read_sample_image(name: str) -> torch.Tensor:
     The Debian wallpapers are JPEGs of 1.3 to 16 megapixels that are soft at full size;
     they are reduced (antialiased bilinear), which makes them sharp at the pixel level, as
     a ground truth for training pairs should be."""
-    from lensim.sensor.isp import linear_to_srgb, srgb_to_linear
+    from lensim.sensor.isp import expose
 
     arr, _ = read_image(sample_image_path(name))
     img = _sample(name)
     if img.scale != 1.0:
         arr = F.interpolate(arr[None], scale_factor=img.scale, mode="bilinear", antialias=True,
                             align_corners=False)[0].clamp(0.0, 1.0)
-    if img.exposure_ev:
-        arr = linear_to_srgb(srgb_to_linear(arr) * 2.0 ** img.exposure_ev)
-    return arr
+    return expose(arr, img.exposure_ev)
 
 
 def _installed(images: tuple[SampleImage, ...]) -> list[SampleImage]:

@@ -19,8 +19,9 @@ from lensim.cli.bank_options import (
     workers_option,
 )
 from lensim.cli.common import console, print_json, progress_bar
-from lensim.cli.validate import at_least, choice, even, input_folder, output_folder, scheduler_address
+from lensim.cli.validate import at_least, choice, even, in_range, input_folder, output_folder, scheduler_address
 from lensim.data.pairs import check_photos, list_images, make_dataset
+from lensim.errors import InputError
 from lensim.optics.lens_file import load_lens
 from lensim.sensor.profile import DEFAULT_SENSOR, load_sensor
 
@@ -44,6 +45,23 @@ def _check_options(sharp_dir: Path, output: Path, crops: int, size: int, placeme
     choice(demosaic, DEMOSAIC_METHODS, "--demosaic")
 
 
+def exposure_range(text: str) -> tuple[float, float]:
+    """--exposure-ev: "EV" or "LOW,HIGH" stops, each in [-8, 4], LOW <= HIGH (one-line errors)."""
+    parts = [p.strip() for p in str(text).split(",")]
+    try:
+        values = [float(p) for p in parts]
+    except ValueError:
+        values = []
+    if len(values) not in (1, 2):
+        raise InputError("--exposure-ev", None, f"expected a number of stops or LOW,HIGH (e.g. -3,0), got {text!r}")
+    for v in values:
+        in_range(v, -8.0, 4.0, "--exposure-ev", "stops", "an exposure change")
+    lo, hi = values[0], values[-1]
+    if lo > hi:
+        raise InputError("--exposure-ev", None, f"expected LOW <= HIGH, got {text!r}")
+    return lo, hi
+
+
 @dataset_app.command("make")
 def make(
     sharp_dir: Path = typer.Argument(..., help="Folder of sharp photos (PNG, TIFF, JPEG)."),
@@ -57,6 +75,9 @@ def make(
     size: int = typer.Option(256, "--size", help="Crop size in pixels (even)."),
     seed: int = typer.Option(0, "--seed", help="Seed of every random draw (placement, colour temperature, noise, crops)."),
     noise: bool = typer.Option(True, "--noise/--no-noise", help="Add shot and read noise."),
+    exposure_ev: str = typer.Option("0", "--exposure-ev", help="Exposure change in stops drawn per placement, "
+                                    "uniform in LOW,HIGH (one value: fixed), applied to the photo's linear light "
+                                    "before the camera: e.g. -3,0 adds darker, noisier scenes. 0: off."),
     demosaic: str = typer.Option("ahd", "--demosaic", help="ahd, malvar, menon or bilinear."),
     bank_dir: Path = typer.Option(None, "--bank", help="A PSF bank at the sensor's pitch (default: computed and cached)."),
     fields: int = fields_option(),
@@ -78,6 +99,7 @@ def make(
     settings = bank_settings(fields, wavelengths, pupil_samples, cache)
     _check_options(sharp_dir, output, crops, size, placements, workers, demosaic, cache)
     scheduler_address(scheduler)
+    ev_range = exposure_range(exposure_ev)
     sensor = load_sensor(sensor_file)
     quiet = quiet or json_out
     if bank_dir is not None:
@@ -89,7 +111,8 @@ def make(
         bank = cached_bank(lens, sensor.pixel_pitch_um, sensor, settings, workers, quiet, scheduler)
     with progress_bar("pairs", "photos", quiet) as cb:
         manifest = make_dataset(sharp_dir, output, bank, sensor_file, sensor, crops=crops, size=size, seed=seed,
-                                placements=placements, noise=noise, demosaic=demosaic, workers=workers, scheduler=scheduler, progress=cb)
+                                placements=placements, noise=noise, demosaic=demosaic, workers=workers, scheduler=scheduler, progress=cb,
+                                exposure_ev=ev_range)
     summary = {"output": str(output), "photos": len(manifest["records"]), "pairs": manifest["pairs"],
                "bank": str(bank.directory), "seed": seed}
     if json_out:

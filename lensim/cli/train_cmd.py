@@ -20,6 +20,7 @@ from lensim.cli.validate import at_least, choice, in_range, input_folder, output
 from lensim.cli.validate import device as check_device
 from lensim.errors import InputError
 from lensim.io import LOCK_NAME
+from lensim.restore.losses import LOSSES
 from lensim.restore.train import TrainConfig, TrainProgress, TrainResult
 
 _D = TrainConfig()
@@ -36,6 +37,8 @@ def train_command(
                                        help="Halve the learning rate every N epochs (paper: 5)."),
     lr_schedule: str = typer.Option(_D.lr_schedule, "--lr-schedule", help="step (halve every --lr-halve-every "
                                     "epochs) or cosine (anneal to 0 over the time budget, else over the epochs)."),
+    loss: str = typer.Option(_D.loss, "--loss", help="mse (the paper's), charbonnier, or charbonnier-edge "
+                             "(Charbonnier plus an edge term that does not reward over-smoothing)."),
     crop: int = typer.Option(_D.crop or 0, "--crop", help="Training sub-crop size in pixels (0: the stored crops)."),
     width: int = typer.Option(_D.width, "--width", help="Channels at full resolution (doubled at each scale)."),
     depth: int = typer.Option(_D.depth, "--depth", help="Number of scales."),
@@ -75,7 +78,7 @@ def train_command(
     quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
     json_out: bool = typer.Option(False, "--json", help="Print a summary as JSON (no progress output)."),
 ) -> None:
-    """Train the field-aware restoration network (Adam, MSE, halving learning rate,
+    """Train the field-aware restoration network (Adam, MSE or --loss, halving learning rate,
     FOV-consistent augmentation, validation PSNR/SSIM per epoch; RUN/log.csv, steps.csv,
     last.pt, best.pt). Multi-GPU: torchrun --nproc_per_node N -m lensim train ... --device cuda
 
@@ -85,6 +88,7 @@ def train_command(
 
     _check_recipe(epochs, batch_size, lr, lr_halve_every, lr_schedule, val_fraction, steps_per_epoch, time_budget_s)
     _check_network(width, depth, deformable_groups, deformable_scales, field_modulation, no_fov)
+    choice(loss, tuple(LOSSES), "--loss")
     at_least(threads, 0, "--threads", what="a number of threads (0: PyTorch's default)")
     at_least(checkpoint_every_s, 0.0, "--checkpoint-every-s", "s", "an interval (0: at epoch ends only)")
     at_least(checkpoint_every_steps, 0, "--checkpoint-every-steps", what="a number of steps (0: off)")
@@ -97,7 +101,7 @@ def train_command(
         torch.set_num_threads(threads)
     overrides: dict[str, Any] = {
         "epochs": epochs, "batch_size": batch_size, "lr": lr, "lr_halve_every": lr_halve_every,
-        "lr_schedule": lr_schedule, "crop": crop or None, "width": width, "depth": depth,
+        "lr_schedule": lr_schedule, "loss": loss, "crop": crop or None, "width": width, "depth": depth,
         "deformable_groups": deformable_groups,
         "deformable_scales": None if deformable_scales < 0 else deformable_scales, "use_fov": not no_fov,
         "field_modulation": field_modulation, "use_deformable": not no_deformable, "use_context": not no_context,

@@ -14,6 +14,13 @@ sensor with its centre at a normalized field radius (1 at the sensor corner) in
 lensim.evaluate (as far as its size allows), so a held-out photo scores every zone; one
 uniform position leaves small photos on a large sensor mostly in the middle zone.
 
+Exposure (``exposure_ev`` = (lo, hi) stops, off at (0, 0)): each placement first draws an
+exposure uniformly in [lo, hi] and scales the photo's linear light by 2**ev (the scene and
+so the target get darker or brighter; lensim.sensor.isp.expose); the camera then adds
+its noise in absolute raw units, so a darker scene is noisier relative to its signal. The
+colour temperature and the noise levels are drawn per capture already
+(lensim.render.pipeline); this widens the brightness range the pairs cover.
+
 Determinism: image i's random stream is seeded from (seed, i, file name); results do not
 depend on worker count or order. Resumability: an image is done when its JSON record
 exists and reads back as this image's (a corrupt record is recomputed); it is written
@@ -43,6 +50,7 @@ from lensim.io import atomic_write_json, folder_lock, read_json
 from lensim.psf.bank import PSFBank
 from lensim.render.mapping import native_mapping
 from lensim.render.pipeline import simulate
+from lensim.sensor.isp import expose
 from lensim.sensor.profile import SensorProfile, load_sensor
 from lensim.workers import run_jobs
 
@@ -62,6 +70,7 @@ class PairJob:
     noise: bool
     demosaic: str
     placements: int = 1
+    exposure_ev: tuple[float, float] = (0.0, 0.0)
 
 
 def image_seed(seed: int, index: int, name: str) -> int:
@@ -109,6 +118,15 @@ def place_on_sensor(h: int, w: int, sensor: SensorProfile, k: int, placements: i
     return 2 * int(top[i] / 2), 2 * int(left[i] / 2)
 
 
+def draw_exposure(ev_range: tuple[float, float], gen: torch.Generator) -> float:
+    """An exposure change in stops, uniform in ev_range; no draw (the generator untouched)
+    when the range is a single value."""
+    lo, hi = ev_range
+    if lo == hi:
+        return float(lo)
+    return lo + (hi - lo) * float(torch.rand(1, generator=gen, dtype=torch.float64)[0])
+
+
 def make_pairs_for_image(job: PairJob) -> dict:
     """Simulate one photo and write its crops; returns (and writes) its record."""
     torch.set_num_threads(1)
@@ -132,15 +150,18 @@ def make_pairs_for_image(job: PairJob) -> dict:
     for p in range(job.placements):
         top, left = place_on_sensor(h2, w2, sensor, p, job.placements, gen)
         mapping = native_mapping(h2, w2, sensor, top, left)
-        sim, params = simulate(img, bank, sensor, gen, noise=job.noise, demosaic=job.demosaic, mapping=mapping)
-        placed.append({"sensor_top": top, "sensor_left": left, "capture": params.to_dict()})
+        ev = draw_exposure(job.exposure_ev, gen)
+        scene = expose(img, ev)
+        sim, params = simulate(scene, bank, sensor, gen, noise=job.noise, demosaic=job.demosaic, mapping=mapping)
+        placed.append({"sensor_top": top, "sensor_left": left, "capture": params.to_dict(),
+                       **({"exposure_ev": ev} if job.exposure_ev != (0.0, 0.0) else {})})
         for _ in range(job.crops):
             cy = int(torch.randint(0, h2 - job.size + 1, (1,), generator=gen))
             cx = int(torch.randint(0, w2 - job.size + 1, (1,), generator=gen))
             name_in = f"pairs/{stem}_{len(crops):03d}_input.png"
             name_gt = f"pairs/{stem}_{len(crops):03d}_target.png"
             write_image(out / name_in, sim[:, cy:cy + job.size, cx:cx + job.size], 8)
-            write_image(out / name_gt, img[:, cy:cy + job.size, cx:cx + job.size], 8)
+            write_image(out / name_gt, scene[:, cy:cy + job.size, cx:cx + job.size], 8)
             crops.append({"input": name_in, "target": name_gt, "sensor_top": top + cy, "sensor_left": left + cx,
                           "placement": p})
     record = {"index": job.index, "source": job.path, "seed": job.seed, "source_crop": [y, x, h2, w2],
@@ -164,16 +185,21 @@ def make_dataset(
     workers: int = 1,
     scheduler: str | None = None,
     progress: Callable[[int, int], None] | None = None,
+    exposure_ev: tuple[float, float] = (0.0, 0.0),
 ) -> dict:
     """Generate pairs for every photo in sharp_dir into out_dir (resumable); returns the
     manifest. `crops` crops are cut at each of a photo's `placements` sensor positions.
-    The bank must be at the sensor's native pitch and cover its diagonal."""
+    The bank must be at the sensor's native pitch and cover its diagonal. exposure_ev:
+    the range of exposure changes in stops drawn per placement (module docstring)."""
     if size < 16 or size % 2:
         raise InputError(None, "size", f"expected an even crop size of at least 16 pixels, got {size}")
     if crops < 1:
         raise InputError(None, "crops", f"expected at least one crop per image, got {crops}")
     if placements < 1:
         raise InputError(None, "placements", f"expected at least one placement per image, got {placements}")
+    exposure_ev = (float(exposure_ev[0]), float(exposure_ev[1]))
+    if not (math.isfinite(exposure_ev[0]) and math.isfinite(exposure_ev[1]) and exposure_ev[0] <= exposure_ev[1]):
+        raise InputError(None, "exposure_ev", f"expected (low, high) stops with low <= high, got {exposure_ev}")
     if bank.directory is None:
         raise InputError(None, "bank", "expected a bank stored on disk (workers load it)")
     if abs(bank.pixel_pitch_um / sensor.pixel_pitch_um - 1) > 1e-6:
@@ -185,8 +211,10 @@ def make_dataset(
     settings = {"format": FORMAT, "seed": seed, "crops": crops, "placements": placements, "size": size,
                 "noise": noise, "demosaic": demosaic, "sensor": sensor.to_dict(), "sensor_name": sensor_name,
                 "lens": bank.manifest.get("lens"), "bank": str(bank.directory), "sources": [str(p) for p in files]}
+    if exposure_ev != (0.0, 0.0):
+        settings["exposure_ev"] = list(exposure_ev)  # absent when off: folders made before keep resuming
     jobs = [PairJob(i, str(p), str(out), str(bank.directory), sensor_name, image_seed(seed, i, p.name), crops, size,
-                    noise, demosaic, placements) for i, p in enumerate(files)]
+                    noise, demosaic, placements, exposure_ev) for i, p in enumerate(files)]
     with folder_lock(out):
         claimed = _claim_folder(out, settings)
         todo = [j for j in jobs if _read_record(j) is None]

@@ -1,6 +1,7 @@
 """Training of the field-aware restoration network on a pairs folder.
 
-Recipe (the paper follows Chang et al. 2020): Adam, MSE loss, learning rate ``lr`` halved
+Recipe (the paper follows Chang et al. 2020): Adam, MSE loss (``loss``: or a Charbonnier
+loss with an edge term, lensim.restore.losses), learning rate ``lr`` halved
 every ``lr_halve_every`` epochs (paper: 1e-4 halved every 5 of 30 epochs; ``lr_schedule=
 "step"``) or annealed to zero along a half cosine over the run (``"cosine"``: over the
 time budget when one is set, else over the epochs; the better choice for a fixed
@@ -13,7 +14,7 @@ in every checkpoint.
 Run folder:
     RUN/config.json, split.json, log.csv, steps.csv, tb/   lensim.restore.run_log. log.csv
                       has one row per epoch (and one when stopped early): epoch (epochs
-                      completed), step (optimizer steps done), loss (mean training MSE
+                      completed), step (optimizer steps done), loss (mean training loss
                       of the epoch's steps in this call), val_psnr (dB), val_ssim, lr
                       (used during the epoch), seconds (since this call started)
     RUN/last.pt       latest checkpoint (every epoch, when stopped, and within an epoch
@@ -42,7 +43,6 @@ from pathlib import Path
 from typing import Any, Callable, Iterator
 
 import torch
-import torch.nn.functional as F
 from torch.utils.data import DataLoader
 
 from lensim.data.manifest import read_pairs_manifest
@@ -68,6 +68,7 @@ from lensim.restore.distributed import (
     shutdown,
     wrap_model,
 )
+from lensim.restore.losses import LOSSES, restoration_loss
 from lensim.restore.network import FieldAwareUNet
 from lensim.restore.run_log import RunLog
 from lensim.restore.schedule import LR_SCHEDULES, BudgetClock, LearningRate
@@ -87,6 +88,9 @@ class TrainConfig:
     crop: training sub-crop size in pixels (None: the stored crops).
     width, depth, use_fov, use_deformable, use_context, deformable_groups,
         deformable_scales, field_modulation: the network (lensim.restore.network.FieldAwareUNet).
+    loss: the training loss, a key of lensim.restore.losses.LOSSES: "mse" (the paper's),
+        "charbonnier" or "charbonnier-edge" (Charbonnier plus an edge term that does not
+        reward over-smoothing).
     seed: seeds model initialisation, data order, crops and augmentation.
     augment: random FOV-consistent dihedral ops.
     val_fraction: share of source photos held out for validation.
@@ -125,6 +129,7 @@ class TrainConfig:
     deformable_groups: int = 2
     deformable_scales: int | None = None
     field_modulation: bool = False
+    loss: str = "mse"
     seed: int = 0
     augment: bool = True
     val_fraction: float = 0.2
@@ -147,7 +152,7 @@ class TrainConfig:
 
 
 # Settings that must not change when resuming (they would change the loss curve's meaning).
-FROZEN_ON_RESUME = ("batch_size", "lr", "lr_halve_every", "lr_schedule", "crop", "width", "depth", "use_fov",
+FROZEN_ON_RESUME = ("loss", "batch_size", "lr", "lr_halve_every", "lr_schedule", "crop", "width", "depth", "use_fov",
                     "use_deformable", "use_context", "deformable_groups", "deformable_scales", "field_modulation",
                     "seed", "augment", "val_fraction", "max_steps_per_epoch", "use_settings", "conditioning")
 
@@ -271,7 +276,8 @@ def _resolve_config(config: TrainConfig | None, overrides: dict[str, Any], ckpt:
         cfg = TrainConfig(**{**asdict(config or TrainConfig()), **overrides})
     else:
         known = set(asdict(TrainConfig()))
-        saved = {k: v for k, v in ckpt["train_config"].items() if k in known}
+        # a setting a checkpoint predates (e.g. loss) had its default value there
+        saved = {**asdict(TrainConfig()), **{k: v for k, v in ckpt["train_config"].items() if k in known}}
         diff = [k for k in FROZEN_ON_RESUME if k in overrides and overrides[k] != saved.get(k)]
         if diff:
             raise InputError(source, ", ".join(diff), f"differs from the run being resumed "
@@ -283,6 +289,8 @@ def _resolve_config(config: TrainConfig | None, overrides: dict[str, Any], ckpt:
                          f"lr_halve_every={cfg.lr_halve_every}")
     if cfg.lr_schedule not in LR_SCHEDULES:
         raise InputError(None, "lr_schedule", f"expected one of {', '.join(LR_SCHEDULES)}, got {cfg.lr_schedule!r}")
+    if cfg.loss not in LOSSES:
+        raise InputError(None, "loss", f"expected one of {', '.join(LOSSES)}, got {cfg.loss!r}")
     return cfg
 
 
@@ -392,7 +400,7 @@ def _save_checkpoint(loop: _Loop, best: bool) -> None:
 
 
 def _optimizer_step(loop: _Loop, batch: dict[str, torch.Tensor]) -> float:
-    """One Adam step on the MSE of a batch (autocast on CUDA); the loss, averaged over ranks."""
+    """One Adam step on the training loss (TrainConfig.loss) of a batch (autocast on CUDA); the loss, averaged over ranks."""
     device, state = loop.device, loop.state
     args = model_inputs(batch, device)
     tgt = batch["target"].to(device, non_blocking=True)
@@ -400,9 +408,9 @@ def _optimizer_step(loop: _Loop, batch: dict[str, torch.Tensor]) -> float:
     if loop.autocast is not None:
         with torch.autocast(device_type="cuda", dtype=loop.autocast):
             out = loop.net(*args)
-        loss = F.mse_loss(out.float(), tgt)
+        loss = restoration_loss(loop.cfg.loss, out.float(), tgt)
     else:
-        loss = F.mse_loss(loop.net(*args), tgt)
+        loss = restoration_loss(loop.cfg.loss, loop.net(*args), tgt)
     state.scaler.scale(loss).backward()
     state.scaler.step(state.optimizer)
     state.scaler.update()

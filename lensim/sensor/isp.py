@@ -79,6 +79,15 @@ def linear_to_srgb(x: torch.Tensor, eps: float = EPS) -> torch.Tensor:
     return torch.where(x <= 0.0031308, 12.92 * x, 1.055 * x.clamp_min(eps) ** (1.0 / 2.4) - 0.055)
 
 
+def expose(img: torch.Tensor, ev: float) -> torch.Tensor:
+    """An sRGB image (..., 3, H, W) in [0, 1] at ``ev`` stops more exposure: linear light
+    times 2**ev (negative ev: a darker scene), back to sRGB; what brightens past 1 clips
+    as a photo's highlights do. ev = 0 returns the image itself."""
+    if ev == 0.0:
+        return img
+    return linear_to_srgb(srgb_to_linear(img) * 2.0 ** ev)
+
+
 def apply_ccm(img: torch.Tensor, ccm: torch.Tensor | Any) -> torch.Tensor:
     """Multiply every pixel's RGB vector by a 3x3 matrix: out[..., i, :, :] = sum_j
     ccm[i, j] * img[..., j, :, :]. img is (..., 3, H, W)."""
