@@ -285,3 +285,48 @@ def test_restore_reads_a_raws_settings_from_exif(runs: dict[str, Path], tmp_path
     _dng(tmp_path / "wide", "wide.dng", fno=0.7, focus_distance_m=2.0)  # 1.5 stops beyond f/2: refused
     code, _, err = run_cli(base + [str(tmp_path / "wide"), "-o", str(tmp_path / "w")], capsys, monkeypatch)
     assert code == 2 and "wide.dng" in err and "f/0.7" in err
+
+
+def test_developed_photos_take_their_settings_from_exif(runs: dict[str, Path], tmp_path: Path, capsys, monkeypatch):
+    import shutil
+
+    import numpy as np
+    from PIL import Image
+    from PIL.TiffImagePlugin import IFDRational
+
+    from lensim.raw.read import photo_exif_settings
+
+    exif = Image.Exif()
+    exif.get_ifd(0x8769).update({33437: IFDRational(4, 1), 37382: IFDRational(2, 1), 37386: IFDRational(50, 1)})
+    pixels = (np.asarray(read_image(_photo(tmp_path))[0].permute(1, 2, 0)) * 255).round().astype(np.uint8)
+    Image.fromarray(pixels).save(tmp_path / "exif.png", exif=exif.tobytes())
+    assert photo_exif_settings(tmp_path / "exif.png") == {"fno": 4.0, "focus_m": 2.0, "focal_mm": 50.0}
+    assert photo_exif_settings(tmp_path / "shot.png") == {}
+    shutil.copy(_dng(tmp_path, "t.dng", fno=8.0, focus_distance_m=math.inf), tmp_path / "t.tif")  # a TIFF's Exif IFD
+    assert photo_exif_settings(tmp_path / "t.tif") == {"fno": 8.0, "focus_m": math.inf}
+    base = ["restore", str(runs["cond"]), "--sensor-offset", "100,200", "--quiet", "--tile", "32", "--overlap", "8"]
+    code, _, err = run_cli(base + [str(tmp_path / "exif.png"), "-o", str(tmp_path / "a")], capsys, monkeypatch)
+    assert code == 0, err
+    code, _, err = run_cli(base + [str(tmp_path / "shot.png"), "-o", str(tmp_path / "b"), "--fno", "4",
+                                   "--focus-m", "2"], capsys, monkeypatch)
+    assert code == 0, err
+    assert torch.equal(read_image(tmp_path / "a" / "exif.png")[0], read_image(tmp_path / "b" / "shot.png")[0])
+    code, _, err = run_cli(base + [str(tmp_path / "exif.png"), "-o", str(tmp_path / "c"), "--fno", "8"], capsys,
+                           monkeypatch)
+    assert code == 0 and not torch.equal(read_image(tmp_path / "c" / "exif.png")[0],
+                                         read_image(tmp_path / "a" / "exif.png")[0])  # the option wins
+
+
+def test_train_command_says_what_it_is_conditioned_on(pairs: Path, tmp_path: Path, capsys, monkeypatch):
+    args = ["train", str(pairs), "--epochs", "1", "--steps-per-epoch", "1", "--width", "4", "--depth", "2",
+            "--crop", "32", "--deformable-scales", "0"]
+    code, out, err = run_cli(args + ["-o", str(tmp_path / "a"), "--quiet"], capsys, monkeypatch)
+    assert code == 0, err
+    code, out, err = run_cli(args + ["-o", str(tmp_path / "b"), "--json"], capsys, monkeypatch)
+    assert code == 0, err
+    assert json.loads(out)["conditioning"]["keys"] == ["fno", "focus_m"]
+    code, out, err = run_cli(args + ["-o", str(tmp_path / "c"), "--no-settings", "--json"], capsys, monkeypatch)
+    assert code == 0, err
+    assert json.loads(out)["conditioning"]["keys"] == []
+    code, out, err = run_cli(args + ["-o", str(tmp_path / "d"), "--threads", "1"], capsys, monkeypatch)
+    assert code == 0 and "conditioned on fno, focus_m (f/2 to f/8" in out

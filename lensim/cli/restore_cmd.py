@@ -68,11 +68,11 @@ def restore_command(
     allow_other_camera: bool = typer.Option(False, "--allow-other-camera", help="Restore raws from another camera or "
                                             "of another size than the checkpoint's sensor (as full frames of it)."),
     workers: int = typer.Option(1, "--workers", help="Raw inputs restored side by side (processes sharing the threads)."),
-    fno: float = typer.Option(None, "--fno", help="F-number the photos were taken at (overrides a raw's EXIF "
+    fno: float = typer.Option(None, "--fno", help="F-number the photos were taken at (overrides their EXIF "
                               "FNumber); needed by a network trained across F-numbers."),
     focus_m: float = typer.Option(None, "--focus-m", help="Focus distance in metres from the sensor, inf for infinity "
-                                  "(overrides a raw's EXIF SubjectDistance)."),
-    focal_mm: float = typer.Option(None, "--focal-mm", help="Focal length in mm (overrides a raw's EXIF FocalLength)."),
+                                  "(overrides their EXIF SubjectDistance)."),
+    focal_mm: float = typer.Option(None, "--focal-mm", help="Focal length in mm (overrides their EXIF FocalLength)."),
     quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
     json_out: bool = typer.Option(False, "--json", help="Print what was written as JSON."),
 ) -> None:
@@ -85,9 +85,10 @@ def restore_command(
     checkpoint's sensor is refused unless --allow-other-camera. Every raw is checked
     before the first output; finished outputs are skipped, so a rerun resumes.
 
-    A network trained across shooting settings needs the photos' settings: a raw's EXIF
-    (FNumber, SubjectDistance, FocalLength) or --fno/--focus-m/--focal-mm (which override
-    it). Settings outside the trained range give a warning, far outside a refusal.
+    A network trained across shooting settings needs the photos' settings: their EXIF
+    (FNumber, SubjectDistance, FocalLength; raw files, TIFF, JPEG, PNG) or
+    --fno/--focus-m/--focal-mm (which override it). Settings outside the trained range give
+    a warning, far outside a refusal.
 
     Example: lensim restore runs/a photo.png -o restored/;
     lensim restore runs/a raws/ -o restored/ --dng --workers 2
@@ -117,7 +118,7 @@ def restore_command(
             written += _restore_raws(raws, output, model, settings, dng, workers, quiet or json_out)
         for path in photos:
             written.append(_restore_photo(path, output, model, (sensor_w, sensor_h), offset, (tile, overlap), bits,
-                                          quiet or json_out, photo_settings))
+                                          quiet or json_out, photo_settings[path]))
     if json_out:
         print_json({"checkpoint": info["path"], "images": written})
 
@@ -146,25 +147,27 @@ def _shooting(fno: float | None, focus_m: float | None, focal_mm: float | None) 
     return {k: check_value(k, v, OPTIONS[k], None) for k, v in given.items() if v is not None}
 
 
-def _photo_settings(photos: list[Path], shooting: dict[str, float], info: dict) -> torch.Tensor | None:
-    """The settings vector for the (non-raw) photos, which take their settings from the
-    options only: None for a network without settings inputs; the trained ranges checked
-    (a warning, or far outside a refusal) before any output."""
+def _photo_settings(photos: list[Path], shooting: dict[str, float], info: dict) -> dict[Path, torch.Tensor | None]:
+    """The settings vector of each (developed) photo: its EXIF's settings (FNumber,
+    SubjectDistance, FocalLength of a TIFF, JPEG or PNG), each replaced by the option's
+    value when one is given; None for a network without settings inputs. The trained
+    ranges are checked (a warning, or far outside a refusal) before any output."""
+    from lensim.raw.read import photo_exif_settings
     from lensim.restore.conditioning import OPTIONS, Conditioning
 
     cond = Conditioning.from_dict(info["conditioning"], info["path"])
-    if not photos:
-        return None
-    for text in cond.check(shooting):
-        warnings.warn(text, UserWarning, stacklevel=2)
-    if not cond.dim:
-        return None
-    missing = [OPTIONS[k] for k in cond.keys if k not in shooting]
-    if missing:
-        raise InputError(", ".join(missing), None, f"{info['path']} was trained across shooting settings "
-                         f"({cond.describe()}) and needs the photos' {', '.join(cond.keys)}; give "
-                         f"{' '.join(m + ' ...' for m in missing)} (raw files take them from their EXIF)")
-    return cond.vector(shooting)
+    vectors: dict[Path, torch.Tensor | None] = {}
+    for path in photos:
+        shot = {**photo_exif_settings(path), **shooting}
+        for text in cond.check(shot, str(path)):
+            warnings.warn(text, UserWarning, stacklevel=2)
+        missing = [OPTIONS[k] for k in cond.keys if k not in shot]
+        if missing:
+            raise InputError(str(path), ", ".join(missing), f"{info['path']} was trained across shooting settings "
+                             f"({cond.describe()}) and needs the photo's {', '.join(cond.keys)}; its EXIF does not "
+                             f"say; give {' '.join(m + ' ...' for m in missing)}")
+        vectors[path] = cond.vector(shot) if cond.dim else None
+    return vectors
 
 
 def _photo_output_name(path: Path) -> str:

@@ -20,6 +20,7 @@ from lensim.cli.validate import at_least, choice, in_range, input_folder, output
 from lensim.cli.validate import device as check_device
 from lensim.errors import InputError
 from lensim.io import LOCK_NAME
+from lensim.restore.conditioning import Conditioning
 from lensim.restore.losses import LOSSES
 from lensim.restore.train import TrainConfig, TrainProgress, TrainResult
 
@@ -211,13 +212,17 @@ def _report(result: TrainResult, quiet: bool, json_out: bool) -> None:
     summary = {"run": result.run_dir, "epochs_done": result.epochs_done, "steps": result.step,
                "stopped_early": result.stopped_early, "seconds": result.seconds, "val_psnr_db": result.val_psnr,
                "val_ssim": result.val_ssim, "val_input_psnr_db": result.val_input_psnr,
-               "best_val_psnr_db": result.best_val_psnr}
+               "best_val_psnr_db": result.best_val_psnr, "conditioning": result.conditioning}
     if json_out:
         print_json(summary)
     elif not quiet:
         vp = "n/a" if result.val_psnr is None else f"{result.val_psnr:.2f} dB (input {result.val_input_psnr:.2f} dB)"
         console.print(f"trained {result.step} steps in {result.seconds:.0f} s; validation PSNR {vp}; "
                       f"checkpoints in {result.run_dir}", highlight=False)
+        cond = Conditioning.from_dict(result.conditioning)
+        if cond.dim:
+            console.print(f"conditioned on {', '.join(cond.keys)} ({cond.describe()}): restore needs the photos' "
+                          "settings (a raw's EXIF or --fno/--focus-m/--focal-mm)", highlight=False)
 
 
 __all__ = ["train_command"]

@@ -447,6 +447,37 @@ def read_raw(path: str | Path) -> RawImage:
     return raw
 
 
+#: EXIF tag numbers of the shooting settings (in the Exif IFD)
+_SETTING_TAGS = {"FNumber": 33437, "SubjectDistance": 37382, "FocalLength": 37386}
+
+
+def photo_exif_settings(path: str | Path) -> dict[str, float]:
+    """Shooting settings a developed photo's EXIF records, {fno, focus_m, focal_mm} (those
+    present): FNumber, SubjectDistance (0 unknown, 0xFFFFFFFF/n infinity) and FocalLength
+    of a TIFF (tifffile) or a JPEG / PNG (Pillow's Exif IFD). {} when the file has none or
+    its EXIF cannot be read (the photo itself is read and checked elsewhere)."""
+    path = Path(path)
+    tags: dict[str, Any] = {}
+    if path.suffix.lower() in (".tif", ".tiff"):
+        tags = _tiff_tags(path)
+    else:
+        try:
+            from PIL import Image
+
+            with Image.open(path) as im:
+                im.load()  # a PNG's eXIf chunk may follow the image data
+                ifd = im.getexif().get_ifd(0x8769)
+                tags = {name: ifd[num] for name, num in _SETTING_TAGS.items() if num in ifd}
+        except Exception:  # noqa: BLE001 - no EXIF to be had: no settings from it
+            return {}
+    for name, value in list(tags.items()):  # Pillow gives IFDRational
+        if hasattr(value, "numerator") and hasattr(value, "denominator") and not isinstance(value, (int, float)):
+            tags[name] = (int(value.numerator), int(value.denominator))
+    found = {"fno": _positive(tags.get("FNumber")), "focus_m": _focus_distance_m(tags),
+             "focal_mm": _positive(tags.get("FocalLength"))}
+    return {k: v for k, v in found.items() if v is not None}
+
+
 def raw_files(paths: list[str | Path]) -> list[Path]:
     """The raw files named: files as given, folders expanded to their files with a raw
     suffix (sorted). A folder without any is an InputError."""

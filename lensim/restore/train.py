@@ -190,6 +190,7 @@ class TrainResult:
     val_input_psnr: float | None
     best_val_psnr: float | None
     history: list[dict[str, Any]] = field(default_factory=list)
+    conditioning: dict[str, Any] | None = None  # TrainConfig.conditioning of the run
 
 
 def budget_progress(report: Callable[[float, float], None] | None,
@@ -550,7 +551,7 @@ def _train(dataset_dir: str | Path, run: Path, config: TrainConfig | None, resum
     best = state.best_val_psnr
     return TrainResult(str(run), state.epoch, state.step, stopped, loop.clock.call_s(), loop.last_loss,
                        metrics.get("psnr"), metrics.get("ssim"), metrics.get("input_psnr"),
-                       best if math.isfinite(best) else None, history)
+                       best if math.isfinite(best) else None, history, cfg.conditioning)
 
 
 __all__ = ["FROZEN_ON_RESUME", "TrainConfig", "TrainProgress", "TrainResult", "budget_progress", "epoch_batches",
