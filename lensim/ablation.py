@@ -1,78 +1,113 @@
 """The paper's ablation (Table 2): the field-aware network with each idea switched off in
-turn (FOV input, deformable decoder, context block), and a plain UNet of about the same
+turn (FOV input, deformable decoder, context block), and a plain network of about the same
 parameter count, trained on the same pairs with the same time budget and evaluated on the
-same held-out photos."""
+same held-out photos. Either architecture (lensim.restore.models): the field-aware UNet
+("unet", the paper's) or NAFNet with the same switches ("nafnet"; its plain variant is
+called plain-nafnet)."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 from lensim.data.manifest import read_held_out, read_pairs_manifest
 from lensim.errors import InputError
 from lensim.io import atomic_write_json, folder_lock, read_json
-from lensim.restore.network import FieldAwareUNet, count_parameters, plain_unet_width
+from lensim.restore.models import ARCHS, build_model, default_width
+from lensim.restore.network import count_parameters
 from lensim.restore.train import TrainConfig, budget_progress, train
 
+ALL_OFF = {"use_fov": False, "use_deformable": False, "use_context": False}
 VARIANTS: dict[str, dict] = {
     "full": {},
     "no-fov": {"use_fov": False},
     "no-deformable": {"use_deformable": False},
     "no-context": {"use_context": False},
-    "plain-unet": {"use_fov": False, "use_deformable": False, "use_context": False},
+    "plain-unet": ALL_OFF,
 }
 
 
-def run_ablation(pairs_dir: str | Path, out_dir: str | Path, time_budget_s: float, width: int = TrainConfig.width,
+def variants_for(arch: str) -> dict[str, dict]:
+    """The ablation's variants for an architecture: VARIANTS, the plain one named
+    plain-nafnet for "nafnet"."""
+    if arch == "unet":
+        return dict(VARIANTS)
+    return {("plain-nafnet" if k == "plain-unet" else k): v for k, v in VARIANTS.items()}
+
+
+def _config(arch: str, width: int, crop: int | None, switches: dict[str, Any]) -> dict[str, Any]:
+    """The model config train() builds for these settings (TrainConfig.model_kwargs)."""
+    return TrainConfig(arch=arch, width=width, crop=crop, **switches).model_kwargs()
+
+
+def run_ablation(pairs_dir: str | Path, out_dir: str | Path, time_budget_s: float, width: int | None = None,
                  crop: int | None = TrainConfig.crop, seed: int = TrainConfig.seed, variants: list[str] | None = None,
                  say: Callable[[str], None] | None = None, device: str = TrainConfig.device,
-                 progress: Callable[[float, float], None] | None = None) -> dict:
+                 progress: Callable[[float, float], None] | None = None, arch: str = "unet") -> dict:
     """Train every variant (cached: a finished run is reused) and evaluate it on the held-out
-    photos of the first run's split; returns {"variants": {name: {params, train, metrics}}}.
-    say(stage) announces each training and the evaluation; progress(done, total) reports
-    training seconds and evaluated crops within them. out_dir is locked while it runs
-    (lensim.io.folder_lock)."""
-    names = variants or list(VARIANTS)
-    unknown = [n for n in names if n not in VARIANTS]
+    photos of the first run's split; returns {"arch", "variants": {name: {params, train,
+    metrics}}}. width: of the full network (None: the architecture's default, matched to the
+    default network's size). say(stage) announces each training and the evaluation;
+    progress(done, total) reports training seconds and evaluated crops within them. out_dir
+    is locked while it runs (lensim.io.folder_lock)."""
+    if arch not in ARCHS:
+        raise InputError(None, "arch", f"expected one of {', '.join(ARCHS)}, got {arch!r}")
+    table = variants_for(arch)
+    names = variants or list(table)
+    unknown = [n for n in names if n not in table]
     if unknown:
-        raise InputError(None, "variants", f"unknown variant {unknown[0]!r}; expected some of {', '.join(VARIANTS)}")
+        raise InputError(None, "variants", f"unknown variant {unknown[0]!r}; expected some of {', '.join(table)}")
     if time_budget_s <= 0:
         raise InputError(None, "time_budget_s", f"expected a positive number of seconds, got {time_budget_s:g}")
     manifest = read_pairs_manifest(pairs_dir)
+    if width is None:
+        full = {k: v for k, v in _config(arch, 1, crop, {}).items() if k not in ("arch", "width", "depth")}
+        width = default_width(arch, **full)
     with folder_lock(out_dir):
-        return _run_variants(pairs_dir, manifest, Path(out_dir), time_budget_s, width, crop, seed, names,
-                             say or (lambda m: None), device, progress)
+        return _run_variants(pairs_dir, manifest, Path(out_dir), time_budget_s, width, crop, seed,
+                             {n: table[n] for n in names}, say or (lambda m: None), device, progress, arch)
+
+
+def _plain_width(arch: str, width: int, crop: int | None) -> int:
+    """Width of the plain network (every switch off) with the full network's parameter count."""
+    from lensim.restore.nafnet import nafnet_width
+    from lensim.restore.network import plain_unet_width
+
+    full = count_parameters(build_model(_config(arch, width, crop, {})))
+    if arch == "unet":
+        return plain_unet_width(full, 3)
+    plain = {k: v for k, v in _config(arch, 1, crop, ALL_OFF).items() if k not in ("arch", "width", "depth")}
+    return nafnet_width(full, **plain)
 
 
 def _run_variants(pairs_dir: str | Path, manifest: dict, out: Path, time_budget_s: float, width: int,
-                  crop: int | None, seed: int, names: list[str], say: Callable[[str], None], device: str,
-                  progress: Callable[[float, float], None] | None) -> dict:
+                  crop: int | None, seed: int, variants: dict[str, dict], say: Callable[[str], None], device: str,
+                  progress: Callable[[float, float], None] | None, arch: str) -> dict:
     """run_ablation's training and evaluation, the output folder locked."""
     from lensim.evaluate.harness import checkpoint_method, evaluate
 
-    full_params = count_parameters(FieldAwareUNet(width=width))
     results: dict[str, dict] = {}
     held_out = None
-    for name in names:
-        switches = dict(VARIANTS[name])
-        w = plain_unet_width(full_params, 3) if name == "plain-unet" else width
+    for name, switches in variants.items():
+        w = _plain_width(arch, width, crop) if switches == ALL_OFF else width
         run = out / name
         marker = run / "done.json"
         if not marker.exists():
             say(f"training {name} ({time_budget_s:g} s)")
-            res = train(pairs_dir, run, epochs=100_000, width=w, crop=crop, seed=seed, lr=5e-4, lr_schedule="cosine",
-                        time_budget_s=time_budget_s, device=device,
+            res = train(pairs_dir, run, epochs=100_000, arch=arch, width=w, crop=crop, seed=seed, lr=5e-4,
+                        lr_schedule="cosine", time_budget_s=time_budget_s, device=device,
                         progress=budget_progress(progress, time_budget_s), **switches)
             atomic_write_json(marker, {"steps": res.step, "seconds": res.seconds})
         held_out = held_out or read_held_out(run)
-        params = count_parameters(FieldAwareUNet(width=w, **switches))
-        results[name] = {"params": params, "width": w, **switches, "train": read_json(marker, "training record")}
+        params = count_parameters(build_model(_config(arch, w, crop, switches)))
+        results[name] = {"params": params, "arch": arch, "width": w, **switches,
+                         "train": read_json(marker, "training record")}
     say("evaluating on the held-out photos")
     methods = {name: checkpoint_method(out / name, manifest.get("lens"), manifest.get("sensor"), device=device)
-               for name in names}
+               for name in variants}
     metrics = evaluate(pairs_dir, methods, sources=held_out, progress=progress)
-    for name in names:
+    for name in variants:
         results[name]["metrics"] = metrics["methods"][name]
-    summary = {"held_out_photos": held_out, "time_budget_s": time_budget_s, "input": metrics["methods"]["input"],
-               "variants": results}
+    summary = {"arch": arch, "held_out_photos": held_out, "time_budget_s": time_budget_s,
+               "input": metrics["methods"]["input"], "variants": results}
     atomic_write_json(out / "ablation.json", summary)
     return summary

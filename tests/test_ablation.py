@@ -109,6 +109,28 @@ def test_ablation_trains_evaluates_and_caches(pairs: Path) -> None:
     assert said and not any(m.startswith("training") for m in said)  # finished runs are reused
 
 
+def test_nafnet_ablation(pairs: Path) -> None:
+    """--arch nafnet: the same switches on NAFNet, the plain variant (plain-nafnet) at the
+    width matching the full NAFNet's parameter count, both NAFNets in their checkpoints."""
+    from lensim.ablation import variants_for
+    from lensim.restore.checkpoint import load_checkpoint
+    from lensim.restore.nafnet import NAFNet, nafnet_width
+
+    assert list(variants_for("nafnet")) == ["full", "no-fov", "no-deformable", "no-context", "plain-nafnet"]
+    out = pairs / "ablation-nafnet"
+    s = run_ablation(pairs / "pairs", out, time_budget_s=2.0, width=8, crop=32, variants=["full", "plain-nafnet"],
+                     arch="nafnet")
+    assert s["arch"] == "nafnet"
+    full = NAFNet(8, use_fov=True, use_deformable=True, use_context=True, deformable_scales=2)
+    assert s["variants"]["full"]["params"] == count_parameters(full)
+    plain = s["variants"]["plain-nafnet"]
+    assert plain["width"] == nafnet_width(count_parameters(full)) and abs(plain["params"] - count_parameters(full)) \
+        <= 0.1 * count_parameters(full)
+    model, _ = load_checkpoint(out / "plain-nafnet")
+    assert isinstance(model, NAFNet) and not (model.use_fov or model.use_deformable or model.use_context)
+    assert abs(s["variants"]["full"]["metrics"]["psnr_db"] - s["input"]["psnr_db"]) < 1.0
+
+
 def test_bad_variants_and_budgets_are_refused_before_any_work(tmp_path: Path) -> None:
     from lensim.errors import InputError
 

@@ -12,7 +12,7 @@ from typing import Any
 import typer
 
 from lensim.cli.common import console, print_json, progress_bar
-from lensim.cli.validate import at_least, finite, output_folder, positive
+from lensim.cli.validate import at_least, choice, finite, output_folder, positive
 from lensim.cli.validate import device as check_device
 from lensim.errors import InputError
 
@@ -33,6 +33,8 @@ def evaluate_command(
     rl_iterations: int = typer.Option(None, "--rl-iterations", help="Richardson-Lucy iterations (default 3)."),
     unsharp_sigma: float = typer.Option(None, "--unsharp-sigma", help="Unsharp-mask Gaussian sigma in pixels (default 1)."),
     unsharp_amount: float = typer.Option(None, "--unsharp-amount", help="Unsharp-mask amount (default 0.6)."),
+    arch: str = typer.Option(None, "--arch", help="Architecture the --model and --plain-unet checkpoints must hold "
+                             "(unet or nafnet; default: whatever they hold)."),
     device: str = typer.Option("cpu", "--device", help="Device of the trained networks (cpu, cuda, cuda:N)."),
     output: Path = typer.Option(None, "-o", "--output", help="Folder for metrics.csv (per crop), metrics.md, metrics.json."),
     quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
@@ -50,6 +52,10 @@ def evaluate_command(
 
     names = _method_names(methods, model, plain_unet)
     _check_options(rl_iterations, unsharp_sigma, unsharp_amount, max_crops, device, output)
+    if arch is not None:
+        from lensim.restore.models import ARCHS
+
+        choice(arch, ARCHS, "--arch")
     manifest = read_pairs_manifest(pairs)
     keep = read_held_out(held_out) if held_out is not None else None
     if sources:
@@ -61,7 +67,8 @@ def evaluate_command(
     table: dict[str, harness.Method] = {}
     for n in names:
         if n in harness.CHECKPOINT_METHODS:
-            table[n] = harness.checkpoint_method(runs[n], manifest.get("lens"), manifest.get("sensor"), device=device)
+            table[n] = harness.checkpoint_method(runs[n], manifest.get("lens"), manifest.get("sensor"), device=device,
+                                                 arch=arch)
         elif n != "input":
             table[n] = harness.builtin_method(n, **{k: v for k, v in options.get(n, {}).items() if v is not None})
     rows: list[dict[str, Any]] = []

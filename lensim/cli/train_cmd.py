@@ -41,7 +41,12 @@ def train_command(
     loss: str = typer.Option(_D.loss, "--loss", help="mse (the paper's), charbonnier, or charbonnier-edge "
                              "(Charbonnier plus an edge term that does not reward over-smoothing)."),
     crop: int = typer.Option(_D.crop or 0, "--crop", help="Training sub-crop size in pixels (0: the stored crops)."),
-    width: int = typer.Option(_D.width, "--width", help="Channels at full resolution (doubled at each scale)."),
+    arch: str = typer.Option(_D.arch, "--arch", help="Network: unet (the field-aware UNet) or nafnet (NAFNet "
+                             "blocks; the same switches)."),
+    width: int = typer.Option(0, "--width", help="Channels at the first scale, doubled at each further one (0: the "
+                              "architecture's default, the size of the default network: unet 32, nafnet about 46)."),
+    stem: int = typer.Option(_D.stem, "--stem", help="nafnet: 2 for a pixel-unshuffle stem (every layer at half "
+                             "resolution, about 4x faster), 1 for none."),
     depth: int = typer.Option(_D.depth, "--depth", help="Number of scales."),
     deformable_groups: int = typer.Option(_D.deformable_groups, "--deformable-groups",
                                           help="Offset groups of each deformable conv."),
@@ -79,7 +84,7 @@ def train_command(
     quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
     json_out: bool = typer.Option(False, "--json", help="Print a summary as JSON (no progress output)."),
 ) -> None:
-    """Train the field-aware restoration network (Adam, MSE or --loss, halving learning rate,
+    """Train a restoration network, the field-aware UNet or NAFNet (Adam, MSE or --loss, halving learning rate,
     FOV-consistent augmentation, validation PSNR/SSIM per epoch; RUN/log.csv, steps.csv,
     last.pt, best.pt). Multi-GPU: torchrun --nproc_per_node N -m lensim train ... --device cuda
 
@@ -88,7 +93,7 @@ def train_command(
     from lensim.restore.train import train
 
     _check_recipe(epochs, batch_size, lr, lr_halve_every, lr_schedule, val_fraction, steps_per_epoch, time_budget_s)
-    _check_network(width, depth, deformable_groups, deformable_scales, field_modulation, no_fov)
+    _check_network(arch, width, depth, deformable_groups, deformable_scales, field_modulation, no_fov, stem)
     choice(loss, tuple(LOSSES), "--loss")
     at_least(threads, 0, "--threads", what="a number of threads (0: PyTorch's default)")
     at_least(checkpoint_every_s, 0.0, "--checkpoint-every-s", "s", "an interval (0: at epoch ends only)")
@@ -102,7 +107,8 @@ def train_command(
         torch.set_num_threads(threads)
     overrides: dict[str, Any] = {
         "epochs": epochs, "batch_size": batch_size, "lr": lr, "lr_halve_every": lr_halve_every,
-        "lr_schedule": lr_schedule, "loss": loss, "crop": crop or None, "width": width, "depth": depth,
+        "lr_schedule": lr_schedule, "loss": loss, "crop": crop or None, "arch": arch, "width": width, "depth": depth,
+        "stem": stem,
         "deformable_groups": deformable_groups,
         "deformable_scales": None if deformable_scales < 0 else deformable_scales, "use_fov": not no_fov,
         "field_modulation": field_modulation, "use_deformable": not no_deformable, "use_context": not no_context,
@@ -142,18 +148,30 @@ def _check_recipe(epochs: int, batch_size: int, lr: float, lr_halve_every: int, 
     at_least(time_budget_s, 0.0, "--time-budget-s", "s", "a time budget (0: none)")
 
 
-def _check_network(width: int, depth: int, groups: int, deformable_scales: int, field_modulation: bool,
-                   no_fov: bool) -> None:
-    """The network's options (lensim.restore.network.FieldAwareUNet's rules), before any work."""
-    at_least(width, 1, "--width", "channels", "a width")
+def _check_network(arch: str, width: int, depth: int, groups: int, deformable_scales: int, field_modulation: bool,
+                   no_fov: bool, stem: int) -> None:
+    """The network's options (the rules of lensim.restore.network.FieldAwareUNet and
+    lensim.restore.nafnet.NAFNet), before any work."""
+    from lensim.restore.models import ARCHS
+
+    choice(arch, ARCHS, "--arch")
+    at_least(width, 0, "--width", "channels", "a width (0: the architecture's default)")
     at_least(depth, 2, "--depth", "scales", "a depth")
     at_least(groups, 1, "--deformable-groups", what="a number of offset groups")
-    if width % groups:
+    if width and width % groups:
         raise InputError("--deformable-groups", None, f"expected a divisor of --width {width}, got {groups}")
     in_range(deformable_scales, -1, depth - 1, "--deformable-scales", what="a number of decoder scales (-1: all)")
+    if arch == "nafnet" and deformable_scales == 0:
+        raise InputError("--deformable-scales", None, "expected 1 or more (or -1: all) with --arch nafnet; use "
+                         "--no-deformable for none")
     if field_modulation and no_fov:
         raise InputError("--field-modulation", None, "is computed from the field-of-view input; expected it without "
                          "--no-fov")
+    if field_modulation and arch != "unet":
+        raise InputError("--field-modulation", None, f"is an option of --arch unet; expected it without --arch {arch}")
+    choice(stem, (1, 2), "--stem")
+    if stem != 1 and arch != "nafnet":
+        raise InputError("--stem", None, f"is an option of --arch nafnet; expected 1 with --arch {arch}, got {stem}")
 
 
 def _check_crop(dataset: Path, crop: int) -> None:

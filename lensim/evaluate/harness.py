@@ -113,7 +113,7 @@ def builtin_method(name: str, **options: Any) -> Method:
 
 
 def checkpoint_method(run: str | Path, lens: Mapping[str, Any] | None = None, sensor: Mapping[str, Any] | None = None,
-                      device: str = "cpu", tile: int = 512, overlap: int = 192) -> Method:
+                      device: str = "cpu", tile: int = 512, overlap: int = 192, arch: str | None = None) -> Method:
     """A trained network (`lensim train` run folder or checkpoint) as a method: each crop is
     restored by lensim.restore.infer.restore_image with its absolute sensor offset (native
     scale) and the sensor's size in pixels. lens / sensor (dataset settings) make
@@ -121,13 +121,19 @@ def checkpoint_method(run: str | Path, lens: Mapping[str, Any] | None = None, se
     conditioned on shooting settings gets each crop's record's settings vector (pairs
     without settings are then an InputError); a crop whose settings lie outside the
     checkpoint's trained ranges is warned about (UserWarning) or, far outside, refused for
-    a conditioned network (lensim.restore.conditioning.Conditioning.check)."""
+    a conditioned network (lensim.restore.conditioning.Conditioning.check). arch: when
+    given, the checkpoint must hold that architecture ("unet" or "nafnet"; InputError
+    naming the file otherwise)."""
     from lensim.restore.checkpoint import load_checkpoint
     from lensim.restore.conditioning import Conditioning
     from lensim.restore.infer import restore_image
+    from lensim.restore.models import arch_of
 
     model, info = load_checkpoint(run, lens=dict(lens) if lens else None, sensor=dict(sensor) if sensor else None,
                                   device=device)
+    if arch is not None and arch_of(info["model_config"]) != arch:
+        raise InputError(info["path"], "model_config", f"holds a {arch_of(info['model_config'])!r} network; "
+                         f"expected {arch!r} (--arch)")
     cond = Conditioning.from_dict(info["conditioning"], info["path"])
 
     def restore(image: torch.Tensor, ctx: CropContext) -> torch.Tensor:

@@ -35,7 +35,6 @@ from typing import Any
 import torch
 
 from lensim.errors import InputError
-from lensim.restore.network import FieldAwareUNet
 from lensim.sensor.profile import SensorProfile, sensor_from_dict
 
 Progress = Callable[[float, float], None]
@@ -220,7 +219,7 @@ def validate(jobs: list[RawJob], sensor: SensorProfile, settings: RestoreSetting
                              "restored DNG; leave out --dng")
 
 
-def restore_raw(job: RawJob, model: FieldAwareUNet, sensor: SensorProfile, settings: RestoreSettings,
+def restore_raw(job: RawJob, model: torch.nn.Module, sensor: SensorProfile, settings: RestoreSettings,
                 progress: Callable[[int, int], None] | None = None) -> dict[str, Any]:
     """Develop, restore and write one raw file (see the module docstring); returns its
     record: input, outputs, size, whether it was native, the develop's capture parameters."""
@@ -269,7 +268,7 @@ def _worker_run(job: RawJob) -> dict[str, Any]:
     return restore_raw(job, _WORKER["model"], _WORKER["sensor"], _WORKER["settings"])
 
 
-def restore_raw_files(files: list[Path], out_dir: Path, model: FieldAwareUNet, settings: RestoreSettings,
+def restore_raw_files(files: list[Path], out_dir: Path, model: torch.nn.Module, settings: RestoreSettings,
                       dng: bool = False, workers: int = 1, progress: Progress | None = None) -> list[dict[str, Any]]:
     """Restore raw files into ``out_dir`` (see the module docstring). ``model`` is the
     loaded network (used in this process when ``workers`` is 1; worker processes load

@@ -3,7 +3,8 @@ evaluation: :func:`load_checkpoint` rebuilds the network) and resuming.
 
 A checkpoint is a ``torch.save`` of a dict, loadable with ``weights_only=True``:
     format, version          CHECKPOINT_FORMAT, CHECKPOINT_VERSION
-    model_config, model_state the network (lensim.restore.network.FieldAwareUNet(**config))
+    model_config, model_state the network (lensim.restore.models.build_model(config); a config
+                              without "arch" is a FieldAwareUNet)
     optimizer, scheduler, scaler  Adam, StepLR and grad-scaler states (scaler None when off)
     epoch, batch_in_epoch, step   epochs completed, batches done in the current epoch,
                               optimizer steps done
@@ -39,7 +40,7 @@ import torch
 from lensim.errors import InputError
 from lensim.io import atomic_writer
 from lensim.restore.conditioning import checkpoint_conditioning
-from lensim.restore.network import FieldAwareUNet
+from lensim.restore.models import build_model
 
 CHECKPOINT_FORMAT = "lensim-restore-checkpoint"
 CHECKPOINT_VERSION = 1
@@ -124,7 +125,7 @@ def load_checkpoint(
     lens: dict[str, Any] | None = None,
     sensor: dict[str, Any] | None = None,
     device: str | torch.device = "cpu",
-) -> tuple[FieldAwareUNet, dict[str, Any]]:
+) -> tuple[torch.nn.Module, dict[str, Any]]:
     """Rebuild the trained network from a checkpoint (or run folder).
 
     Args:
@@ -146,7 +147,9 @@ def load_checkpoint(
     data = read_checkpoint(path)
     cfg = data["model_config"]
     try:
-        model = FieldAwareUNet(**cfg)
+        if not isinstance(cfg, dict):
+            raise TypeError(f"expected a dict, got {type(cfg).__name__}")
+        model = build_model(cfg)
     except (TypeError, ValueError) as e:
         raise InputError(str(path), "model_config", f"cannot build the network ({e})") from None
     try:

@@ -32,10 +32,10 @@ from __future__ import annotations
 from typing import Callable
 
 import torch
+import torch.nn as nn
 
 from lensim.restore.conditioning import batch_settings
 from lensim.restore.fov import fov_channels
-from lensim.restore.network import FieldAwareUNet
 
 # ----------------------------------------------------------------------------- geometry
 
@@ -107,7 +107,7 @@ def _axis_weights(length: int, starts: list[int], tile: int, overlap: int, margi
 
 @torch.no_grad()
 def restore_image(
-    model: FieldAwareUNet,
+    model: nn.Module,
     image: torch.Tensor,
     sensor_top_left: tuple[float, float],
     sensor_size: tuple[float, float],
@@ -120,7 +120,8 @@ def restore_image(
     """Restore a (3, H, W) image of any size, tile by tile (see the module docstring).
 
     Args:
-        model: the network (its device and dtype are used for the tiles).
+        model: the network, any architecture of lensim.restore.models (its device and dtype
+            are used for the tiles).
         image: (3, H, W) float in [0, 1] (any device; the output is on the CPU).
         sensor_top_left: (top, left) of the image's top-left pixel on the sensor, in image
             pixels (image_sensor_geometry).

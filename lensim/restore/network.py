@@ -244,6 +244,8 @@ class FieldAwareUNet(nn.Module):
             channels (settings_planes) and as per-channel FiLM (SettingsModulation) at the
             bottleneck and every decoder scale; with field_modulation the field MLP also
             sees them, so the position-dependent modulation depends on the settings.
+        arch: "unet", the name lensim.restore.models.build_model knows this class by (it is
+            in ``config``, so a config rebuilds the network either way).
 
     forward(rgb (B, 3, H, W), fov (B, 2, H, W) or (2, H, W), required iff use_fov,
     settings (B, k) or (k,), required iff settings_dim > 0) ->
@@ -265,8 +267,11 @@ class FieldAwareUNet(nn.Module):
         deformable_scales: int | None = None,
         field_modulation: bool = False,
         settings_dim: int = 0,
+        arch: str = "unet",
     ) -> None:
         super().__init__()
+        if arch != "unet":
+            raise ValueError(f"arch must be 'unet' for FieldAwareUNet, got {arch!r}")
         if field_modulation and not use_fov:
             raise ValueError("field_modulation needs use_fov=True (it is computed from the FOV channels)")
         ws = tuple(int(w) for w in widths) if widths is not None else tuple(width * 2**s for s in range(depth))
@@ -331,6 +336,7 @@ class FieldAwareUNet(nn.Module):
     def config(self) -> dict[str, Any]:
         """Constructor arguments that rebuild this architecture (for checkpoints)."""
         return {
+            "arch": "unet",
             "widths": list(self.widths),
             "use_fov": self.use_fov,
             "use_deformable": self.use_deformable,

@@ -69,7 +69,7 @@ from lensim.restore.distributed import (
     wrap_model,
 )
 from lensim.restore.losses import LOSSES, restoration_loss
-from lensim.restore.network import FieldAwareUNet
+from lensim.restore.models import ARCHS, build_model, default_width
 from lensim.restore.run_log import RunLog
 from lensim.restore.schedule import LR_SCHEDULES, BudgetClock, LearningRate
 
@@ -86,8 +86,15 @@ class TrainConfig:
         cos(pi p)) / 2 at progress p in [0, 1]: the share of the time budget spent when
         one is set, else of the epochs; set before every step); lensim.restore.schedule.
     crop: training sub-crop size in pixels (None: the stored crops).
-    width, depth, use_fov, use_deformable, use_context, deformable_groups,
-        deformable_scales, field_modulation: the network (lensim.restore.network.FieldAwareUNet).
+    arch: "unet" (lensim.restore.network.FieldAwareUNet) or "nafnet"
+        (lensim.restore.nafnet.NAFNet: one NAFBlock per encoder and decoder scale, two at
+        the smallest); lensim.restore.models builds either.
+    width: channels at full resolution (0: the architecture's default, the width that
+        matches the default FieldAwareUNet's parameter count: lensim.restore.models.default_width).
+    depth, use_fov, use_deformable, use_context, deformable_groups, deformable_scales: the
+        network's scales and switches, for either architecture.
+    field_modulation: FieldAwareUNet only.
+    stem: NAFNet only: 2 for a pixel-unshuffle stem (every layer at half resolution).
     loss: the training loss, a key of lensim.restore.losses.LOSSES: "mse" (the paper's),
         "charbonnier" or "charbonnier-edge" (Charbonnier plus an edge term that does not
         reward over-smoothing).
@@ -121,6 +128,7 @@ class TrainConfig:
     lr_halve_every: int = 5
     lr_schedule: str = "step"
     crop: int | None = 128
+    arch: str = "unet"
     width: int = 32
     depth: int = 3
     use_fov: bool = True
@@ -130,6 +138,7 @@ class TrainConfig:
     deformable_scales: int | None = None
     field_modulation: bool = False
     loss: str = "mse"
+    stem: int = 1
     seed: int = 0
     augment: bool = True
     val_fraction: float = 0.2
@@ -144,17 +153,29 @@ class TrainConfig:
     conditioning: dict[str, Any] | None = None
 
     def model_kwargs(self) -> dict[str, Any]:
-        return {"width": self.width, "depth": self.depth, "use_fov": self.use_fov,
-                "use_deformable": self.use_deformable, "use_context": self.use_context,
-                "deformable_groups": self.deformable_groups, "deformable_scales": self.deformable_scales,
-                "field_modulation": self.field_modulation,
-                "settings_dim": Conditioning.from_dict(self.conditioning).dim}
+        """The network's config for lensim.restore.models.build_model ("arch" included)."""
+        switches = {"use_fov": self.use_fov, "use_deformable": self.use_deformable, "use_context": self.use_context,
+                    "deformable_groups": self.deformable_groups,
+                    "settings_dim": Conditioning.from_dict(self.conditioning).dim}
+        if self.arch == "nafnet":
+            if self.field_modulation:
+                raise InputError(None, "field_modulation", "is a FieldAwareUNet option; expected it off with "
+                                 "arch 'nafnet'")
+            n = self.depth - 1
+            return {"arch": "nafnet", "width": self.width, "enc_blocks": [1] * n, "middle_blocks": 2,
+                    "dec_blocks": [1] * n, **switches, "stem": self.stem,
+                    "deformable_scales": n if self.deformable_scales is None else self.deformable_scales}
+        if self.stem != 1:
+            raise InputError(None, "stem", f"is a NAFNet option; expected 1 with arch {self.arch!r}, got {self.stem}")
+        return {"arch": self.arch, "width": self.width, "depth": self.depth, **switches,
+                "deformable_scales": self.deformable_scales, "field_modulation": self.field_modulation}
 
 
 # Settings that must not change when resuming (they would change the loss curve's meaning).
-FROZEN_ON_RESUME = ("loss", "batch_size", "lr", "lr_halve_every", "lr_schedule", "crop", "width", "depth", "use_fov",
-                    "use_deformable", "use_context", "deformable_groups", "deformable_scales", "field_modulation",
-                    "seed", "augment", "val_fraction", "max_steps_per_epoch", "use_settings", "conditioning")
+FROZEN_ON_RESUME = ("loss", "batch_size", "lr", "lr_halve_every", "lr_schedule", "crop", "arch", "width", "depth",
+                    "use_fov", "use_deformable", "use_context", "deformable_groups", "deformable_scales",
+                    "field_modulation", "stem", "seed", "augment", "val_fraction", "max_steps_per_epoch",
+                    "use_settings", "conditioning")
 
 
 @dataclass
@@ -292,6 +313,11 @@ def _resolve_config(config: TrainConfig | None, overrides: dict[str, Any], ckpt:
         raise InputError(None, "lr_schedule", f"expected one of {', '.join(LR_SCHEDULES)}, got {cfg.lr_schedule!r}")
     if cfg.loss not in LOSSES:
         raise InputError(None, "loss", f"expected one of {', '.join(LOSSES)}, got {cfg.loss!r}")
+    if cfg.arch not in ARCHS:
+        raise InputError(None, "arch", f"expected one of {', '.join(ARCHS)}, got {cfg.arch!r}")
+    if cfg.width == 0:  # the architecture's size-matched default
+        switches = {k: v for k, v in cfg.model_kwargs().items() if k not in ("arch", "width", "depth")}
+        cfg.width = default_width(cfg.arch, **switches)
     return cfg
 
 
@@ -345,7 +371,10 @@ def _build_state(cfg: TrainConfig, device: torch.device, ckpt: dict[str, Any] | 
     """Model (seeded), Adam, learning-rate schedule, grad scaler and position, restored from
     ``ckpt`` when resuming; the autocast dtype (None: full precision)."""
     torch.manual_seed(cfg.seed)
-    model = FieldAwareUNet(**cfg.model_kwargs()).to(device)
+    try:
+        model = build_model(cfg.model_kwargs()).to(device)
+    except (TypeError, ValueError) as e:
+        raise InputError(None, "config", f"cannot build the {cfg.arch} network ({e})") from None
     optimizer = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     lr = LearningRate(optimizer, cfg.lr_schedule, cfg.lr, cfg.lr_halve_every, cfg.epochs)
     autocast = amp_dtype(device, cfg.amp)
@@ -474,7 +503,8 @@ def train(
     progress: Callable[[TrainProgress], None] | None = None,
     **overrides: Any,
 ) -> TrainResult:
-    """Train (or, with ``resume``, continue training) a FieldAwareUNet on a pairs folder.
+    """Train (or, with ``resume``, continue training) a restoration network (TrainConfig.arch)
+    on a pairs folder.
 
     Args:
         dataset_dir: folder written by ``lensim dataset make`` (manifest.json + crops).

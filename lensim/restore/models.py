@@ -1,0 +1,72 @@
+"""Restoration architectures by name: one place that builds a network from its config.
+
+``config["arch"]`` is ``"unet"`` (lensim.restore.network.FieldAwareUNet; the default when
+the key is missing, so checkpoints written before there was a choice keep loading) or
+``"nafnet"`` (lensim.restore.nafnet.NAFNet). Every model has ``.config`` (a dict that
+rebuilds it through :func:`build_model`, "arch" included), ``.size_multiple``, ``.use_fov``
+and ``.settings_dim``.
+
+Size matching: the default FieldAwareUNet (width 32, 3 scales, deformable block at the
+coarsest decoder scale) has 821,209 parameters; :func:`default_width` gives each
+architecture's width at that size (NAFNet: :func:`lensim.restore.nafnet.nafnet_width`).
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+from typing import Any
+
+import torch
+import torch.nn as nn
+
+from lensim.restore.nafnet import NAFNet, nafnet_width
+from lensim.restore.network import FieldAwareUNet, count_parameters
+
+ARCHS: tuple[str, ...] = ("unet", "nafnet")
+#: Width of the default FieldAwareUNet (and of the reference every default size matches).
+UNET_WIDTH = 32
+
+
+def arch_of(config: dict[str, Any]) -> str:
+    """The architecture a model config names ("unet" when it names none)."""
+    return str(config.get("arch", "unet"))
+
+
+def build_model(config: dict[str, Any]) -> nn.Module:
+    """The network a config describes (``model.config`` of any architecture, or an old
+    checkpoint's config without "arch"). ValueError for an unknown architecture;
+    TypeError / ValueError from the constructor for arguments it does not take."""
+    arch = arch_of(config)
+    kwargs = {k: v for k, v in config.items() if k != "arch"}
+    if arch == "unet":
+        return FieldAwareUNet(**kwargs)
+    if arch == "nafnet":
+        return NAFNet(**kwargs)
+    raise ValueError(f"unknown architecture {arch!r}; expected one of {', '.join(ARCHS)}")
+
+
+@lru_cache(maxsize=None)
+def reference_parameters() -> int:
+    """Parameters of the default FieldAwareUNet (width 32, 3 scales, DCN at the coarsest
+    decoder scale, FOV input, context block): the size every default matches."""
+    with torch.device("meta"):
+        return count_parameters(FieldAwareUNet(width=UNET_WIDTH, deformable_scales=1))
+
+
+@lru_cache(maxsize=None)
+def _nafnet_default_width(frozen: tuple[tuple[str, Any], ...]) -> int:
+    return nafnet_width(reference_parameters(), **dict(frozen))
+
+
+def default_width(arch: str, **switches: Any) -> int:
+    """The width of ``arch`` (with constructor ``switches`` such as use_fov, stem) whose
+    parameter count matches the default FieldAwareUNet's within 10%: 32 for "unet" (it is
+    the default), the matching width for "nafnet" (46 for the plain and FOV variants)."""
+    if arch == "unet":
+        return UNET_WIDTH
+    if arch == "nafnet":
+        frozen = tuple(sorted((k, tuple(v) if isinstance(v, list) else v) for k, v in switches.items()))
+        return _nafnet_default_width(frozen)
+    raise ValueError(f"unknown architecture {arch!r}; expected one of {', '.join(ARCHS)}")
+
+
+__all__ = ["ARCHS", "UNET_WIDTH", "arch_of", "build_model", "default_width", "reference_parameters"]
