@@ -330,3 +330,11 @@ def test_train_command_says_what_it_is_conditioned_on(pairs: Path, tmp_path: Pat
     assert json.loads(out)["conditioning"]["keys"] == []
     code, out, err = run_cli(args + ["-o", str(tmp_path / "d"), "--threads", "1"], capsys, monkeypatch)
     assert code == 0 and "conditioned on fno, focus_m (f/2 to f/8" in out
+
+
+def test_evaluating_a_conditioned_network_on_pairs_without_settings_is_refused(runs: dict[str, Path], tmp_path: Path):
+    from lensim.evaluate.harness import checkpoint_method, evaluate_rows
+
+    bare = make_settings_pairs(tmp_path / "bare", grid=[(4.0, 2.0)], photos=1, crops=1, with_settings=False)
+    with pytest.raises(InputError, match="has no settings"):
+        evaluate_rows(bare, {"model": checkpoint_method(runs["cond"])})

@@ -142,7 +142,11 @@ def checkpoint_method(run: str | Path, lens: Mapping[str, Any] | None = None, se
             for text in cond.check(ctx.settings, str(run)):
                 warnings.warn(text, UserWarning, stacklevel=2)
         if cond.dim:
-            vec = cond.vector(ctx.settings or {}, f"{run} on record {ctx.record} (pairs without settings)")
+            if ctx.settings is None:
+                raise InputError(str(run), "conditioning", f"the network is conditioned on {', '.join(cond.keys)}; "
+                                 f"record {ctx.record} of the pairs has no settings; expected pairs made across "
+                                 "shooting settings")
+            vec = cond.vector(ctx.settings, str(run))
         return restore_image(model, image, (float(ctx.top), float(ctx.left)),
                              (float(ctx.sensor.height), float(ctx.sensor.width)), tile=tile, overlap=overlap,
                              settings=vec)
