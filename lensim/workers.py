@@ -118,7 +118,7 @@ def _run_on_dask(fn: Callable[[J], R], jobs: Sequence[J], workers: int, schedule
     from distributed import Client, LocalCluster, as_completed
 
     cluster = None if scheduler else LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                                  dashboard_address=None)
+                                                  dashboard_address=":0")  # no fixed port
     parent = os.getpid() if cluster is not None else None
     try:
         with _client(Client, scheduler or cluster) as client:

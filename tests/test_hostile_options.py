@@ -70,6 +70,17 @@ PSF_BANK = [
     case("bank-scheduler-http", BANK + "--scheduler http://10.0.0.5:8786", "--scheduler", "http://10.0.0.5:8786"),
     case("bank-scheduler-port-zero", BANK + "--scheduler tcp://localhost:0", "--scheduler", "tcp://localhost:0"),
     case("bank-scheduler-blank", BANK + "--scheduler ''", "--scheduler"),
+    case("bank-fno-empty-item", BANK + "--fno 5.6,,8", "--fno", "5.6,,8"),
+    case("bank-fno-zero", BANK + "--fno 0", "--fno", "0"),
+    case("bank-fno-duplicate", BANK + "--fno 8,8.0", "--fno", "twice"),
+    case("bank-fno-nan", BANK + "--fno 8,nan", "--fno", "nan"),
+    case("bank-fno-text", BANK + "--fno 8,f2", "--fno", "f2"),
+    case("bank-fno-faster-than-lens", BANK + "--fno 2,8", "--fno", "F/2"),
+    case("bank-focus-duplicate-inf", BANK + "--focus-m inf,Infinity", "--focus-m", "twice"),
+    case("bank-focus-negative", BANK + "--focus-m inf,-3", "--focus-m", "-3"),
+    case("bank-focus-inside-lens", BANK + "--focus-m inf,0.01", "--focus-m", "inside the lens"),
+    case("bank-object-empty", BANK + "--object-m ,", "--object-m"),
+    case("bank-config-unknown", BANK + "--config wide,tele", "configuration", "wide"),
     case("bank-output-file", BANK.replace("{t}/b", "{t}/afile"), "afile", make=AFILE),
     case("bank-output-under-file", BANK.replace("{t}/b", "{t}/afile/b"), "afile", make=AFILE),
     case("bank-output-unwritable", BANK.replace("{t}/b", UNWRITABLE + "/b"), UNWRITABLE),
@@ -79,6 +90,7 @@ PSF_BANK = [
     case("show-gamma-nan", "psf show {w.bank} -o {t}/fig --gamma nan", "--gamma"),
     case("show-output-file", "psf show {w.bank} -o {t}/afile", "afile", make=AFILE),
     case("show-output-under-file", "psf show {w.bank} -o {t}/afile/fig", "afile", make=AFILE),
+    case("show-setting-of-a-single-bank", "psf show {w.bank} -o {t}/fig --setting 0", "--setting", "not a grid"),
 ]
 
 LENS = [

@@ -176,7 +176,7 @@ def npz_arrays(folder: Path, pattern: str) -> dict[str, dict[str, np.ndarray]]:
     out = {}
     for p in sorted(folder.glob(pattern)):
         with np.load(p) as z:
-            out[p.name] = {k: z[k] for k in z.files}
+            out[str(p.relative_to(folder))] = {k: z[k] for k in z.files}
     return out
 
 
@@ -248,6 +248,49 @@ def _rows(path: Path) -> int:
         return max(0, len(path.read_text().splitlines()) - 1)
     except OSError:
         return 0
+
+
+GRID = ["psf", "bank", "cooke_triplet", "--sensor", "apsc_mirrorless", "--kernel", "21", "--fields", "3",
+        "--wavelengths-nm", "500:600:100", "--pupil-samples", "40", "--fno", "5.6,8", "--focus-m", "inf,1", "--quiet"]
+
+
+@pytest.fixture(scope="module")
+def reference_grid(tmp_path_factory):
+    """An uninterrupted grid of banks (2 F-numbers x 2 focus distances x 3 fields), in this process."""
+    out = tmp_path_factory.mktemp("reference-grid") / "grid"
+    threads = torch.get_num_threads()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            assert cli([*GRID, "-o", str(out)]) == 0
+    finally:
+        torch.set_num_threads(threads)
+    return out
+
+
+def _grid_kill_resume(reference: Path, tmp_path: Path, seed: int, more: tuple[str, ...] = ()) -> None:
+    out = tmp_path / "grid"
+    args = [*GRID, *more, "-o", str(out)]
+    fields = kill_when(args, lambda: len(list(out.glob("s*/field_*.npz"))), 12, seed, 0.2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert cli(args) == 0
+    ref, got = npz_arrays(reference, "s*/field_*.npz"), npz_arrays(out, "s*/field_*.npz")
+    assert sorted(got) == sorted(ref) and len(ref) == 12, f"killed at {fields} fields"
+    for name, arrays in ref.items():
+        for key, value in arrays.items():
+            np.testing.assert_array_equal(got[name][key], value, err_msg=f"{name}:{key}, killed at {fields} fields")
+    assert_same_tree(reference, out, "**/manifest.json", f"killed at {fields} fields")
+
+
+def test_killed_grid_resumes_to_the_arrays_of_an_uninterrupted_run(reference_grid, tmp_path):
+    _grid_kill_resume(reference_grid, tmp_path, 0)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", SLOW_SEEDS)
+def test_killed_grid_on_dask_workers_resumes_to_the_arrays_of_an_uninterrupted_run(reference_grid, tmp_path, seed):
+    _grid_kill_resume(reference_grid, tmp_path, seed, ("--workers", "2"))
 
 
 JOBS = {"bank": _bank_kill_resume, "pairs": _pairs_kill_resume, "train": _train_kill_resume}

@@ -33,7 +33,7 @@ def scheduler():
     given by address, as `--scheduler` takes it)."""
     distributed = pytest.importorskip("distributed")
     threads = torch.get_num_threads()
-    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None) as c:
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=":0") as c:
         yield c.scheduler_address
     torch.set_num_threads(threads)  # the jobs set one thread in their worker: this process
 

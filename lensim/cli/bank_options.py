@@ -40,6 +40,19 @@ def scheduler_option() -> Any:
                         "tcp://10.0.0.5:8786) instead of local workers.")
 
 
+def setting_list_option(key: str) -> Any:
+    """A comma list of one shooting setting (fno, focus_m, object_m, config): grids on `psf
+    bank` and `dataset make` (lensim.psf.bank.grid)."""
+    helps = {
+        "fno": "F-number(s), image space at infinity; a comma list makes a grid of banks (e.g. 1.4,2,2.8).",
+        "focus_m": "Focus distance(s) in m from the image plane, inf allowed; a comma list makes a grid (e.g. inf,3,1).",
+        "object_m": "Object distance(s) in m from the image plane (default: the focus distance); a comma list makes "
+                    "a grid.",
+        "config": "Lens configuration(s) (zoom positions), names or 1-based numbers; a comma list makes a grid.",
+    }
+    return typer.Option(None, "--" + key.replace("_", "-"), help=helps[key])
+
+
 def cache_option() -> Any:
     return typer.Option(None, "--cache", help="Bank cache folder (default $LENSIM_CACHE or ~/.cache/lensim).")
 

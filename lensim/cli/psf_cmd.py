@@ -1,7 +1,9 @@
 """`lensim psf ...`: compute single PSFs (and PSF banks)."""
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import typer
@@ -12,6 +14,7 @@ from lensim.cli.bank_options import (
     fields_option,
     pupil_samples_option,
     scheduler_option,
+    setting_list_option,
     wavelengths_option,
     workers_option,
 )
@@ -28,9 +31,16 @@ from lensim.cli.validate import (
     scheduler_address,
 )
 from lensim.cli.validate import wavelength_nm as wavelength_nm_checked
+from lensim.errors import InputError
 from lensim.io import atomic_write_bytes
+from lensim.jsonable import jsonable
 from lensim.optics.lens_file import load_lens
 from lensim.psf.compute import METHODS, compute_psf
+
+if TYPE_CHECKING:
+    from lensim.optics.lens import Lens
+    from lensim.psf.bank import BankSettings
+    from lensim.psf.bank.grid import GridAxes
 
 psf_app = typer.Typer(help="Point spread functions: single PSFs, banks, pictures.", no_args_is_help=True)
 
@@ -101,6 +111,10 @@ def bank(
     max_spacing_um: float = typer.Option(None, "--max-spacing-um",
                                          help="Largest fine PSF spacing in um (default: half the Airy radius at the shortest wavelength)."),
     aiming: str = typer.Option("real", "--aiming", help="Ray aiming: real or paraxial."),
+    fno: str = setting_list_option("fno"),
+    focus_m: str = setting_list_option("focus_m"),
+    object_m: str = setting_list_option("object_m"),
+    config: str = setting_list_option("config"),
     workers: int = workers_option(),
     scheduler: str = scheduler_option(),
     output: Path = typer.Option(..., "-o", "--output", help="Bank directory (created; an existing bank with the same settings is resumed)."),
@@ -114,15 +128,18 @@ def bank(
     The bank options and their defaults are those of `simulate` and `dataset make`
     (lensim.psf.bank.BankSettings).
 
+    Shooting settings (--fno, --focus-m, --object-m, --config): single values give one bank
+    of the lens at that setting; comma lists give a grid, OUTPUT/manifest.json listing every
+    setting and one bank per setting in OUTPUT/s000, s001, ... (lensim.psf.bank.grid).
+
     The fields are computed here (--workers 1), on a local Dask cluster (--workers N) or on
     an existing one (--scheduler ADDRESS); the parent writes every field file.
 
     Example: lensim psf bank --lens cooke_triplet --sensor apsc_mirrorless --fields 64 --workers 2 -o bank/
-    """
-    import time
 
-    from lensim.errors import InputError
-    from lensim.psf.bank import build_bank
+    Example: lensim psf bank --lens double_gauss --sensor full_frame --fno 2,2.8,4 --focus-m inf,3 -o grid/
+    """
+    from lensim.psf.bank.grid import GridAxes
     from lensim.sensor.profile import load_sensor
     from lensim.sensor.spectral import DEFAULT_CAMERA
 
@@ -136,29 +153,56 @@ def bank(
     _check_bank_options(pixel_um, kernel, method, max_spacing_um, workers, output)
     scheduler_address(scheduler)
     settings = bank_settings(fields, wavelengths_nm, pupil_samples, aiming=aiming, kernel_pixels=kernel or None)
+    axes = GridAxes.from_options(fno, focus_m, object_m, config)
     lens = load_lens(name)
     profile = load_sensor(sensor) if sensor is not None else None
     pitch = profile.pixel_pitch_um if profile is not None else float(pixel_um)
     from_profile = response is None and profile is not None
     response = response or (profile.spectral_response if profile is not None else DEFAULT_CAMERA)
     check_response(settings, response, illuminant, profile if from_profile else None)
-    t0 = time.time()
+    where = {"workers": workers, "scheduler": scheduler}
+    options = {"method": method, "max_spacing_um": max_spacing_um, "illuminant": illuminant}
     with progress_bar("PSF bank", "fields", quiet or json_out) as report:
-        result = build_bank(lens, pitch, settings, response=response, out_dir=output, workers=workers, progress=report,
-                            scheduler=scheduler, method=method, max_spacing_um=max_spacing_um, illuminant=illuminant)
-    m = result.manifest
-    info = {"bank": str(output), "lens": lens.source, "sensor": sensor, "fields": len(m["fields"]),
-            "wavelengths": len(m["wavelengths_nm"]), "kernel_pixels": m["kernel_pixels"],
-            "pixel_pitch_um": m["pixel_pitch_um"], "oversampling": m["oversampling"],
-            "fine_spacing_um": m["fine_spacing_um"], "response": m["response"]["name"],
-            "illuminant": m["response"]["illuminant"], "seconds": time.time() - t0}
+        info = _compute_bank(lens, pitch, settings, axes, response, output, where, report, options)
+    info["sensor"] = sensor
     if json_out:
         print_json(info)
     elif not quiet:
-        console.print(f"wrote {output}: {info['fields']} fields x {info['wavelengths']} wavelengths, "
+        grid = f"{info['settings']} settings x " if "settings" in info else ""
+        console.print(f"wrote {output}: {grid}{info['fields']} fields x {info['wavelengths']} wavelengths, "
                       f"{info['kernel_pixels']}x{info['kernel_pixels']} px of {info['pixel_pitch_um']:g} um, fine grid "
                       f"{info['oversampling']}x per pixel ({info['fine_spacing_um']:.4g} um), response {info['response']} "
                       f"under {info['illuminant']}, {info['seconds']:.1f} s", highlight=False)
+
+
+def _compute_bank(lens: Lens, pitch: float, settings: BankSettings, axes: GridAxes, response: str, output: Path,
+                  where: dict, report: Callable[[float, float], None] | None, options: dict) -> dict:
+    """Compute psf bank's bank, one-setting bank or grid; its summary (--json's)."""
+    import time
+
+    from lensim.psf.bank import build_bank
+    from lensim.psf.bank.grid import compute_grid, compute_setting_bank
+
+    t0 = time.time()
+    extra: dict = {}
+    if axes.is_grid:
+        grid = compute_grid(lens, pitch, axes, settings, output, response=response, progress=report, **where,
+                            **options)
+        m = grid.bank(0).manifest
+        extra = {"settings": len(grid), "grid": [jsonable(r) for r in grid.manifest["settings"]]}
+    elif axes.given:
+        m = compute_setting_bank(lens, pitch, axes.settings()[0], settings, output, response=response,
+                                 progress=report, **where, **options).manifest
+        extra = {"shooting": m["shooting"]["resolved"]}
+    else:
+        m = build_bank(lens, pitch, settings, response=response, out_dir=output, progress=report, **where,
+                       **options).manifest
+    oversampling = m["oversampling"]
+    return {"bank": str(output), "lens": lens.source, "fields": len(m["fields"]),
+            "wavelengths": len(m["wavelengths_nm"]), "kernel_pixels": m["kernel_pixels"],
+            "pixel_pitch_um": m["pixel_pitch_um"], "oversampling": oversampling,
+            "fine_spacing_um": m["fine_spacing_um"], "response": m["response"]["name"],
+            "illuminant": m["response"]["illuminant"], **extra, "seconds": time.time() - t0}
 
 
 def _check_bank_options(pixel_um: float | None, kernel: int, method: str, max_spacing_um: float | None, workers: int,
@@ -177,9 +221,11 @@ def _check_bank_options(pixel_um: float | None, kernel: int, method: str, max_sp
 
 @psf_app.command("show")
 def show(
-    bank_dir: Path = typer.Argument(..., help="A bank directory written by `lensim psf bank`."),
+    bank_dir: Path = typer.Argument(..., help="A bank directory written by `lensim psf bank` (or a grid of banks)."),
     output: Path = typer.Option(..., "-o", "--output", help="Folder for the PNG figures."),
     gamma: float = typer.Option(0.5, "--gamma", help="Display gamma of the kernel pictures (smaller shows fainter tails)."),
+    setting: int = typer.Option(None, "--setting", help="For a grid of banks: the setting to show (0-based, the "
+                                "order of its manifest.json; default: every setting, each in OUTPUT/sNNN)."),
 ) -> None:
     """Figures of a PSF bank: psf_map.png (kernels over the sensor), strehl.png,
     mtf.png (sagittal/tangential at four fields) and relative_illumination.png.
@@ -188,10 +234,22 @@ def show(
     """
     from lensim.plots.bank import write_bank_figures
     from lensim.psf.bank import PSFBank
+    from lensim.psf.bank.grid import GridBank, is_grid
 
     positive(gamma, "--gamma", what="a display gamma")
     input_folder(bank_dir, what="bank folder")
     output_folder(output)
-    paths = write_bank_figures(PSFBank.load(bank_dir), output, gamma=gamma)
-    for p in paths:
-        console.print(f"wrote {p}", highlight=False)
+    if not is_grid(bank_dir):
+        if setting is not None:
+            raise InputError("--setting", None, f"{bank_dir} is a single bank, not a grid; expected no --setting")
+        for p in write_bank_figures(PSFBank.load(bank_dir), output, gamma=gamma):
+            console.print(f"wrote {p}", highlight=False)
+        return
+    grid = GridBank.load(bank_dir)
+    if setting is not None:
+        in_range(setting, 0, len(grid) - 1, "--setting", what=f"a setting of the grid's {len(grid)}")
+    for i in range(len(grid)) if setting is None else [setting]:
+        out = output if setting is not None else output / grid.names[i]
+        console.print(f"setting {i} ({grid.label(i)}):", highlight=False)
+        for p in write_bank_figures(grid.bank(i), out, gamma=gamma):
+            console.print(f"wrote {p}", highlight=False)

@@ -24,14 +24,17 @@ field, each written atomically. Rerunning with the same settings skips the field
 on disk (resume after a kill); different settings are refused.
 
 Modules: types (BankField, PSFBank and its kernel lookup), store (manifest, field files,
-resume guard), compute (per-field work, the executor, build_bank), settings (BankSettings:
-what a bank is asked for; field positions, the wavelength parser, kernel sizing).
+resume guard), compute (per-field work, plans of banks computed together as one job list,
+build_bank), settings (BankSettings: what a bank is asked for; field positions, the
+wavelength parser, kernel sizing), grid (GridBank: one bank per shooting setting under one
+manifest), grid_interp (the nearest setting, kernels blended between settings).
 Kernel rotation lives in lensim.render.rotation, the bank's figures in lensim.plots.bank.
 
 Units: lengths mm, pixel pitch and PSF spacing um, wavelengths nm in the manifest and the
 API of this module (um inside the optics code), angles in degrees.
 """
 from lensim.psf.bank.compute import alias_free_pixels, build_bank, compute_bank, embed_centred
+from lensim.psf.bank.grid import GridAxes, GridBank, compute_grid
 from lensim.psf.bank.settings import (
                                       DEFAULT_FIELDS,
                                       BankSettings,
@@ -43,7 +46,8 @@ from lensim.psf.bank.store import FORMAT, FORMAT_VERSION, MANIFEST, field_file, 
 from lensim.psf.bank.types import BankField, Progress, PSFBank
 
 __all__ = [
-    "DEFAULT_FIELDS", "FORMAT", "FORMAT_VERSION", "MANIFEST", "BankField", "BankSettings", "PSFBank", "Progress",
+    "DEFAULT_FIELDS", "FORMAT", "FORMAT_VERSION", "MANIFEST", "BankField", "BankSettings", "GridAxes", "GridBank",
+    "PSFBank", "Progress", "compute_grid",
     "alias_free_pixels", "build_bank", "compute_bank", "default_fields", "embed_centred", "field_file",
     "parse_wavelengths_nm", "read_manifest", "suggest_kernel_pixels",
 ]

@@ -200,27 +200,19 @@ def _compute_field(job: _Job, index: int, fld: float, para: ParaxialData | None 
 @dataclass
 class FieldTask:
     """One bank field to compute (picklable: a job of lensim.workers.run_jobs): the
-    bank's job, the field's index and normalized position, the lens's paraxial data."""
+    bank's job, the field's index and normalized position, the lens's paraxial data, and
+    which of the banks computed together it belongs to."""
 
     job: _Job
     index: int
     field: float
     para: ParaxialData
+    bank: int = 0
 
 
 def compute_field_task(task: FieldTask) -> BankField:
     """The field a FieldTask names (run in this process or in a worker)."""
     return _compute_field(task.job, task.index, task.field, task.para)
-
-
-def _run_fields(job: _Job, todo: list[tuple[int, float]], workers: int, para: ParaxialData,
-                finish: Callable[[BankField], None], scheduler: str | None = None) -> None:
-    """Compute the (index, field) pairs in `todo`, calling finish(field) as each is done,
-    through lensim.workers.run_jobs: in this process with one torch thread when workers
-    == 1 or only one field is left, else on a local Dask cluster of `workers` processes,
-    or on the Dask cluster at `scheduler`."""
-    tasks = [FieldTask(job, i, fld, para) for i, fld in todo]
-    run_jobs(compute_field_task, tasks, workers, scheduler, lambda _task, bf: finish(bf))
 
 
 def _check_fields(lens: Lens, fields: list[float] | np.ndarray | None) -> np.ndarray:
@@ -290,6 +282,107 @@ def _manifest(job: _Job, fields: np.ndarray, resp: SpectralResponse, max_spacing
     }
 
 
+class BankPlan:
+    """A bank to compute (plan_bank makes one, checked): its job, normalized fields,
+    manifest, the lens's paraxial data and the directory it is stored in (None: memory
+    only). open() finds the fields already on disk; tasks() are the fields still to
+    compute; finish(field) stores one computed field; result() is the whole bank. `label`
+    names the bank in sampling warnings (a grid's setting)."""
+
+    def __init__(self, job: _Job, fields: np.ndarray, manifest: dict, para: ParaxialData,
+                 directory: Path | None = None, label: str = "") -> None:
+        self.job, self.fields, self.manifest, self.para = job, fields, manifest, para
+        self.directory, self.label = directory, label
+        self.done: dict[int, BankField] = {}
+
+    def open(self) -> None:
+        """Prepare the directory (refusing a bank of other settings) and read the fields
+        already computed there (lensim.psf.bank.store.open_bank_directory)."""
+        if self.directory is not None:
+            self.done = open_bank_directory(self.directory, self.manifest, self.fields)
+
+    def tasks(self, bank: int = 0) -> list[FieldTask]:
+        """The fields still to compute, tagged with `bank`."""
+        return [FieldTask(self.job, i, float(f), self.para, bank) for i, f in enumerate(self.fields)
+                if i not in self.done]
+
+    def finish(self, bf: BankField) -> None:
+        """Store a computed field (written into the directory atomically) and pass on its
+        sampling warnings as one PSFSamplingWarning."""
+        if self.directory is not None:
+            write_field(self.directory, bf, self.manifest)
+        self.done[bf.index] = bf
+        if bf.warnings:
+            more = f" (and {len(bf.warnings) - 1} more)" if len(bf.warnings) > 1 else ""
+            where = f" ({self.label})" if self.label else ""
+            warnings.warn(f"{self.job.lens.source}: bank field {bf.field:.4f}{where}: {bf.warnings[0]}{more}",
+                          PSFSamplingWarning, stacklevel=6)
+
+    def result(self) -> PSFBank:
+        """The bank, every field computed."""
+        manifest = self.manifest if self.directory is None else (read_manifest(self.directory) or self.manifest)
+        return PSFBank(manifest, [self.done[i] for i in range(len(self.fields))], self.directory)
+
+
+def plan_bank(
+    lens: Lens,
+    pixel_pitch_um: float,
+    kernel_pixels: int,
+    fields: list[float] | np.ndarray | None = None,
+    wavelengths_nm: list[float] | np.ndarray | None = None,
+    response: str | Path | SpectralResponse | None = None,
+    method: str = "huygens",
+    pupil_samples: int = 64,
+    max_spacing_um: float | None = None,
+    aiming: str = "real",
+    out_dir: str | Path | None = None,
+    illuminant: str = "E",
+    ri_samples: int = 32,
+    label: str = "",
+) -> BankPlan:
+    """The checked plan of the bank compute_bank computes (same arguments), nothing
+    computed and nothing written yet."""
+    _check_arguments(lens, pixel_pitch_um, kernel_pixels, method, aiming, 1)
+    flds = _check_fields(lens, fields)
+    resp = _response(lens, wavelengths_nm, response, illuminant)
+    wl_um = [float(w) / 1000.0 for w in np.asarray(resp.wavelengths_nm, dtype=np.float64)]
+    para = paraxial_data(lens)
+    if max_spacing_um is None:
+        pf0 = pupil_field(lens, 0.0, min(wl_um), pupil_samples, aiming, para)
+        max_spacing_um = 0.5 * 1.22 * min(wl_um) * pf0.working_fno()
+    if not (max_spacing_um > 0):
+        raise InputError(lens.source, "max_spacing_um", f"expected a positive spacing (um), got {max_spacing_um}")
+    job = _Job(lens, wl_um, resp.weights, lens.primary_wavelength_um, float(pixel_pitch_um), int(kernel_pixels),
+               oversampling_factor(pixel_pitch_um, max_spacing_um), method, int(pupil_samples), int(ri_samples), aiming)
+    return BankPlan(job, flds, _manifest(job, flds, resp, max_spacing_um), para,
+                    None if out_dir is None else Path(out_dir), label)
+
+
+def compute_banks(plans: list[BankPlan], workers: int = 1, scheduler: str | None = None,
+                  progress: Progress | None = None) -> list[PSFBank]:
+    """Compute several banks as one list of field jobs (lensim.workers.run_jobs: here, on
+    a local Dask cluster of `workers` processes or on the cluster at `scheduler`), each
+    resuming from the fields already in its directory and writing each field as it
+    finishes; progress(done, total) counts the fields of all the banks. The caller holds
+    the directories' locks."""
+    for plan in plans:
+        plan.open()
+    total = sum(len(p.fields) for p in plans)
+    count = sum(len(p.done) for p in plans)
+    if progress is not None:
+        progress(count, total)
+
+    def finish(task: FieldTask, bf: BankField) -> None:
+        nonlocal count
+        plans[task.bank].finish(bf)
+        count += 1
+        if progress is not None:
+            progress(count, total)
+
+    run_jobs(compute_field_task, [t for b, p in enumerate(plans) for t in p.tasks(b)], workers, scheduler, finish)
+    return [p.result() for p in plans]
+
+
 def compute_bank(
     lens: Lens,
     pixel_pitch_um: float,
@@ -332,49 +425,12 @@ def compute_bank(
     another process is writing into out_dir (lensim.io.folder_lock, held while computing).
     """
     _check_arguments(lens, pixel_pitch_um, kernel_pixels, method, aiming, workers)
-    flds = _check_fields(lens, fields)
-    resp = _response(lens, wavelengths_nm, response, illuminant)
-    wl_um = [float(w) / 1000.0 for w in np.asarray(resp.wavelengths_nm, dtype=np.float64)]
-    para = paraxial_data(lens)
-    if max_spacing_um is None:
-        pf0 = pupil_field(lens, 0.0, min(wl_um), pupil_samples, aiming, para)
-        max_spacing_um = 0.5 * 1.22 * min(wl_um) * pf0.working_fno()
-    if not (max_spacing_um > 0):
-        raise InputError(lens.source, "max_spacing_um", f"expected a positive spacing (um), got {max_spacing_um}")
-    job = _Job(lens, wl_um, resp.weights, lens.primary_wavelength_um, float(pixel_pitch_um), int(kernel_pixels),
-               oversampling_factor(pixel_pitch_um, max_spacing_um), method, int(pupil_samples), int(ri_samples), aiming)
-    manifest = _manifest(job, flds, resp, max_spacing_um)
+    plan = plan_bank(lens, pixel_pitch_um, kernel_pixels, fields, wavelengths_nm, response, method, pupil_samples,
+                     max_spacing_um, aiming, out_dir, illuminant, ri_samples)
     if out_dir is None:
-        return _compute_fields(job, flds, manifest, None, (workers, scheduler), para, progress)
+        return compute_banks([plan], workers, scheduler, progress)[0]
     with folder_lock(out_dir):
-        return _compute_fields(job, flds, manifest, Path(out_dir), (workers, scheduler), para, progress)
-
-
-def _compute_fields(job: _Job, flds: np.ndarray, manifest: dict, directory: Path | None,
-                    where: tuple[int, str | None], para: ParaxialData, progress: Progress | None) -> PSFBank:
-    """The bank's fields: those already in ``directory`` (when given and made with these
-    settings) and the rest computed (where: workers and scheduler, as run_jobs takes
-    them), each written there as it finishes."""
-    lens = job.lens
-    done = open_bank_directory(directory, manifest, flds) if directory is not None else {}
-    total = len(flds)
-    if progress is not None:
-        progress(len(done), total)
-
-    def finish(bf: BankField) -> None:
-        if directory is not None:
-            write_field(directory, bf, manifest)
-        done[bf.index] = bf
-        if bf.warnings:
-            more = f" (and {len(bf.warnings) - 1} more)" if len(bf.warnings) > 1 else ""
-            warnings.warn(f"{lens.source}: bank field {bf.field:.4f}: {bf.warnings[0]}{more}", PSFSamplingWarning,
-                          stacklevel=5)
-        if progress is not None:
-            progress(len(done), total)
-
-    _run_fields(job, [(i, float(flds[i])) for i in range(total) if i not in done], where[0], para, finish, where[1])
-    return PSFBank(manifest if directory is None else (read_manifest(directory) or manifest),
-                   [done[i] for i in range(total)], directory)
+        return compute_banks([plan], workers, scheduler, progress)[0]
 
 
 def build_bank(lens: Lens, pixel_pitch_um: float, settings: BankSettings, response: str | Path | None = None,

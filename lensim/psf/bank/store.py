@@ -17,8 +17,9 @@ from lensim.psf.bank.types import BankField, PSFBank
 MANIFEST = "manifest.json"
 FORMAT = "lensim-psf-bank"
 FORMAT_VERSION = 1
-# manifest keys that may differ between runs of the same bank (they do not shape kernels)
-_INFORMATIVE_KEYS = ("lens_file", "lensim_version")
+# manifest keys that may differ between runs of the same bank (they do not shape kernels: a
+# setting's lens is in "lens"; "shooting" only describes it)
+_INFORMATIVE_KEYS = ("lens_file", "lensim_version", "shooting")
 
 
 def lensim_version() -> str:
@@ -42,6 +43,9 @@ def read_manifest(directory: str | Path) -> dict | None:
         m = json.loads(p.read_text(encoding="utf-8"))
     except (OSError, json.JSONDecodeError) as e:
         raise InputError(str(p), None, f"not valid JSON: {e}") from None
+    if isinstance(m, dict) and m.get("format") == "lensim-psf-grid":
+        raise InputError(str(p), "format", f"a grid of {len(m.get('settings') or [])} banks, not one bank; expected "
+                         "one setting's bank, a sub-folder s000, s001, ... (its manifest.json lists the settings)")
     if not isinstance(m, dict) or m.get("format") != FORMAT:
         raise InputError(str(p), "format", f"expected {FORMAT!r}; not a PSF bank manifest")
     if m.get("format_version") != FORMAT_VERSION:
