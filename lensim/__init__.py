@@ -31,6 +31,7 @@ _API = {
     "train": "lensim.restore.train",
     "load_checkpoint": "lensim.restore.checkpoint",
     "restore_image": "lensim.restore.infer",
+    "export_onnx": "lensim.restore.export",
     "evaluate_methods": "lensim.evaluate.harness:evaluate",  # `lensim.evaluate` is the package
     "run_ablation": "lensim.ablation",
     "run_demo": "lensim.demo",

@@ -11,7 +11,7 @@ import typer
 from lensim.cli import app
 
 TOP = {"lens", "psf", "simulate", "dataset", "train", "restore", "evaluate", "ablation", "report", "demo", "assets",
-       "raw", "develop", "sensor"}
+       "raw", "develop", "sensor", "export"}
 # other spellings of the common options that must not appear anywhere
 FORBIDDEN = {"--out", "--outdir", "--output-dir", "--num-workers", "--jobs", "-j", "--gpu", "--cuda", "--random-seed",
              "--lens-file", "--camera", "--silent", "--verbose-json", "--dev"}

@@ -289,6 +289,15 @@ RUNS = [
          make=edited("r", RUN, lambda p: (p / "split.json").write_text("[1,"))),
     case("train-resume-nothing", "train {w.data} -o {t}/r --resume", "r", make=folder("r")),
     case("train-resume-garbage", "train {w.data} -o {t}/r --resume --crop 32", "last.pt", make=edited("r", RUN, _garbage_checkpoint)),
+    case("export-run-missing", "export {t}/norun -o {t}/m.onnx", "norun"),
+    case("export-run-empty", "export {t}/r -o {t}/m.onnx", "r", "best.pt", make=folder("r")),
+    case("export-checkpoint-text", "export {t}/x.pt -o {t}/m.onnx", "x.pt", make=text("x.pt", "hello")),
+    case("export-checkpoint-garbage", "export {t}/r -o {t}/m.onnx", "best.pt", make=edited("r", RUN, _garbage_checkpoint)),
+    case("restore-onnx-garbage", "restore {t}/m.onnx {w.photo} -o {t}/out --engine onnxruntime", "m.onnx",
+         "not an ONNX model", make=binary("m.onnx", JUNK)),
+    case("restore-onnx-empty", "restore {t}/m.onnx {w.photo} -o {t}/out --engine onnxruntime", "m.onnx",
+         make=binary("m.onnx", b"")),
+    case("restore-onnx-missing", "restore {t}/m.onnx {w.photo} -o {t}/out --engine onnxruntime", "m.onnx"),
 ]
 
 REPORTS = [

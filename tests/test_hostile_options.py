@@ -14,6 +14,7 @@ SIM = "simulate {w.photo} -o {t}/out --bank {w.bank} "
 DATASET = "dataset make {w.photos} -o {t}/d --bank {w.bank} --crops 1 --size 32 "
 TRAIN = "train {w.data} -o {t}/r --epochs 1 --width 4 --depth 2 --crop 32 "
 RESTORE = "restore {w.run} {w.photo} -o {t}/out "
+EXPORT = "export {w.run} -o {t}/m.onnx "
 EVAL = "evaluate --pairs {w.data} --methods input "
 AFILE = text("afile", "a file, not a folder")
 UNWRITABLE = "/proc/lensim-hostile"
@@ -222,6 +223,18 @@ RESTORING = [
     case("restore-output-file", RESTORE.replace("{t}/out", "{t}/afile"), "afile", make=AFILE),
     case("restore-output-under-file", RESTORE.replace("{t}/out", "{t}/afile/out"), "afile", make=AFILE),
     case("restore-output-unwritable", RESTORE.replace("{t}/out", UNWRITABLE), UNWRITABLE),
+    case("restore-engine-banana", RESTORE + "--engine banana", "--engine", "banana"),
+    case("restore-onnx-engine-torch", "restore {t}/m.onnx {w.photo} -o {t}/out", "m.onnx", "--engine onnxruntime",
+         make=text("m.onnx", "x")),
+    case("restore-onnx-device-banana", RESTORE + "--engine onnxruntime --device banana", "--device", "banana"),
+    case("restore-onnx-device-cuda", RESTORE + "--engine onnxruntime --device cuda:0", "--device", "cuda:0",
+         "CUDAExecutionProvider"),
+    case("export-opset-16", EXPORT + "--opset 16", "--opset", "16"),
+    case("export-opset-99", EXPORT + "--opset 99", "--opset", "99"),
+    case("export-output-txt", "export {w.run} -o {t}/m.txt", "m.txt", ".onnx"),
+    case("export-output-folder", EXPORT, "m.onnx", make=folder("m.onnx")),
+    case("export-output-under-file", "export {w.run} -o {t}/afile/m.onnx", "afile", make=AFILE),
+    case("export-output-unwritable", "export {w.run} -o " + UNWRITABLE + "/m.onnx", UNWRITABLE),
     case("develop-bits-12", "develop {w.dng} -o {t}/out --bits 12", "--bits", "12"),
     case("develop-format-jpg", "develop {w.dng} -o {t}/out --format jpg", "--format", "jpg"),
     case("develop-wb-unknown", "develop {w.dng} -o {t}/out --wb banana", "--wb", "banana"),

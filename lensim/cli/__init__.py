@@ -11,6 +11,7 @@ from lensim.cli.dataset_cmd import dataset_app
 from lensim.cli.demo_cmd import demo_command, report_command
 from lensim.cli.develop_cmd import develop_command
 from lensim.cli.evaluate_cmd import evaluate_command
+from lensim.cli.export_cmd import export_command
 from lensim.cli.lens_cmd import lens_app
 from lensim.cli.psf_cmd import psf_app
 from lensim.cli.raw_cmd import raw_app
@@ -36,6 +37,7 @@ app.add_typer(dataset_app, name="dataset")
 app.command("evaluate")(evaluate_command)
 app.command("train")(train_command)
 app.command("restore")(restore_command)
+app.command("export")(export_command)
 app.command("develop")(develop_command)
 app.command("demo")(demo_command)
 app.command("ablation")(ablation_command)

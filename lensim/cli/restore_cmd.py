@@ -7,12 +7,13 @@ from __future__ import annotations
 
 import warnings
 from pathlib import Path
+from typing import Any
 
 import torch
 import typer
 
 from lensim.cli.common import console, print_json, progress_bar
-from lensim.cli.validate import at_least, distinct_outputs, output_folder
+from lensim.cli.validate import at_least, choice, distinct_outputs, output_folder
 from lensim.cli.validate import device as check_device
 from lensim.errors import InputError
 from lensim.io import folder_lock
@@ -50,7 +51,8 @@ def _restore_raws(files: list[Path], output: Path, model, settings, dng: bool, w
 
 
 def restore_command(
-    checkpoint: Path = typer.Argument(..., help="Run folder (best.pt, else last.pt) or checkpoint file."),
+    checkpoint: Path = typer.Argument(..., help="Run folder (best.pt, else last.pt) or checkpoint file; with --engine "
+                                      "onnxruntime also an .onnx file from `lensim export`."),
     images: list[Path] = typer.Argument(..., help="Photos to restore (8/16-bit PNG, TIFF or JPEG), camera raw files "
                                         "(DNG, CR2, NEF, ARW, ...) or folders of raw files."),
     output: Path = typer.Option(..., "-o", "--output", help="Output folder."),
@@ -62,7 +64,9 @@ def restore_command(
     overlap: int = typer.Option(192, "--overlap", help="Least overlap of neighbouring tiles in pixels."),
     bits: int = typer.Option(0, "--bits", help="Output bit depth 8 or 16 (0: that of the input)."),
     device: str = typer.Option("cpu", "--device", help="cpu, cuda or cuda:N."),
-    threads: int = typer.Option(0, "--threads", help="CPU threads for PyTorch (0: PyTorch's default)."),
+    engine: str = typer.Option("torch", "--engine", help="torch (the PyTorch network) or onnxruntime (an .onnx file, "
+                               "or the run exported on the fly); same tiling, same results within 1e-3."),
+    threads: int = typer.Option(0, "--threads", help="CPU threads for PyTorch / onnxruntime (0: their default)."),
     dng: bool = typer.Option(False, "--dng", help="Raw inputs: also write OUT/<name>.dng, the restored photo as a "
                              "LinearRaw DNG with the raw's colour matrices, white balance and EXIF."),
     allow_other_camera: bool = typer.Option(False, "--allow-other-camera", help="Restore raws from another camera or "
@@ -90,10 +94,15 @@ def restore_command(
     --fno/--focus-m/--focal-mm (which override it). Settings outside the trained range give
     a warning, far outside a refusal.
 
+    --engine onnxruntime runs the network with onnxruntime: CHECKPOINT may then be an .onnx
+    file written by `lensim export` (its metadata gives the sensor and lens trained for), or
+    a run, exported on the fly in memory.
+
     Example: lensim restore runs/a photo.png -o restored/;
-    lensim restore runs/a raws/ -o restored/ --dng --workers 2
+    lensim restore runs/a raws/ -o restored/ --dng --workers 2;
+    lensim restore model.onnx photo.png -o restored/ --engine onnxruntime
     """
-    _check_options(bits, tile, overlap, workers, threads, device, output, checkpoint)
+    _check_options(bits, tile, overlap, workers, threads, device, output, checkpoint, engine)
     shooting = _shooting(fno, focus_m, focal_mm)
     offset = _parse_pair(sensor_offset, "--sensor-offset") if sensor_offset else None
     raws, photos = _split_inputs(images)
@@ -104,7 +113,8 @@ def restore_command(
                          "active area (or the place a simulated DNG records)")
     if threads > 0:
         torch.set_num_threads(threads)
-    model, info, sensor_data, (sensor_w, sensor_h) = _load_model(checkpoint, lens_file, sensor_file, device)
+    model, info, sensor_data, (sensor_w, sensor_h) = _load_model(checkpoint, lens_file, sensor_file, device, engine,
+                                                                 threads)
     _check_photos(photos, offset, (sensor_w, sensor_h))
     photo_settings = _photo_settings(photos, shooting, info)
     written = []
@@ -114,18 +124,21 @@ def restore_command(
 
             settings = RestoreSettings(checkpoint=info["path"], sensor=dict(sensor_data), tile=tile, overlap=overlap,
                                        device=device, allow_other_camera=allow_other_camera, shooting=shooting,
-                                       conditioning=info["conditioning"])
+                                       conditioning=info["conditioning"], engine=engine, onnx=info.get("onnx"))
             written += _restore_raws(raws, output, model, settings, dng, workers, quiet or json_out)
         for path in photos:
             written.append(_restore_photo(path, output, model, (sensor_w, sensor_h), offset, (tile, overlap), bits,
                                           quiet or json_out, photo_settings[path]))
     if json_out:
-        print_json({"checkpoint": info["path"], "images": written})
+        print_json({"checkpoint": info["path"], "engine": engine, "images": written})
 
 
 def _check_options(bits: int, tile: int, overlap: int, workers: int, threads: int, device: str, output: Path,
-                   checkpoint: Path) -> None:
-    """restore's numbers, device, output folder and checkpoint path, before any work."""
+                   checkpoint: Path, engine: str = "torch") -> None:
+    """restore's numbers, engine, device, output folder and checkpoint path, before any work."""
+    from lensim.restore.engines import ENGINES, is_onnx_path, providers_for
+
+    choice(engine, ENGINES, "--engine")
     if bits not in (0, 8, 16):
         raise InputError("--bits", None, f"expected 8 or 16, got {bits}")
     if tile < 16 or not 0 <= overlap < tile:
@@ -133,10 +146,15 @@ def _check_options(bits: int, tile: int, overlap: int, workers: int, threads: in
                          f"tile {tile}, overlap {overlap}")
     at_least(workers, 1, "--workers", what="a number of processes")
     at_least(threads, 0, "--threads", what="a number of threads (0: PyTorch's default)")
-    check_device(device)
+    if engine == "torch":
+        check_device(device)
+    else:
+        providers_for(device)
     output_folder(output)
     if not Path(checkpoint).exists():
-        raise InputError(str(checkpoint), None, "no such run folder or checkpoint file")
+        raise InputError(str(checkpoint), None, "no such run folder, checkpoint or ONNX file")
+    if is_onnx_path(checkpoint) and engine != "onnxruntime":
+        raise InputError(str(checkpoint), "--engine", "is an ONNX model; expected --engine onnxruntime to run it")
 
 
 def _shooting(fno: float | None, focus_m: float | None, focal_mm: float | None) -> dict[str, float]:
@@ -195,12 +213,12 @@ def _check_offset(path: Path, offset: tuple[int, int] | None, image_wh: tuple[in
                          f"the {sensor_w}x{sensor_h} sensor")
 
 
-def _load_model(checkpoint: Path, lens_file: str | None, sensor_file: str | None,
-                device: str) -> tuple[torch.nn.Module, dict, dict, tuple[int, int]]:
-    """(model, checkpoint info, sensor profile dict, its (width, height) in pixels): the network of a checkpoint, warned
-    about when the given lens or sensor differs from its own; the sensor is --sensor's, else
-    the one trained for, and must record its resolution [width, height] in pixels."""
-    from lensim.restore.checkpoint import load_checkpoint
+def _load_model(checkpoint: Path, lens_file: str | None, sensor_file: str | None, device: str, engine: str = "torch",
+                threads: int = 0) -> tuple[Any, dict, dict, tuple[int, int]]:
+    """(model or engine, its info, sensor profile dict, its (width, height) in pixels): the network of a checkpoint
+    (or the ONNX model: lensim.restore.engines.load_engine), warned about when the given lens or sensor differs from
+    its own; the sensor is --sensor's, else the one trained for, and must record its resolution [width, height]."""
+    from lensim.restore.engines import load_engine
     from lensim.sensor.profile import load_sensor
 
     lens_dict = None
@@ -209,7 +227,7 @@ def _load_model(checkpoint: Path, lens_file: str | None, sensor_file: str | None
 
         lens_dict = lens_to_dict(load_lens(lens_file))
     sensor_dict = load_sensor(sensor_file).to_dict() if sensor_file is not None else None
-    model, info = load_checkpoint(checkpoint, lens=lens_dict, sensor=sensor_dict, device=device)
+    model, info = load_engine(checkpoint, engine, device, threads, lens=lens_dict, sensor=sensor_dict)
     sensor_data = sensor_dict or info.get("sensor") or {}
     res = sensor_data.get("resolution") if isinstance(sensor_data, dict) else None
     if not (isinstance(res, (list, tuple)) and len(res) == 2 and all(isinstance(v, int) and v > 0 for v in res)):
@@ -217,7 +235,7 @@ def _load_model(checkpoint: Path, lens_file: str | None, sensor_file: str | None
     return model, info, sensor_data, (int(res[0]), int(res[1]))
 
 
-def _restore_photo(path: Path, output: Path, model: torch.nn.Module, sensor_wh: tuple[int, int],
+def _restore_photo(path: Path, output: Path, model: Any, sensor_wh: tuple[int, int],
                    offset: tuple[int, int] | None, tiling: tuple[int, int], bits: int, quiet: bool,
                    settings: torch.Tensor | None) -> dict:
     """Restore one photo (a full frame, or a native-scale crop at ``offset`` = (top, left)

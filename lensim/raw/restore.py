@@ -9,7 +9,8 @@ For each raw file (:func:`restore_raw_files`):
 2. develop it in the sensor's orientation (lensim.raw.develop.develop_raw with the
    profile's CCM and the as-shot white balance, no rounding: what the network was trained
    on), in strips of rows to bound memory;
-3. restore it tile by tile (lensim.restore.infer.restore_image), each tile fed the
+3. restore it tile by tile (lensim.restore.infer.restore_image, the network or its ONNX
+   export: lensim.restore.engines), each tile fed the
    field-of-view coordinates of its place on the sensor (:func:`raw_geometry`): the active
    area is the whole sensor, the optical axis at its centre; a DNG written by `lensim
    simulate` records where its frame lay on the sensor (:func:`lensim.raw.dng.read_simulation_record`);
@@ -59,10 +60,12 @@ class RawJob:
 
 @dataclass(frozen=True)
 class RestoreSettings:
-    """What every file shares: the checkpoint, the sensor trained for (profile mapping),
-    tiling, device, whether other cameras are allowed, the shooting settings given on the
-    command line (``shooting``: {fno, focus_m, focal_mm}, overriding each file's EXIF) and
-    the checkpoint's conditioning (Conditioning.to_dict(); None: no settings)."""
+    """What every file shares: the checkpoint (or ONNX file), the sensor trained for
+    (profile mapping), tiling, device, whether other cameras are allowed, the shooting
+    settings given on the command line (``shooting``: {fno, focus_m, focal_mm}, overriding
+    each file's EXIF), the checkpoint's conditioning (Conditioning.to_dict(); None: no
+    settings) and the engine: "torch", or "onnxruntime" with ``onnx`` the serialized model
+    (worker processes build their sessions from it)."""
 
     checkpoint: str
     sensor: dict[str, Any]
@@ -72,6 +75,8 @@ class RestoreSettings:
     allow_other_camera: bool = False
     shooting: dict[str, float] = field(default_factory=dict)
     conditioning: dict[str, Any] | None = None
+    engine: str = "torch"
+    onnx: bytes | None = None
 
 
 def plan_jobs(files: list[Path], out_dir: Path, dng: bool) -> list[RawJob]:
@@ -219,10 +224,11 @@ def validate(jobs: list[RawJob], sensor: SensorProfile, settings: RestoreSetting
                              "restored DNG; leave out --dng")
 
 
-def restore_raw(job: RawJob, model: torch.nn.Module, sensor: SensorProfile, settings: RestoreSettings,
+def restore_raw(job: RawJob, model: Any, sensor: SensorProfile, settings: RestoreSettings,
                 progress: Callable[[int, int], None] | None = None) -> dict[str, Any]:
     """Develop, restore and write one raw file (see the module docstring); returns its
-    record: input, outputs, size, whether it was native, the develop's capture parameters."""
+    record: input, outputs, size, whether it was native, the develop's capture parameters.
+    ``model``: the network or any lensim.restore.infer.Engine."""
     from lensim.images import write_image
     from lensim.raw import read_raw
     from lensim.raw.develop import apply_orientation, develop_raw
@@ -255,11 +261,17 @@ _WORKER: dict[str, Any] = {}
 
 
 def _worker_start(settings: RestoreSettings, threads: int) -> None:
-    """Worker process set-up: its share of the CPU threads and its own copy of the model."""
-    from lensim.restore.checkpoint import load_checkpoint
-
+    """Worker process set-up: its share of the CPU threads and its own copy of the model
+    (or onnxruntime session)."""
     torch.set_num_threads(threads)
-    _WORKER["model"], _ = load_checkpoint(settings.checkpoint, device=settings.device)
+    if settings.engine == "onnxruntime" and settings.onnx is not None:
+        from lensim.restore.engines import OnnxEngine
+
+        _WORKER["model"] = OnnxEngine(settings.onnx, settings.device, threads, source=settings.checkpoint)
+    else:
+        from lensim.restore.checkpoint import load_checkpoint
+
+        _WORKER["model"], _ = load_checkpoint(settings.checkpoint, device=settings.device)
     _WORKER["sensor"] = sensor_from_dict(settings.sensor, "checkpoint sensor")
     _WORKER["settings"] = settings
 
@@ -268,11 +280,11 @@ def _worker_run(job: RawJob) -> dict[str, Any]:
     return restore_raw(job, _WORKER["model"], _WORKER["sensor"], _WORKER["settings"])
 
 
-def restore_raw_files(files: list[Path], out_dir: Path, model: torch.nn.Module, settings: RestoreSettings,
+def restore_raw_files(files: list[Path], out_dir: Path, model: Any, settings: RestoreSettings,
                       dng: bool = False, workers: int = 1, progress: Progress | None = None) -> list[dict[str, Any]]:
     """Restore raw files into ``out_dir`` (see the module docstring). ``model`` is the
-    loaded network (used in this process when ``workers`` is 1; worker processes load
-    their own from ``settings.checkpoint``). ``progress(done, total)`` counts files (with
+    loaded network or engine (used in this process when ``workers`` is 1; worker processes
+    load their own from ``settings.checkpoint``, or ``settings.onnx`` for onnxruntime). ``progress(done, total)`` counts files (with
     one worker, fractions of a file as its tiles finish). Returns one record per file."""
     if workers < 1:
         raise InputError("--workers", None, f"expected at least 1, got {workers}")

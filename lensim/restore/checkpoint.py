@@ -120,6 +120,20 @@ def _canonical(d: Any) -> str:
     return json.dumps(d, sort_keys=True, default=str)
 
 
+def warn_other_camera(source: str, trained: dict[str, Any], lens: dict[str, Any] | None,
+                      sensor: dict[str, Any] | None) -> None:
+    """A UserWarning naming ``source`` when the given lens or sensor (dicts, or None: not
+    given) differs from the one ``trained`` records (its "lens" and "sensor": a
+    checkpoint, or an ONNX export's metadata)."""
+    if lens is not None and trained.get("lens") is not None and _canonical(lens) != _canonical(trained["lens"]):
+        warnings.warn(f"{source}: trained for lens {_describe_lens(trained['lens'])!r}, used for lens "
+                      f"{_describe_lens(lens)!r}; the restoration may be wrong", UserWarning, stacklevel=3)
+    if sensor is not None and trained.get("sensor") is not None and \
+            _canonical(sensor) != _canonical(trained["sensor"]):
+        warnings.warn(f"{source}: trained for sensor {_describe_sensor(trained['sensor'])!r}, used for sensor "
+                      f"{_describe_sensor(sensor)!r}; the restoration may be wrong", UserWarning, stacklevel=3)
+
+
 def load_checkpoint(
     path: str | Path,
     lens: dict[str, Any] | None = None,
@@ -160,12 +174,7 @@ def load_checkpoint(
         raise InputError(str(path), "model_state", f"does not match the model config it records ({detail})") from None
     model.to(device).eval()
     conditioning = checkpoint_conditioning(data, int(getattr(model, "settings_dim", 0)), str(path))
-    if lens is not None and data.get("lens") is not None and _canonical(lens) != _canonical(data["lens"]):
-        warnings.warn(f"{path}: trained for lens {_describe_lens(data['lens'])!r}, used for lens "
-                      f"{_describe_lens(lens)!r}; the restoration may be wrong", UserWarning, stacklevel=2)
-    if sensor is not None and data.get("sensor") is not None and _canonical(sensor) != _canonical(data["sensor"]):
-        warnings.warn(f"{path}: trained for sensor {_describe_sensor(data['sensor'])!r}, used for sensor "
-                      f"{_describe_sensor(sensor)!r}; the restoration may be wrong", UserWarning, stacklevel=2)
+    warn_other_camera(str(path), data, lens, sensor)
     info = {k: v for k, v in data.items() if k not in TRAINING_STATE_KEYS}
     info["path"] = str(path)
     info["conditioning"] = conditioning.to_dict()
@@ -283,4 +292,4 @@ def refuse_existing_run(run: Path) -> None:
 
 __all__ = ["BEST", "CHECKPOINT_FORMAT", "CHECKPOINT_VERSION", "LAST", "REQUIRED_KEYS", "TRAINING_STATE_KEYS",
            "TrainingState", "atomic_torch_save", "load_checkpoint", "read_checkpoint", "read_resume_checkpoint", "refuse_existing_run",
-           "resolve_checkpoint", "rng_state", "set_rng_state"]
+           "resolve_checkpoint", "rng_state", "set_rng_state", "warn_other_camera"]

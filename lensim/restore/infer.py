@@ -1,5 +1,10 @@
 """Inference: tiled restoration of images of any size (checkpoints: lensim.restore.checkpoint).
 
+Engines: the tiling is the one home for every engine. :func:`restore_image` takes the
+PyTorch network (wrapped in :class:`TorchEngine`) or any :class:`Engine`, such as the
+onnxruntime session of an exported model (lensim.restore.engines.OnnxEngine); an engine
+only restores one tile given its RGB, FOV channels and optional settings vector.
+
 Tiling (:func:`restore_image`): the image is cut into a grid of tiles of at most ``tile``
 pixels a side whose top-left corners lie at multiples of ``model.size_multiple`` (the
 network is shift-equivariant only for such shifts; see lensim.restore.network). Each tile
@@ -29,13 +34,76 @@ is given (then it is at the sensor's native pixel scale, like lensim.render.mapp
 """
 from __future__ import annotations
 
-from typing import Callable
+from typing import Callable, Protocol, runtime_checkable
 
 import torch
 import torch.nn as nn
 
 from lensim.restore.conditioning import batch_settings
 from lensim.restore.fov import fov_channels
+
+#: `lensim restore`'s tiling defaults (pixels)
+DEFAULT_TILE = 512
+DEFAULT_OVERLAP = 192
+
+
+def default_margin(overlap: int) -> int:
+    """The context-only margin restore_image uses by default: (overlap - overlap // 4) // 2
+    pixels, i.e. a linear ramp over the middle quarter of the overlap."""
+    return (overlap - overlap // 4) // 2
+
+
+# ----------------------------------------------------------------------------- engines
+
+
+@runtime_checkable
+class Engine(Protocol):
+    """What restore_image runs tiles with: a PyTorch network (:class:`TorchEngine`) or an
+    exported ONNX model (lensim.restore.engines.OnnxEngine).
+
+    Attributes: size_multiple (tiles start at multiples of it), use_fov (whether the FOV
+    channels are fed), settings_dim (D, the length of the settings vector; 0: none),
+    device and dtype (where and in what restore_image builds a tile's inputs). Calling it
+    with rgb (1, 3, h, w), fov (1, 2, h, w) or None and settings (1, D) or None returns
+    the restored tile (1, 3, h, w) (any device and float dtype)."""
+
+    size_multiple: int
+    use_fov: bool
+    settings_dim: int
+    device: torch.device
+    dtype: torch.dtype
+
+    def __call__(self, rgb: torch.Tensor, fov: torch.Tensor | None,
+                 settings: torch.Tensor | None = None) -> torch.Tensor: ...
+
+
+class TorchEngine:
+    """A PyTorch network as an :class:`Engine`: tiles are built on its parameters' device
+    and in their dtype (so CUDA and half-precision networks run as they are)."""
+
+    def __init__(self, model: torch.nn.Module) -> None:
+        param = next(model.parameters())
+        self.model = model
+        self.size_multiple = int(getattr(model, "size_multiple", 1))
+        self.use_fov = bool(getattr(model, "use_fov", True))
+        self.settings_dim = int(getattr(model, "settings_dim", 0) or 0)
+        self.device = param.device
+        self.dtype = param.dtype
+
+    def __call__(self, rgb: torch.Tensor, fov: torch.Tensor | None,
+                 settings: torch.Tensor | None = None) -> torch.Tensor:
+        if settings is None:
+            return self.model(rgb, fov)
+        return self.model(rgb, fov, settings)
+
+
+def as_engine(model: torch.nn.Module | Engine) -> Engine:
+    """``model`` itself when it is an Engine, else the network wrapped in a TorchEngine."""
+    if isinstance(model, torch.nn.Module):
+        return TorchEngine(model)
+    if isinstance(model, Engine):
+        return model
+    raise TypeError(f"expected a torch.nn.Module or an Engine, got {type(model).__name__}")
 
 # ----------------------------------------------------------------------------- geometry
 
@@ -107,12 +175,12 @@ def _axis_weights(length: int, starts: list[int], tile: int, overlap: int, margi
 
 @torch.no_grad()
 def restore_image(
-    model: nn.Module,
+    model: torch.nn.Module | Engine,
     image: torch.Tensor,
     sensor_top_left: tuple[float, float],
     sensor_size: tuple[float, float],
-    tile: int = 512,
-    overlap: int = 192,
+    tile: int = DEFAULT_TILE,
+    overlap: int = DEFAULT_OVERLAP,
     margin: int | None = None,
     progress: Callable[[int, int], None] | None = None,
     settings: torch.Tensor | None = None,
@@ -121,7 +189,8 @@ def restore_image(
 
     Args:
         model: the network, any architecture of lensim.restore.models (its device and dtype
-            are used for the tiles).
+            are used for the tiles), or any :class:`Engine` (an exported ONNX model:
+            lensim.restore.engines).
         image: (3, H, W) float in [0, 1] (any device; the output is on the CPU).
         sensor_top_left: (top, left) of the image's top-left pixel on the sensor, in image
             pixels (image_sensor_geometry).
@@ -140,17 +209,17 @@ def restore_image(
     """
     if image.dim() != 3 or image.shape[0] != 3:
         raise ValueError(f"image must be (3, H, W), got {tuple(image.shape)}")
-    m = int(getattr(model, "size_multiple", 1))
+    engine = as_engine(model)
+    m = engine.size_multiple
     tile = max(m, tile // m * m)
     if not 0 <= overlap < tile:
         raise ValueError(f"overlap must be in [0, tile={tile}), got {overlap}")
     if margin is None:
-        margin = (overlap - overlap // 4) // 2
+        margin = default_margin(overlap)
     if overlap - 2 * margin < 1 and overlap > 0:
         raise ValueError(f"overlap ({overlap}) must exceed 2 * margin ({margin})")
     overlap_eff = max(overlap, 2 * margin + 1)
     _, h, w = image.shape
-    param = next(model.parameters())
     ys = tile_starts(h, tile, overlap_eff, m)
     xs = tile_starts(w, tile, overlap_eff, m)
     wy = _axis_weights(h, ys, tile, overlap_eff, margin)
@@ -159,18 +228,17 @@ def restore_image(
     top, left = float(sensor_top_left[0]), float(sensor_top_left[1])
     sh, sw = float(sensor_size[0]), float(sensor_size[1])
     total, done = len(ys) * len(xs), 0
-    use_fov = bool(getattr(model, "use_fov", True))
-    vec = batch_settings(settings, 1, int(getattr(model, "settings_dim", 0)), param)
+    device, dtype = engine.device, engine.dtype
+    vec = batch_settings(settings, 1, engine.settings_dim, torch.empty(0, device=device, dtype=dtype))
     for y0, wyy in zip(ys, wy):
         th = len(wyy)
         for x0, wxx in zip(xs, wx):
             tw = len(wxx)
-            rgb = image[:, y0:y0 + th, x0:x0 + tw].to(device=param.device, dtype=param.dtype).unsqueeze(0)
+            rgb = image[:, y0:y0 + th, x0:x0 + tw].to(device=device, dtype=dtype).unsqueeze(0)
             fov = None
-            if use_fov:
-                fov = fov_channels(th, tw, top + y0, left + x0, sh, sw, dtype=param.dtype, device=param.device)
-                fov = fov.unsqueeze(0)
-            res = (model(rgb, fov) if vec is None else model(rgb, fov, vec))[0].float().cpu()
+            if engine.use_fov:
+                fov = fov_channels(th, tw, top + y0, left + x0, sh, sw, dtype=dtype, device=device).unsqueeze(0)
+            res = engine(rgb, fov, vec)[0].float().cpu()
             out[:, y0:y0 + th, x0:x0 + tw] += res * (wyy.view(1, th, 1) * wxx.view(1, 1, tw))
             done += 1
             if progress is not None:
@@ -178,4 +246,5 @@ def restore_image(
     return out
 
 
-__all__ = ["image_sensor_geometry", "restore_image", "tile_starts"]
+__all__ = ["DEFAULT_OVERLAP", "DEFAULT_TILE", "Engine", "TorchEngine", "as_engine", "default_margin",
+           "image_sensor_geometry", "restore_image", "tile_starts"]
