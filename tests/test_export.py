@@ -49,13 +49,14 @@ def perturbed(seed: int = 0, **kw) -> FieldAwareUNet:
     return model.eval()
 
 
-def save_run(folder: Path, model: FieldAwareUNet, sensor: dict | None = None) -> Path:
+def save_run(folder: Path, model: torch.nn.Module, sensor: dict | None = None,
+             conditioning: dict | None = None) -> Path:
     folder.mkdir(parents=True, exist_ok=True)
     sensor = sensor or load_sensor("apsc_mirrorless").to_dict()
     atomic_torch_save({"format": CHECKPOINT_FORMAT, "version": 1, "model_config": model.config,
                        "model_state": model.state_dict(), "sensor": sensor, "sensor_name": sensor["name"],
                        "lens": {"name": "test lens"}, "train_config": {"crop": 96, "lr": 5e-4}, "epoch": 3,
-                       "step": 42}, folder / "best.pt")
+                       "step": 42, "conditioning": conditioning}, folder / "best.pt")
     return folder
 
 
@@ -113,6 +114,38 @@ def test_one_file_runs_any_size_and_batch(narrow):
         assert max_diff(model, engine, rgb, fov) < TOL, (n, h, w)
 
 
+ARCHS = {
+    "unet-conditioned": dict(arch="unet", width=8, settings_dim=2, field_modulation=True),
+    "nafnet-fov-dcn-stem": dict(arch="nafnet", width=8, use_fov=True, use_deformable=True, stem=2, settings_dim=1),
+    "nafnet-plain": dict(arch="nafnet", width=8),
+}
+
+
+@pytest.mark.parametrize("name", list(ARCHS))
+def test_every_architecture_exports(name: str):
+    """Both architectures of lensim.restore.models, conditioned or not: the graph's inputs
+    follow the network's (fov iff use_fov, settings iff settings_dim) and its output equals
+    PyTorch's, batched, at a size that is not a multiple of the size multiple."""
+    from lensim.restore.models import build_model
+
+    torch.manual_seed(7)
+    model = build_model(ARCHS[name])
+    with torch.no_grad():
+        for p in model.parameters():
+            p.add_(0.05 * torch.randn_like(p))
+    model.eval()
+    engine = OnnxEngine(export_model_bytes(model, {}))
+    k = model.settings_dim
+    assert engine.input_names == ["rgb"] + (["fov"] if model.use_fov else []) + (["settings"] if k else [])
+    rgb, fov = tile_inputs(45, 70, n=2, seed=9)
+    fov = fov if model.use_fov else None
+    settings = torch.rand(2, k) * 2 - 1 if k else None
+    with torch.no_grad():
+        ref = model(rgb, fov, settings)
+    assert (ref - rgb).abs().max().item() > 0.05
+    assert (engine(rgb, fov, settings) - ref).abs().max().item() < TOL
+
+
 def test_plain_network_has_no_fov_input(tmp_path: Path):
     model = perturbed(1, width=6, depth=2, use_fov=False, use_deformable=False, use_context=False)
     engine = OnnxEngine(export_model_bytes(model, {}))
@@ -151,8 +184,8 @@ def test_tiled_restore_with_either_engine_agrees(narrow):
     model, _, path = narrow
     img = torch.rand(3, 150, 230, generator=torch.Generator().manual_seed(5))
     args = ((10.0, 20.0), (400.0, 600.0))
-    a = restore_image(model, img, *args, tile=64, overlap=32)
-    b = restore_image(OnnxEngine(path), img, *args, tile=64, overlap=32)
+    a = restore_image(model, img, *args, tile=96, overlap=40)
+    b = restore_image(OnnxEngine(path), img, *args, tile=96, overlap=40)
     assert (a - b).abs().max().item() < TOL and (a - img).abs().max().item() > 0.05
 
 
@@ -185,6 +218,38 @@ def test_restore_command_onnxruntime_equals_torch(narrow, tmp_path: Path, capsys
     assert np.abs(outs["torch"] - read_tif16(photo)).max() > 0.05
     assert np.abs(outs["file"] - outs["torch"]).max() < TOL
     assert np.abs(outs["fly"] - outs["torch"]).max() < TOL
+
+
+def test_conditioned_restore_reads_the_conditioning_from_the_file(tmp_path: Path, capsys, monkeypatch):
+    """A network conditioned on the F-number and focus: the .onnx file carries the trained
+    ranges (a focus range reaching infinity included, as strict JSON), restore takes the
+    settings from --fno/--focus-m and writes what the torch engine writes; a photo without
+    them is refused in one line, as with the checkpoint."""
+    from lensim.restore.models import build_model
+
+    torch.manual_seed(11)
+    model = build_model(dict(arch="unet", width=8, depth=2, settings_dim=2))
+    with torch.no_grad():
+        for p in model.parameters():
+            p.add_(0.05 * torch.randn_like(p))
+    cond = {"keys": ["fno", "focus_m"], "ranges": {"fno": [2.0, 8.0], "focus_m": [1.0, float("inf")]}}
+    run = save_run(tmp_path / "run", model.eval(), conditioning=cond)
+    path = export_onnx(run, tmp_path / "c.onnx")
+    meta = read_metadata(path)
+    assert meta["settings_dim"] == 2 and meta["conditioning"]["ranges"]["focus_m"] == [1.0, "inf"]
+    photo = write_tif16(tmp_path / "a.tif", 40, 56, 3)
+    outs = {}
+    for name, source, engine in [("torch", run, "torch"), ("ort", path, "onnxruntime")]:
+        code, _, err = run_cli(["restore", str(source), str(photo), "-o", str(tmp_path / name), "--quiet", "--engine",
+                                engine, "--fno", "4", "--focus-m", "3", "--sensor-offset", "100,200"], capsys,
+                               monkeypatch)
+        assert code == 0, err
+        outs[name] = read_tif16(tmp_path / name / "a.tif")
+    assert np.abs(outs["ort"] - outs["torch"]).max() < TOL
+    assert np.abs(outs["torch"] - read_tif16(photo)).max() > 0.05
+    code, _, err = run_cli(["restore", str(path), str(photo), "-o", str(tmp_path / "x"), "--engine", "onnxruntime",
+                            "--sensor-offset", "100,200"], capsys, monkeypatch)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "--fno" in err, err
 
 
 def test_export_command(narrow, tmp_path: Path, capsys, monkeypatch):

@@ -67,6 +67,9 @@ class OnnxEngine:
             opts.intra_op_num_threads = threads
             opts.inter_op_num_threads = 1
         opts.log_severity_level = 3  # errors only: onnxruntime's notes would reach stderr unasked
+        # idle threads sleep instead of spinning, as lensim sets OMP_WAIT_POLICY=PASSIVE for torch
+        # (lensim/__init__.py): on a shared machine spinning threads steal the cores others wait for
+        opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
         providers = providers_for(device)
         if not isinstance(model, bytes) and not Path(model).is_file():
             raise InputError(self.source, None, "no such file; expected an ONNX model from `lensim export`")

@@ -37,7 +37,6 @@ from __future__ import annotations
 from typing import Callable, Protocol, runtime_checkable
 
 import torch
-import torch.nn as nn
 
 from lensim.restore.conditioning import batch_settings
 from lensim.restore.fov import fov_channels

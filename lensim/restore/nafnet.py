@@ -94,7 +94,8 @@ def box_mean(x: torch.Tensor, window: int) -> torch.Tensor:
     r = window // 2
     if r == 0:
         return x
-    ch, (h, w) = x.shape[1], x.shape[-2:]
+    # int(): the kernel's shape is a constant of the network (an ONNX export needs it static)
+    ch, (h, w) = int(x.shape[1]), x.shape[-2:]
     ones = torch.ones(ch, 1, window, window, dtype=x.dtype, device=x.device)
     total = F.conv2d(x, ones, padding=r, groups=ch)
     count = F.conv2d(torch.ones(1, 1, h, w, dtype=x.dtype, device=x.device), ones[:1], padding=r)
