@@ -11,9 +11,9 @@ import typer
 from lensim.cli.common import progress_bar
 from lensim.errors import InputError
 from lensim.optics.lens import Lens
-from lensim.psf.bank import PSFBank
+from lensim.psf.bank import GridAxes, GridBank, PSFBank
 from lensim.psf.bank.settings import DEFAULT_WAVELENGTHS_TEXT, BankSettings, parse_wavelengths_nm
-from lensim.render.bank_cache import ensure_bank
+from lensim.render.bank_cache import ensure_bank, ensure_grid
 from lensim.sensor.profile import SensorProfile
 
 
@@ -99,19 +99,37 @@ def bank_for_lens(bank_dir: Path, lens_file: str | None) -> tuple[PSFBank, Lens]
     when given, which must then be the lens the bank was computed for (a bank of another
     lens would be used silently otherwise)."""
     from lensim.cli.validate import input_folder
-    from lensim.optics.lens_file import lens_from_dict, lens_to_dict, load_lens
 
     bank = PSFBank.load(input_folder(bank_dir, "--bank", "bank folder"))
-    stored = bank.manifest.get("lens")
+    return bank, _lens_of(bank.manifest.get("lens"), bank_dir, lens_file)
+
+
+def bank_or_grid_for_lens(bank_dir: Path, lens_file: str | None) -> tuple[PSFBank | GridBank, Lens]:
+    """bank_for_lens, where the folder may also hold a grid of banks (lensim.psf.bank.grid;
+    the lens is then its lens file's lens)."""
+    from lensim.cli.validate import input_folder
+    from lensim.psf.bank.grid import is_grid
+
+    folder = input_folder(bank_dir, "--bank", "bank folder")
+    if not is_grid(folder):
+        return bank_for_lens(bank_dir, lens_file)
+    grid = GridBank.load(folder)
+    return grid, _lens_of(grid.lens, bank_dir, lens_file)
+
+
+def _lens_of(stored: Any, bank_dir: Path, lens_file: str | None) -> Lens:
+    """The lens a bank's manifest stores, or --lens checked against it."""
+    from lensim.optics.lens_file import lens_from_dict, lens_to_dict, load_lens
+
     if lens_file is None:
         if not isinstance(stored, dict):
             raise InputError(str(bank_dir), "lens", "the bank records no lens; expected --lens")
-        return bank, lens_from_dict(stored, source=f"{bank_dir} (manifest lens)")
+        return lens_from_dict(stored, source=f"{bank_dir} (manifest lens)")
     lens = load_lens(lens_file)
     if isinstance(stored, dict) and _optics(lens_to_dict(lens)) != _optics(stored):
         raise InputError("--lens", None, f"{lens_file} is not the lens the bank {bank_dir} was computed for "
                          f"({stored.get('name') or 'unnamed'}); expected that lens, or no --lens")
-    return bank, lens
+    return lens
 
 
 def _optics(lens_data: dict) -> Any:
@@ -130,3 +148,12 @@ def cached_bank(lens: Lens, pitch_um: float, sensor: SensorProfile, settings: Ba
     with progress_bar("PSF bank", "fields", quiet) as cb:
         return ensure_bank(lens, pitch_um, settings, response=sensor.spectral_response, workers=workers, progress=cb,
                            scheduler=scheduler)
+
+
+def cached_grid(lens: Lens, pitch_um: float, sensor: SensorProfile, settings: BankSettings, axes: GridAxes,
+                workers: int, quiet: bool, scheduler: str | None = None) -> GridBank:
+    """The lens's grid of banks over `axes` at this pitch (um) with the sensor's spectral
+    response, from the cache or computed into it, with a progress bar unless quiet."""
+    with progress_bar("PSF grid", "fields", quiet) as cb:
+        return ensure_grid(lens, pitch_um, axes, settings, response=sensor.spectral_response, workers=workers,
+                           progress=cb, scheduler=scheduler)

@@ -7,14 +7,16 @@ import typer
 
 from lensim import assets
 from lensim.cli.bank_options import (
-    bank_for_lens,
+    bank_or_grid_for_lens,
     bank_settings,
     cache_option,
     cached_bank,
+    cached_grid,
     check_response,
     fields_option,
     pupil_samples_option,
     scheduler_option,
+    setting_list_option,
     wavelengths_option,
     workers_option,
 )
@@ -23,6 +25,7 @@ from lensim.cli.validate import at_least, choice, even, in_range, input_folder, 
 from lensim.data.pairs import check_photos, list_images, make_dataset
 from lensim.errors import InputError
 from lensim.optics.lens_file import load_lens
+from lensim.psf.bank import GridAxes, GridBank, PSFBank
 from lensim.sensor.profile import DEFAULT_SENSOR, load_sensor
 
 dataset_app = typer.Typer(help="Training data: aligned (aberrated, sharp) pairs.", no_args_is_help=True)
@@ -79,7 +82,12 @@ def make(
                                     "uniform in LOW,HIGH (one value: fixed), applied to the photo's linear light "
                                     "before the camera: e.g. -3,0 adds darker, noisier scenes. 0: off."),
     demosaic: str = typer.Option("ahd", "--demosaic", help="ahd, malvar, menon or bilinear."),
-    bank_dir: Path = typer.Option(None, "--bank", help="A PSF bank at the sensor's pitch (default: computed and cached)."),
+    bank_dir: Path = typer.Option(None, "--bank", help="A PSF bank, or a grid of banks, at the sensor's pitch (default: "
+                                  "computed and cached)."),
+    fno: str = setting_list_option("fno"),
+    focus_m: str = setting_list_option("focus_m"),
+    object_m: str = setting_list_option("object_m"),
+    config: str = setting_list_option("config"),
     fields: int = fields_option(),
     wavelengths: str = wavelengths_option(),
     pupil_samples: int = pupil_samples_option(),
@@ -94,27 +102,41 @@ def make(
     (sharp), with every crop's sensor position and every random draw in
     DATASET/manifest.json.
 
+    Across shooting settings: --bank GRID (a grid from `psf bank --fno 2,2.8 ...`) or the
+    same lists here (--fno, --focus-m, --object-m, --config: a cached grid) give each photo
+    one of the grid's settings (seeded, every setting equally often); its record carries
+    "settings" (resolved F-number, distances, focal length).
+
     Example: lensim dataset make photos/ --lens cooke_triplet --sensor apsc_mirrorless -o data/ --crops 8 --size 256 --placements 3
+
+    Example: lensim dataset make photos/ --lens double_gauss --sensor full_frame --fno 2,2.8,4 --focus-m inf,3 -o data/
     """
     settings = bank_settings(fields, wavelengths, pupil_samples, cache)
     _check_options(sharp_dir, output, crops, size, placements, workers, demosaic, cache)
     scheduler_address(scheduler)
     ev_range = exposure_range(exposure_ev)
+    axes = GridAxes.from_options(fno, focus_m, object_m, config)
+    if bank_dir is not None and axes.given:
+        raise InputError("--bank", None, "the bank (or grid of banks) fixes the shooting settings; expected --bank or "
+                         "--fno/--focus-m/--object-m/--config, not both")
     sensor = load_sensor(sensor_file)
     quiet = quiet or json_out
+    bank: PSFBank | GridBank
     if bank_dir is not None:
-        bank, _ = bank_for_lens(bank_dir, lens_file)
+        bank, _ = bank_or_grid_for_lens(bank_dir, lens_file)
     else:
         lens = load_lens(lens_file or assets.DEFAULT_LENS)
         check_response(settings, sensor.spectral_response, sensor=sensor)
         check_photos(list_images(sharp_dir), size)  # before the bank, which takes minutes
-        bank = cached_bank(lens, sensor.pixel_pitch_um, sensor, settings, workers, quiet, scheduler)
+        bank = (cached_grid(lens, sensor.pixel_pitch_um, sensor, settings, axes, workers, quiet, scheduler)
+                if axes.given else cached_bank(lens, sensor.pixel_pitch_um, sensor, settings, workers, quiet, scheduler))
     with progress_bar("pairs", "photos", quiet) as cb:
         manifest = make_dataset(sharp_dir, output, bank, sensor_file, sensor, crops=crops, size=size, seed=seed,
                                 placements=placements, noise=noise, demosaic=demosaic, workers=workers, scheduler=scheduler, progress=cb,
                                 exposure_ev=ev_range)
     summary = {"output": str(output), "photos": len(manifest["records"]), "pairs": manifest["pairs"],
-               "bank": str(bank.directory), "seed": seed}
+               "bank": str(bank.directory), "seed": seed,
+               **({"settings": len(bank)} if isinstance(bank, GridBank) else {})}
     if json_out:
         print_json(summary)
     elif not quiet:

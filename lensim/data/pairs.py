@@ -37,6 +37,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import math
+import random
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping
@@ -47,7 +48,7 @@ from lensim.data.manifest import FORMAT, MANIFEST
 from lensim.errors import InputError
 from lensim.images import READ_SUFFIXES, read_image, write_image
 from lensim.io import atomic_write_json, folder_lock, read_json
-from lensim.psf.bank import PSFBank
+from lensim.psf.bank import GridBank, PSFBank
 from lensim.render.mapping import native_mapping
 from lensim.render.pipeline import simulate
 from lensim.sensor.isp import expose
@@ -71,6 +72,8 @@ class PairJob:
     demosaic: str
     placements: int = 1
     exposure_ev: tuple[float, float] = (0.0, 0.0)
+    settings: dict | None = None  # the bank's shooting settings (describe()), recorded when known
+    grid_setting: int | None = None  # the setting's index in a grid of banks
 
 
 def image_seed(seed: int, index: int, name: str) -> int:
@@ -166,14 +169,62 @@ def make_pairs_for_image(job: PairJob) -> dict:
                           "placement": p})
     record = {"index": job.index, "source": job.path, "seed": job.seed, "source_crop": [y, x, h2, w2],
               "placements": placed, "crops": crops}
+    if job.settings is not None:
+        record["settings"] = job.settings
+    if job.grid_setting is not None:
+        record["grid_setting"] = job.grid_setting
     atomic_write_json(record_path(out, job.index), record)
     return record
+
+
+def grid_settings_of_photos(seed: int, photos: int, settings: int) -> list[int]:
+    """The grid setting (index) of each photo: photos in blocks of `settings`, each block
+    a seeded random permutation of the settings, so every setting gets the same number of
+    photos (within one) and the draw depends on the seed and the photo's index only."""
+    out: list[int] = []
+    for block in range(-(-photos // settings)):
+        order = list(range(settings))
+        random.Random(image_seed(seed, block, "grid settings")).shuffle(order)
+        out.extend(order)
+    return out[:photos]
+
+
+@dataclass
+class _BankUse:
+    """Which bank each photo is simulated with, and what the dataset records of it."""
+
+    dirs: list[str]  # bank folder per photo
+    settings: list[dict | None]  # shooting settings per photo (describe()'s), None when unknown
+    grid_settings: list[int | None]  # the setting's index per photo in a grid
+    recorded: dict  # what settings.json records of the bank(s)
+    pitch_um: float
+    where: str  # the bank's or grid's folder
+
+
+def _bank_use(bank: PSFBank | GridBank, photos: int, seed: int) -> _BankUse:
+    """A single bank for every photo, or a grid's banks drawn per photo
+    (grid_settings_of_photos); records carry the bank's resolved settings when its
+    manifest describes them (a grid's, or a bank of one setting)."""
+    if isinstance(bank, GridBank):
+        picks = grid_settings_of_photos(seed, photos, len(bank))
+        entries = bank.manifest["settings"]
+        recorded = {"lens": bank.lens, "bank": str(bank.directory),
+                    "grid": [{"bank": e["bank"], "resolved": e["resolved"]} for e in entries]}
+        return _BankUse([str(bank.bank_dir(k)) for k in picks], [entries[k]["resolved"] for k in picks], list(picks),
+                        recorded, float(bank.manifest["bank"]["pixel_pitch_um"]), str(bank.directory))
+    if bank.directory is None:
+        raise InputError(None, "bank", "expected a bank stored on disk (workers load it)")
+    shooting = bank.manifest.get("shooting")
+    resolved = shooting.get("resolved") if isinstance(shooting, dict) else None
+    return _BankUse([str(bank.directory)] * photos, [resolved] * photos, [None] * photos,
+                    {"lens": bank.manifest.get("lens"), "bank": str(bank.directory)}, bank.pixel_pitch_um,
+                    str(bank.directory))
 
 
 def make_dataset(
     sharp_dir: str | Path,
     out_dir: str | Path,
-    bank: PSFBank,
+    bank: PSFBank | GridBank,
     sensor_name: str,
     sensor: SensorProfile,
     crops: int = 8,
@@ -189,8 +240,11 @@ def make_dataset(
 ) -> dict:
     """Generate pairs for every photo in sharp_dir into out_dir (resumable); returns the
     manifest. `crops` crops are cut at each of a photo's `placements` sensor positions.
-    The bank must be at the sensor's native pitch and cover its diagonal. exposure_ev:
-    the range of exposure changes in stops drawn per placement (module docstring)."""
+    The bank must be at the sensor's native pitch and cover its diagonal. A grid of banks
+    (lensim.psf.bank.GridBank) gives each photo one of its settings (balanced and seeded:
+    grid_settings_of_photos); its records carry "settings" (describe()'s numbers) and
+    "grid_setting" (the index), the manifest a "grid" summary. exposure_ev: the range of
+    exposure changes in stops drawn per placement (module docstring)."""
     if size < 16 or size % 2:
         raise InputError(None, "size", f"expected an even crop size of at least 16 pixels, got {size}")
     if crops < 1:
@@ -200,21 +254,21 @@ def make_dataset(
     exposure_ev = (float(exposure_ev[0]), float(exposure_ev[1]))
     if not (math.isfinite(exposure_ev[0]) and math.isfinite(exposure_ev[1]) and exposure_ev[0] <= exposure_ev[1]):
         raise InputError(None, "exposure_ev", f"expected (low, high) stops with low <= high, got {exposure_ev}")
-    if bank.directory is None:
-        raise InputError(None, "bank", "expected a bank stored on disk (workers load it)")
-    if abs(bank.pixel_pitch_um / sensor.pixel_pitch_um - 1) > 1e-6:
-        raise InputError(str(bank.directory), "pixel_pitch_um", f"the bank is at {bank.pixel_pitch_um:g} um; expected "
-                         f"the pitch of the sensor {sensor_name} ({sensor.pixel_pitch_um:g} um)")
     files = list_images(sharp_dir)
+    use = _bank_use(bank, len(files), seed)
+    if abs(use.pitch_um / sensor.pixel_pitch_um - 1) > 1e-6:
+        raise InputError(use.where, "pixel_pitch_um", f"the bank is at {use.pitch_um:g} um; expected "
+                         f"the pitch of the sensor {sensor_name} ({sensor.pixel_pitch_um:g} um)")
     check_photos(files, size)
     out = Path(out_dir)
     settings = {"format": FORMAT, "seed": seed, "crops": crops, "placements": placements, "size": size,
                 "noise": noise, "demosaic": demosaic, "sensor": sensor.to_dict(), "sensor_name": sensor_name,
-                "lens": bank.manifest.get("lens"), "bank": str(bank.directory), "sources": [str(p) for p in files]}
+                **use.recorded, "sources": [str(p) for p in files]}
     if exposure_ev != (0.0, 0.0):
         settings["exposure_ev"] = list(exposure_ev)  # absent when off: folders made before keep resuming
-    jobs = [PairJob(i, str(p), str(out), str(bank.directory), sensor_name, image_seed(seed, i, p.name), crops, size,
-                    noise, demosaic, placements, exposure_ev) for i, p in enumerate(files)]
+    jobs = [PairJob(i, str(p), str(out), use.dirs[i], sensor_name, image_seed(seed, i, p.name), crops, size,
+                    noise, demosaic, placements, exposure_ev, use.settings[i], use.grid_settings[i])
+            for i, p in enumerate(files)]
     with folder_lock(out):
         claimed = _claim_folder(out, settings)
         todo = [j for j in jobs if _read_record(j) is None]
@@ -226,6 +280,8 @@ def make_dataset(
             raise
         records = [read_json(record_path(out, j.index), "photo record") for j in jobs]
         manifest = {**settings, "records": records, "pairs": sum(len(r["crops"]) for r in records)}
+        if isinstance(bank, GridBank):
+            manifest["grid"] = [{**e, "photos": use.grid_settings.count(k)} for k, e in enumerate(settings["grid"])]
         atomic_write_json(out / MANIFEST, manifest)
     return manifest
 

@@ -50,7 +50,8 @@ from lensim.evaluate.metrics import ZONES, image_scores, normalized_radius
 from lensim.images import read_image
 from lensim.io import atomic_write_text
 from lensim.psf.bank import MANIFEST as BANK_MANIFEST
-from lensim.psf.bank import PSFBank
+from lensim.psf.bank import GridBank, PSFBank
+from lensim.psf.bank.grid import is_grid
 from lensim.render.mapping import SensorMapping, native_mapping
 from lensim.sensor.profile import SensorProfile, sensor_from_dict
 
@@ -157,18 +158,34 @@ def checkpoint_method(run: str | Path, lens: Mapping[str, Any] | None = None, se
 # dataset
 
 
-def _load_bank(manifest: Mapping[str, Any], pairs_dir: Path, bank: PSFBank | str | Path | None) -> PSFBank | None:
-    if isinstance(bank, PSFBank):
+def _load_bank(manifest: Mapping[str, Any], pairs_dir: Path,
+               bank: PSFBank | GridBank | str | Path | None) -> PSFBank | GridBank | None:
+    """The bank (or grid of banks) the pairs were made with: given, or the manifest's."""
+    if isinstance(bank, (PSFBank, GridBank)):
         return bank
     if bank is not None:
-        return PSFBank.load(bank)
+        return GridBank.load(bank) if is_grid(bank) else PSFBank.load(bank)
     path = manifest.get("bank")
     if not path:
         return None
     for cand in (Path(path), pairs_dir / path):
+        if is_grid(cand):
+            return GridBank.load(cand)
         if (cand / BANK_MANIFEST).is_file():
             return PSFBank.load(cand)
     return None
+
+
+def _record_bank(bank: PSFBank | GridBank | None, record: Mapping[str, Any], where: str) -> PSFBank | None:
+    """The bank a record's photo was simulated with: a grid's bank of the record's
+    setting (its grid_setting), else the one bank."""
+    if not isinstance(bank, GridBank):
+        return bank
+    k = record.get("grid_setting")
+    if isinstance(k, bool) or not isinstance(k, int) or not 0 <= k < len(bank):
+        raise InputError(where, "grid_setting", f"expected the index of one of the grid's {len(bank)} settings "
+                         f"({bank.directory}), got {k!r}")
+    return bank.bank(k)
 
 
 def _record_settings(record: Mapping[str, Any], pairs_dir: Path, index: int) -> dict[str, float] | None:
@@ -183,7 +200,7 @@ def _record_settings(record: Mapping[str, Any], pairs_dir: Path, index: int) -> 
 def evaluate_rows(
     pairs_dir: str | Path,
     methods: Mapping[str, Method],
-    bank: PSFBank | str | Path | None = None,
+    bank: PSFBank | GridBank | str | Path | None = None,
     sources: Sequence[str] | None = None,
     max_crops: int | None = None,
     progress: Callable[[int, int], None] | None = None,
@@ -191,7 +208,8 @@ def evaluate_rows(
     """Score every method on every crop of a pairs dataset; one row per (crop, method).
 
     methods: name -> method (``input`` is added first when absent). bank: the PSF bank
-    (object or folder; default the one the manifest names, if it exists). sources: keep
+    (object or folder; default the one the manifest names, if it exists), or a grid of
+    banks (each record then uses its setting's bank, its grid_setting). sources: keep
     only records whose source photo's file name (or full path) is listed (e.g. the
     held-out photos of a training run). max_crops: stop after this many crops.
     progress(done, total) counts crops. Rows: record, crop, source, input, sensor_top,
@@ -225,7 +243,8 @@ def evaluate_rows(
             raise InputError(str(pairs_dir / cr["input"]), "size", f"is {tuple(x.shape)}; its target is {tuple(y.shape)}")
         _, h, w = x.shape
         top, left = int(cr["sensor_top"]), int(cr["sensor_left"])
-        ctx = CropContext(native_mapping(h, w, sensor, top, left), sensor, the_bank, crop_capture(rec, cr), top, left,
+        rec_bank = _record_bank(the_bank, rec, f"{pairs_dir / MANIFEST}: records[{ri}]")
+        ctx = CropContext(native_mapping(h, w, sensor, top, left), sensor, rec_bank, crop_capture(rec, cr), top, left,
                           ri, ci, _record_settings(rec, pairs_dir, ri))
         rho = normalized_radius(h, w, top, left, sensor.height, sensor.width)
         for name, method in all_methods.items():
@@ -275,7 +294,7 @@ def summarize(rows: Sequence[Mapping[str, Any]]) -> dict:
 def evaluate(
     pairs_dir: str | Path,
     methods: Mapping[str, Method],
-    bank: PSFBank | str | Path | None = None,
+    bank: PSFBank | GridBank | str | Path | None = None,
     sources: Sequence[str] | None = None,
     max_crops: int | None = None,
     progress: Callable[[int, int], None] | None = None,
