@@ -26,6 +26,7 @@ from lensim.optics.lens_file import load_lens
 from lensim.sensor.profile import DEFAULT_SENSOR, SensorProfile, load_sensor
 
 if TYPE_CHECKING:
+    from lensim.optics.shooting import ShootingSettings
     from lensim.psf.bank import PSFBank
 
 Say = Callable[[str], None]
@@ -63,11 +64,13 @@ def _stage(out: Path, name: str) -> Path:
     return d
 
 
-def _claim_folder(out: Path, settings: DemoSettings, quick: bool, seed: int) -> None:
+def _claim_folder(out: Path, settings: DemoSettings, quick: bool, seed: int, shooting: dict | None = None) -> None:
     """Record the run's settings in out/demo.json; refuse a folder made with others, whose
-    cached stages would not match."""
+    cached stages would not match. shooting: the lens's shooting settings (to_dict), when
+    any is given."""
     marker = out / "demo.json"
-    mine = json.loads(json.dumps({**asdict(settings), "quick": quick, "seed": seed}))
+    mine = json.loads(json.dumps({**asdict(settings), "quick": quick, "seed": seed,
+                                  **({"shooting": shooting} if shooting else {})}))
     if marker.exists():
         try:
             theirs = read_json(marker, "demo settings record")
@@ -121,17 +124,29 @@ def _train(pairs: Path, run: Path, settings: DemoSettings, plain: bool, seed: in
 
 
 def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: int = 1, say: Say | None = None,
-             device: str = "cpu", progress: StageProgress | None = None) -> dict:
+             device: str = "cpu", progress: StageProgress | None = None,
+             shooting: ShootingSettings | None = None) -> dict:
     """Run the demo into out_dir; returns the report's JSON (also written). device: where the
     networks train and run ("cpu", "cuda", "cuda:N"). say(stage) announces each stage and
-    progress(done, total) reports within it. out_dir is locked while the demo runs
-    (lensim.io.folder_lock: a second demo into it is refused at once)."""
+    progress(done, total) reports within it. shooting: the built-in lens's shooting
+    settings (lensim.optics.shooting; default the lens file's). out_dir is locked while the
+    demo runs (lensim.io.folder_lock: a second demo into it is refused at once)."""
     with folder_lock(out_dir):
-        return _run_demo(Path(out_dir), quick, seed, workers, say, device, progress)
+        return _run_demo(Path(out_dir), quick, seed, workers, say, device, progress, shooting)
+
+
+def _set_lens(shooting: ShootingSettings | None) -> tuple[Any, dict | None]:
+    """The built-in lens at the shooting settings and their record (None: the file's own)."""
+    from lensim.optics.shooting import describe, lens_at, record
+
+    lens = load_lens(DEFAULT_LENS)
+    if shooting is None or shooting.is_default:
+        return lens, None
+    return lens_at(lens, shooting), record(describe(lens, shooting))
 
 
 def _run_demo(out: Path, quick: bool, seed: int, workers: int, say: Say | None, device: str,
-              progress: StageProgress | None) -> dict:
+              progress: StageProgress | None, shooting: ShootingSettings | None = None) -> dict:
     """run_demo's stages, the folder locked."""
     from lensim.data.pairs import make_dataset
     from lensim.plots.bank import write_bank_figures
@@ -142,10 +157,11 @@ def _run_demo(out: Path, quick: bool, seed: int, workers: int, say: Say | None, 
     say = say or (lambda msg: None)
     step = progress or (lambda done, total: None)
     settings = DemoSettings.make(quick)
-    _claim_folder(out, settings, quick, seed)
+    lens, described = _set_lens(shooting)  # before the folder is claimed: a refused setting leaves nothing
+    _claim_folder(out, settings, quick, seed, None if described is None or shooting is None else shooting.to_dict())
     timings: dict[str, float] = {}
     figs = _stage(out, "figures")
-    lens, sensor = load_lens(DEFAULT_LENS), load_sensor(DEFAULT_SENSOR)
+    sensor = load_sensor(DEFAULT_SENSOR)
 
     t = time.perf_counter()
     say("lens figures")
@@ -158,8 +174,14 @@ def _run_demo(out: Path, quick: bool, seed: int, workers: int, say: Say | None, 
     say("PSF bank")
     bank_settings = BankSettings(fields=settings.fields, wavelengths_nm=settings.wavelengths_nm,
                                  pupil_samples=settings.pupil_samples, kernel_limit=41)
-    bank = build_bank(lens, sensor.pixel_pitch_um, bank_settings, response=sensor.spectral_response,
-                      out_dir=out / "bank", workers=workers, progress=step)
+    if shooting is None or shooting.is_default:
+        bank = build_bank(lens, sensor.pixel_pitch_um, bank_settings, response=sensor.spectral_response,
+                          out_dir=out / "bank", workers=workers, progress=step)
+    else:  # the bank's manifest records the settings, and so do the pairs made from it
+        from lensim.psf.bank.grid import compute_setting_bank
+
+        bank = compute_setting_bank(load_lens(DEFAULT_LENS), sensor.pixel_pitch_um, shooting, bank_settings,
+                                    out / "bank", response=sensor.spectral_response, workers=workers, progress=step)
     write_bank_figures(bank, figs)
     timings["bank"] = time.perf_counter() - t
 
@@ -195,6 +217,7 @@ def _run_demo(out: Path, quick: bool, seed: int, workers: int, say: Say | None, 
         "settings": {**asdict(settings), "quick": quick, "seed": seed, "workers": workers, "device": device,
                      "kernel_pixels": bank.kernel_pixels},
         "bank": _bank_summary(bank),
+        "shooting": described,
         "training": {"model": model_info, "plain-unet": plain_info},
         **evaluation,
         "raw_file": raw_file,

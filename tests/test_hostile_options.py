@@ -7,6 +7,7 @@ from __future__ import annotations
 import pytest
 
 from hostile_world import Case, case, check_case, folder, text
+from reference_lenses import REFERENCE_LENSES
 
 PSF = "psf compute cooke_triplet "
 BANK = "psf bank --lens cooke_triplet --pixel-um 20 --fields 2 --wavelengths-nm 550 --pupil-samples 32 -o {t}/b "
@@ -292,6 +293,41 @@ EVALUATING = [
          "--export-test-photos", "--export-photos"),
 ]
 
+ZOOM = str(REFERENCE_LENSES / "nikon_80-200_zoom.zmx")
+SHOOTING = [  # single-value shooting settings (psf bank and dataset make grids: above)
+    case("shoot-fno-too-fast", PSF + "--fno 2", "--fno", "F/2", "maximum aperture F/5"),
+    case("shoot-fno-zero", PSF + "--fno 0", "--fno", "'0'"),
+    case("shoot-fno-negative", PSF + "--fno -4", "--fno", "-4"),
+    case("shoot-fno-nan", PSF + "--fno nan", "--fno", "nan"),
+    case("shoot-fno-inf", PSF + "--fno inf", "--fno", "inf"),
+    case("shoot-fno-text", PSF + "--fno f8", "--fno", "f8"),
+    case("shoot-fno-list", PSF + "--fno 8,11", "--fno", "one value", "8,11"),
+    case("shoot-fno-empty", PSF + "--fno ''", "--fno"),
+    case("shoot-focus-negative", PSF + "--focus-m -1", "--focus-m", "-1"),
+    case("shoot-focus-zero", PSF + "--focus-m 0", "--focus-m", "metres"),
+    case("shoot-focus-nan", PSF + "--focus-m nan", "--focus-m", "nan"),
+    case("shoot-focus-huge", PSF + "--focus-m 1e12", "--focus-m", "inf"),
+    case("shoot-focus-too-close", PSF + "--focus-m 0.1", "--focus-m", "cannot focus at 0.1 m"),
+    case("shoot-focus-inside-lens", PSF + "--focus-m 0.02", "--focus-m", "inside the lens"),
+    case("shoot-object-nan", PSF + "--object-m nan", "--object-m", "nan"),
+    case("shoot-object-negative", PSF + "--object-m -2 --focus-m 1", "--object-m", "-2"),
+    case("shoot-object-inside-lens", PSF + "--object-m 0.03 --focus-m 1", "--object-m", "inside the lens"),
+    case("shoot-config-none-declared", PSF + "--config tele", "--config", "declares no configurations"),
+    case("shoot-config-unknown", "psf compute " + ZOOM + " --config 4", "--config", "1..3"),
+    case("shoot-config-blank", PSF + "--config ' '", "--config"),
+    case("shoot-simulate-with-bank", SIM + "--fno 8", "--fno", "--lens"),
+    case("shoot-simulate-other-lens", SIM + "--lens cooke_triplet --fno 8", "--lens", "at these settings"),
+    case("shoot-simulate-focus-nan", "simulate {w.photo} -o {t}/out --focus-m nan", "--focus-m"),
+    case("shoot-simulate-fno-list", "simulate {w.photo} -o {t}/out --fno 8,11", "--fno", "psf bank"),
+    case("shoot-demo-fno-too-fast", "demo --quick -o {t}/demo --fno 2", "--fno", "F/2"),
+    case("shoot-demo-object-zero", "demo --quick -o {t}/demo --object-m 0", "--object-m"),
+    case("shoot-info-config", "lens info cooke_triplet --config 1", "--config"),
+    case("shoot-spot-focus-close", "lens spot cooke_triplet --json --focus-m 0.1", "--focus-m"),
+    case("shoot-field-fno-fast", "lens field cooke_triplet --fno 1", "--fno"),
+    case("shoot-plot-object-negative", "lens plot cooke_triplet -o {t}/p.png --object-m -3", "--object-m"),
+    case("shoot-lensfun-aperture-fast", LENSFUN.replace("--aperture 5.6", "--aperture 2"), "--aperture", "F/5"),
+]
+
 USAGE = [
     case("usage-unknown-option", "lens info cooke_triplet --bogus", "--bogus"),
     case("usage-missing-argument", "lens info", "lens_file"),
@@ -304,7 +340,8 @@ USAGE = [
     case("usage-bad-choice", "lens spot cooke_triplet --json --reference banana", "--reference", "banana"),
 ]
 
-ALL: list[Case] = PSF_COMPUTE + PSF_BANK + LENS + LENS_OUTPUTS + SIMULATE + DATASET_MAKE + TRAINING + RESTORING + EVALUATING + USAGE
+ALL: list[Case] = (PSF_COMPUTE + PSF_BANK + LENS + LENS_OUTPUTS + SIMULATE + DATASET_MAKE + TRAINING + RESTORING
+                   + EVALUATING + SHOOTING + USAGE)
 
 
 @pytest.mark.parametrize("c", ALL, ids=[c.id for c in ALL])

@@ -14,7 +14,7 @@ from lensim.errors import InputError
 from lensim.optics.lens import Lens
 from lensim.optics.lens_file import lens_from_dict, lens_to_dict, load_lens
 from lensim.optics.paraxial import paraxial_data, signed_indices, trace_yu
-from lensim.optics.shooting import ShootingSettings, describe, lens_at
+from lensim.optics.shooting import ShootingSettings, describe, lens_at, record
 from lensim.optics.surfaces import Surface
 from lensim.psf.compute import compute_psf
 
@@ -284,3 +284,59 @@ def test_zoom_positions_take_shooting_settings(reference_lenses) -> None:
             lens_at(lens, ShootingSettings(config=name, fno=2))
     with pytest.raises(InputError, match=r"unknown configuration 'wide'; expected a name or a number 1..3"):
         lens_at(lens, ShootingSettings(config="wide"))
+
+
+# ---------------------------------------------------------------- the commands
+
+def test_psf_compute_takes_the_settings_and_records_them(capsys, monkeypatch) -> None:
+    import json
+
+    from cli_runner import run_cli
+
+    code, out, _ = run_cli(["psf", "compute", "cooke_triplet", "--fno", "8", "--focus-m", "1", "--grid", "48",
+                            "--pupil-samples", "48", "--json"], capsys, monkeypatch)
+    assert code == 0
+    got = json.loads(out)["settings"]
+    want = describe(load_lens("cooke_triplet"), ShootingSettings(fno=8, focus_m=1.0))
+    assert got == {k: (pytest.approx(v) if isinstance(v, float) else v) for k, v in want.items()}
+    assert got["fno"] == pytest.approx(8.0) and got["working_fno"] > 8.0 and got["object_m"] == 1.0
+
+
+def test_banks_simulate_and_pairs_record_the_settings(tmp_path, capsys, monkeypatch) -> None:
+    # psf bank --fno/--focus-m/--object-m: the manifest holds the lens at those settings and
+    # their record; simulate with that bank and --lens at the same settings records them in
+    # its photo JSON; dataset make from it gives every record the settings
+    import json
+
+    from PIL import Image
+
+    from cli_runner import run_cli
+
+    options = ["--fno", "8", "--focus-m", "2", "--object-m", "inf"]
+    code, _, err = run_cli(["psf", "bank", "--lens", "cooke_triplet", "--sensor", "apsc_mirrorless", "--fields", "2",
+                            "--wavelengths-nm", "550", "--pupil-samples", "32", "-o", str(tmp_path / "bank"),
+                            "--json", *options], capsys, monkeypatch)
+    assert code == 0, err
+    manifest = json.loads((tmp_path / "bank" / "manifest.json").read_text())
+    settings = ShootingSettings(fno=8, focus_m=2.0, object_m=math.inf)
+    want = record(describe(load_lens("cooke_triplet"), settings))
+    assert manifest["shooting"]["resolved"] == want and want["object_m"] == "inf"
+    assert manifest["lens"] == json.loads(json.dumps(lens_to_dict(lens_at(load_lens("cooke_triplet"), settings))))
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    for i in range(2):
+        Image.fromarray((np.random.default_rng(i).random((64, 80, 3)) * 255).astype(np.uint8)).save(photos / f"{i}.png")
+    code, _, err = run_cli(["simulate", str(photos / "0.png"), "-o", str(tmp_path / "sim"), "--bank",
+                            str(tmp_path / "bank"), "--lens", "cooke_triplet", *options, "--no-blur", "--quiet"],
+                           capsys, monkeypatch)
+    assert code == 0, err
+    assert json.loads((tmp_path / "sim" / "0.json").read_text())["settings"] == want
+    code, _, err = run_cli(["simulate", str(photos / "1.png"), "-o", str(tmp_path / "sim2"), "--lens",
+                            "cooke_triplet", *options, "--no-blur", "--quiet"], capsys, monkeypatch)
+    assert code == 0, err
+    assert json.loads((tmp_path / "sim2" / "1.json").read_text())["settings"] == want
+    code, _, err = run_cli(["dataset", "make", str(photos), "-o", str(tmp_path / "data"), "--bank", str(tmp_path / "bank"),
+                            "--crops", "1", "--size", "32", "--quiet"], capsys, monkeypatch)
+    assert code == 0, err
+    records = json.loads((tmp_path / "data" / "manifest.json").read_text())["records"]
+    assert [r["settings"] for r in records] == [want] * 2

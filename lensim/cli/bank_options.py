@@ -1,6 +1,11 @@
 """The PSF-bank options of `psf bank`, `simulate` and `dataset make`, declared once with
 BankSettings' defaults, and the cached bank `simulate` and `dataset make` ask for: the same
-options always name the same cached bank."""
+options always name the same cached bank.
+
+Also the shooting-settings options (--fno, --object-m, --focus-m, --config;
+lensim.optics.shooting), declared once: comma lists (grids) on `psf bank` and `dataset
+make` (setting_list_option), single values on `psf compute`, `simulate`, `demo` and `lens
+info/plot/spot/field` (setting_option, shooting_settings)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -11,6 +16,8 @@ import typer
 from lensim.cli.common import progress_bar
 from lensim.errors import InputError
 from lensim.optics.lens import Lens
+from lensim.optics.shooting import OPTIONS as SHOOTING_OPTIONS
+from lensim.optics.shooting import ShootingSettings
 from lensim.psf.bank import GridAxes, GridBank, PSFBank
 from lensim.psf.bank.settings import DEFAULT_WAVELENGTHS_TEXT, BankSettings, parse_wavelengths_nm
 from lensim.render.bank_cache import ensure_bank, ensure_grid
@@ -51,6 +58,62 @@ def setting_list_option(key: str) -> Any:
         "config": "Lens configuration(s) (zoom positions), names or 1-based numbers; a comma list makes a grid.",
     }
     return typer.Option(None, "--" + key.replace("_", "-"), help=helps[key])
+
+
+_SINGLE_HELP = {
+    "fno": "F-number: the stop is set for image-space F/N at infinity and keeps its size when focusing close "
+           "(default: the lens file's aperture, the widest allowed).",
+    "focus_m": "Focus distance in m from the image plane, or inf: the image plane (or the lens file's focus group) "
+               "moves to focus there (default: --object-m, else as the lens file is).",
+    "object_m": "Object distance in m from the image plane, or inf (default: --focus-m, else the lens file's).",
+    "config": "Lens configuration (zoom position): its name or 1-based number.",
+}
+
+
+def setting_option(key: str) -> Any:
+    """One shooting setting (fno, focus_m, object_m, config), a single value: commands
+    that use the lens at one setting."""
+    return typer.Option(None, "--" + key.replace("_", "-"), help=_SINGLE_HELP[key])
+
+
+def fno_option() -> Any:
+    return setting_option("fno")
+
+
+def object_m_option() -> Any:
+    return setting_option("object_m")
+
+
+def focus_m_option() -> Any:
+    return setting_option("focus_m")
+
+
+def config_option() -> Any:
+    return setting_option("config")
+
+
+def shooting_settings(fno: str | None, object_m: str | None, focus_m: str | None,
+                      config: str | None) -> ShootingSettings:
+    """The ShootingSettings of the single-value options (checked; one-line errors naming
+    the option; a comma list is refused: grids are psf bank's and dataset make's)."""
+    for key, text in (("fno", fno), ("object_m", object_m), ("focus_m", focus_m), ("config", config)):
+        if text is not None and "," in str(text):
+            raise InputError("<command line>", SHOOTING_OPTIONS[key], f"expected one value, got the list {text!r} "
+                             "(grids of settings are made by psf bank and dataset make)")
+    return ShootingSettings.from_text(fno, object_m, focus_m, config)
+
+
+def lens_and_record(lens_file: str, settings: ShootingSettings) -> tuple[Lens, dict | None]:
+    """The lens file (or built-in name) at the shooting settings, and the settings as
+    records keep them (lensim.optics.shooting.record(describe(...))); None for the lens
+    file's own settings (the lens is then the file's, unchanged)."""
+    from lensim.optics.lens_file import load_lens
+    from lensim.optics.shooting import describe, lens_at, record
+
+    lens = load_lens(lens_file)
+    if settings.is_default:
+        return lens, None
+    return lens_at(lens, settings), record(describe(lens, settings))
 
 
 def cache_option() -> Any:
@@ -94,14 +157,21 @@ def check_response(settings: BankSettings, response: str | Path, illuminant: str
         raise InputError("--response" if sensor is None else f"sensor {sensor.name!r}", None, e.message) from None
 
 
-def bank_for_lens(bank_dir: Path, lens_file: str | None) -> tuple[PSFBank, Lens]:
+def bank_for_lens(bank_dir: Path, lens_file: str | None,
+                  shooting: ShootingSettings | None = None) -> tuple[PSFBank, Lens]:
     """The bank of ``--bank`` and the lens to simulate: the bank's own lens, or --lens
-    when given, which must then be the lens the bank was computed for (a bank of another
-    lens would be used silently otherwise)."""
+    (at the shooting settings) when given, which must then be the lens the bank was
+    computed for (a bank of another lens would be used silently otherwise). Shooting
+    settings without --lens are refused: the bank's lens is already set."""
     from lensim.cli.validate import input_folder
 
     bank = PSFBank.load(input_folder(bank_dir, "--bank", "bank folder"))
-    return bank, _lens_of(bank.manifest.get("lens"), bank_dir, lens_file)
+    if shooting is not None and not shooting.is_default:
+        given = ", ".join(SHOOTING_OPTIONS[k] for k, v in shooting.to_dict().items() if v is not None)
+        if lens_file is None:
+            raise InputError("<command line>", given, f"the bank {bank_dir} holds its lens at the settings it was "
+                             "computed for; expected --lens with these options, or none of them")
+    return bank, _lens_of(bank.manifest.get("lens"), bank_dir, lens_file, shooting)
 
 
 def bank_or_grid_for_lens(bank_dir: Path, lens_file: str | None) -> tuple[PSFBank | GridBank, Lens]:
@@ -117,17 +187,19 @@ def bank_or_grid_for_lens(bank_dir: Path, lens_file: str | None) -> tuple[PSFBan
     return grid, _lens_of(grid.lens, bank_dir, lens_file)
 
 
-def _lens_of(stored: Any, bank_dir: Path, lens_file: str | None) -> Lens:
-    """The lens a bank's manifest stores, or --lens checked against it."""
-    from lensim.optics.lens_file import lens_from_dict, lens_to_dict, load_lens
+def _lens_of(stored: Any, bank_dir: Path, lens_file: str | None, shooting: ShootingSettings | None = None) -> Lens:
+    """The lens a bank's manifest stores, or --lens (at the shooting settings) checked
+    against it."""
+    from lensim.optics.lens_file import lens_from_dict, lens_to_dict
 
     if lens_file is None:
         if not isinstance(stored, dict):
             raise InputError(str(bank_dir), "lens", "the bank records no lens; expected --lens")
         return lens_from_dict(stored, source=f"{bank_dir} (manifest lens)")
-    lens = load_lens(lens_file)
+    lens, _ = lens_and_record(lens_file, shooting or ShootingSettings())
     if isinstance(stored, dict) and _optics(lens_to_dict(lens)) != _optics(stored):
-        raise InputError("--lens", None, f"{lens_file} is not the lens the bank {bank_dir} was computed for "
+        at = "" if shooting is None or shooting.is_default else " at these settings"
+        raise InputError("--lens", None, f"{lens_file}{at} is not the lens the bank {bank_dir} was computed for "
                          f"({stored.get('name') or 'unnamed'}); expected that lens, or no --lens")
     return lens
 

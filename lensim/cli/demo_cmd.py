@@ -5,6 +5,7 @@ from pathlib import Path
 
 import typer
 
+from lensim.cli.bank_options import config_option, fno_option, focus_m_option, object_m_option, shooting_settings
 from lensim.cli.common import StageBars, console, print_json
 from lensim.cli.validate import at_least, input_folder, output_folder
 from lensim.cli.validate import device as check_device
@@ -18,11 +19,16 @@ def demo_command(
     device: str = typer.Option("cpu", "--device", help="cpu, cuda or cuda:N: where the networks train and run."),
     quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
     json_out: bool = typer.Option(False, "--json", help="Print report.json's metrics."),
+    fno: str = fno_option(),
+    object_m: str = object_m_option(),
+    focus_m: str = focus_m_option(),
+    config: str = config_option(),
 ) -> None:
     """Lens -> PSF bank -> simulated pairs -> training -> restoration -> evaluation -> report.
 
     Writes OUT/report.html (self-contained), OUT/report.json and the figures in
-    OUT/figures/. A second run reuses every finished stage.
+    OUT/figures/. A second run reuses every finished stage. --fno, --object-m, --focus-m and
+    --config set the built-in lens (report.json records them as "shooting").
 
     Example: lensim demo --quick -o demo/
     """
@@ -30,10 +36,17 @@ def demo_command(
 
     at_least(workers, 1, "--workers", what="a number of processes")
     check_device(device)
+    shooting = shooting_settings(fno, object_m, focus_m, config)
+    if not shooting.is_default:  # refused before the folder is made
+        from lensim.assets import DEFAULT_LENS
+        from lensim.optics.lens_file import load_lens
+        from lensim.optics.shooting import lens_at
+
+        lens_at(load_lens(DEFAULT_LENS), shooting)
     output_folder(output)
     with StageBars(show=not quiet and not json_out) as bars:
         report = run_demo(output, quick=quick, seed=seed, workers=workers, say=bars.say, device=device,
-                          progress=bars.progress)
+                          progress=bars.progress, shooting=shooting)
     if json_out:
         print_json({"metrics": report["metrics"], "report": str(output / "report.html")})
     elif not quiet:

@@ -9,6 +9,7 @@ from typing import Optional
 import typer
 from rich.table import Table
 
+from lensim.cli.bank_options import config_option, fno_option, focus_m_option, object_m_option, shooting_settings
 from lensim.cli.common import console, print_json
 from lensim.cli.validate import AIMINGS, choice, output_file
 from lensim.errors import InputError
@@ -44,13 +45,19 @@ def _glass_makers(makers: Optional[str], match_glass: bool) -> Optional[list[str
     return [known[m.lower()] for m in names]
 
 
-def _load(lens_file: str, match_glass: bool = False, makers: Optional[list[str]] = None):
-    """Load a lens; with match_glass its model glasses become the nearest catalogue glasses.
+def _load(lens_file: str, match_glass: bool = False, makers: Optional[list[str]] = None,
+          shooting: tuple[Optional[str], ...] = (None, None, None, None)):
+    """Load a lens; with match_glass its model glasses become the nearest catalogue glasses;
+    then it is set to the shooting options (--fno, --object-m, --focus-m, --config).
     Returns (lens, glass matches)."""
+    from lensim.optics.shooting import lens_at
+
+    settings = shooting_settings(*shooting)
     lens = load_lens(lens_file)
-    if not match_glass:
-        return lens, []
-    return match_glasses(lens, makers)
+    matches: list[dict] = []
+    if match_glass:
+        lens, matches = match_glasses(lens, makers)
+    return lens_at(lens, settings), matches
 
 
 def _fmt(x, digits=6) -> str:
@@ -68,13 +75,19 @@ def info(
     aiming: str = typer.Option("real", help="Ray aiming for real-ray figures: real or paraxial."),
     match_glass: bool = typer.Option(False, "--match-glass", help=MATCH_GLASS_HELP),
     glass_makers: Optional[str] = typer.Option(None, "--glass-makers", help=GLASS_MAKERS_HELP),
+    fno: Optional[str] = fno_option(),
+    object_m: Optional[str] = object_m_option(),
+    focus_m: Optional[str] = focus_m_option(),
+    config: Optional[str] = config_option(),
 ) -> None:
-    """Surface table and first-order data (EFL, BFL, F/#, pupils, fields, wavelengths).
+    """Surface table and first-order data (EFL, BFL, F/#, pupils, fields, wavelengths), of
+    the lens at the shooting options when given.
 
     Example: lensim lens info phone_wide --match-glass --glass-makers Ohara,Schott --json
     """
     choice(aiming, AIMINGS, "--aiming")
-    lens, matches = _load(lens_file, match_glass, _glass_makers(glass_makers, match_glass))
+    lens, matches = _load(lens_file, match_glass, _glass_makers(glass_makers, match_glass),
+                          (fno, object_m, focus_m, config))
     summary = first_order_summary(lens, aiming=aiming)
     if json_out:
         print_json(summary | {"glass_matches": matches} if match_glass else summary)
@@ -232,6 +245,10 @@ def plot(
     kind: PlotKind = typer.Option(PlotKind.layout, "--kind", help="layout (ray fans), or against the field: "
                                   "distortion (%), lateral-colour (um per sensor channel) or illumination."),
     sensor: Optional[str] = typer.Option(None, "--sensor", help=SENSOR_HELP),
+    fno: Optional[str] = fno_option(),
+    object_m: Optional[str] = object_m_option(),
+    focus_m: Optional[str] = focus_m_option(),
+    config: Optional[str] = config_option(),
 ) -> None:
     """Draw the lens layout (a y-z cross-section with a fan of rays per field), or its
     distortion, lateral colour or relative illumination against the field.
@@ -243,7 +260,8 @@ def plot(
     Example: lensim lens plot cooke_triplet --kind lateral-colour --sensor apsc_mirrorless -o lateral.png
     """
     _check_figure_name(output)
-    lens, fields = fields_to_show(load_lens(lens_file), field, field_deg, image_height_mm)
+    lens, _ = _load(lens_file, shooting=(fno, object_m, focus_m, config))
+    lens, fields = fields_to_show(lens, field, field_deg, image_height_mm)
     if kind is PlotKind.layout:
         from lensim.plots.lens import plot_layout
 
@@ -269,6 +287,10 @@ def spot(
     image_height_mm: Optional[list[float]] = typer.Option(None, "--image-height-mm", help=IMAGE_HEIGHT_HELP),
     reference: ReferenceChoice = typer.Option(ReferenceChoice.chief, help="Centre of the spots and of the RMS radius: "
                                               "the chief ray or the centroid."),
+    fno: Optional[str] = fno_option(),
+    object_m: Optional[str] = object_m_option(),
+    focus_m: Optional[str] = focus_m_option(),
+    config: Optional[str] = config_option(),
 ) -> None:
     """Spot diagrams and RMS spot radii for each field, all wavelengths.
 
@@ -284,7 +306,8 @@ def spot(
         raise InputError(None, "--output", "expected -o FILE (an image to write), --json, or both")
     if output is not None:
         _check_figure_name(output)
-    lens, fields = fields_to_show(load_lens(lens_file), field, field_deg, image_height_mm)
+    lens, _ = _load(lens_file, shooting=(fno, object_m, focus_m, config))
+    lens, fields = fields_to_show(lens, field, field_deg, image_height_mm)
     spots = spot_diagram(lens, fields, None, hexapolar(SPOT_RINGS), aiming.value)
     if output is not None:
         plot_spots(lens, aiming=aiming.value, path=output, reference=reference.value, spots=spots)
@@ -316,6 +339,10 @@ def field_command(
     image_height_mm: Optional[list[float]] = typer.Option(None, "--image-height-mm", help=IMAGE_HEIGHT_HELP),
     match_glass: bool = typer.Option(False, "--match-glass", help=MATCH_GLASS_HELP),
     glass_makers: Optional[str] = typer.Option(None, "--glass-makers", help=GLASS_MAKERS_HELP),
+    fno: Optional[str] = fno_option(),
+    object_m: Optional[str] = object_m_option(),
+    focus_m: Optional[str] = focus_m_option(),
+    config: Optional[str] = config_option(),
 ) -> None:
     """Lens-level outputs per field: the real chief-ray height at each wavelength, the
     paraxial height, distortion (%), lateral colour of each sensor channel (its chief-ray
@@ -324,7 +351,8 @@ def field_command(
 
     Example: lensim lens field cooke_triplet --sensor apsc_mirrorless --json
     """
-    lens, matches = _load(lens_file, match_glass, _glass_makers(glass_makers, match_glass))
+    lens, matches = _load(lens_file, match_glass, _glass_makers(glass_makers, match_glass),
+                          (fno, object_m, focus_m, config))
     lens, fields = fields_to_show(lens, field, field_deg, image_height_mm)
     report = _field_report(lens, fields, sensor, aiming)
     if json_out:

@@ -11,10 +11,16 @@ import typer
 from lensim.cli.bank_options import (
     bank_settings,
     check_response,
+    config_option,
     fields_option,
+    fno_option,
+    focus_m_option,
+    lens_and_record,
+    object_m_option,
     pupil_samples_option,
     scheduler_option,
     setting_list_option,
+    shooting_settings,
     wavelengths_option,
     workers_option,
 )
@@ -57,9 +63,14 @@ def compute(
     aiming: str = typer.Option("real", "--aiming", help="Ray aiming: real or paraxial."),
     output: Path = typer.Option(None, "-o", "--output", help="Write the PSF array (.npy, energy per sample)."),
     json_out: bool = typer.Option(False, "--json", help="Print the figures (Strehl, RMS spot, EE50/EE80, chief-ray position) as JSON."),
+    fno: str = fno_option(),
+    object_m: str = object_m_option(),
+    focus_m: str = focus_m_option(),
+    config: str = config_option(),
 ) -> None:
     """One PSF: grid x grid samples at spacing_um, centred on the real chief-ray image point;
-    the array sums to the transmitted fraction (inside the window).
+    the array sums to the transmitted fraction (inside the window). --fno, --object-m,
+    --focus-m and --config set the lens first (--json prints them resolved as "settings").
 
     Example: lensim psf compute cooke_triplet --field 0.7 --wavelength-nm 550 -o psf.npy --json
     """
@@ -72,7 +83,7 @@ def compute(
     positive(spacing_um, "--spacing-um", "um", "a sample spacing")
     if output is not None:
         output_file(output, suffixes=(".npy",))
-    lens = load_lens(lens_file)
+    lens, described = lens_and_record(lens_file, shooting_settings(fno, object_m, focus_m, config))
     psf = compute_psf(lens, field, wavelength_nm / 1000.0, method, pupil_samples, grid, spacing_um, aiming)
     if output is not None:
         import io
@@ -83,6 +94,8 @@ def compute(
     info = {"lens": lens.source, "field": field, "field_value": psf.field_value, "field_type": lens.field_type,
             "wavelength_nm": wavelength_nm, "method": method, "grid": grid, "spacing_um": spacing_um,
             "pupil_samples": pupil_samples, "aiming": aiming, **psf.figures}
+    if described is not None:
+        info["settings"] = described
     if json_out:
         print_json(info)
         return

@@ -16,8 +16,14 @@ from lensim.cli.bank_options import (
     cache_option,
     cached_bank,
     check_response,
+    config_option,
     fields_option,
+    fno_option,
+    focus_m_option,
+    lens_and_record,
+    object_m_option,
     pupil_samples_option,
+    shooting_settings,
     wavelengths_option,
 )
 from lensim.cli.common import console, print_json
@@ -26,7 +32,6 @@ from lensim.errors import InputError, PupilSamplingError
 from lensim.images import read_image, write_image
 from lensim.io import atomic_write_text
 from lensim.optics.lens import Lens
-from lensim.optics.lens_file import load_lens
 from lensim.psf.bank import BankSettings, PSFBank
 from lensim.render.kernels import check_bank_fits
 from lensim.render.mapping import map_to_sensor
@@ -59,6 +64,10 @@ def simulate_command(
     cache: Path = cache_option(),
     quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
     json_out: bool = typer.Option(False, "--json", help="Print what was written and drawn as JSON."),
+    fno: str = fno_option(),
+    object_m: str = object_m_option(),
+    focus_m: str = focus_m_option(),
+    config: str = config_option(),
 ) -> None:
     """Simulate what the camera (lens + sensor) would deliver for each sharp photo.
 
@@ -66,17 +75,23 @@ def simulate_command(
     every pixel has a physical field position; the PSF bank is computed at that effective
     pitch and cached (the bank options are those of `psf bank` and `dataset make`, with the
     same defaults). Writes OUT/<name>.png and OUT/<name>.json (the draws: colour
-    temperature, noise levels, seed).
+    temperature, noise levels, seed; with --fno/--object-m/--focus-m/--config, the resolved
+    shooting settings).
 
     Example: lensim simulate photo.png --lens cooke_triplet --sensor apsc_mirrorless -o sim/
     """
     settings = bank_settings(fields, wavelengths, pupil_samples, cache)
+    shooting = shooting_settings(fno, object_m, focus_m, config)
     _check_options(output, fmt, bits, demosaic, workers, cache)
     _check_photos(images, fmt)
+    described = None
     if bank_dir is not None:
-        given_bank, lens = bank_for_lens(bank_dir, lens_file)
+        given_bank, lens = bank_for_lens(bank_dir, lens_file, shooting)
+        recorded = given_bank.manifest.get("shooting")  # a bank of one setting (psf bank --fno ...)
+        described = recorded.get("resolved") if isinstance(recorded, dict) else None
     else:
-        given_bank, lens = None, load_lens(lens_file or assets.DEFAULT_LENS)
+        given_bank = None
+        lens, described = lens_and_record(lens_file or assets.DEFAULT_LENS, shooting)
     sensor = load_sensor(sensor_file)
     if given_bank is None and (blur or distortion):
         check_response(settings, sensor.spectral_response, sensor=sensor)
@@ -105,6 +120,8 @@ def simulate_command(
         write_image(target, out, bits)
         info = {"input": str(path), "output": str(target), "seed": seed + i, "lens": lens.source, "sensor": sensor.name,
                 "bank": None if bank is None else str(bank.directory), **params.to_dict()}
+        if described is not None:
+            info["settings"] = described
         atomic_write_text(output / (path.stem + ".json"), json.dumps(info, indent=2, default=str) + "\n")
         results.append(info)
         if not quiet and not json_out:

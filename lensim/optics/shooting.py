@@ -127,6 +127,14 @@ class ShootingSettings:
                                                f"{', '.join(OPTIONS)}")
         return cls(**{k: data.get(k) for k in OPTIONS})
 
+    @classmethod
+    def from_text(cls, fno: str | None = None, object_m: str | None = None, focus_m: str | None = None,
+                  config: str | None = None) -> ShootingSettings:
+        """From command-line text: numbers, distances also "inf"; None where not given."""
+        numbers = {k: None if v is None else _number(v, k, allow_inf=k != "fno")
+                   for k, v in (("fno", fno), ("object_m", object_m), ("focus_m", focus_m))}
+        return cls(**numbers, config=config)
+
     def distances_m(self) -> tuple[float | None, float | None]:
         """(object_m, focus_m) with one given for the other when only one is set."""
         obj = self.object_m if self.object_m is not None else self.focus_m
@@ -283,13 +291,21 @@ def _check_fno(lens_inf: Lens, fno: float, largest_mm: float) -> float:
     return stop
 
 
+def _configuration_key(lens: Lens, key: str) -> str:
+    """The configuration's name (resolve_configuration); an unknown key names --config."""
+    try:
+        return resolve_configuration(lens, key)
+    except InputError as e:
+        raise InputError(e.source, "--config", e.message) from None
+
+
 def lens_at(lens: Lens, settings: ShootingSettings | None) -> Lens:
     """The lens at these shooting settings (see the module docstring). The lens itself when
     every setting is None; otherwise a new Lens without configurations whose aperture is
     its physical stop (aperture_type "stop_semi_diameter")."""
     settings = settings or ShootingSettings()
     if settings.config is not None:
-        lens = apply_configuration(lens, settings.config)
+        lens = apply_configuration(lens, _configuration_key(lens, settings.config))
     if settings.fno is None and settings.object_m is None and settings.focus_m is None:
         return lens
     base = lens.with_changes(configurations={})
@@ -313,12 +329,18 @@ def describe(lens: Lens, settings: ShootingSettings | None) -> dict[str, Any]:
     configuration's name or None}. Without focus or object settings the lens file's object
     distance is both."""
     settings = settings or ShootingSettings()
-    config = resolve_configuration(lens, settings.config) if settings.config is not None else None
+    config = _configuration_key(lens, settings.config) if settings.config is not None else None
     at = lens_at(lens, settings)
     inf = _at_infinity(at)
     object_m = math.inf if at.infinite_object else (at.object_distance + _image_z(at)) / 1000.0
     _, focus_m = settings.distances_m()
     para_inf = paraxial_data(inf)
-    return {"fno": abs(para_inf.efl_mm) / para_inf.epd_mm, "working_fno": paraxial_data(at).working_fno,
-            "focus_m": object_m if focus_m is None else focus_m, "object_m": object_m,
-            "focal_mm": para_inf.efl_mm, "config": config}
+    return {"fno": float(abs(para_inf.efl_mm) / para_inf.epd_mm), "working_fno": float(paraxial_data(at).working_fno),
+            "focus_m": float(object_m if focus_m is None else focus_m), "object_m": float(object_m),
+            "focal_mm": float(para_inf.efl_mm), "config": config}
+
+
+def record(described: Mapping[str, Any]) -> dict[str, Any]:
+    """describe()'s dict for a JSON file (strict JSON): infinite distances as the string
+    "inf" (float("inf") reads it back; so does lensim.restore.conditioning)."""
+    return {k: ("inf" if isinstance(v, float) and math.isinf(v) else v) for k, v in described.items()}

@@ -477,9 +477,6 @@ class _Reader:
                     raise self.err(line, "THIC", f"surface {s} has no value for configuration {k} of {n}")
                 thicknesses[s - 1] = per[k][0]
             out[str(k)] = thicknesses
-        self.notes.append(f"{n} configurations read from the multi-configuration editor (THIC operands on surfaces "
-                          f"{', '.join(str(s) for s in sorted(optical))}); the lens as saved is configuration "
-                          f"{active}; choose one with --config 1..{n}")
         return out
 
     def apertures(self, s: _Surf) -> tuple[float | None, float | None]:
