@@ -340,3 +340,50 @@ def test_banks_simulate_and_pairs_record_the_settings(tmp_path, capsys, monkeypa
     assert code == 0, err
     records = json.loads((tmp_path / "data" / "manifest.json").read_text())["records"]
     assert [r["settings"] for r in records] == [want] * 2
+
+
+# ---------------------------------------------------------------- the native focus block and fields
+
+@pytest.mark.parametrize("focus, match", [
+    ({"thickness": 9}, r"focus.thickness: expected a surface index 0..5"),
+    ({"thickness": 0}, r"focus.thickness: expected an air gap, but surfaces\[0\] is followed by"),
+    ({"thickness": 1, "compensator": 1}, "focus.compensator: expected another gap than focus.thickness"),
+    ({"thickness": "1"}, "focus.thickness: expected a 0-based surface index"),
+    ({"thickness": True}, "focus.thickness: expected a 0-based surface index"),
+    ({"compensator": 3}, "focus.thickness: missing"),
+    ({"thickness": 1, "group": 3}, r"focus: unknown key\(s\) group"),
+    ([1, 3], "focus: expected a mapping"),
+])
+def test_bad_focus_blocks_are_named(focus, match: str) -> None:
+    data = lens_to_dict(load_lens("cooke_triplet"))
+    data["focus"] = focus
+    with pytest.raises(InputError, match=match):
+        lens_from_dict(data, source="t.yaml")
+
+
+def test_object_height_fields_become_the_angles_they_subtend() -> None:
+    data = lens_to_dict(load_lens("cooke_triplet"))
+    data["object"] = {"distance": 800.0}
+    data["fields"] = {"type": "object_height", "values": [0.0, 100.0, 200.0]}
+    lens = lens_from_dict(data)
+    z_ep = paraxial_data(lens).entrance_pupil_z_mm
+    at = lens_at(lens, ShootingSettings(focus_m=math.inf))
+    assert at.infinite_object and at.field_type == "angle"
+    assert at.fields == pytest.approx([math.degrees(math.atan2(h, 800.0 + z_ep)) for h in (0.0, 100.0, 200.0)])
+    # the file's own object distance keeps its fields
+    same = lens_at(lens, ShootingSettings(fno=8))
+    assert same.field_type == "object_height" and same.fields == lens.fields
+
+
+def test_lens_info_shows_the_lens_at_a_zoom_position(reference_lenses, capsys, monkeypatch) -> None:
+    import json
+
+    from cli_runner import run_cli
+
+    code, out, err = run_cli(["lens", "info", str(reference_lenses / "nikon_80-200_zoom.zmx"), "--config", "3",
+                              "--fno", "4", "--json"], capsys, monkeypatch)
+    assert code == 0, err
+    info = json.loads(out)
+    assert info["efl_mm"] == pytest.approx(143.0764, abs=1e-3)
+    assert info["settings"]["config"] == "3" and info["settings"]["fno"] == pytest.approx(4.0)
+    assert info["epd_mm"] == pytest.approx(info["efl_mm"] / 4.0, rel=1e-9)

@@ -50,14 +50,24 @@ def _load(lens_file: str, match_glass: bool = False, makers: Optional[list[str]]
     """Load a lens; with match_glass its model glasses become the nearest catalogue glasses;
     then it is set to the shooting options (--fno, --object-m, --focus-m, --config).
     Returns (lens, glass matches)."""
-    from lensim.optics.shooting import lens_at
+    lens, matches, _ = _load_set(lens_file, match_glass, makers, shooting)
+    return lens, matches
+
+
+def _load_set(lens_file: str, match_glass: bool = False, makers: Optional[list[str]] = None,
+              shooting: tuple[Optional[str], ...] = (None, None, None, None)):
+    """_load, and the shooting settings resolved as records keep them (None when none is
+    given)."""
+    from lensim.optics.shooting import describe, lens_at, record
 
     settings = shooting_settings(*shooting)
     lens = load_lens(lens_file)
     matches: list[dict] = []
     if match_glass:
         lens, matches = match_glasses(lens, makers)
-    return lens_at(lens, settings), matches
+    if settings.is_default:
+        return lens, matches, None
+    return lens_at(lens, settings), matches, record(describe(lens, settings))
 
 
 def _fmt(x, digits=6) -> str:
@@ -86,9 +96,11 @@ def info(
     Example: lensim lens info phone_wide --match-glass --glass-makers Ohara,Schott --json
     """
     choice(aiming, AIMINGS, "--aiming")
-    lens, matches = _load(lens_file, match_glass, _glass_makers(glass_makers, match_glass),
-                          (fno, object_m, focus_m, config))
+    lens, matches, described = _load_set(lens_file, match_glass, _glass_makers(glass_makers, match_glass),
+                                         (fno, object_m, focus_m, config))
     summary = first_order_summary(lens, aiming=aiming)
+    if described is not None:
+        summary["settings"] = described
     if json_out:
         print_json(summary | {"glass_matches": matches} if match_glass else summary)
         return
@@ -123,6 +135,8 @@ def info(
     for k, v in rows:
         f.add_row(k, v)
     console.print(f)
+    if described is not None:
+        console.print("settings: " + ", ".join(f"{k} {v}" for k, v in described.items()), highlight=False)
     for note in lens.notes:
         console.print(f"note: {note}", highlight=False)
 
