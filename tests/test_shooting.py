@@ -387,3 +387,15 @@ def test_lens_info_shows_the_lens_at_a_zoom_position(reference_lenses, capsys, m
     assert info["efl_mm"] == pytest.approx(143.0764, abs=1e-3)
     assert info["settings"]["config"] == "3" and info["settings"]["fno"] == pytest.approx(4.0)
     assert info["epd_mm"] == pytest.approx(info["efl_mm"] / 4.0, rel=1e-9)
+
+
+def test_a_demo_folder_refuses_other_shooting_settings(tmp_path, capsys, monkeypatch) -> None:
+    # a demo folder made at the lens file's settings is not resumed at F/8 (its cached
+    # bank and pairs are of another lens): one line naming the marker, nothing computed
+    from cli_runner import run_cli
+    from lensim.demo import DemoSettings, _claim_folder
+
+    _claim_folder(tmp_path, DemoSettings.make(True), quick=True, seed=0)
+    code, _, err = run_cli(["demo", "--quick", "--fno", "8", "-o", str(tmp_path)], capsys, monkeypatch)
+    assert code == 2 and "demo.json" in err and "shooting=None" in err and err.count("\n") == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["demo.json"]
