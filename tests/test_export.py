@@ -331,3 +331,35 @@ def test_raw_worker_processes_run_onnxruntime(tmp_path: Path, capsys, monkeypatc
     for d in dngs:
         a, b = read_tif16(tmp_path / "torch" / f"{d.stem}.tif"), read_tif16(tmp_path / "ort" / f"{d.stem}.tif")
         assert np.abs(a - b).max() < TOL
+
+
+def test_execution_providers(monkeypatch):
+    """cpu runs on the CPU provider; cuda:N asks for the CUDA provider on device N (with the
+    CPU one behind it) where onnxruntime has it, else a one-line refusal naming --device."""
+    import onnxruntime as ort
+
+    from lensim.errors import InputError
+    from lensim.restore.engines import providers_for
+
+    assert providers_for("cpu") == ["CPUExecutionProvider"]
+    monkeypatch.setattr(ort, "get_available_providers", lambda: ["CUDAExecutionProvider", "CPUExecutionProvider"])
+    assert providers_for("cuda:1") == [("CUDAExecutionProvider", {"device_id": 1}), "CPUExecutionProvider"]
+    assert providers_for("cuda")[0] == ("CUDAExecutionProvider", {"device_id": 0})
+    monkeypatch.setattr(ort, "get_available_providers", lambda: ["CPUExecutionProvider"])
+    with pytest.raises(InputError, match="--device: 'cuda' requested but this onnxruntime has no CUDA"):
+        providers_for("cuda")
+    with pytest.raises(InputError, match="--device: expected cpu, cuda or cuda:N"):
+        providers_for("gpu")
+
+
+def test_onnx_file_warns_about_another_camera_like_a_checkpoint(narrow):
+    from lensim.restore.engines import load_engine
+
+    _, _, path = narrow
+    engine, info = load_engine(path, "onnxruntime", lens={"name": "test lens"})
+    assert info["sensor"]["resolution"] == [6000, 4000] and info["lens"] == {"name": "test lens"}
+    other = load_sensor("phone").to_dict()
+    with pytest.warns(UserWarning, match=r"model\.onnx: trained for sensor .*used for sensor"):
+        load_engine(path, "onnxruntime", sensor=other)
+    with pytest.warns(UserWarning, match=r"trained for lens 'test lens', used for lens 'other'"):
+        load_engine(path, "onnxruntime", lens={"name": "other"})

@@ -232,8 +232,6 @@ RESTORING = [
     case("restore-onnx-engine-torch", "restore {t}/m.onnx {w.photo} -o {t}/out", "m.onnx", "--engine onnxruntime",
          make=text("m.onnx", "x")),
     case("restore-onnx-device-banana", RESTORE + "--engine onnxruntime --device banana", "--device", "banana"),
-    case("restore-onnx-device-cuda", RESTORE + "--engine onnxruntime --device cuda:0", "--device", "cuda:0",
-         "CUDAExecutionProvider"),
     case("export-opset-16", EXPORT + "--opset 16", "--opset", "16"),
     case("export-opset-99", EXPORT + "--opset 99", "--opset", "99"),
     case("export-output-txt", "export {w.run} -o {t}/m.txt", "m.txt", ".onnx"),
@@ -339,6 +337,10 @@ USAGE = [
     case("usage-out-of-range-rays", "lens plot cooke_triplet -o {t}/p.png --rays 0", "--rays"),
     case("usage-bad-choice", "lens spot cooke_triplet --json --reference banana", "--reference", "banana"),
 ]
+
+if "CUDAExecutionProvider" not in __import__("onnxruntime").get_available_providers():  # the CPU build (CI's)
+    RESTORING.append(case("restore-onnx-device-cuda", RESTORE + "--engine onnxruntime --device cuda:0", "--device",
+                          "cuda:0", "CUDAExecutionProvider"))
 
 ALL: list[Case] = (PSF_COMPUTE + PSF_BANK + LENS + LENS_OUTPUTS + SIMULATE + DATASET_MAKE + TRAINING + RESTORING
                    + EVALUATING + SHOOTING + USAGE)
