@@ -3,18 +3,22 @@ turn (FOV input, deformable decoder, context block), and a plain network of abou
 parameter count, trained on the same pairs with the same time budget and evaluated on the
 same held-out photos. Either architecture (lensim.restore.models): the field-aware UNet
 ("unet", the paper's) or NAFNet with the same switches ("nafnet"; its plain variant is
-called plain-nafnet)."""
+called plain-nafnet).
+
+A killed ablation resumes when run again with the same options: finished variants are
+reused (RUN/done.json), an unfinished one continues from its RUN/last.pt on the rest of its
+time budget (lensim.restore.train's resume), and one killed before its first checkpoint
+starts again. torch and the training modules load when run_ablation runs."""
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 from typing import Any, Callable
 
 from lensim.data.manifest import read_held_out, read_pairs_manifest
 from lensim.errors import InputError
 from lensim.io import atomic_write_json, folder_lock, read_json
-from lensim.restore.models import ARCHS, build_model, default_width
-from lensim.restore.network import count_parameters
-from lensim.restore.train import TrainConfig, budget_progress, train
+from lensim.restore.config import TrainConfig
 
 ALL_OFF = {"use_fov": False, "use_deformable": False, "use_context": False}
 VARIANTS: dict[str, dict] = {
@@ -48,7 +52,10 @@ def run_ablation(pairs_dir: str | Path, out_dir: str | Path, time_budget_s: floa
     metrics}}}. width: of the full network (None: the architecture's default, matched to the
     default network's size). say(stage) announces each training and the evaluation;
     progress(done, total) reports training seconds and evaluated crops within them. out_dir
-    is locked while it runs (lensim.io.folder_lock)."""
+    is locked while it runs (lensim.io.folder_lock). A variant's run folder left unfinished
+    by a kill (no done.json) continues from its last.pt (_train_variant)."""
+    from lensim.restore.models import ARCHS, default_width
+
     if arch not in ARCHS:
         raise InputError(None, "arch", f"expected one of {', '.join(ARCHS)}, got {arch!r}")
     table = variants_for(arch)
@@ -69,8 +76,9 @@ def run_ablation(pairs_dir: str | Path, out_dir: str | Path, time_budget_s: floa
 
 def _plain_width(arch: str, width: int, crop: int | None) -> int:
     """Width of the plain network (every switch off) with the full network's parameter count."""
+    from lensim.restore.models import build_model
     from lensim.restore.nafnet import nafnet_width
-    from lensim.restore.network import plain_unet_width
+    from lensim.restore.network import count_parameters, plain_unet_width
 
     full = count_parameters(build_model(_config(arch, width, crop, {})))
     if arch == "unet":
@@ -79,11 +87,31 @@ def _plain_width(arch: str, width: int, crop: int | None) -> int:
     return nafnet_width(full, **plain)
 
 
+def _train_variant(pairs_dir: str | Path, run: Path, time_budget_s: float, device: str,
+                   progress: Callable[[float, float], None] | None, network: dict[str, Any]) -> Any:
+    """Train one variant into ``run`` for ``time_budget_s`` seconds in all: a fresh run, or
+    the continuation of one a kill left there (RUN/last.pt: same data order and schedule, the
+    budget counts the seconds trained before; a changed network or crop is refused in one
+    line naming last.pt). A folder without last.pt (killed before its first checkpoint)
+    holds nothing to continue and is started again. Returns the TrainResult."""
+    from lensim.restore.checkpoint import LAST
+    from lensim.restore.train import budget_progress, train
+
+    resume = (run / LAST).is_file()
+    if run.exists() and not resume:
+        shutil.rmtree(run)
+    return train(pairs_dir, run, resume=resume, epochs=100_000, lr=5e-4, lr_schedule="cosine",
+                 time_budget_s=time_budget_s, device=device, progress=budget_progress(progress, time_budget_s),
+                 **network)
+
+
 def _run_variants(pairs_dir: str | Path, manifest: dict, out: Path, time_budget_s: float, width: int,
                   crop: int | None, seed: int, variants: dict[str, dict], say: Callable[[str], None], device: str,
                   progress: Callable[[float, float], None] | None, arch: str) -> dict:
     """run_ablation's training and evaluation, the output folder locked."""
     from lensim.evaluate.harness import checkpoint_method, evaluate
+    from lensim.restore.models import build_model
+    from lensim.restore.network import count_parameters
 
     results: dict[str, dict] = {}
     held_out = None
@@ -93,9 +121,8 @@ def _run_variants(pairs_dir: str | Path, manifest: dict, out: Path, time_budget_
         marker = run / "done.json"
         if not marker.exists():
             say(f"training {name} ({time_budget_s:g} s)")
-            res = train(pairs_dir, run, epochs=100_000, arch=arch, width=w, crop=crop, seed=seed, lr=5e-4,
-                        lr_schedule="cosine", time_budget_s=time_budget_s, device=device,
-                        progress=budget_progress(progress, time_budget_s), **switches)
+            res = _train_variant(pairs_dir, run, time_budget_s, device, progress,
+                                 dict(arch=arch, width=w, crop=crop, seed=seed, **switches))
             atomic_write_json(marker, {"steps": res.step, "seconds": res.seconds})
         held_out = held_out or read_held_out(run)
         params = count_parameters(build_model(_config(arch, w, crop, switches)))

@@ -139,3 +139,30 @@ def test_bad_variants_and_budgets_are_refused_before_any_work(tmp_path: Path) ->
     with pytest.raises(InputError, match="time_budget_s: expected a positive number of seconds"):
         run_ablation(tmp_path / "pairs", tmp_path / "out", 0.0)
     assert not (tmp_path / "out").exists()
+
+
+def test_a_killed_ablation_resumes(pairs: Path) -> None:
+    """A rerun after a kill: the unfinished variant (last.pt, no done.json) continues from
+    its checkpoint on the rest of its budget; one killed before its first checkpoint (no
+    last.pt) starts again; a changed network is refused in one line naming last.pt."""
+    from lensim.errors import InputError
+    from lensim.restore.checkpoint import read_checkpoint
+    from lensim.restore.train import train
+
+    out = pairs / "ablation-killed"
+    # what a kill leaves: the full variant trained part of its budget, the plain one only begun
+    partial = train(pairs / "pairs", out / "full", epochs=100_000, arch="unet", width=8, crop=32, seed=0, lr=5e-4,
+                    lr_schedule="cosine", time_budget_s=0.5)
+    (out / "plain-unet").mkdir(parents=True)
+    (out / "plain-unet" / "log.csv").write_text("epoch,step\n")
+    with pytest.raises(InputError, match=r"full/last.pt: crop: differs from the run being resumed"):
+        run_ablation(pairs / "pairs", out, time_budget_s=2.0, width=8, crop=48, variants=["full"])
+    said: list[str] = []
+    s = run_ablation(pairs / "pairs", out, time_budget_s=2.0, width=8, crop=32, variants=["full", "plain-unet"],
+                     say=said.append)
+    assert said[:2] == ["training full (2 s)", "training plain-unet (2 s)"]
+    ckpt = read_checkpoint(out / "full" / "last.pt")
+    assert s["variants"]["full"]["train"]["steps"] > partial.step  # continued, not started again
+    assert ckpt["train_config"]["time_budget_s"] == 2.0 and ckpt["train_seconds"] >= 1.9
+    assert s["variants"]["plain-unet"]["train"]["steps"] >= 1
+    assert (out / "ablation.json").is_file() and (out / "plain-unet" / "done.json").is_file()

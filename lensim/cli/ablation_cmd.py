@@ -10,7 +10,7 @@ from lensim.ablation import VARIANTS, variants_for
 from lensim.cli.common import StageBars, console, print_json
 from lensim.cli.validate import at_least, choice, input_folder, output_folder, positive
 from lensim.cli.validate import device as check_device
-from lensim.restore.train import TrainConfig
+from lensim.restore.config import TrainConfig
 
 _D = TrainConfig()
 

@@ -1,6 +1,7 @@
 """`lensim train`: train the field-aware restoration network on a pairs folder.
 
-Every default comes from lensim.restore.train.TrainConfig (the one place that sets them).
+Every default comes from lensim.restore.config.TrainConfig (the one place that sets them);
+torch and the training modules load when the command runs.
 
 Register in lensim/cli/__init__.py with
     app.command("train")(train_command)
@@ -10,9 +11,8 @@ from __future__ import annotations
 import math
 import shutil
 from pathlib import Path
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
-import torch
 import typer
 
 from lensim.cli.common import console, print_json
@@ -20,9 +20,10 @@ from lensim.cli.validate import at_least, choice, in_range, input_folder, output
 from lensim.cli.validate import device as check_device
 from lensim.errors import InputError
 from lensim.io import LOCK_NAME
-from lensim.restore.conditioning import Conditioning
-from lensim.restore.losses import LOSSES
-from lensim.restore.train import TrainConfig, TrainProgress, TrainResult
+from lensim.restore.config import TrainConfig
+
+if TYPE_CHECKING:
+    from lensim.restore.train import TrainProgress, TrainResult
 
 _D = TrainConfig()
 
@@ -90,6 +91,9 @@ def train_command(
 
     Example: lensim train data/ -o runs/a --epochs 30 --crop 128 --time-budget-s 1800
     """
+    import torch
+
+    from lensim.restore.losses import LOSSES
     from lensim.restore.train import train
 
     _check_recipe(epochs, batch_size, lr, lr_halve_every, lr_schedule, val_fraction, steps_per_epoch, time_budget_s)
@@ -237,6 +241,8 @@ def _report(result: TrainResult, quiet: bool, json_out: bool) -> None:
         vp = "n/a" if result.val_psnr is None else f"{result.val_psnr:.2f} dB (input {result.val_input_psnr:.2f} dB)"
         console.print(f"trained {result.step} steps in {result.seconds:.0f} s; validation PSNR {vp}; "
                       f"checkpoints in {result.run_dir}", highlight=False)
+        from lensim.restore.conditioning import Conditioning
+
         cond = Conditioning.from_dict(result.conditioning)
         if cond.dim:
             console.print(f"conditioned on {', '.join(cond.keys)} ({cond.describe()}): restore needs the photos' "

@@ -57,6 +57,7 @@ from lensim.restore.checkpoint import (
     refuse_existing_run,
 )
 from lensim.restore.conditioning import Conditioning
+from lensim.restore.config import TrainConfig
 from lensim.restore.dataset import PairDataset, crop_refs, sensor_hw, split_sources
 from lensim.restore.distributed import (
     Ranks,
@@ -72,104 +73,6 @@ from lensim.restore.losses import LOSSES, restoration_loss
 from lensim.restore.models import ARCHS, build_model, default_width
 from lensim.restore.run_log import RunLog
 from lensim.restore.schedule import LR_SCHEDULES, BudgetClock, LearningRate
-
-
-@dataclass
-class TrainConfig:
-    """Training settings (all recorded in RUN/config.json and in checkpoints).
-
-    epochs: epochs to train in total (a resumed run may raise it).
-    batch_size: crops per optimizer step (per rank under DDP).
-    lr: initial Adam learning rate.
-    lr_halve_every: epochs between halvings of the "step" schedule.
-    lr_schedule: "step" (halve every ``lr_halve_every`` epochs) or "cosine" (lr * (1 +
-        cos(pi p)) / 2 at progress p in [0, 1]: the share of the time budget spent when
-        one is set, else of the epochs; set before every step); lensim.restore.schedule.
-    crop: training sub-crop size in pixels (None: the stored crops).
-    arch: "unet" (lensim.restore.network.FieldAwareUNet) or "nafnet"
-        (lensim.restore.nafnet.NAFNet: one NAFBlock per encoder and decoder scale, two at
-        the smallest); lensim.restore.models builds either.
-    width: channels at full resolution (0: the architecture's default, the width that
-        matches the default FieldAwareUNet's parameter count: lensim.restore.models.default_width).
-    depth, use_fov, use_deformable, use_context, deformable_groups, deformable_scales: the
-        network's scales and switches, for either architecture.
-    field_modulation: FieldAwareUNet only.
-    stem: NAFNet only: 2 for a pixel-unshuffle stem (every layer at half resolution).
-    loss: the training loss, a key of lensim.restore.losses.LOSSES: "mse" (the paper's),
-        "charbonnier" or "charbonnier-edge" (Charbonnier plus an edge term that does not
-        reward over-smoothing).
-    seed: seeds model initialisation, data order, crops and augmentation.
-    augment: random FOV-consistent dihedral ops.
-    val_fraction: share of source photos held out for validation.
-    val_batch_size: crops per validation forward pass.
-    device: "cpu", "cuda", "cuda:N".
-    amp: mixed precision on CUDA (ignored on CPU).
-    time_budget_s: stop cleanly (checkpoint, log row) once the run has trained this many
-        seconds in all, counting the calls before a resume (None: no limit).
-    max_steps_per_epoch: cap on steps per epoch (None: the whole epoch), for quick runs.
-    checkpoint_every_s: also write RUN/last.pt within an epoch once this many seconds of
-        training passed since the last checkpoint (None: at epoch ends only), so a kill
-        loses at most that much work; a resume from it continues the same batches.
-    checkpoint_every_steps: likewise every this many optimizer steps (None: off).
-    use_settings: condition the network on the shooting settings of pairs made across a
-        grid (lensim.restore.conditioning: the settings that vary over the training
-        records become its inputs). False trains an unconditioned network on the same
-        pairs; the ranges are still recorded (and checked when restoring). No effect on
-        pairs without settings.
-    conditioning: what the run is conditioned on, Conditioning.to_dict() ({"keys": the
-        inputs in vector order, "ranges": {key: [smallest, largest]} over the training
-        records}); None: derived from the training records when the run starts (and
-        recorded here, in RUN/config.json and in checkpoints).
-    """
-
-    epochs: int = 30
-    batch_size: int = 4
-    lr: float = 1e-4
-    lr_halve_every: int = 5
-    lr_schedule: str = "step"
-    crop: int | None = 128
-    arch: str = "unet"
-    width: int = 32
-    depth: int = 3
-    use_fov: bool = True
-    use_deformable: bool = True
-    use_context: bool = True
-    deformable_groups: int = 2
-    deformable_scales: int | None = None
-    field_modulation: bool = False
-    loss: str = "mse"
-    stem: int = 1
-    seed: int = 0
-    augment: bool = True
-    val_fraction: float = 0.2
-    val_batch_size: int = 8
-    device: str = "cpu"
-    amp: bool = True
-    time_budget_s: float | None = None
-    max_steps_per_epoch: int | None = None
-    checkpoint_every_s: float | None = 300.0
-    checkpoint_every_steps: int | None = None
-    use_settings: bool = True
-    conditioning: dict[str, Any] | None = None
-
-    def model_kwargs(self) -> dict[str, Any]:
-        """The network's config for lensim.restore.models.build_model ("arch" included)."""
-        switches = {"use_fov": self.use_fov, "use_deformable": self.use_deformable, "use_context": self.use_context,
-                    "deformable_groups": self.deformable_groups,
-                    "settings_dim": Conditioning.from_dict(self.conditioning).dim}
-        if self.arch == "nafnet":
-            if self.field_modulation:
-                raise InputError(None, "field_modulation", "is a FieldAwareUNet option; expected it off with "
-                                 "arch 'nafnet'")
-            n = self.depth - 1
-            return {"arch": "nafnet", "width": self.width, "enc_blocks": [1] * n, "middle_blocks": 2,
-                    "dec_blocks": [1] * n, **switches, "stem": self.stem,
-                    "deformable_scales": n if self.deformable_scales is None else self.deformable_scales}
-        if self.stem != 1:
-            raise InputError(None, "stem", f"is a NAFNet option; expected 1 with arch {self.arch!r}, got {self.stem}")
-        return {"arch": self.arch, "width": self.width, "depth": self.depth, **switches,
-                "deformable_scales": self.deformable_scales, "field_modulation": self.field_modulation}
-
 
 # Settings that must not change when resuming (they would change the loss curve's meaning).
 FROZEN_ON_RESUME = ("loss", "batch_size", "lr", "lr_halve_every", "lr_schedule", "crop", "arch", "width", "depth",
