@@ -363,3 +363,38 @@ def test_onnx_file_warns_about_another_camera_like_a_checkpoint(narrow):
         load_engine(path, "onnxruntime", sensor=other)
     with pytest.warns(UserWarning, match=r"trained for lens 'test lens', used for lens 'other'"):
         load_engine(path, "onnxruntime", lens={"name": "other"})
+
+
+def test_library_refusals(narrow, tmp_path: Path):
+    """export_onnx itself (not only the CLI) refuses a destination under a file, a folder
+    as destination, an opset outside 17..max_opset() and leaves nothing behind."""
+    from lensim.errors import InputError
+    from lensim.restore.export import max_opset
+
+    _, run, _ = narrow
+    (tmp_path / "afile").write_text("x")
+    (tmp_path / "folder.onnx").mkdir()
+    with pytest.raises(InputError, match="afile is a file, not a folder"):
+        export_onnx(run, tmp_path / "afile" / "m.onnx")
+    with pytest.raises(InputError, match="folder.onnx: is a folder"):
+        export_onnx(run, tmp_path / "folder.onnx")
+    for opset in (16, max_opset() + 1):
+        with pytest.raises(InputError, match=f"--opset: expected an ONNX opset from 17 to {max_opset()}"):
+            export_onnx(run, tmp_path / "m.onnx", opset=opset)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["afile", "folder.onnx"]
+
+
+def test_the_export_uses_the_grid_sample_dcn_whatever_the_backend_named():
+    """A network configured for torchvision's deformable op (CUDA) exports through the
+    pure-PyTorch grid_sample DCN; the network itself is left as it was."""
+    from lensim.restore.deform import ModulatedDeformConv2d
+    from lensim.restore.export import _cpu_float_copy
+
+    model = perturbed(5, width=8, depth=2)
+    for m in model.modules():
+        if isinstance(m, ModulatedDeformConv2d):
+            m.backend = "torchvision"
+    twin = _cpu_float_copy(model)
+    backends = {m.backend for m in twin.modules() if isinstance(m, ModulatedDeformConv2d)}
+    assert backends == {"grid_sample"}
+    assert {m.backend for m in model.modules() if isinstance(m, ModulatedDeformConv2d)} == {"torchvision"}

@@ -239,9 +239,17 @@ def _strict(x: Any) -> Any:
 
 
 def _cpu_float_copy(model: nn.Module) -> nn.Module:
+    """A float32 CPU copy in eval mode whose deformable convolutions use the pure-PyTorch
+    grid_sample backend (what exports; torchvision's op would not)."""
     import copy
 
-    return copy.deepcopy(model).to(device="cpu", dtype=torch.float32).eval()
+    from lensim.restore.deform import ModulatedDeformConv2d
+
+    twin = copy.deepcopy(model).to(device="cpu", dtype=torch.float32).eval()
+    for module in twin.modules():
+        if isinstance(module, ModulatedDeformConv2d):
+            module.backend = "grid_sample"
+    return twin
 
 
 def _check_destination(path: Path) -> None:
