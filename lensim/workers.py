@@ -53,11 +53,26 @@ def exit_with_parent(parent_pid: int, poll_s: float = 0.25) -> None:
     threading.Thread(target=_watch, args=(parent_pid, poll_s), name="lensim-exit-with-parent", daemon=True).start()
 
 
+class _Failed:
+    """An exception raised by a job, sent back as its result (so the worker does not log a
+    multi-line traceback of an error the parent reports in one line); an unexpected one
+    carries the worker's traceback as a note."""
+
+    def __init__(self, error: BaseException) -> None:
+        from lensim.errors import LensimError
+
+        if not isinstance(error, LensimError):
+            import traceback
+
+            error.add_note("in a Dask worker:\n" + "".join(traceback.format_exception(error)).rstrip())
+        self.error = error
+
+
 def _in_worker(fn: Callable[[Any], Any], job: Any, parent_pid: int | None) -> Any:
     """fn(job) in a Dask worker: tied to its parent when that is a local cluster's
     (parent_pid), with one torch thread (a job's tensors are small; more threads would
     fight the other workers for cores) and warnings dropped (a job returns what its
-    parent should report)."""
+    parent should report); an exception comes back as a _Failed result."""
     import warnings
 
     import torch
@@ -67,7 +82,10 @@ def _in_worker(fn: Callable[[Any], Any], job: Any, parent_pid: int | None) -> An
     torch.set_num_threads(1)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return fn(job)
+        try:
+            return fn(job)
+        except Exception as e:  # noqa: BLE001  (re-raised in the parent)
+            return _Failed(e)
 
 
 def run_jobs(fn: Callable[[J], R], jobs: Sequence[J], workers: int = 1, scheduler: str | None = None,
@@ -115,10 +133,13 @@ def _client(client_type: Any, address: Any) -> Any:
 
 def _run_on_dask(fn: Callable[[J], R], jobs: Sequence[J], workers: int, scheduler: str | None,
                  on_result: Callable[[J, R], None] | None) -> None:
+    import logging
+
     from distributed import Client, LocalCluster, as_completed
 
     cluster = None if scheduler else LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                                  dashboard_address=":0")  # no fixed port
+                                                  dashboard_address=":0",  # no fixed port
+                                                  silence_logs=logging.ERROR)  # no warnings of cancelled jobs
     parent = os.getpid() if cluster is not None else None
     try:
         with _client(Client, scheduler or cluster) as client:
@@ -127,6 +148,8 @@ def _run_on_dask(fn: Callable[[J], R], jobs: Sequence[J], workers: int, schedule
             try:
                 for fut in as_completed(futures):
                     result = fut.result()
+                    if isinstance(result, _Failed):
+                        raise result.error
                     if on_result is not None:
                         on_result(job_of[fut.key], result)
             except BaseException:

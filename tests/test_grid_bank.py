@@ -139,3 +139,17 @@ def test_nearest_and_interpolated(grid_dir):
                                                                    "does not vary")):
         with pytest.raises(InputError, match=needle):
             grid.interpolated(**bad)
+
+
+def test_f_numbers_blended_across_more_than_a_stop_warn(grid_dir):
+    from lensim.psf.bank.grid_interp import GridInterpolationWarning, _bracket, coordinate
+
+    assert coordinate("fno", 8.0) - coordinate("fno", 4.0) == pytest.approx(2.0)  # two stops
+    assert coordinate("focus_m", math.inf) == 0.0 and coordinate("focus_m", 4.0) == 0.25
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        GridBank.load(grid_dir).interpolated(fno=6.7, focus_m=3.0)  # F/5.6 to F/8: one stop, no warning
+        assert _bracket("focus_m", [math.inf, 1.0], 3.0, "g") == [(math.inf, pytest.approx(2 / 3)),
+                                                                  (1.0, pytest.approx(1 / 3))]
+    with pytest.warns(GridInterpolationWarning, match="1.9 stops apart"):
+        assert [v for v, _ in _bracket("fno", [5.6, 11.0], 8.0, "g")] == [5.6, 11.0]

@@ -47,13 +47,21 @@ def test_jobs_here_report_each_result_and_keep_torch_threads():
     assert len(got) == 3
 
 
-def test_jobs_on_a_cluster_by_address(scheduler):
+def _broken(x: int) -> int:
+    return {}[x]
+
+
+def test_jobs_on_a_cluster_by_address(scheduler, capfd):
     got = {}
     run_jobs(_square, list(range(6)), scheduler=scheduler, on_result=lambda j, r: got.__setitem__(j, r))
     assert got == {j: j * j for j in range(6)}
     with pytest.raises(InputError, match="expected anything but 2") as e:
         run_jobs(_refuse, [1, 2, 3], scheduler=scheduler)
     assert (e.value.source, e.value.field) == ("job.yaml", "x")
+    assert "Compute Failed" not in capfd.readouterr().err  # the one-line error only, no worker traceback logged
+    with pytest.raises(KeyError) as k:  # a bug keeps the worker's traceback, as a note
+        run_jobs(_broken, [7], scheduler=scheduler)
+    assert any("in a Dask worker" in n and "_broken" in n for n in k.value.__notes__)
 
 
 def test_bank_on_a_cluster_by_address_is_bitwise_the_bank_computed_here(scheduler, tmp_path):

@@ -208,11 +208,22 @@ class FieldTask:
     field: float
     para: ParaxialData
     bank: int = 0
+    label: str = ""
 
 
 def compute_field_task(task: FieldTask) -> BankField:
-    """The field a FieldTask names (run in this process or in a worker)."""
-    return _compute_field(task.job, task.index, task.field, task.para)
+    """The field a FieldTask names (run in this process or in a worker); an error names
+    the bank's label (a grid's setting) after the field."""
+    try:
+        return _compute_field(task.job, task.index, task.field, task.para)
+    except PupilSamplingError as e:
+        if not task.label:
+            raise
+        raise PupilSamplingError(e.source, f"{e.field} ({task.label})", e.message, e.needed) from None
+    except InputError as e:
+        if not task.label:
+            raise
+        raise type(e)(e.source, f"{e.field} ({task.label})" if e.field else task.label, e.message) from None
 
 
 def _check_fields(lens: Lens, fields: list[float] | np.ndarray | None) -> np.ndarray:
@@ -303,7 +314,7 @@ class BankPlan:
 
     def tasks(self, bank: int = 0) -> list[FieldTask]:
         """The fields still to compute, tagged with `bank`."""
-        return [FieldTask(self.job, i, float(f), self.para, bank) for i, f in enumerate(self.fields)
+        return [FieldTask(self.job, i, float(f), self.para, bank, self.label) for i, f in enumerate(self.fields)
                 if i not in self.done]
 
     def finish(self, bf: BankField) -> None:
