@@ -10,13 +10,13 @@ in those coordinates, field by field (the grid's banks share fields, kernel size
 wavelengths). Values outside an axis's range are refused: kernels are not extrapolated.
 Configurations are names: a request must name one of the grid's (no blending across them).
 
-Where it is sound (benchmarks/grid_bank.py, Cooke triplet; docs/psf.md has the table):
-focus distance, linear in dioptres, is close to exact (4 m from infinity and 2 m: kernel
-NCC 0.9999 or better, blurred photos agree to 78 dB and more), as defocus is linear in
+Where it is sound (benchmarks/grid_bank.py, Cooke triplet on APS-C; docs/psf.md has the
+table): focus distance, linear in dioptres, is close to exact (4 m from infinity and 2 m:
+worst kernel NCC 0.9993, blurred photos agree to 79 dB and more), as defocus is linear in
 dioptres. F-number is an approximation: a blur of one size blended with a blur of another
-is not the blur of the size between. A half stop from grid F-numbers one stop apart
-gives kernel NCC 0.96 (better than either neighbour, 0.91-0.92); from two stops apart
-0.89. Blending across F-numbers more than one stop apart therefore warns
+is not the blur of the size between. F/6.7 from F/5.6 and F/8 (one stop apart) gives a
+worst kernel NCC of 0.96 (either neighbour alone 0.92); F/8 from F/5.6 and F/11 (two
+stops) 0.91. Blending across F-numbers more than one stop apart therefore warns
 (GridInterpolationWarning): make the grid denser in F-number instead.
 """
 from __future__ import annotations
