@@ -13,7 +13,8 @@ sensor's geometry, with the CLI's allocator setting (lensim.cli.allocator) and
 torch.inference_mode. Rounds interleave the variants (the order rotates each round), so
 every variant sees the same machine load; MP/s is the median over rounds and "vs old" the
 median of the per-round ratios to ``unet``. Weights are random (seeded): speed and memory
-do not depend on training. Variants:
+do not depend on training; every weight is perturbed so that no layer is zero (NAFNet's
+residual scales and the zero-initialised last convs would be). Variants:
 
 * unet: the default field-aware UNet (width 32, DCN at the coarsest decoder scale), the
   old default (0.19 MP/s in issue 5's measurement);
@@ -64,6 +65,9 @@ elif base == "nafnet-full":
 else:
     raise SystemExit(f"unknown variant {variant}")
 params = count_parameters(model)
+with torch.no_grad():  # no zero layer (zero-initialised tails, NAFNet's beta and gamma) an engine could fold away
+    for p in model.parameters():
+        p.add_(0.02 * torch.randn_like(p))
 opts = set(variant.split("+")[1:])
 model.eval()
 engine = model

@@ -263,6 +263,15 @@ def _app() -> typer.Typer:
     return app
 
 
+def test_deformable_groups_checked_only_with_deformable_blocks() -> None:
+    """An odd width is fine without deformable blocks (benchmarks train the plain UNet at 37)."""
+    from lensim.cli.train_cmd import _check_network
+
+    _check_network("unet", 37, 3, 2, -1, False, True, 1, no_deformable=True)
+    with pytest.raises(InputError, match="--deformable-groups"):
+        _check_network("unet", 37, 3, 2, -1, False, True, 1, no_deformable=False)
+
+
 def test_train_and_evaluate_with_arch(tmp_path: Path) -> None:
     """`lensim train --arch nafnet` (default width: the size-matched one) writes a NAFNet
     checkpoint that load_checkpoint rebuilds; `lensim evaluate --arch` checks what it loads."""

@@ -97,7 +97,8 @@ def train_command(
     from lensim.restore.train import train
 
     _check_recipe(epochs, batch_size, lr, lr_halve_every, lr_schedule, val_fraction, steps_per_epoch, time_budget_s)
-    _check_network(arch, width, depth, deformable_groups, deformable_scales, field_modulation, no_fov, stem)
+    _check_network(arch, width, depth, deformable_groups, deformable_scales, field_modulation, no_fov, stem,
+                   no_deformable)
     choice(loss, tuple(LOSSES), "--loss")
     at_least(threads, 0, "--threads", what="a number of threads (0: PyTorch's default)")
     at_least(checkpoint_every_s, 0.0, "--checkpoint-every-s", "s", "an interval (0: at epoch ends only)")
@@ -153,7 +154,7 @@ def _check_recipe(epochs: int, batch_size: int, lr: float, lr_halve_every: int, 
 
 
 def _check_network(arch: str, width: int, depth: int, groups: int, deformable_scales: int, field_modulation: bool,
-                   no_fov: bool, stem: int) -> None:
+                   no_fov: bool, stem: int, no_deformable: bool = False) -> None:
     """The network's options (the rules of lensim.restore.network.FieldAwareUNet and
     lensim.restore.nafnet.NAFNet), before any work."""
     from lensim.restore.models import ARCHS
@@ -162,7 +163,7 @@ def _check_network(arch: str, width: int, depth: int, groups: int, deformable_sc
     at_least(width, 0, "--width", "channels", "a width (0: the architecture's default)")
     at_least(depth, 2, "--depth", "scales", "a depth")
     at_least(groups, 1, "--deformable-groups", what="a number of offset groups")
-    if width and width % groups:
+    if width and width % groups and not no_deformable:  # the groups split the deformable blocks' channels
         raise InputError("--deformable-groups", None, f"expected a divisor of --width {width}, got {groups}")
     in_range(deformable_scales, -1, depth - 1, "--deformable-scales", what="a number of decoder scales (-1: all)")
     if arch == "nafnet" and deformable_scales == 0:
