@@ -153,3 +153,29 @@ def test_f_numbers_blended_across_more_than_a_stop_warn(grid_dir):
                                                                   (1.0, pytest.approx(1 / 3))]
     with pytest.warns(GridInterpolationWarning, match="1.9 stops apart"):
         assert [v for v, _ in _bracket("fno", [5.6, 11.0], 8.0, "g")] == [5.6, 11.0]
+
+
+def test_command_line_grid_json_and_show(grid_dir, tmp_path, capsys, monkeypatch):
+    from cli_runner import run_cli
+
+    out = tmp_path / "g"
+    code, text, err = run_cli(["psf", "bank", "cooke_triplet", "--pixel-um", "4", "--kernel", "15", "--fields", "2",
+                               "--wavelengths-nm", "550", "--pupil-samples", "32", "--fno", "8,5.6", "-o", str(out),
+                               "--json"], capsys, monkeypatch)
+    assert code == 0, err
+    info = json.loads(text)
+    assert info["settings"] == 2 and [e["request"]["fno"] for e in info["grid"]] == [8.0, 5.6]
+    assert [p.name for p in sorted(out.iterdir()) if p.is_dir()] == ["s000", "s001"]
+    code, text, err = run_cli(["psf", "show", str(grid_dir), "-o", str(tmp_path / "one"), "--setting", "3"], capsys,
+                              monkeypatch)
+    assert code == 0 and "F/8, focus 1 m" in text and (tmp_path / "one" / "psf_map.png").is_file()
+    code, text, err = run_cli(["psf", "show", str(out), "-o", str(tmp_path / "all")], capsys, monkeypatch)
+    assert code == 0 and all((tmp_path / "all" / s / "strehl.png").is_file() for s in ("s000", "s001"))
+    import torch
+
+    from lensim.images import write_image
+
+    write_image(tmp_path / "x.png", torch.rand(3, 32, 48), 8)
+    code, _, err = run_cli(["simulate", str(tmp_path / "x.png"), "--bank", str(out), "-o", str(tmp_path / "s")],
+                           capsys, monkeypatch)
+    assert code == 2 and err.count("\n") == 1 and "grid of 2 banks" in err, err
