@@ -77,7 +77,7 @@ def _in_worker(fn: Callable[[Any], Any], job: Any, parent_pid: int | None) -> An
 
     import torch
 
-    if parent_pid is not None:
+    if parent_pid is not None and os.getppid() == parent_pid:  # (a forkserver's worker relies on its nanny alone)
         exit_with_parent(parent_pid)
     torch.set_num_threads(1)
     with warnings.catch_warnings():
