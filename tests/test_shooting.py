@@ -14,7 +14,7 @@ from lensim.errors import InputError
 from lensim.optics.lens import Lens
 from lensim.optics.lens_file import lens_from_dict, lens_to_dict, load_lens
 from lensim.optics.paraxial import paraxial_data, signed_indices, trace_yu
-from lensim.optics.shooting import ShootingSettings, describe, lens_at, record
+from lensim.optics.shooting import ShootingSettings, describe, lens_at, max_stop_mm, record
 from lensim.optics.surfaces import Surface
 from lensim.psf.compute import compute_psf
 
@@ -98,6 +98,17 @@ def test_too_fast_an_f_number_is_refused_naming_the_maximum() -> None:
     with pytest.raises(InputError, match=r"--fno: F/4 is faster than the lens's maximum aperture F/5\b"):
         lens_at(load_lens("cooke_triplet"), ShootingSettings(fno=4))
     lens_at(load_lens("cooke_triplet"), ShootingSettings(fno=5.0))  # its own aperture is allowed
+
+
+def test_a_rounded_marking_of_wide_open_is_wide_open() -> None:
+    lens = load_lens("double_gauss")  # EPD 50 mm at EFL 100.0002 mm: wide open is F/2.0001
+    wide_open = describe(lens, ShootingSettings())["fno"]
+    assert 2.0 < wide_open < 2.001
+    at_two = lens_at(lens, ShootingSettings(fno=2))
+    assert describe(lens, ShootingSettings(fno=2))["fno"] == pytest.approx(wide_open, rel=1e-9)
+    assert at_two.aperture_value == pytest.approx(max_stop_mm(lens), rel=1e-9)
+    with pytest.raises(InputError, match=r"--fno: F/1.97 is faster than the lens's maximum aperture F/2\b"):
+        lens_at(lens, ShootingSettings(fno=1.97))  # more than 1 % faster
 
 
 def test_the_stop_clear_aperture_limits_the_maximum_aperture() -> None:

@@ -51,6 +51,8 @@ OPTIONS = {"fno": "--fno", "object_m": "--object-m", "focus_m": "--focus-m", "co
 MAX_DISTANCE_M = 1.0e6
 _NEWTON_STEPS = 60
 _TOLERANCE_MM = 1e-9
+#: relative amount an --fno may be faster than wide open and still mean wide open (markings are rounded)
+WIDE_OPEN_TOLERANCE = 0.01
 
 
 def _number(value: Any, key: str, allow_inf: bool) -> float:
@@ -281,11 +283,14 @@ def _fields_for_object(file_lens: Lens, object_mm: float) -> dict[str, Any]:
 
 
 def _check_fno(lens_inf: Lens, fno: float, largest_mm: float) -> float:
-    """The stop semi-diameter (mm) for F/fno at infinity; a faster fno than the largest
-    stop allows is refused naming --fno."""
+    """The stop semi-diameter (mm) for F/fno at infinity; an fno within WIDE_OPEN_TOLERANCE
+    of the wide-open F-number is wide open (lens markings are rounded), a faster fno is
+    refused naming --fno."""
     stop = _stop_at_fno(lens_inf, fno)
     if stop > largest_mm * (1 + 1e-9):
         fastest = _fno_of_stop(lens_inf, largest_mm)
+        if fno >= fastest * (1 - WIDE_OPEN_TOLERANCE):  # a rounded marking of wide open (F/2 for F/2.0001)
+            return largest_mm
         raise InputError("<command line>", "--fno", f"F/{fno:g} is faster than the lens's maximum aperture "
                                                     f"F/{fastest:.3g}; expected --fno {fastest:.3g} or more")
     return stop
