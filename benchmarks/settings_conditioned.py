@@ -143,7 +143,8 @@ def train_run(pairs: Path, run: Path, steps: int, **extra: Any) -> dict[str, Any
     train_src, _ = split_sources([r.source for r in refs], 0.25, 0)
     n_train = sum(r.source in set(train_src) for r in refs)
     per_epoch = max(1, n_train // 4)
-    epochs = max(1, math.ceil(steps / per_epoch))  # then steps // epochs steps in each: within 1 % of the budget
+    # the fewest epochs of at most a whole epoch's batches each that make exactly ``steps`` steps
+    epochs = next(e for e in range(max(1, math.ceil(steps / per_epoch)), steps + 1) if steps % e == 0)
     t0 = time.perf_counter()
     result = train(pairs, run, epochs=epochs, max_steps_per_epoch=steps // epochs, batch_size=4, lr=5e-4,
                    lr_schedule="cosine", crop=64, width=16, deformable_scales=1, val_fraction=0.25, seed=0,
@@ -151,6 +152,52 @@ def train_run(pairs: Path, run: Path, steps: int, **extra: Any) -> dict[str, Any
     done = {"steps": result.step, "seconds": time.perf_counter() - t0, "val_psnr": result.val_psnr}
     marker.write_text(json.dumps(done))
     return done
+
+
+def spot_sizes() -> dict[str, list[float]]:
+    """Polychromatic RMS spot radius (um) of the lens at every setting, at 0, 8 and 16 deg
+    (the APS-C half-diagonal is 16 deg at 50 mm): how much the blur changes."""
+    from lensim.optics.lens_file import load_lens
+    from lensim.optics.shooting import ShootingSettings, lens_at
+    from lensim.optics.spot import rms_spot_radius
+
+    lens = load_lens("cooke_triplet")
+    out = {}
+    for s in GRID + BETWEEN:
+        at = lens_at(lens, ShootingSettings(fno=s[0], focus_m=s[1]))
+        out[tag(*s)] = [round(1000 * rms_spot_radius(at, f), 2) for f in (0.0, 8.0, 16.0)]
+    return out
+
+
+def sensitivity(out: Path, held_out: list[str]) -> dict[str, dict[str, float]]:
+    """Whether the conditioned network uses its settings: mean PSNR (dB) of its restorations
+    of the held-out crops of two grid settings given each grid setting's vector."""
+    from lensim.evaluate.metrics import psnr_batch
+    from lensim.images import read_image
+    from lensim.io import read_json
+    from lensim.restore.checkpoint import load_checkpoint
+    from lensim.restore.conditioning import Conditioning
+    from lensim.restore.infer import restore_image
+
+    model, info = load_checkpoint(out / "runs" / "conditioned" / "last.pt")
+    cond = Conditioning.from_dict(info["conditioning"])
+    h, w = (float(v) for v in reversed(info["sensor"]["resolution"]))
+    res: dict[str, dict[str, float]] = {}
+    for data in (GRID[0], GRID[3]):
+        d = out / "pairs" / tag(*data)
+        crops = [c for r in read_json(d / "manifest.json", "pairs")["records"] if Path(r["source"]).name in held_out
+                 for c in r["crops"]]
+        res[tag(*data)] = {}
+        for given in GRID:
+            vec = cond.vector({"fno": given[0], "focus_m": given[1]})
+            ps = []
+            for c in crops:
+                x, _ = read_image(d / c["input"])
+                y, _ = read_image(d / c["target"])
+                out_img = restore_image(model, x, (c["sensor_top"], c["sensor_left"]), (h, w), settings=vec)
+                ps.append(float(psnr_batch(out_img.clamp(0, 1)[None], y[None])))
+            res[tag(*data)][tag(*given)] = round(sum(ps) / len(ps), 3)
+    return res
 
 
 def nearest(fno: float, focus: float) -> tuple[float, float]:
@@ -213,6 +260,8 @@ def main() -> None:
         summary = evaluate(sets[s], held_out, models)
         results[tag(*s)] = {"on_grid": s in GRID, "per_setting_model": tag(*near), **summary}
     record["results"] = results
+    record["rms_spot_um_at_0_8_16_deg"] = spot_sizes()
+    record["conditioned_psnr_given_other_settings"] = sensitivity(out, held_out)
     record["evaluate_seconds"] = time.perf_counter() - t0
     (out / "results.json").write_text(json.dumps(record, indent=1))
     (out / "table.md").write_text(table(record))
@@ -249,7 +298,14 @@ def table(record: dict[str, Any]) -> str:
             vals = [_avg(record["results"], on_grid, m, z) for z in (None, *ZONES)]
             means.append(f"| {'on grid' if on_grid else 'between grid'} | {m} | "
                          + " | ".join(f"{v:.2f}" for v in vals) + " |")
-    return head + "\n".join(lines) + "\n" + "\n".join(means) + "\n"
+    sens = record["conditioned_psnr_given_other_settings"]
+    given = list(next(iter(sens.values())))
+    spots = ["", "| crops at | " + " | ".join(f"conditioned given {g}" for g in given) + " |",
+             "|---|" + "---:|" * len(given)]
+    spots += [f"| {k} | " + " | ".join(f"{v[g]:.2f}" for g in given) + " |" for k, v in sens.items()]
+    spots += ["", "| setting | RMS spot radius (um) at 0 / 8 / 16 deg |", "|---|---|"]
+    spots += [f"| {k} | {' / '.join(f'{v:.1f}' for v in vals)} |" for k, vals in record["rms_spot_um_at_0_8_16_deg"].items()]
+    return head + "\n".join(lines) + "\n" + "\n".join(means) + "\n" + "\n".join(spots) + "\n"
 
 
 if __name__ == "__main__":
