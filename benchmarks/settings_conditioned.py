@@ -45,9 +45,16 @@ from typing import Any
 
 import torch
 
+# the defaults (the committed results); --lens, --grid, --between and --single change them
+LENS = "cooke_triplet"
 GRID = [(5.0, math.inf), (5.0, 0.5), (8.0, math.inf), (8.0, 0.5)]
 BETWEEN = [(5.6, 0.7), (7.1, 2.0)]
 SINGLE = (5.0, math.inf)
+
+
+def _settings(text: str) -> list[tuple[float, float]]:
+    """'F:D,F:D' -> [(fno, focus_m)] (D may be inf)."""
+    return [(float(a), float(b)) for a, b in (item.split(":") for item in text.split(","))]
 ZONES = ("centre", "middle", "edge")
 
 
@@ -86,7 +93,7 @@ def pairs_for(out: Path, sharp: Path, fno: float, focus: float) -> Path:
     d = out / "pairs" / tag(fno, focus)
     if (d / "settings.done").exists():
         return d
-    lens, sensor = load_lens("cooke_triplet"), load_sensor("apsc_mirrorless")
+    lens, sensor = load_lens(LENS), load_sensor("apsc_mirrorless")
     shot = ShootingSettings(fno=fno, focus_m=focus)
     at = lens_at(lens, shot)
     bank = ensure_bank(at, sensor.pixel_pitch_um, BankSettings(fields=6, wavelengths_nm=(450.0, 500.0, 550.0, 600.0,
@@ -155,17 +162,20 @@ def train_run(pairs: Path, run: Path, steps: int, **extra: Any) -> dict[str, Any
 
 
 def spot_sizes() -> dict[str, list[float]]:
-    """Polychromatic RMS spot radius (um) of the lens at every setting, at 0, 8 and 16 deg
-    (the APS-C half-diagonal is 16 deg at 50 mm): how much the blur changes."""
+    """Polychromatic RMS spot radius (um) of the lens at every setting, at 0 and at half and
+    all of the APS-C sensor's half-diagonal angle, in whole degrees (8 and 16 deg at 50
+    mm): how much the blur changes."""
+    from lensim.optics.analysis import first_order_summary
     from lensim.optics.lens_file import load_lens
     from lensim.optics.shooting import ShootingSettings, lens_at
     from lensim.optics.spot import rms_spot_radius
 
-    lens = load_lens("cooke_triplet")
+    lens = load_lens(LENS)
+    edge = math.degrees(math.atan(0.5 * math.hypot(23.52, 15.68) / first_order_summary(lens)["efl_mm"]))
     out = {}
     for s in GRID + BETWEEN:
         at = lens_at(lens, ShootingSettings(fno=s[0], focus_m=s[1]))
-        out[tag(*s)] = [round(1000 * rms_spot_radius(at, f), 2) for f in (0.0, 8.0, 16.0)]
+        out[tag(*s)] = [round(1000 * rms_spot_radius(at, f), 2) for f in (0.0, round(edge / 2), round(edge))]
     return out
 
 
@@ -183,7 +193,7 @@ def sensitivity(out: Path, held_out: list[str]) -> dict[str, dict[str, float]]:
     cond = Conditioning.from_dict(info["conditioning"])
     h, w = (float(v) for v in reversed(info["sensor"]["resolution"]))
     res: dict[str, dict[str, float]] = {}
-    for data in (GRID[0], GRID[3]):
+    for data in (GRID[0], GRID[-1]):
         d = out / "pairs" / tag(*data)
         crops = [c for r in read_json(d / "manifest.json", "pairs")["records"] if Path(r["source"]).name in held_out
                  for c in r["crops"]]
@@ -203,8 +213,10 @@ def sensitivity(out: Path, held_out: list[str]) -> dict[str, dict[str, float]]:
 def nearest(fno: float, focus: float) -> tuple[float, float]:
     """The grid setting nearest in stops and dioptres, each over the grid's span."""
     def d(g: tuple[float, float]) -> float:
-        span_n = math.log2(8.0 / 5.0)
-        return math.hypot((math.log2(fno) - math.log2(g[0])) / span_n, (1 / focus - 1 / g[1]) / 2.0)
+        n = [math.log2(x[0]) for x in GRID]
+        dpt = [1 / x[1] for x in GRID]
+        span_n, span_d = (max(n) - min(n)) or 1.0, (max(dpt) - min(dpt)) or 1.0
+        return math.hypot((math.log2(fno) - math.log2(g[0])) / span_n, (1 / focus - 1 / g[1]) / span_d)
     return min(GRID, key=d)
 
 
@@ -219,6 +231,7 @@ def evaluate(pairs: Path, held_out: list[str], runs: dict[str, Path]) -> dict[st
 
 
 def main() -> None:
+    global LENS, GRID, BETWEEN, SINGLE
     ap = argparse.ArgumentParser()
     ap.add_argument("out", nargs="?", default="bench-settings")
     ap.add_argument("--steps", type=int, default=1600)
@@ -226,7 +239,17 @@ def main() -> None:
     ap.add_argument("--stage", default="all", choices=["data", "conditioned", "mixed", "single", "per-setting",
                                                         "evaluate", "all"],
                     help="run the stages up to this one only (each is cached), to keep heavy jobs short")
+    ap.add_argument("--lens", default=LENS)
+    ap.add_argument("--grid", help="grid settings FNO:FOCUS_M,... (default: the module's GRID)")
+    ap.add_argument("--between", help="settings between grid points, FNO:FOCUS_M,...")
+    ap.add_argument("--single", help="the single-setting network's FNO:FOCUS_M (default: the first grid setting)")
     args = ap.parse_args()
+    LENS = args.lens
+    if args.grid:
+        GRID = _settings(args.grid)
+        SINGLE = GRID[0]
+    BETWEEN = _settings(args.between) if args.between else BETWEEN
+    SINGLE = _settings(args.single)[0] if args.single else SINGLE
     torch.set_num_threads(1)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -235,7 +258,8 @@ def main() -> None:
     sets = {s: pairs_for(out, sharp, *s) for s in GRID + BETWEEN}
     grid = merged(out, [sets[s] for s in GRID])
     runs = out / "runs"
-    record: dict[str, Any] = {"steps_budget": args.steps, "photos": args.photos, "runs": {}}
+    record: dict[str, Any] = {"lens": LENS, "grid": GRID, "between": BETWEEN, "single": SINGLE,
+                              "steps_budget": args.steps, "photos": args.photos, "runs": {}}
     stages = ["data", "conditioned", "mixed", "single", "per-setting", "evaluate", "all"]
     last = stages.index(args.stage)
     if last >= 1:
@@ -260,7 +284,7 @@ def main() -> None:
         summary = evaluate(sets[s], held_out, models)
         results[tag(*s)] = {"on_grid": s in GRID, "per_setting_model": tag(*near), **summary}
     record["results"] = results
-    record["rms_spot_um_at_0_8_16_deg"] = spot_sizes()
+    record["rms_spot_um"] = spot_sizes()
     record["conditioned_psnr_given_other_settings"] = sensitivity(out, held_out)
     record["evaluate_seconds"] = time.perf_counter() - t0
     (out / "results.json").write_text(json.dumps(record, indent=1))
@@ -303,8 +327,8 @@ def table(record: dict[str, Any]) -> str:
     spots = ["", "| crops at | " + " | ".join(f"conditioned given {g}" for g in given) + " |",
              "|---|" + "---:|" * len(given)]
     spots += [f"| {k} | " + " | ".join(f"{v[g]:.2f}" for g in given) + " |" for k, v in sens.items()]
-    spots += ["", "| setting | RMS spot radius (um) at 0 / 8 / 16 deg |", "|---|---|"]
-    spots += [f"| {k} | {' / '.join(f'{v:.1f}' for v in vals)} |" for k, vals in record["rms_spot_um_at_0_8_16_deg"].items()]
+    spots += ["", "| setting | RMS spot radius (um) at the axis, half and all the half-diagonal |", "|---|---|"]
+    spots += [f"| {k} | {' / '.join(f'{v:.1f}' for v in vals)} |" for k, vals in record["rms_spot_um"].items()]
     return head + "\n".join(lines) + "\n" + "\n".join(means) + "\n" + "\n".join(spots) + "\n"
 
 
