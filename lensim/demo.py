@@ -37,7 +37,14 @@ StageProgress = Callable[[float, float], None]
 
 @dataclass(frozen=True)
 class DemoSettings:
-    """Sizes of a demo run. quick: about 3 minutes on 2 cores; default: about 15."""
+    """Sizes of a demo run. quick: about 3 minutes on 2 cores; default: about 15.
+
+    width, deformable_scales: the field-aware UNet whose parameter count every network of
+    the demo matches. arch, stem: the demo's network (the default network): "nafnet" with
+    FOV channels and a ``stem``x``stem`` pixel-unshuffle stem (benchmarks/nafnet_vs_unet.py:
+    ahead of the UNet on the same budget, restores about 5x faster), or "unet", the UNet
+    itself. The baseline is the plain UNet of the same size (the stronger of the plain
+    networks measured)."""
 
     fields: int
     wavelengths_nm: tuple[float, ...]
@@ -50,6 +57,8 @@ class DemoSettings:
     width: int
     train_crop: int
     deformable_scales: int
+    arch: str = "nafnet"
+    stem: int = 2
 
     @classmethod
     def make(cls, quick: bool) -> "DemoSettings":
@@ -102,6 +111,7 @@ def _photos(out: Path, size: int) -> Path:
 def _train(pairs: Path, run: Path, settings: DemoSettings, plain: bool, seed: int, device: str = "cpu",
            progress: StageProgress | None = None) -> dict:
     """Train once (cached by RUN/done.json) on a time budget; progress(seconds, budget)."""
+    from lensim.restore.nafnet import nafnet_width
     from lensim.restore.network import FieldAwareUNet, count_parameters, plain_unet_width
     from lensim.restore.train import budget_progress, train
 
@@ -112,9 +122,12 @@ def _train(pairs: Path, run: Path, settings: DemoSettings, plain: bool, seed: in
         shutil.rmtree(run)  # an unfinished run: start it again (its budget was not spent)
     kw: dict[str, Any] = dict(epochs=100_000, batch_size=4, lr=5e-4, lr_schedule="cosine", crop=settings.train_crop,
                               seed=seed, time_budget_s=settings.train_seconds, val_fraction=0.25, device=device)
+    target = count_parameters(FieldAwareUNet(width=settings.width, deformable_scales=settings.deformable_scales))
     if plain:
-        target = count_parameters(FieldAwareUNet(width=settings.width, deformable_scales=settings.deformable_scales))
         kw.update(width=plain_unet_width(target, 3), use_fov=False, use_deformable=False, use_context=False)
+    elif settings.arch == "nafnet":
+        switches: dict[str, Any] = dict(use_fov=True, use_deformable=False, use_context=False, stem=settings.stem)
+        kw.update(arch="nafnet", width=nafnet_width(target, **switches), **switches)
     else:
         kw.update(width=settings.width, deformable_scales=settings.deformable_scales)
     res = train(pairs, run, progress=budget_progress(progress, settings.train_seconds), **kw)
