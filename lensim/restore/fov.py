@@ -67,6 +67,21 @@ def fov_channels(
     return out.to(dtype)
 
 
+def batch_fov(fov: torch.Tensor | None, rgb: torch.Tensor) -> torch.Tensor:
+    """The FOV channels a network with use_fov needs, checked against its input: fov
+    (B, 2, H, W), or (2, H, W) shared by the batch, for rgb (B, 3, H, W) -> (B, 2, H, W) in
+    rgb's dtype. Raises ValueError for a missing or mismatched fov."""
+    if fov is None:
+        raise ValueError("this model was built with use_fov=True: pass the FOV channels (fov_channels)")
+    b = rgb.shape[0]
+    if fov.dim() == 3:
+        fov = fov.unsqueeze(0).expand(b, -1, -1, -1)
+    if fov.dim() != 4 or fov.shape[0] != b or fov.shape[1] != 2 or fov.shape[-2:] != rgb.shape[-2:]:
+        raise ValueError(f"fov must be (B, 2, H, W) or (2, H, W) matching rgb {tuple(rgb.shape)}, "
+                         f"got {tuple(fov.shape)}")
+    return fov.to(rgb.dtype)
+
+
 def _check(rgb: torch.Tensor, fov: torch.Tensor, op: int) -> None:
     if op not in DIHEDRAL_OPS:
         raise ValueError(f"op must be an integer in 0..7, got {op!r}")

@@ -57,6 +57,7 @@ import torch.nn as nn
 import torch.nn.functional as F
 
 from lensim.restore.conditioning import batch_settings, settings_planes
+from lensim.restore.fov import batch_fov
 from lensim.restore.network import ContextBlock, DeformResBlock, _pad_bottom_right, count_parameters
 
 #: Pixel-unshuffle factors of the stem.
@@ -239,14 +240,7 @@ class NAFNet(nn.Module):
         ph, pw = (-h) % m, (-w) % m
         planes = [_pad_bottom_right(rgb, ph, pw, linear=False)]
         if self.use_fov:
-            if fov is None:
-                raise ValueError("this model was built with use_fov=True: pass the FOV channels (fov_channels)")
-            if fov.dim() == 3:
-                fov = fov.unsqueeze(0).expand(b, -1, -1, -1)
-            if fov.dim() != 4 or fov.shape[0] != b or fov.shape[1] != 2 or fov.shape[-2:] != rgb.shape[-2:]:
-                raise ValueError(f"fov must be (B, 2, H, W) or (2, H, W) matching rgb {tuple(rgb.shape)}, "
-                                 f"got {tuple(fov.shape)}")
-            planes.append(_pad_bottom_right(fov.to(rgb.dtype), ph, pw, linear=True))
+            planes.append(_pad_bottom_right(batch_fov(fov, rgb), ph, pw, linear=True))
         s = batch_settings(settings, b, self.settings_dim, rgb)
         if s is not None:
             planes.append(settings_planes(s, h + ph, w + pw))

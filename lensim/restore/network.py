@@ -66,6 +66,7 @@ import torch.nn.functional as F
 
 from lensim.restore.conditioning import batch_settings, settings_planes
 from lensim.restore.deform import ModulatedDeformConv2d
+from lensim.restore.fov import batch_fov
 
 KERNEL_TAPS = 9  # 3x3 deformable kernels
 
@@ -356,14 +357,7 @@ class FieldAwareUNet(nn.Module):
         b = rgb.shape[0]
         x = _pad_bottom_right(rgb, ph, pw, linear=False)
         if self.use_fov:
-            if fov is None:
-                raise ValueError("this model was built with use_fov=True: pass the FOV channels (fov_channels)")
-            if fov.dim() == 3:
-                fov = fov.unsqueeze(0).expand(b, -1, -1, -1)
-            if fov.dim() != 4 or fov.shape[0] != b or fov.shape[1] != 2 or fov.shape[-2:] != rgb.shape[-2:]:
-                raise ValueError(f"fov must be (B, 2, H, W) or (2, H, W) matching rgb {tuple(rgb.shape)}, "
-                                 f"got {tuple(fov.shape)}")
-            fov = _pad_bottom_right(fov.to(rgb.dtype), ph, pw, linear=True)
+            fov = _pad_bottom_right(batch_fov(fov, rgb), ph, pw, linear=True)
             x = torch.cat((x, fov), dim=1)
         s = batch_settings(settings, b, self.settings_dim, rgb)
         if s is not None:
