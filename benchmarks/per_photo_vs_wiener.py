@@ -17,7 +17,7 @@ import sys
 from collections import defaultdict
 from pathlib import Path
 
-METHODS = ("unet", "plain-unet", "nafnet-fov-stem2")
+METHODS = ("unet", "unet-seed1", "plain-unet", "nafnet-fov-stem2", "nafnet-full")
 
 
 def crop_means(csv_path: Path) -> dict[tuple[str, str], float]:
