@@ -1,8 +1,11 @@
-"""JSON-ready copies of results: non-finite floats become null, scalars with .item()
-(numpy, torch) become Python numbers, tuples become lists."""
+"""JSON-ready copies of results: scalars with .item() (numpy, torch) become Python
+numbers, tuples become lists, and non-finite floats become null (jsonable: results, where
+a non-finite number means "none") or the strings "inf", "-inf", "nan" (strict_json: settings
+and metadata, where an infinite focus distance keeps its meaning; float() reads them back)."""
 from __future__ import annotations
 
 import math
+from typing import Any
 
 
 def jsonable(x):
@@ -15,4 +18,18 @@ def jsonable(x):
         return [jsonable(v) for v in x]
     if hasattr(x, "item") and getattr(x, "ndim", 0) == 0:
         return jsonable(x.item())
+    return x
+
+
+def strict_json(x: Any) -> Any:
+    """A copy of x that json.dumps writes as strict JSON, non-finite floats as the strings
+    "inf", "-inf", "nan" (float() reads them back); mapping keys become strings."""
+    if isinstance(x, float) and not math.isfinite(x):
+        return str(x)
+    if isinstance(x, dict):
+        return {str(k): strict_json(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [strict_json(v) for v in x]
+    if hasattr(x, "item") and getattr(x, "ndim", 0) == 0:
+        return strict_json(x.item())
     return x

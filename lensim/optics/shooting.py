@@ -41,6 +41,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from lensim.errors import InputError, LensimError
+from lensim.jsonable import strict_json
 from lensim.optics.configurations import apply_configuration, resolve_configuration
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import paraxial_data
@@ -110,10 +111,8 @@ class ShootingSettings:
     def to_dict(self) -> dict[str, Any]:
         """{fno, object_m, focus_m, config}; None where not set, infinite distances as the
         string "inf" (strict JSON)."""
-        def enc(x: float | None) -> float | str | None:
-            return "inf" if x is not None and math.isinf(x) else x
-
-        return {"fno": self.fno, "object_m": enc(self.object_m), "focus_m": enc(self.focus_m), "config": self.config}
+        return strict_json({"fno": self.fno, "object_m": self.object_m, "focus_m": self.focus_m,
+                            "config": self.config})
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any] | None) -> ShootingSettings:
@@ -348,4 +347,4 @@ def describe(lens: Lens, settings: ShootingSettings | None) -> dict[str, Any]:
 def record(described: Mapping[str, Any]) -> dict[str, Any]:
     """describe()'s dict for a JSON file (strict JSON): infinite distances as the string
     "inf" (float("inf") reads it back; so does lensim.restore.conditioning)."""
-    return {k: ("inf" if isinstance(v, float) and math.isinf(v) else v) for k, v in described.items()}
+    return strict_json(dict(described))

@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import io
 import json
-import math
 import warnings
 from pathlib import Path
 from typing import Any
@@ -48,6 +47,7 @@ import torch.nn as nn
 import lensim
 from lensim.errors import InputError
 from lensim.io import atomic_write_bytes
+from lensim.jsonable import strict_json
 
 ONNX_FORMAT = "lensim-restore-onnx"
 ONNX_FORMAT_VERSION = 1
@@ -218,24 +218,10 @@ def export_model_bytes(model: nn.Module, info: dict[str, Any], opset: int = DEFA
     proto = onnx.load_from_string(buf.getvalue())
     entry = proto.metadata_props.add()
     entry.key = METADATA_KEY
-    entry.value = json.dumps(_strict(onnx_metadata(model, info, opset)), default=str, allow_nan=False)
+    entry.value = json.dumps(strict_json(onnx_metadata(model, info, opset)), default=str, allow_nan=False)
     proto.producer_name = "lensim"
     proto.producer_version = lensim.__version__
     return proto.SerializeToString()
-
-
-def _strict(x: Any) -> Any:
-    """A copy of x for strict JSON: non-finite floats become the strings "inf", "-inf",
-    "nan" (a focus range reaching infinity keeps its meaning: float("inf") reads it)."""
-    if isinstance(x, float) and not math.isfinite(x):
-        return str(x)
-    if isinstance(x, dict):
-        return {str(k): _strict(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_strict(v) for v in x]
-    if hasattr(x, "item") and getattr(x, "ndim", 0) == 0:
-        return _strict(x.item())
-    return x
 
 
 def _cpu_float_copy(model: nn.Module) -> nn.Module:

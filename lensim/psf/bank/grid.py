@@ -33,9 +33,10 @@ from typing import Any
 
 from lensim.errors import InputError
 from lensim.io import atomic_write_text, folder_lock
+from lensim.jsonable import strict_json
 from lensim.optics.lens import Lens
 from lensim.optics.lens_file import lens_to_dict
-from lensim.optics.shooting import OPTIONS, ShootingSettings, describe, lens_at
+from lensim.optics.shooting import OPTIONS, ShootingSettings, describe, lens_at, record
 from lensim.psf.bank.compute import compute_banks, plan_bank
 from lensim.psf.bank.settings import BankSettings, suggest_kernel_pixels
 from lensim.psf.bank.store import FORMAT as BANK_FORMAT
@@ -51,15 +52,6 @@ AXES = ("config", "fno", "focus_m", "object_m")
 def setting_dir(index: int) -> str:
     """The sub-folder of setting `index` inside a grid folder."""
     return f"s{index:03d}"
-
-
-def json_number(x: Any) -> Any:
-    """A setting's value for strict JSON: infinite distances as "inf"."""
-    return "inf" if isinstance(x, float) and math.isinf(x) else x
-
-
-def _resolved_json(d: dict[str, Any]) -> dict[str, Any]:
-    return {k: json_number(v) for k, v in d.items()}
 
 
 def resolved_numbers(d: dict[str, Any]) -> dict[str, Any]:
@@ -82,7 +74,7 @@ def parse_setting_list(text: str | None, key: str) -> tuple[Any, ...] | None:
     seen: set[Any] = set()
     for v in values:
         if v in seen:
-            raise InputError("<command line>", option, f"{json_number(v)!s} is given twice in {text!r}; expected "
+            raise InputError("<command line>", option, f"{strict_json(v)!s} is given twice in {text!r}; expected "
                              "distinct values")
         seen.add(v)
     return values
@@ -122,7 +114,7 @@ class GridAxes:
 
     def to_dict(self) -> dict[str, Any]:
         """{axis: list of values or None} for JSON (distances "inf" where infinite)."""
-        return {k: None if getattr(self, k) is None else [json_number(v) for v in getattr(self, k)] for k in AXES}
+        return {k: None if getattr(self, k) is None else strict_json(getattr(self, k)) for k in AXES}
 
 
 def setting_label(settings: ShootingSettings) -> str:
@@ -149,7 +141,7 @@ def _grid_manifest(lens: Lens, axes: GridAxes, settings: list[ShootingSettings],
     return {
         "format": GRID_FORMAT, "format_version": GRID_FORMAT_VERSION, "lens_file": lens.source,
         "lens": lens_to_dict(lens), "axes": axes.to_dict(), "bank": shared,
-        "settings": [{"bank": setting_dir(i), "request": s.to_dict(), "resolved": _resolved_json(r)}
+        "settings": [{"bank": setting_dir(i), "request": s.to_dict(), "resolved": record(r)}
                      for i, (s, r) in enumerate(zip(settings, resolved, strict=True))],
         "lensim_version": lensim_version(),
     }
@@ -232,7 +224,7 @@ def compute_grid(lens: Lens, pixel_pitch_um: float, axes: GridAxes, settings: Ba
                        label=setting_label(s), **settings.compute_options(), **options)
              for i, (at, s) in enumerate(zip(lenses, shots, strict=True))]
     for plan, s, r in zip(plans, shots, resolved, strict=True):
-        plan.manifest["shooting"] = {"request": s.to_dict(), "resolved": _resolved_json(r)}
+        plan.manifest["shooting"] = {"request": s.to_dict(), "resolved": record(r)}
     manifest = _grid_manifest(lens, axes, shots, resolved, plans[0].manifest)
     with folder_lock(out):
         _open_grid_directory(out, manifest)
@@ -330,7 +322,7 @@ def compute_setting_bank(lens: Lens, pixel_pitch_um: float, shot: ShootingSettin
     kernel = grid_kernel_pixels([at], pixel_pitch_um, settings)
     plan = plan_bank(at, pixel_pitch_um, kernel, response=response, out_dir=out_dir, label=setting_label(shot),
                      **settings.compute_options(), **options)
-    plan.manifest["shooting"] = {"request": shot.to_dict(), "resolved": _resolved_json(describe(lens, shot))}
+    plan.manifest["shooting"] = {"request": shot.to_dict(), "resolved": record(describe(lens, shot))}
     if out_dir is None:
         return compute_banks([plan], workers, scheduler, progress)[0]
     with folder_lock(out_dir):

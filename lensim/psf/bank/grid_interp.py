@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from lensim.errors import InputError
+from lensim.jsonable import strict_json
 from lensim.optics.shooting import OPTIONS
 from lensim.psf.bank.types import BankField, PSFBank
 
@@ -179,7 +180,7 @@ def interpolate_bank(grid: GridBank, query: dict[str, Any]) -> PSFBank:
     fields = [_blend_field([b.fields[j] for b in banks], w) for j in range(len(banks[0].fields))]
     top = banks[int(np.argmax(w))]
     manifest = {**top.manifest, "interpolated": {
-        "request": {k: (v if not isinstance(v, float) or math.isfinite(v) else "inf") for k, v in query.items()},
+        "request": strict_json(query),
         "from": [{"bank": grid.names[i], "weight": x} for i, x in weights]}}
     manifest.pop("shooting", None)
     return PSFBank(manifest, fields, None)
