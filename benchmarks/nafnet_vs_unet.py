@@ -60,6 +60,9 @@ NETWORKS: dict[str, list[str]] = {
     "nafnet-fov": ["--arch", "nafnet", "--no-deformable", "--no-context", "--seed", "0"],
     "nafnet-full": ["--arch", "nafnet", "--deformable-scales", "1", "--seed", "0"],
     "unet-seed1": [*UNET, "--seed", "1"],  # the default again from another seed: run-to-run spread
+    "nafnet-fov-stem2-seed1": ["--arch", "nafnet", "--stem", "2", "--no-deformable", "--no-context", "--seed", "1"],
+    "plain-unet-seed1": ["--arch", "unet", "--width", "37", *OFF, "--seed", "1"],
+    "nafnet-stem2": ["--arch", "nafnet", "--stem", "2", *OFF, "--seed", "0"],  # the plain NAFNet, made fast
     "nafnet-fov-stem2-w64": ["--arch", "nafnet", "--stem", "2", "--width", "64", "--no-deformable", "--no-context",
                              "--seed", "0"],
 }
