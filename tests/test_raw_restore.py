@@ -2,6 +2,8 @@
 camera checks, linear DNG output, batches (resume, validation before output)."""
 from __future__ import annotations
 
+import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -182,3 +184,14 @@ def test_simulated_dng_restores_as_in_memory(tmp_path: Path, capsys, monkeypatch
     exact = restore_image(model, camera, place, frame).clamp(0, 1)
     centred = restore_image(model, camera, (1976.0, 2964.0), frame).clamp(0, 1)
     assert float((exact - from_dng).abs().max()) < 2e-5 < 0.1 * float((centred - from_dng).abs().max())
+
+
+def test_json_record_keeps_an_infinite_focus_distance(run, tmp_path: Path, capsys, monkeypatch):
+    folder, _ = run
+    raw, params = capture(0)
+    write_capture_dng(tmp_path / "raws" / "s0.dng", raw, small_sensor(), params)
+    code, stdout, err = run_cli(["restore", str(folder), str(tmp_path / "raws"), "-o", str(tmp_path / "out"),
+                                 "--quiet", "--json", "--focus-m", "inf"], capsys, monkeypatch)
+    assert code == 0, err
+    (record,) = json.loads(stdout)["images"]
+    assert record["settings"]["focus_m"] == "inf" and float(record["settings"]["focus_m"]) == math.inf

@@ -36,6 +36,7 @@ from typing import Any
 import torch
 
 from lensim.errors import InputError
+from lensim.jsonable import strict_json
 from lensim.sensor.profile import SensorProfile, sensor_from_dict
 
 Progress = Callable[[float, float], None]
@@ -252,7 +253,7 @@ def restore_raw(job: RawJob, model: Any, sensor: SensorProfile, settings: Restor
     write_image(job.tif, apply_orientation(out, raw.orientation), 16, srgb_tag=True)
     return {"input": str(job.source), "output": str(job.tif), "dng": None if job.dng is None else str(job.dng),
             "width": raw.width, "height": raw.height, "camera": raw.camera, "native": native, "skipped": False,
-            "capture": params.to_dict(), "settings": raw_settings(raw, settings.shooting)}
+            "capture": params.to_dict(), "settings": strict_json(raw_settings(raw, settings.shooting))}
 
 
 # ----------------------------------------------------------------------------- batches
