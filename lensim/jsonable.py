@@ -1,7 +1,8 @@
 """JSON-ready copies of results: scalars with .item() (numpy, torch) become Python
 numbers, tuples become lists, and non-finite floats become null (jsonable: results, where
 a non-finite number means "none") or the strings "inf", "-inf", "nan" (strict_json: settings
-and metadata, where an infinite focus distance keeps its meaning; float() reads them back)."""
+and metadata, where an infinite focus distance keeps its meaning; from_strict reads them
+back)."""
 from __future__ import annotations
 
 import math
@@ -33,3 +34,12 @@ def strict_json(x: Any) -> Any:
     if hasattr(x, "item") and getattr(x, "ndim", 0) == 0:
         return strict_json(x.item())
     return x
+
+
+NON_FINITE = ("inf", "-inf", "nan")  # the strings strict_json writes for non-finite floats
+
+
+def from_strict(value: Any) -> Any:
+    """One value as strict_json wrote it, read back: "inf", "-inf", "nan" become floats,
+    anything else is returned as it is."""
+    return float(value) if isinstance(value, str) and value in NON_FINITE else value

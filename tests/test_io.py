@@ -41,3 +41,18 @@ def test_read_json_round_trip_and_one_line_errors(tmp_path):
         with pytest.raises(InputError) as err:
             read_json(path, "manifest")
         assert str(path) in str(err.value) and words in str(err.value) and "\n" not in str(err.value)
+
+
+def test_strict_json_round_trips_non_finite_numbers_and_leaves_other_strings():
+    import json
+    import math
+
+    from lensim.jsonable import from_strict, jsonable, strict_json
+
+    data = {"focus_m": math.inf, "shift": -math.inf, "bad": math.nan, "fno": 2.8, "config": "tele", 3: (1.0, 2)}
+    text = json.dumps(strict_json(data), allow_nan=False)  # strict JSON: no bare Infinity or NaN
+    back = {k: from_strict(v) for k, v in json.loads(text).items()}
+    assert back["focus_m"] == math.inf and back["shift"] == -math.inf and math.isnan(back["bad"])
+    assert back["fno"] == 2.8 and back["config"] == "tele" and back["3"] == [1.0, 2]
+    assert from_strict("infinity") == "infinity"  # only the three strings strict_json writes
+    assert jsonable(data)["focus_m"] is None and jsonable(data)["config"] == "tele"

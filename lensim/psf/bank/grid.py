@@ -33,7 +33,7 @@ from typing import Any
 
 from lensim.errors import InputError
 from lensim.io import atomic_write_text, folder_lock
-from lensim.jsonable import strict_json
+from lensim.jsonable import from_strict, strict_json
 from lensim.optics.lens import Lens
 from lensim.optics.lens_file import lens_to_dict
 from lensim.optics.shooting import OPTIONS, ShootingSettings, describe, lens_at, record
@@ -56,7 +56,7 @@ def setting_dir(index: int) -> str:
 
 def resolved_numbers(d: dict[str, Any]) -> dict[str, Any]:
     """A resolved-settings dict read from JSON with "inf" turned back into math.inf."""
-    return {k: (math.inf if v == "inf" else v) for k, v in d.items()}
+    return {k: from_strict(v) for k, v in d.items()}
 
 
 def parse_setting_list(text: str | None, key: str) -> tuple[Any, ...] | None:
@@ -277,7 +277,7 @@ class GridBank:
     @property
     def axes(self) -> dict[str, list | None]:
         """{axis: its values (math.inf for infinite distances) or None}."""
-        return {k: None if v is None else [math.inf if x == "inf" else x for x in v]
+        return {k: None if v is None else [from_strict(x) for x in v]
                 for k, v in self.manifest["axes"].items()}
 
     def bank(self, index: int) -> PSFBank:
