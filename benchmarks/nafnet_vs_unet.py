@@ -19,20 +19,24 @@ Every stage is cached in OUT (a rerun skips what exists):
    field_aware_vs_plain.sh's recipe: Adam from 5e-4, cosine over the budget, batch 4, 96-px
    crops, dihedral augmentation, a quarter of the photos held out (the same for every run:
    the split depends only on the photo names and the seed, 0 for every run but
-   unet-seed1): unet (the default: width 32, FOV input, context block, DCN at the
+   the "-seed1" runs): unet (the default: width 32, FOV input, context block, DCN at the
    coarsest decoder scale), nafnet-fov-stem2 (FOV, pixel-unshuffle stem, size-matched),
    plain-unet (width 37, the same size, no switch), nafnet (plain, size-matched),
    nafnet-fov, nafnet-full (FOV, DCN at the coarsest decoder scale, context block),
-   unet-seed1 (the default from seed 1: how far two runs of one network differ; seed 1
-   holds out other photos, so it is scored on the unseen test photos only),
+   unet-seed1, nafnet-fov-stem2-seed1, plain-unet-seed1 (the same from seed 1: how far two
+   runs of one network differ; seed 1 holds out other photos), nafnet-stem2 (the plain
+   NAFNet with the pixel-unshuffle stem),
    nafnet-fov-stem2-w64 (width 64, 1.6 M parameters);
 3. the last checkpoints (no model selection on the test photos), the aberrated input and
    the Wiener oracle (true PSFs) scored with lensim.evaluate.harness on the held-out
-   photos' crops and on every unseen test crop: OUT/held_out.json, OUT/test_photos.json
-   (summaries by zone), OUT/held_out.csv, OUT/test_photos.csv (per crop), OUT/table.md
-   (the tables below, printed too): PSNR / SSIM overall and per zone, and each network
-   against the default UNet paired per crop (mean difference, its standard deviation,
-   crops and photos ahead).
+   photos' crops of each split (seed 0's networks on OUT/held_out.*, seed 1's on
+   OUT/held_out-seed1.*, each paired against its split's UNet) and on every unseen test
+   crop (every network, paired against the seed-0 UNet): OUT/held_out*.json,
+   OUT/test_photos.json (summaries by zone), OUT/held_out*.csv, OUT/test_photos.csv (per
+   crop), OUT/table.md (the tables, printed too): PSNR / SSIM overall and per zone, each
+   network against its reference paired per crop (mean difference, its standard
+   deviation, crops and photos ahead), and the networks run from two seeds, per seed and
+   averaged.
 """
 from __future__ import annotations
 
@@ -127,16 +131,34 @@ def train_all(out: Path, names: list[str], seconds: float) -> None:
             (out / f"{name}.done").write_text(time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()) + "\n")
 
 
+def _split_groups(out: Path, names: list[str]) -> list[tuple[str, str, list[str], list[str]]]:
+    """(label, reference, held-out photos, networks) for each held-out split among the
+    runs (the split depends on the seed): "held_out" for the reference's split, then
+    "held_out-seedN" for the others; each group's reference is its first UNet run."""
+    from lensim.data.manifest import read_held_out
+
+    groups: dict[tuple[str, ...], list[str]] = {}
+    for n in [REFERENCE, *[n for n in names if n != REFERENCE]]:
+        groups.setdefault(tuple(read_held_out(out / n)), []).append(n)
+    result = []
+    for i, (held_out, nets) in enumerate(groups.items()):
+        seed = json.loads((out / nets[0] / "split.json").read_text())["seed"]
+        reference = next((n for n in nets if n.startswith("unet")), nets[0])
+        result.append(("held_out" if i == 0 else f"held_out-seed{seed}", reference, list(held_out), nets))
+    return result
+
+
 def evaluate_all(out: Path, names: list[str], wiener: bool = True) -> dict:
-    """Stage 3: every network, input and Wiener on the held-out and the test crops."""
-    from lensim.data.manifest import read_held_out, read_pairs_manifest
+    """Stage 3: every network, input and Wiener on each split's held-out crops (the networks
+    of that split) and on the test crops (every network)."""
+    from lensim.data.manifest import read_pairs_manifest
     from lensim.evaluate.harness import builtin_method, checkpoint_method, evaluate, write_csv
 
     results: dict = {}
-    held_out = read_held_out(out / REFERENCE)
-    same_split = [n for n in names if read_held_out(out / n) == held_out]  # seed 1 holds out other photos
-    for label, pairs, sources, nets in (("held_out", out / "pairs-old", held_out, same_split),
-                                        ("test_photos", out / "pairs-test", None, names)):
+    stages = [(label, reference, out / "pairs-old", held_out, nets)
+              for label, reference, held_out, nets in _split_groups(out, names)]
+    stages.append(("test_photos", REFERENCE, out / "pairs-test", None, names))
+    for label, reference, pairs, sources, nets in stages:
         manifest = read_pairs_manifest(pairs)
         methods = {n: checkpoint_method(out / n / "last.pt", manifest.get("lens"), manifest.get("sensor"))
                    for n in nets}
@@ -146,8 +168,8 @@ def evaluate_all(out: Path, names: list[str], wiener: bool = True) -> dict:
         summary = evaluate(pairs, methods, bank=out / "bank", sources=sources, rows=rows)
         (out / f"{label}.json").write_text(json.dumps(summary, indent=2) + "\n")
         write_csv(rows, out / f"{label}.csv")
-        results[label] = {"summary": summary, "rows": rows, "networks": nets}
-    results["held_out_photos"] = held_out
+        results[label] = {"summary": summary, "rows": rows, "networks": nets, "reference": reference,
+                          "photos": sources}
     return results
 
 
@@ -184,6 +206,26 @@ def _paired(rows: list[dict], names: list[str], reference: str) -> list[str]:
     return lines
 
 
+def _seed_table(results: dict, names: list[str]) -> list[str]:
+    """Networks run from more than one seed: PSNR per seed and the mean, held out (each
+    seed's own split) and on the unseen test photos."""
+    runs: dict[str, list[str]] = {}
+    for n in names:
+        runs.setdefault(n.removesuffix("-seed1"), []).append(n)
+    held = {n: r["summary"]["methods"][n]["psnr_db"] for label, r in results.items() if label.startswith("held_out")
+            for n in r["networks"]}
+    unseen = results["test_photos"]["summary"]["methods"]
+    lines = ["| network | seeds | held out, per seed (dB) | held out, mean | unseen, per seed (dB) | unseen, mean |",
+             "| --- | ---: | --- | ---: | --- | ---: |"]
+    for base, seeds in runs.items():
+        if len(seeds) < 2:
+            continue
+        h, u = [held[n] for n in seeds], [unseen[n]["psnr_db"] for n in seeds]
+        lines.append(f"| {base} | {len(seeds)} | {' / '.join(f'{v:.2f}' for v in h)} | {statistics.mean(h):.2f} | "
+                     f"{' / '.join(f'{v:.2f}' for v in u)} | {statistics.mean(u):.2f} |")
+    return lines
+
+
 def report(out: Path, names: list[str], results: dict, seconds: float) -> str:
     lines = [f"# NAFNet vs UNet, {seconds:g} s of training each (benchmarks/nafnet_vs_unet.py)", ""]
     lines.append("| network | params | steps | seconds |")
@@ -194,11 +236,15 @@ def report(out: Path, names: list[str], results: dict, seconds: float) -> str:
     for n in names:
         model, info = load_checkpoint(out / n / "last.pt")
         lines.append(f"| {n} | {count_parameters(model):,} | {info['step']} | {info['train_seconds']:.0f} |")
-    for label, title in (("held_out", f"Held-out photos ({', '.join(results['held_out_photos'])})"),
-                         ("test_photos", "Unseen test photos")):
+    for label, r in results.items():
+        title = (f"Held-out photos, {label.partition('-')[2] or 'seed 0'} ({', '.join(r['photos'])})"
+                 if label.startswith("held_out") else "Unseen test photos")
         lines += ["", f"## {title}", "", "PSNR (dB), gain over the input, SSIM; zones: PSNR (gain) / SSIM", ""]
-        lines += _zone_table(results[label]["summary"])
-        lines += ["", "Paired per crop:", ""] + _paired(results[label]["rows"], results[label]["networks"], REFERENCE)
+        lines += _zone_table(r["summary"])
+        lines += ["", "Paired per crop:", ""] + _paired(r["rows"], r["networks"], r["reference"])
+    seeds = _seed_table(results, names)
+    if len(seeds) > 2:
+        lines += ["", "## Across seeds", ""] + seeds
     return "\n".join(lines) + "\n"
 
 
