@@ -4,9 +4,10 @@ share the generalization benchmark's test pairs; the input column checks that).
 
     python benchmarks/per_photo_vs_wiener.py [NAFNET_RESULTS] [GENERALIZATION_RESULTS]
 
-Reads NAFNET_RESULTS/test_photos.csv (one row per crop and method) and
+Reads NAFNET_RESULTS/test_photos.csv (one row per crop and method; every network in it is
+tabled) and, when that file has no "wiener" rows (a run with --no-wiener),
 GENERALIZATION_RESULTS/per_photo.md (per-photo input and Wiener PSNR, the mean of the crops'
-PSNR in dB) and prints a Markdown table: per photo, the mean crop PSNR of each method and
+PSNR in dB), and prints a Markdown table: per photo, the mean crop PSNR of each method and
 the margin of each network over the Wiener oracle.
 """
 from __future__ import annotations
@@ -16,8 +17,6 @@ import re
 import sys
 from collections import defaultdict
 from pathlib import Path
-
-METHODS = ("unet", "unet-seed1", "plain-unet", "nafnet-fov-stem2", "nafnet-full")
 
 
 def crop_means(csv_path: Path) -> dict[tuple[str, str], float]:
@@ -43,15 +42,21 @@ def main() -> None:
     here = Path(__file__).parent / "results"
     nafnet = Path(sys.argv[1]) if len(sys.argv) > 1 else here / "nafnet_vs_unet"
     general = Path(sys.argv[2]) if len(sys.argv) > 2 else here / "generalization"
-    means, wiener = crop_means(nafnet / "test_photos.csv"), wiener_table(general / "per_photo.md")
-    print("| photo | input | Wiener oracle | " + " | ".join(METHODS) + " | "
-          + " | ".join(f"{m} - Wiener" for m in METHODS) + " |")
-    print("| --- |" + " ---: |" * (2 + 2 * len(METHODS)))
+    means = crop_means(nafnet / "test_photos.csv")
+    photos = sorted({p for p, _ in means})
+    if (photos[0], "wiener") in means:
+        wiener = {p: (means[(p, "input")], means[(p, "wiener")]) for p in photos}
+    else:
+        wiener = wiener_table(general / "per_photo.md")
+    methods = list(dict.fromkeys(m for _, m in means if m not in ("input", "wiener")))
+    print("| photo | input | Wiener oracle | " + " | ".join(methods) + " | "
+          + " | ".join(f"{m} - Wiener" for m in methods) + " |")
+    print("| --- |" + " ---: |" * (2 + 2 * len(methods)))
     for photo in sorted(wiener):
         given, oracle = wiener[photo]
         if abs(means[(photo, "input")] - given) > 0.005:
             raise SystemExit(f"{photo}: input PSNR {means[(photo, 'input')]:.2f} != {given:.2f}: not the same crops")
-        nets = [means[(photo, m)] for m in METHODS]
+        nets = [means[(photo, m)] for m in methods]
         print(f"| {photo} | {given:.2f} | {oracle:.2f} | " + " | ".join(f"{v:.2f}" for v in nets) + " | "
               + " | ".join(f"{v - oracle:+.2f}" for v in nets) + " |")
 
