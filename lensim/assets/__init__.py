@@ -6,6 +6,7 @@ from pathlib import Path
 ASSETS_DIR = Path(__file__).parent
 LENS_DIR = ASSETS_DIR / "lenses"
 DEFAULT_LENS = "cooke_triplet"
+DEFAULT_SENSOR = "apsc_mirrorless"  # fits inside the default lens's image circle
 
 
 def lens_names() -> list[str]:

@@ -2,15 +2,18 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 from rich.table import Table
 
 from lensim import assets
-from lensim.assets.images import SAMPLE_IMAGES, TEST_IMAGES, SampleImage, available_sample_images, unseen_photos
 from lensim.cli.common import console, print_json
 from lensim.cli.validate import output_folder
 from lensim.errors import InputError
+
+if TYPE_CHECKING:
+    from lensim.assets.images import SampleImage
 
 
 def assets_command(
@@ -25,6 +28,8 @@ def assets_command(
 
     Example: lensim assets --export-photos photos/ && lensim dataset make photos/ -o pairs/
     """
+    from lensim.assets.images import SAMPLE_IMAGES, TEST_IMAGES, available_sample_images, unseen_photos
+
     for folder, option in ((export_photos, "--export-photos"), (export_test_photos, "--export-test-photos")):
         if folder is not None:
             output_folder(folder, option)

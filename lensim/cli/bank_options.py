@@ -5,27 +5,30 @@ options always name the same cached bank.
 Also the shooting-settings options (--fno, --object-m, --focus-m, --config;
 lensim.optics.shooting), declared once: comma lists (grids) on `psf bank` and `dataset
 make` (setting_list_option), single values on `psf compute`, `simulate`, `demo` and `lens
-info/plot/spot/field` (setting_option, shooting_settings)."""
+info/plot/spot/field` (setting_option, shooting_settings).
+
+The options' defaults come from lensim.psf.defaults (plain Python): building the options
+and the help loads no optics or PSF module; the functions that compute load them."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import typer
 
 from lensim.cli.common import progress_bar
 from lensim.errors import InputError
-from lensim.optics.lens import Lens
-from lensim.optics.shooting import OPTIONS as SHOOTING_OPTIONS
-from lensim.optics.shooting import ShootingSettings
-from lensim.psf.bank import GridAxes, GridBank, PSFBank
-from lensim.psf.bank.settings import DEFAULT_WAVELENGTHS_TEXT, BankSettings, parse_wavelengths_nm
-from lensim.render.bank_cache import ensure_bank, ensure_grid
-from lensim.sensor.profile import SensorProfile
+from lensim.psf.defaults import BANK_FIELDS, BANK_PUPIL_SAMPLES, DEFAULT_WAVELENGTHS_TEXT
+
+if TYPE_CHECKING:
+    from lensim.optics.lens import Lens
+    from lensim.optics.shooting import ShootingSettings
+    from lensim.psf.bank import BankSettings, GridAxes, GridBank, PSFBank
+    from lensim.sensor.profile import SensorProfile
 
 
 def fields_option() -> Any:
-    return typer.Option(BankSettings.fields, "--fields", help="Radial fields 0..1 of the bank (at least 2; "
+    return typer.Option(BANK_FIELDS, "--fields", help="Radial fields 0..1 of the bank (at least 2; "
                         "sqrt-spaced: denser towards the edge).")
 
 
@@ -35,7 +38,7 @@ def wavelengths_option() -> Any:
 
 
 def pupil_samples_option() -> Any:
-    return typer.Option(BankSettings.pupil_samples, "--pupil-samples", help="Pupil grid samples across the diameter.")
+    return typer.Option(BANK_PUPIL_SAMPLES, "--pupil-samples", help="Pupil grid samples across the diameter.")
 
 
 def workers_option() -> Any:
@@ -96,6 +99,9 @@ def shooting_settings(fno: str | None, object_m: str | None, focus_m: str | None
                       config: str | None) -> ShootingSettings:
     """The ShootingSettings of the single-value options (checked; one-line errors naming
     the option; a comma list is refused: grids are psf bank's and dataset make's)."""
+    from lensim.optics.shooting import OPTIONS as SHOOTING_OPTIONS
+    from lensim.optics.shooting import ShootingSettings
+
     for key, text in (("fno", fno), ("object_m", object_m), ("focus_m", focus_m), ("config", config)):
         if text is not None and "," in str(text):
             raise InputError("<command line>", SHOOTING_OPTIONS[key], f"expected one value, got the list {text!r} "
@@ -129,6 +135,8 @@ def bank_settings(fields: int, wavelengths: str, pupil_samples: int, cache: Path
                   **more: Any) -> BankSettings:
     """BankSettings from the command line's bank options (checked before any work; an
     error names the option)."""
+    from lensim.psf.bank.settings import BankSettings, parse_wavelengths_nm
+
     try:
         return BankSettings(fields=fields, wavelengths_nm=parse_wavelengths_nm(wavelengths),
                             pupil_samples=pupil_samples, cache_dir=cache, **more)
@@ -164,6 +172,8 @@ def bank_for_lens(bank_dir: Path, lens_file: str | None,
     computed for (a bank of another lens would be used silently otherwise). Shooting
     settings without --lens are refused: the bank's lens is already set."""
     from lensim.cli.validate import input_folder
+    from lensim.optics.shooting import OPTIONS as SHOOTING_OPTIONS
+    from lensim.psf.bank import PSFBank
 
     bank = PSFBank.load(input_folder(bank_dir, "--bank", "bank folder"))
     if shooting is not None and not shooting.is_default:
@@ -178,7 +188,7 @@ def bank_or_grid_for_lens(bank_dir: Path, lens_file: str | None) -> tuple[PSFBan
     """bank_for_lens, where the folder may also hold a grid of banks (lensim.psf.bank.grid;
     the lens is then its lens file's lens)."""
     from lensim.cli.validate import input_folder
-    from lensim.psf.bank.grid import is_grid
+    from lensim.psf.bank.grid import GridBank, is_grid
 
     folder = input_folder(bank_dir, "--bank", "bank folder")
     if not is_grid(folder):
@@ -191,6 +201,7 @@ def _lens_of(stored: Any, bank_dir: Path, lens_file: str | None, shooting: Shoot
     """The lens a bank's manifest stores, or --lens (at the shooting settings) checked
     against it."""
     from lensim.optics.lens_file import lens_from_dict, lens_to_dict
+    from lensim.optics.shooting import ShootingSettings
 
     if lens_file is None:
         if not isinstance(stored, dict):
@@ -217,6 +228,8 @@ def cached_bank(lens: Lens, pitch_um: float, sensor: SensorProfile, settings: Ba
     """The lens's bank at this pitch (um) with the sensor's spectral response, from the
     cache or computed into it (with `workers` local processes or on the Dask cluster at
     `scheduler`), with a progress bar unless quiet."""
+    from lensim.render.bank_cache import ensure_bank
+
     with progress_bar("PSF bank", "fields", quiet) as cb:
         return ensure_bank(lens, pitch_um, settings, response=sensor.spectral_response, workers=workers, progress=cb,
                            scheduler=scheduler)
@@ -226,6 +239,8 @@ def cached_grid(lens: Lens, pitch_um: float, sensor: SensorProfile, settings: Ba
                 workers: int, quiet: bool, scheduler: str | None = None) -> GridBank:
     """The lens's grid of banks over `axes` at this pitch (um) with the sensor's spectral
     response, from the cache or computed into it, with a progress bar unless quiet."""
+    from lensim.render.bank_cache import ensure_grid
+
     with progress_bar("PSF grid", "fields", quiet) as cb:
         return ensure_grid(lens, pitch_um, axes, settings, response=sensor.spectral_response, workers=workers,
                            progress=cb, scheduler=scheduler)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
@@ -22,11 +23,11 @@ from lensim.cli.bank_options import (
 )
 from lensim.cli.common import console, print_json, progress_bar
 from lensim.cli.validate import at_least, choice, even, in_range, input_folder, output_folder, scheduler_address
-from lensim.data.pairs import check_photos, list_images, make_dataset
 from lensim.errors import InputError
-from lensim.optics.lens_file import load_lens
-from lensim.psf.bank import GridAxes, GridBank, PSFBank
-from lensim.sensor.profile import DEFAULT_SENSOR, load_sensor
+
+if TYPE_CHECKING:
+    from lensim.psf.bank import BankSettings, GridAxes, GridBank, PSFBank
+    from lensim.sensor.profile import SensorProfile
 
 dataset_app = typer.Typer(help="Training data: aligned (aberrated, sharp) pairs.", no_args_is_help=True)
 
@@ -71,7 +72,7 @@ def make(
     output: Path = typer.Option(..., "-o", "--output", help="Dataset folder (resumes if it exists with the same settings)."),
     lens_file: str = typer.Option(None, "--lens", help="Lens file or built-in lens name (default: the bank's lens "
                                   f"with --bank, else {assets.DEFAULT_LENS})."),
-    sensor_file: str = typer.Option(DEFAULT_SENSOR, "--sensor", help="Sensor profile file or built-in name."),
+    sensor_file: str = typer.Option(assets.DEFAULT_SENSOR, "--sensor", help="Sensor profile file or built-in name."),
     crops: int = typer.Option(8, "--crops", help="Crops per photo and placement."),
     placements: int = typer.Option(1, "--placements", help="Sensor positions per photo, stratified by field radius "
                                    "(3: centre, middle and edge zones)."),
@@ -111,6 +112,10 @@ def make(
 
     Example: lensim dataset make photos/ --lens double_gauss --sensor full_frame --fno 2,2.8,4 --focus-m inf,3 -o data/
     """
+    from lensim.data.pairs import make_dataset
+    from lensim.psf.bank import GridAxes, GridBank
+    from lensim.sensor.profile import load_sensor
+
     settings = bank_settings(fields, wavelengths, pupil_samples, cache)
     _check_options(sharp_dir, output, crops, size, placements, workers, demosaic, cache)
     scheduler_address(scheduler)
@@ -125,11 +130,7 @@ def make(
     if bank_dir is not None:
         bank, _ = bank_or_grid_for_lens(bank_dir, lens_file)
     else:
-        lens = load_lens(lens_file or assets.DEFAULT_LENS)
-        check_response(settings, sensor.spectral_response, sensor=sensor)
-        check_photos(list_images(sharp_dir), size)  # before the bank, which takes minutes
-        bank = (cached_grid(lens, sensor.pixel_pitch_um, sensor, settings, axes, workers, quiet, scheduler)
-                if axes.given else cached_bank(lens, sensor.pixel_pitch_um, sensor, settings, workers, quiet, scheduler))
+        bank = _lens_bank(lens_file, sharp_dir, size, sensor, settings, axes, workers, quiet, scheduler)
     with progress_bar("pairs", "photos", quiet) as cb:
         manifest = make_dataset(sharp_dir, output, bank, sensor_file, sensor, crops=crops, size=size, seed=seed,
                                 placements=placements, noise=noise, demosaic=demosaic, workers=workers, scheduler=scheduler, progress=cb,
@@ -141,3 +142,18 @@ def make(
         print_json(summary)
     elif not quiet:
         console.print(f"wrote {summary['pairs']} pairs from {summary['photos']} photos to {output}", highlight=False)
+
+
+def _lens_bank(lens_file: str | None, sharp_dir: Path, size: int, sensor: SensorProfile, settings: BankSettings,
+               axes: GridAxes, workers: int, quiet: bool, scheduler: str | None) -> PSFBank | GridBank:
+    """The lens's bank at the sensor's pitch (a grid of banks over ``axes`` when given),
+    cached or computed, once the spectral response and the photos are known to work."""
+    from lensim.data.pairs import check_photos, list_images
+    from lensim.optics.lens_file import load_lens
+
+    lens = load_lens(lens_file or assets.DEFAULT_LENS)
+    check_response(settings, sensor.spectral_response, sensor=sensor)
+    check_photos(list_images(sharp_dir), size)  # before the bank, which takes minutes
+    if axes.given:
+        return cached_grid(lens, sensor.pixel_pitch_um, sensor, settings, axes, workers, quiet, scheduler)
+    return cached_bank(lens, sensor.pixel_pitch_um, sensor, settings, workers, quiet, scheduler)

@@ -4,7 +4,7 @@ from __future__ import annotations
 import math
 from enum import Enum
 from pathlib import Path
-from typing import Optional
+from typing import TYPE_CHECKING, Optional
 
 import typer
 from rich.table import Table
@@ -13,11 +13,10 @@ from lensim.cli.bank_options import config_option, fno_option, focus_m_option, o
 from lensim.cli.common import console, print_json
 from lensim.cli.validate import AIMINGS, choice, output_file
 from lensim.errors import InputError
-from lensim.optics.aiming import Aiming
-from lensim.optics.analysis import first_order_summary
-from lensim.optics.lens import Lens
-from lensim.optics.lens_file import load_lens, match_glasses, save_lens
-from lensim.optics.materials import CATALOGS, Air
+from lensim.optics.aiming_modes import Aiming
+
+if TYPE_CHECKING:
+    from lensim.optics.lens import Lens
 
 lens_app = typer.Typer(help="Inspect, plot and convert lens prescriptions.", no_args_is_help=True)
 
@@ -32,6 +31,8 @@ GLASS_MAKERS_HELP = ("Catalogues --match-glass searches, comma-separated (Schott
 
 def _glass_makers(makers: Optional[str], match_glass: bool) -> Optional[list[str]]:
     """The --glass-makers list, checked before any work (an unknown maker is a one-line error)."""
+    from lensim.optics.materials import CATALOGS
+
     if makers is None:
         return None
     if not match_glass:
@@ -58,6 +59,7 @@ def _load_set(lens_file: str, match_glass: bool = False, makers: Optional[list[s
               shooting: tuple[Optional[str], ...] = (None, None, None, None)):
     """_load, and the shooting settings resolved as records keep them (None when none is
     given)."""
+    from lensim.optics.lens_file import load_lens, match_glasses
     from lensim.optics.shooting import describe, lens_at, record
 
     settings = shooting_settings(*shooting)
@@ -95,6 +97,8 @@ def info(
 
     Example: lensim lens info phone_wide --match-glass --glass-makers Ohara,Schott --json
     """
+    from lensim.optics.analysis import first_order_summary
+
     choice(aiming, AIMINGS, "--aiming")
     lens, matches, described = _load_set(lens_file, match_glass, _glass_makers(glass_makers, match_glass),
                                          (fno, object_m, focus_m, config))
@@ -104,18 +108,7 @@ def info(
     if json_out:
         print_json(summary | {"glass_matches": matches} if match_glass else summary)
         return
-    t = Table(title=f"{lens.name or Path(lens.source).name}  (lengths in mm)")
-    for col in ("#", "radius", "thickness", "material", "nd", "conic", "clear s.d.", "note"):
-        t.add_column(col, justify="right" if col not in ("material", "note") else "left")
-    nd_wl = 0.5875618
-    for i, s in enumerate(lens.surfaces):
-        mat = "MIRROR" if s.is_mirror else ("" if isinstance(s.material, Air) else s.material.name)
-        nd = "" if isinstance(s.material, Air) or s.is_mirror else f"{s.material.index(nd_wl).item():.5f}"
-        note = ", ".join(x for x in ("STOP" if s.is_stop else "", s.kind if s.is_aspheric else "",
-                                     f"obsc {s.obscuration_radius:g}" if s.obscuration_radius else "") if x)
-        t.add_row(str(i + 1), _fmt(s.radius), _fmt(s.thickness), mat, nd, _fmt(s.conic) if s.conic else "",
-                  _fmt(s.clear_radius) if s.clear_radius is not None else "", note)
-    console.print(t)
+    console.print(_surface_table(lens))
     f = Table(title="First-order data", show_header=False)
     f.add_column("quantity")
     f.add_column("value", justify="right")
@@ -141,6 +134,24 @@ def info(
         console.print(f"note: {note}", highlight=False)
 
 
+def _surface_table(lens: Lens) -> Table:
+    """lens info's surface table: radii, thicknesses, clear semi-diameters in mm, nd at the d line."""
+    from lensim.optics.materials import Air
+
+    t = Table(title=f"{lens.name or Path(lens.source).name}  (lengths in mm)")
+    for col in ("#", "radius", "thickness", "material", "nd", "conic", "clear s.d.", "note"):
+        t.add_column(col, justify="right" if col not in ("material", "note") else "left")
+    nd_wl = 0.5875618
+    for i, s in enumerate(lens.surfaces):
+        mat = "MIRROR" if s.is_mirror else ("" if isinstance(s.material, Air) else s.material.name)
+        nd = "" if isinstance(s.material, Air) or s.is_mirror else f"{s.material.index(nd_wl).item():.5f}"
+        note = ", ".join(x for x in ("STOP" if s.is_stop else "", s.kind if s.is_aspheric else "",
+                                     f"obsc {s.obscuration_radius:g}" if s.obscuration_radius else "") if x)
+        t.add_row(str(i + 1), _fmt(s.radius), _fmt(s.thickness), mat, nd, _fmt(s.conic) if s.conic else "",
+                  _fmt(s.clear_radius) if s.clear_radius is not None else "", note)
+    return t
+
+
 @lens_app.command("convert")
 def convert(
     lens_file: str = LENS_ARG,
@@ -152,6 +163,8 @@ def convert(
 
     Example: lensim lens convert design.zmx -o design.yaml
     """
+    from lensim.optics.lens_file import save_lens
+
     makers = _glass_makers(glass_makers, match_glass)
     if output.suffix.lower() not in (".json", ".yaml", ".yml"):
         raise InputError(str(output), "--output", "expected a .json, .yaml or .yml file name for a native lens file")

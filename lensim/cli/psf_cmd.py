@@ -5,7 +5,6 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
 import typer
 
 from lensim.cli.bank_options import (
@@ -40,10 +39,11 @@ from lensim.cli.validate import wavelength_nm as wavelength_nm_checked
 from lensim.errors import InputError
 from lensim.io import atomic_write_bytes
 from lensim.jsonable import jsonable
-from lensim.optics.lens_file import load_lens
-from lensim.psf.compute import METHODS, compute_psf
+from lensim.psf.defaults import METHODS
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from lensim.optics.lens import Lens
     from lensim.psf.bank import BankSettings
     from lensim.psf.bank.grid import GridAxes
@@ -74,6 +74,8 @@ def compute(
 
     Example: lensim psf compute cooke_triplet --field 0.7 --wavelength-nm 550 -o psf.npy --json
     """
+    from lensim.psf.compute import compute_psf
+
     in_range(field, 0.0, 1.0, "--field", what="a normalized field")
     wavelength_nm_checked(wavelength_nm)
     choice(method, METHODS, "--method")
@@ -86,11 +88,7 @@ def compute(
     lens, described = lens_and_record(lens_file, shooting_settings(fno, object_m, focus_m, config))
     psf = compute_psf(lens, field, wavelength_nm / 1000.0, method, pupil_samples, grid, spacing_um, aiming)
     if output is not None:
-        import io
-
-        buf = io.BytesIO()
-        np.save(buf, psf.data)
-        atomic_write_bytes(output, buf.getvalue())
+        _save_npy(output, psf.data)
     info = {"lens": lens.source, "field": field, "field_value": psf.field_value, "field_type": lens.field_type,
             "wavelength_nm": wavelength_nm, "method": method, "grid": grid, "spacing_um": spacing_um,
             "pupil_samples": pupil_samples, "aiming": aiming, **psf.figures}
@@ -103,6 +101,17 @@ def compute(
         console.print(f"{k:22s} {v}", highlight=False)
     if output is not None:
         console.print(f"wrote {output}")
+
+
+def _save_npy(path: Path, data: np.ndarray) -> None:
+    """``data`` as a .npy file, written atomically."""
+    import io
+
+    import numpy as np
+
+    buf = io.BytesIO()
+    np.save(buf, data)
+    atomic_write_bytes(path, buf.getvalue())
 
 
 @psf_app.command("bank")
@@ -152,6 +161,7 @@ def bank(
 
     Example: lensim psf bank --lens double_gauss --sensor full_frame --fno 2,2.8,4 --focus-m inf,3 -o grid/
     """
+    from lensim.optics.lens_file import load_lens
     from lensim.psf.bank.grid import GridAxes
     from lensim.sensor.profile import load_sensor
     from lensim.sensor.spectral import DEFAULT_CAMERA

@@ -7,9 +7,8 @@ from __future__ import annotations
 
 import warnings
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import torch
 import typer
 
 from lensim.cli.common import console, print_json, progress_bar
@@ -17,6 +16,9 @@ from lensim.cli.validate import at_least, choice, distinct_outputs, output_folde
 from lensim.cli.validate import device as check_device
 from lensim.errors import InputError
 from lensim.io import folder_lock
+
+if TYPE_CHECKING:
+    import torch
 
 
 def _parse_pair(text: str, option: str) -> tuple[int, int]:
@@ -112,6 +114,8 @@ def restore_command(
         raise InputError("--sensor-offset", None, "applies to developed photos; a raw file's place on the sensor is its "
                          "active area (or the place a simulated DNG records)")
     if threads > 0:
+        import torch
+
         torch.set_num_threads(threads)
     model, info, sensor_data, (sensor_w, sensor_h) = _load_model(checkpoint, lens_file, sensor_file, device, engine,
                                                                  threads)

@@ -5,8 +5,8 @@ import dataclasses
 import json
 import warnings
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import torch
 import typer
 
 from lensim import assets
@@ -29,14 +29,12 @@ from lensim.cli.bank_options import (
 from lensim.cli.common import console, print_json
 from lensim.cli.validate import at_least, choice, distinct_outputs, output_folder
 from lensim.errors import InputError, PupilSamplingError
-from lensim.images import read_image, write_image
 from lensim.io import atomic_write_text
-from lensim.optics.lens import Lens
-from lensim.psf.bank import BankSettings, PSFBank
-from lensim.render.kernels import check_bank_fits
-from lensim.render.mapping import map_to_sensor
-from lensim.render.pipeline import simulate
-from lensim.sensor.profile import SensorProfile, load_sensor
+
+if TYPE_CHECKING:
+    from lensim.optics.lens import Lens
+    from lensim.psf.bank import BankSettings, PSFBank
+    from lensim.sensor.profile import SensorProfile
 
 
 def simulate_command(
@@ -80,6 +78,14 @@ def simulate_command(
 
     Example: lensim simulate photo.png --lens cooke_triplet --sensor apsc_mirrorless -o sim/
     """
+    import torch
+
+    from lensim.images import read_image, write_image
+    from lensim.render.kernels import check_bank_fits
+    from lensim.render.mapping import map_to_sensor
+    from lensim.render.pipeline import simulate
+    from lensim.sensor.profile import load_sensor
+
     settings = bank_settings(fields, wavelengths, pupil_samples, cache)
     shooting = shooting_settings(fno, object_m, focus_m, config)
     _check_options(output, fmt, bits, demosaic, workers, cache)
@@ -169,6 +175,8 @@ def _check_options(output: Path, fmt: str, bits: int, demosaic: str, workers: in
 def _check_photos(images: list[Path], fmt: str) -> None:
     """Every photo readable and no two writing the same OUT/<name>, before the first
     output (a bad last photo must not leave the earlier ones written)."""
+    from lensim.images import read_image
+
     distinct_outputs(images, lambda p: f"{p.stem}.{fmt}")
     for path in images:
         read_image(path)

@@ -14,15 +14,12 @@ import re
 import tempfile
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
-from typing import TypeVar, get_args
+from typing import TypeVar
 
 from lensim.errors import InputError
-from lensim.optics.aiming import Aiming
+from lensim.optics.aiming_modes import AIMINGS
 
 T = TypeVar("T")
-
-#: the ray-aiming names (--aiming)
-AIMINGS: tuple[str, ...] = get_args(Aiming)
 
 
 # ---------------------------------------------------------------- paths

@@ -17,12 +17,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from typing import Literal
 
 import numpy as np
 import torch
 
 from lensim.errors import InputError, RayTraceError
+from lensim.optics.aiming_modes import Aiming
 from lensim.optics.launch import launch, launch_at, object_rays
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import ParaxialData, paraxial_data, paraxial_image_height
@@ -35,8 +35,6 @@ from lensim.optics.trace import (
     media_indices,
     trace,
 )
-
-Aiming = Literal["paraxial", "real"]
 
 
 def _tensor(x, device=None) -> torch.Tensor:

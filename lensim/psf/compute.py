@@ -17,12 +17,11 @@ from lensim.errors import InputError, PupilSamplingError
 from lensim.optics.aiming import Aiming, object_field
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import paraxial_data, paraxial_image_height
+from lensim.psf.defaults import METHODS
 from lensim.psf.fourier import direction_scale, fft_psf, geometric_psf
 from lensim.psf.huygens import huygens_psf
 from lensim.psf.metrics import encircled_energy_radius, rms_spot_radius_um, strehl_ratio
 from lensim.psf.pupil_field import PupilField, pupil_field
-
-METHODS = ("huygens", "fft", "geometric")
 
 
 class PSFSamplingWarning(UserWarning):

@@ -51,11 +51,11 @@ from typing import Any
 import numpy as np
 import torch
 
+from lensim.assets import DEFAULT_SENSOR
 from lensim.errors import InputError, LensimError
 from lensim.io import read_text
 
 BAYER_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
-DEFAULT_SENSOR = "apsc_mirrorless"  # fits inside the default lens's image circle
 SENSOR_DIR = Path(__file__).resolve().parents[1] / "assets" / "sensors"
 
 TOP_KEYS = {"name", "source", "description", "notes", "pixel_pitch_um", "resolution", "bayer_pattern",

@@ -20,6 +20,7 @@ import numpy as np
 
 from lensim.errors import InputError
 from lensim.optics.lens import Lens
+from lensim.psf.defaults import BANK_FIELDS, BANK_PUPIL_SAMPLES, DEFAULT_WAVELENGTHS_TEXT
 
 DEFAULT_FIELDS = 64
 FIELD_SPACINGS = ("sqrt", "linear")
@@ -106,8 +107,7 @@ def suggest_kernel_pixels(lens: Lens, pitch_um: float, limit: int = 99) -> int:
     return int(min(max(p, 7), limit if limit % 2 else limit - 1))
 
 
-#: the default bank wavelengths as typed on the command line, and their values (16, nm)
-DEFAULT_WAVELENGTHS_TEXT = "400:700:20"
+#: the default bank wavelengths as typed on the command line (lensim.psf.defaults), and their values (16, nm)
 DEFAULT_WAVELENGTHS_NM = parse_wavelengths_nm(DEFAULT_WAVELENGTHS_TEXT)
 
 
@@ -128,10 +128,10 @@ class BankSettings:
     spots. At native sensor pitch 128 pupil samples keep the alias-free window as wide as
     the kernel down to 400 nm (64 leave 29 of the Cooke triplet's 35 px on APS-C)."""
 
-    fields: int = 32
+    fields: int = BANK_FIELDS
     field_spacing: str = "sqrt"
     wavelengths_nm: tuple[float, ...] = DEFAULT_WAVELENGTHS_NM
-    pupil_samples: int = 128
+    pupil_samples: int = BANK_PUPIL_SAMPLES
     aiming: str = "real"
     kernel_pixels: int | None = None
     kernel_limit: int = 99
