@@ -327,3 +327,34 @@ def test_killed_dataset_make_leaves_no_dask_worker(reference, tmp_path):
         proc.send_signal(signal.SIGKILL)
         proc.communicate()
     assert wait_for(lambda: not any(alive(w) for w in workers), 5.0), "Dask workers outlived their parent"
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
+def test_killed_restore_leaves_no_dask_worker(tmp_path):
+    pytest.importorskip("rawpy")
+    from lensim.raw.dng import write_capture_dng
+    from lensim.restore.checkpoint import CHECKPOINT_FORMAT, atomic_torch_save
+    from lensim.restore.network import FieldAwareUNet
+    from test_raw_restore import capture, small_sensor
+
+    torch.manual_seed(0)
+    model = FieldAwareUNet(8, 2, zero_init_tail=False).eval()
+    atomic_torch_save({"format": CHECKPOINT_FORMAT, "version": 1, "model_config": model.config,
+                       "model_state": model.state_dict(), "sensor": small_sensor().to_dict(), "lens": None},
+                      tmp_path / "run" / "last.pt")
+    for k in range(6):  # raws larger than the sensor (restored as full frames of it): seconds each
+        raw, params = capture(k, (768, 1024))
+        write_capture_dng(tmp_path / "raws" / f"s{k}.dng", raw, small_sensor(), params)
+    proc = lensim_process(["restore", str(tmp_path / "run"), str(tmp_path / "raws"), "-o", str(tmp_path / "out"),
+                           "--allow-other-camera", "--workers", "2", "--quiet"])
+    try:
+        assert wait_for(lambda: len(workers_of(proc.pid, "spawn_main")) >= 2, 120), proc.poll()
+        workers = workers_of(proc.pid, "spawn_main")
+        time.sleep(1.0)  # the workers load the model and restore their first raws
+        assert proc.poll() is None, "the restore ended before the kill"
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.communicate()
+    assert wait_for(lambda: not any(alive(w) for w in workers), 5.0), "Dask workers outlived their restore"
+    assert len(list((tmp_path / "out").glob("*.tif"))) < 6  # killed with raws left to restore

@@ -131,18 +131,90 @@ def test_batch_is_checked_before_output_and_resumes(run, tmp_path: Path, capsys,
 
 @pytest.mark.slow
 def test_worker_processes_write_what_one_process_writes(run, tmp_path: Path, capsys, monkeypatch):
+    """--workers 2 (a local Dask cluster) and --scheduler (a cluster given by address, here
+    with two worker threads in this process) write the files one process writes, and
+    report them by the paths given (relative ones here)."""
+    distributed = pytest.importorskip("distributed")
     folder, _ = run
+    monkeypatch.chdir(tmp_path)
+    for k in range(3):
+        raw, params = capture(k)
+        write_capture_dng(Path("raws") / f"s{k}.dng", raw, small_sensor(), params)
+    threads = torch.get_num_threads()
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False, protocol="tcp://",
+                                  dashboard_address=":0") as c:
+        runs = {"1": ["--workers", "1"], "2": ["--workers", "2"], "cluster": ["--scheduler", c.scheduler_address]}
+        for name, where in runs.items():
+            code, stdout, err = run_cli(["restore", str(folder), "raws", "-o", name, "--quiet", "--json", *where],
+                                        capsys, monkeypatch)
+            assert code == 0, err
+            records = sorted(json.loads(stdout)["images"], key=lambda r: r["input"])
+            assert [(r["input"], r["output"], r["skipped"]) for r in records] == [
+                (f"raws/s{k}.dng", f"{name}/s{k}.tif", False) for k in range(3)]
+    torch.set_num_threads(threads)  # the cluster's jobs set their threads in this process
+    for name in ("2", "cluster"):
+        for k in range(3):
+            # the same up to one 16-bit step (float sums in another thread count)
+            one, other = read_tif(tmp_path / "1" / f"s{k}.tif"), read_tif(tmp_path / name / f"s{k}.tif")
+            assert np.abs(one - other).max() <= 1.0 / 65535 + 1e-9, (name, k)
+
+
+def test_a_worker_loads_the_model_once_and_restores_as_this_process(run, tmp_path: Path, monkeypatch):
+    """restore_in_worker, the job a Dask worker runs: its jobs pickle; the process loads
+    the model on its first job only (again when the checkpoint file changes); the files
+    are those restored here with the loaded model."""
+    import os
+    import pickle
+
+    from lensim.raw import restore as raw_restore
+    from lensim.restore import checkpoint
+
+    folder, model = run
+    loads: list[str] = []
+    real = checkpoint.load_checkpoint
+    monkeypatch.setattr(checkpoint, "load_checkpoint", lambda path, **kw: loads.append(path) or real(path, **kw))
+    monkeypatch.setattr(raw_restore, "_MODEL", {})
+    settings = raw_restore.RestoreSettings(checkpoint=str(folder / "last.pt"), sensor=small_sensor().to_dict(),
+                                           tile=32, overlap=8)
     for k in range(3):
         raw, params = capture(k)
         write_capture_dng(tmp_path / "raws" / f"s{k}.dng", raw, small_sensor(), params)
-    for workers in ("1", "2"):
-        code, _, err = run_cli(["restore", str(folder), str(tmp_path / "raws"), "-o", str(tmp_path / workers),
-                                "--quiet", "--workers", workers], capsys, monkeypatch)
-        assert code == 0, err
+    (tmp_path / "w").mkdir()
+    jobs = [raw_restore.RawJob(tmp_path / "raws" / f"s{k}.dng", tmp_path / "w" / f"s{k}.tif", None) for k in range(3)]
+    threads = torch.get_num_threads()
+    try:
+        for k, job in enumerate(jobs):
+            if k == 2:  # the checkpoint rewritten (a newer modification time): loaded anew
+                stat = os.stat(folder / "last.pt")
+                os.utime(folder / "last.pt", ns=(stat.st_atime_ns, stat.st_mtime_ns + 10**9))
+            task = pickle.loads(pickle.dumps(raw_restore.WorkerJob(job, settings, 1)))
+            assert raw_restore.restore_in_worker(task)["output"] == str(job.tif)
+            assert torch.get_num_threads() == 1 and len(loads) == (1 if k < 2 else 2)
+        assert len(raw_restore._MODEL) == 1  # only the latest model is kept
+    finally:
+        torch.set_num_threads(threads)
+    raw_restore.restore_raw_files([j.source for j in jobs], tmp_path / "here", model, settings)
     for k in range(3):
-        # the same up to one 16-bit step (float sums in another thread count)
-        one, two = read_tif(tmp_path / "1" / f"s{k}.tif"), read_tif(tmp_path / "2" / f"s{k}.tif")
-        assert np.abs(one - two).max() <= 1.0 / 65535 + 1e-9
+        here, there = read_tif(tmp_path / "here" / f"s{k}.tif"), read_tif(tmp_path / "w" / f"s{k}.tif")
+        assert np.abs(here - there).max() <= 1.0 / 65535 + 1e-9, k
+
+
+def test_a_scheduler_that_does_not_answer_is_one_line_and_writes_nothing(run, tmp_path: Path, capsys, monkeypatch):
+    import socket
+
+    dask = pytest.importorskip("dask")
+    folder, _ = run
+    raw, params = capture(0)
+    write_capture_dng(tmp_path / "raws" / "s0.dng", raw, small_sensor(), params)
+    with socket.socket() as s:  # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        address = f"tcp://127.0.0.1:{s.getsockname()[1]}"
+    with dask.config.set({"distributed.comm.timeouts.connect": "0.5s"}):
+        code, _, err = run_cli(["restore", str(folder), str(tmp_path / "raws"), "-o", str(tmp_path / "out"),
+                                "--quiet", "--scheduler", address], capsys, monkeypatch)
+    assert code == 2 and len(err.strip().splitlines()) == 1, err
+    assert address in err and "no Dask scheduler answered" in err
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
 
 
 def test_simulated_dng_restores_as_in_memory(tmp_path: Path, capsys, monkeypatch):

@@ -1,4 +1,4 @@
-"""lensim.workers.run_jobs, the one engine of `psf bank` and `dataset make`: jobs run here
+"""lensim.workers.run_jobs, the one engine of `psf bank`, `dataset make` and `restore`: jobs run here
 or on a Dask cluster given by address with the same results, errors cross as themselves,
 a scheduler that does not answer is one line. (Local clusters and their workers' death
 with the parent: tests/test_kill_resume.py.)"""
@@ -89,3 +89,20 @@ def test_a_scheduler_that_does_not_answer_is_one_line():
         run_jobs(_square, [1, 2], scheduler=address)
     assert str(e.value).startswith(address) and "no Dask scheduler answered" in str(e.value)
     assert "\n" not in str(e.value)
+
+
+def _malloc_trim(_job: int) -> str | None:
+    import os
+
+    return os.environ.get("MALLOC_TRIM_THRESHOLD_")
+
+
+@pytest.mark.slow
+def test_local_workers_keep_glibcs_malloc_trimming(monkeypatch):
+    """A local cluster's worker processes start without Dask's MALLOC_TRIM_THRESHOLD_
+    (which slows array work down: lensim.workers._local_cluster)."""
+    pytest.importorskip("distributed")
+    monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)
+    got: list[str | None] = []
+    run_jobs(_malloc_trim, [1, 2], workers=2, on_result=lambda j, r: got.append(r))
+    assert got == [None, None]

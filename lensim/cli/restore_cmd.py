@@ -11,8 +11,9 @@ from typing import TYPE_CHECKING, Any
 
 import typer
 
+from lensim.cli.bank_options import scheduler_option
 from lensim.cli.common import console, print_json, progress_bar
-from lensim.cli.validate import at_least, choice, distinct_outputs, output_folder
+from lensim.cli.validate import at_least, choice, distinct_outputs, output_folder, scheduler_address
 from lensim.cli.validate import device as check_device
 from lensim.errors import InputError
 from lensim.io import folder_lock
@@ -39,12 +40,16 @@ def _split_inputs(paths: list[Path]) -> tuple[list[Path], list[Path]]:
     return (raw_files(raw_given) if raw_given else []), photos
 
 
-def _restore_raws(files: list[Path], output: Path, model, settings, dng: bool, workers: int, quiet: bool) -> list[dict]:
-    """Restore raw files with a progress bar over the batch (lensim.raw.restore)."""
+def _restore_raws(files: list[Path], output: Path, model, settings, dng: bool, where: tuple[int, str | None],
+                  quiet: bool) -> list[dict]:
+    """Restore raw files with a progress bar over the batch (lensim.raw.restore); where:
+    (--workers, --scheduler)."""
     from lensim.raw.restore import restore_raw_files
 
+    workers, scheduler = where
     with progress_bar("restoring raw files", "files", quiet) as step:
-        records = restore_raw_files(files, output, model, settings, dng=dng, workers=workers, progress=step)
+        records = restore_raw_files(files, output, model, settings, dng=dng, workers=workers, progress=step,
+                                    scheduler=scheduler)
     if not quiet:
         for r in records:
             what = "skipped (done)" if r["skipped"] else "->"
@@ -73,7 +78,9 @@ def restore_command(
                              "LinearRaw DNG with the raw's colour matrices, white balance and EXIF."),
     allow_other_camera: bool = typer.Option(False, "--allow-other-camera", help="Restore raws from another camera or "
                                             "of another size than the checkpoint's sensor (as full frames of it)."),
-    workers: int = typer.Option(1, "--workers", help="Raw inputs restored side by side (processes sharing the threads)."),
+    workers: int = typer.Option(1, "--workers", help="Raw inputs restored side by side: a local Dask cluster of N "
+                                "worker processes when > 1, sharing the CPU threads, each loading the model once."),
+    scheduler: str = scheduler_option(),
     fno: float = typer.Option(None, "--fno", help="F-number the photos were taken at (overrides their EXIF "
                               "FNumber); needed by a network trained across F-numbers."),
     focus_m: float = typer.Option(None, "--focus-m", help="Focus distance in metres from the sensor, inf for infinity "
@@ -89,7 +96,9 @@ def restore_command(
     with the field-of-view of their active area on the sensor and written as OUT/<name>.tif
     (16-bit sRGB; with --dng also a linear DNG). A raw from another camera than the
     checkpoint's sensor is refused unless --allow-other-camera. Every raw is checked
-    before the first output; finished outputs are skipped, so a rerun resumes.
+    before the first output; finished outputs are skipped, so a rerun resumes. --workers N
+    restores N raws side by side on a local Dask cluster, --scheduler ADDRESS on an existing
+    one (its workers must see the same files: they write the outputs).
 
     A network trained across shooting settings needs the photos' settings: their EXIF
     (FNumber, SubjectDistance, FocalLength; raw files, TIFF, JPEG, PNG) or
@@ -105,11 +114,14 @@ def restore_command(
     lensim restore model.onnx photo.png -o restored/ --engine onnxruntime
     """
     _check_options(bits, tile, overlap, workers, threads, device, output, checkpoint, engine)
+    scheduler_address(scheduler)
     shooting = _shooting(fno, focus_m, focal_mm)
     offset = _parse_pair(sensor_offset, "--sensor-offset") if sensor_offset else None
     raws, photos = _split_inputs(images)
     if dng and not raws:
         raise InputError("--dng", None, "applies to camera raw inputs; none were given")
+    if scheduler is not None and not raws:
+        raise InputError("--scheduler", None, "applies to camera raw inputs (photos are restored here); none were given")
     if offset is not None and raws:
         raise InputError("--sensor-offset", None, "applies to developed photos; a raw file's place on the sensor is its "
                          "active area (or the place a simulated DNG records)")
@@ -129,7 +141,7 @@ def restore_command(
             settings = RestoreSettings(checkpoint=info["path"], sensor=dict(sensor_data), tile=tile, overlap=overlap,
                                        device=device, allow_other_camera=allow_other_camera, shooting=shooting,
                                        conditioning=info["conditioning"], engine=engine, onnx=info.get("onnx"))
-            written += _restore_raws(raws, output, model, settings, dng, workers, quiet or json_out)
+            written += _restore_raws(raws, output, model, settings, dng, (workers, scheduler), quiet or json_out)
         for path in photos:
             written.append(_restore_photo(path, output, model, (sensor_w, sensor_h), offset, (tile, overlap), bits,
                                           quiet or json_out, photo_settings[path]))

@@ -23,13 +23,17 @@ For each raw file (:func:`restore_raw_files`):
 
 Every input is read and checked before the first output is written; outputs that exist
 are skipped (a rerun resumes); each file is written atomically. ``workers`` > 1 restores
-files side by side in worker processes, the CPU threads shared among them.
+files side by side on a local Dask cluster (lensim.workers.run_jobs, the engine of `psf
+bank` and `dataset make`), the CPU threads shared among its processes; ``scheduler`` runs
+them on an existing cluster, whose workers write the outputs (they must see the same
+files). Each worker process loads the model once, on its first file.
 """
 from __future__ import annotations
 
+import os
+import threading
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -258,35 +262,102 @@ def restore_raw(job: RawJob, model: Any, sensor: SensorProfile, settings: Restor
 
 # ----------------------------------------------------------------------------- batches
 
-_WORKER: dict[str, Any] = {}
+
+@dataclass(frozen=True)
+class WorkerJob:
+    """One raw file for a worker process (lensim.workers.run_jobs; plain, picklable data):
+    the job with absolute paths (a cluster's workers need not share this process's working
+    folder, but must see the same files), the batch's settings and the worker's threads
+    (torch's, or onnxruntime's intra-op threads)."""
+
+    job: RawJob
+    settings: RestoreSettings
+    threads: int
 
 
-def _worker_start(settings: RestoreSettings, threads: int) -> None:
-    """Worker process set-up: its share of the CPU threads and its own copy of the model
-    (or onnxruntime session)."""
-    torch.set_num_threads(threads)
+_MODEL_LOCK = threading.Lock()  # a cluster's worker may run several jobs at once, in threads
+_MODEL: dict[tuple[Any, ...], Any] = {}  # this process's one model (or engine), by _model_key
+
+
+def _model_key(settings: RestoreSettings, threads: int) -> tuple[Any, ...]:
+    """What identifies a worker's model: the ONNX bytes' digest, or the checkpoint file
+    (path, size, modification time: a cluster's long-lived workers load a checkpoint
+    rewritten since anew), with the engine, device and threads."""
     if settings.engine == "onnxruntime" and settings.onnx is not None:
-        from lensim.restore.engines import OnnxEngine
+        import hashlib
 
-        _WORKER["model"] = OnnxEngine(settings.onnx, settings.device, threads, source=settings.checkpoint)
-    else:
-        from lensim.restore.checkpoint import load_checkpoint
-
-        _WORKER["model"], _ = load_checkpoint(settings.checkpoint, device=settings.device)
-    _WORKER["sensor"] = sensor_from_dict(settings.sensor, "checkpoint sensor")
-    _WORKER["settings"] = settings
-
-
-def _worker_run(job: RawJob) -> dict[str, Any]:
-    return restore_raw(job, _WORKER["model"], _WORKER["sensor"], _WORKER["settings"])
+        return ("onnx", hashlib.sha256(settings.onnx).hexdigest(), settings.device, threads)
+    try:
+        st = os.stat(settings.checkpoint)
+    except OSError as e:
+        raise InputError(settings.checkpoint, None, f"cannot be read in a worker process ({e.strerror or e}); a "
+                         "cluster's workers must see the same files as this process") from None
+    return ("torch", settings.checkpoint, st.st_size, st.st_mtime_ns, settings.device, threads)
 
 
-def restore_raw_files(files: list[Path], out_dir: Path, model: Any, settings: RestoreSettings,
-                      dng: bool = False, workers: int = 1, progress: Progress | None = None) -> list[dict[str, Any]]:
+def _worker_model(settings: RestoreSettings, threads: int) -> Any:
+    """This process's model for ``settings``: loaded on its first job (and again only when
+    the model changes; the one before is dropped), the same object for every later job."""
+    key = _model_key(settings, threads)
+    with _MODEL_LOCK:
+        if key not in _MODEL:
+            _MODEL.clear()
+            if key[0] == "onnx":
+                from lensim.restore.engines import OnnxEngine
+
+                _MODEL[key] = OnnxEngine(settings.onnx or b"", settings.device, threads, source=settings.checkpoint)
+            else:
+                from lensim.restore.checkpoint import load_checkpoint
+
+                _MODEL[key] = load_checkpoint(settings.checkpoint, device=settings.device)[0]
+        return _MODEL[key]
+
+
+def restore_in_worker(task: WorkerJob) -> dict[str, Any]:
+    """run_jobs' job: restore one raw file (:func:`restore_raw`) in a worker process with
+    ``task.threads`` torch threads and the process's cached model (:func:`_worker_model`)."""
+    torch.set_num_threads(task.threads)
+    model = _worker_model(task.settings, task.threads)
+    return restore_raw(task.job, model, sensor_from_dict(task.settings.sensor, "checkpoint sensor"), task.settings)
+
+
+def _absolute(job: RawJob) -> RawJob:
+    return RawJob(job.source.absolute(), job.tif.absolute(), None if job.dng is None else job.dng.absolute())
+
+
+def _restore_on_workers(todo: list[RawJob], settings: RestoreSettings, workers: int, scheduler: str | None,
+                        finished: Callable[[dict[str, Any]], None]) -> None:
+    """Restore the jobs through lensim.workers.run_jobs: on a local Dask cluster of
+    min(workers, jobs) processes sharing this process's torch threads (each gets
+    threads // processes, at least 1, as ``--threads`` or torch's default gives them), or
+    on the cluster at ``scheduler`` (one thread per job, as its workers are sized);
+    ``finished(record)`` per file as it is written, with the paths as given."""
+    from lensim.workers import run_jobs
+
+    threads = 1 if scheduler else max(1, torch.get_num_threads() // min(workers, len(todo)))
+    shared = replace(settings, checkpoint=str(Path(settings.checkpoint).absolute()))
+    given = {_absolute(job): job for job in todo}
+
+    def done(task: WorkerJob, record: dict[str, Any]) -> None:
+        job = given[task.job]
+        finished({**record, "input": str(job.source), "output": str(job.tif),
+                  "dng": None if job.dng is None else str(job.dng)})
+
+    run_jobs(restore_in_worker, [WorkerJob(job, shared, threads) for job in given], workers, scheduler, done)
+
+
+def restore_raw_files(files: list[Path], out_dir: Path, model: Any, settings: RestoreSettings, dng: bool = False,
+                      workers: int = 1, progress: Progress | None = None,
+                      scheduler: str | None = None) -> list[dict[str, Any]]:
     """Restore raw files into ``out_dir`` (see the module docstring). ``model`` is the
-    loaded network or engine (used in this process when ``workers`` is 1; worker processes
-    load their own from ``settings.checkpoint``, or ``settings.onnx`` for onnxruntime). ``progress(done, total)`` counts files (with
-    one worker, fractions of a file as its tiles finish). Returns one record per file."""
+    loaded network or engine, used in this process when ``workers`` is 1 or one file is
+    left to do (and no ``scheduler``). Otherwise the files are restored side by side
+    through lensim.workers.run_jobs (:func:`_restore_on_workers`): on a local Dask cluster
+    of ``workers`` processes, or on the cluster at ``scheduler`` (an address such as
+    tcp://host:8786; its workers must import lensim and see the same files); each worker
+    process loads its own model from ``settings.checkpoint`` (``settings.onnx`` for
+    onnxruntime) on its first file. ``progress(done, total)`` counts files (in this
+    process, fractions of a file as its tiles finish). Returns one record per file."""
     if workers < 1:
         raise InputError("--workers", None, f"expected at least 1, got {workers}")
     sensor = sensor_from_dict(settings.sensor, "checkpoint sensor")
@@ -295,12 +366,13 @@ def restore_raw_files(files: list[Path], out_dir: Path, model: Any, settings: Re
     records = [{"input": str(j.source), "output": str(j.tif), "skipped": True} for j in jobs if j.finished]
     todo = [j for j in jobs if not j.finished]
     total = len(jobs)
+
     def step(done: float) -> None:
         if progress is not None:
             progress(done, total)
 
     step(len(records))
-    if workers == 1 or len(todo) <= 1:
+    if scheduler is None and (workers == 1 or len(todo) <= 1):
         for job in todo:
             before = len(records)
 
@@ -309,16 +381,14 @@ def restore_raw_files(files: list[Path], out_dir: Path, model: Any, settings: Re
             records.append(restore_raw(job, model, sensor, settings, progress=tiles))
             step(len(records))
         return records
-    threads = max(1, torch.get_num_threads() // workers)
-    import multiprocessing
-
-    with ProcessPoolExecutor(max_workers=min(workers, len(todo)), mp_context=multiprocessing.get_context("spawn"),
-                             initializer=_worker_start, initargs=(settings, threads)) as pool:
-        for fut in as_completed([pool.submit(_worker_run, job) for job in todo]):
-            records.append(fut.result())
+    if todo:
+        def finished(record: dict[str, Any]) -> None:
+            records.append(record)
             step(len(records))
+
+        _restore_on_workers(todo, settings, workers, scheduler, finished)
     return records
 
 
-__all__ = ["RawJob", "RestoreSettings", "check_camera", "plan_jobs", "raw_geometry", "raw_settings", "restore_raw",
-           "restore_raw_files", "settings_vector", "validate"]
+__all__ = ["RawJob", "RestoreSettings", "WorkerJob", "check_camera", "plan_jobs", "raw_geometry", "raw_settings",
+           "restore_in_worker", "restore_raw", "restore_raw_files", "settings_vector", "validate"]
