@@ -11,7 +11,7 @@ Both use ``threads`` threads (torch.set_num_threads; onnxruntime's intra-op thre
 the allocator setting of the `lensim` command. Prints the median seconds and MP/s of each
 engine, their ratio and the largest difference between the two outputs.
 
-* dcn-all: the network `lensim train` builds by default (DCN at every decoder scale);
+* dcn-all: the network `lensim train --arch unet` builds by default (DCN at every decoder scale);
 * dcn-coarsest: DCN at the coarsest decoder scale only (the demo's network).
 """
 from __future__ import annotations

@@ -82,12 +82,12 @@ TRAIN="--time-budget-s $((MINUTES * 60)) --threads 1 --crop 96 --batch-size 4 --
 pids=()
 if [ ! -f "$OUT/model.done" ]; then
   rm -rf "$OUT/model"
-  ("$LENSIM" train "$OUT/pairs" -o "$OUT/model" $TRAIN --width 32 --deformable-scales 1 && touch "$OUT/model.done") &
+  ("$LENSIM" train "$OUT/pairs" -o "$OUT/model" $TRAIN --arch unet --width 32 --deformable-scales 1 && touch "$OUT/model.done") &
   pids+=($!)
 fi
 if [ ! -f "$OUT/plain.done" ]; then
   rm -rf "$OUT/plain"
-  ("$LENSIM" train "$OUT/pairs" -o "$OUT/plain" $TRAIN --width 37 --no-fov --no-deformable --no-context \
+  ("$LENSIM" train "$OUT/pairs" -o "$OUT/plain" $TRAIN --arch unet --width 37 --no-fov --no-deformable --no-context \
     && touch "$OUT/plain.done") &
   pids+=($!)
 fi

@@ -70,7 +70,7 @@ PAIRS="--bank $OUT/bank --placements 3 --crops 8 --size 128 --seed 0 --workers 2
 "$LENSIM" dataset make "$OUT/photos-new" -o "$OUT/pairs-more" $PAIRS
 
 TRAIN="--time-budget-s $((MINUTES * 60)) --threads 1 --crop 96 --batch-size 4 --lr 5e-4 --lr-schedule cosine
-       --epochs 100000 --val-fraction 0.1 --seed 0 --width 32 --deformable-scales 1 --quiet"
+       --epochs 100000 --val-fraction 0.1 --seed 0 --arch unet --width 32 --deformable-scales 1 --quiet"
 pids=()
 if [ ! -f "$OUT/old.done" ]; then
   rm -rf "$OUT/old"

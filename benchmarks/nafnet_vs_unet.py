@@ -60,9 +60,10 @@ NETWORKS: dict[str, list[str]] = {
     "unet": [*UNET, "--seed", "0"],
     "nafnet-fov-stem2": ["--arch", "nafnet", "--stem", "2", "--no-deformable", "--no-context", "--seed", "0"],
     "plain-unet": ["--arch", "unet", "--width", "37", *OFF, "--seed", "0"],
-    "nafnet": ["--arch", "nafnet", *OFF, "--seed", "0"],
-    "nafnet-fov": ["--arch", "nafnet", "--no-deformable", "--no-context", "--seed", "0"],
-    "nafnet-full": ["--arch", "nafnet", "--deformable-scales", "1", "--seed", "0"],
+    "nafnet": ["--arch", "nafnet", "--stem", "1", *OFF, "--seed", "0"],
+    "nafnet-fov": ["--arch", "nafnet", "--stem", "1", "--no-deformable", "--no-context", "--seed", "0"],
+    "nafnet-full": ["--arch", "nafnet", "--stem", "1", "--deformable", "--context", "--deformable-scales", "1",
+                    "--seed", "0"],
     "unet-seed1": [*UNET, "--seed", "1"],  # the default again from another seed: run-to-run spread
     "nafnet-fov-stem2-seed1": ["--arch", "nafnet", "--stem", "2", "--no-deformable", "--no-context", "--seed", "1"],
     "plain-unet-seed1": ["--arch", "unet", "--width", "37", *OFF, "--seed", "1"],

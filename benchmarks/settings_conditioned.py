@@ -154,7 +154,7 @@ def train_run(pairs: Path, run: Path, steps: int, **extra: Any) -> dict[str, Any
     epochs = next(e for e in range(max(1, math.ceil(steps / per_epoch)), steps + 1) if steps % e == 0)
     t0 = time.perf_counter()
     result = train(pairs, run, epochs=epochs, max_steps_per_epoch=steps // epochs, batch_size=4, lr=5e-4,
-                   lr_schedule="cosine", crop=64, width=16, deformable_scales=1, val_fraction=0.25, seed=0,
+                   lr_schedule="cosine", crop=64, arch="unet", width=16, deformable_scales=1, val_fraction=0.25, seed=0,
                    checkpoint_every_s=None, **extra)
     done = {"steps": result.step, "seconds": time.perf_counter() - t0, "val_psnr": result.val_psnr}
     marker.write_text(json.dumps(done))

@@ -20,12 +20,18 @@ from lensim.errors import InputError
 from lensim.io import atomic_write_json, folder_lock, read_json
 from lensim.restore.config import TrainConfig
 
+#: The full network of the paper's ablation: FOV input, deformable decoder, context block,
+#: and no stem (STEM), for either architecture. Every variant names all its switches, so
+#: TrainConfig's defaults (the default network has neither deformable blocks, nor the
+#: context block, and a 2x stem) do not change what an ablation trains.
+FULL = {"use_fov": True, "use_deformable": True, "use_context": True}
 ALL_OFF = {"use_fov": False, "use_deformable": False, "use_context": False}
+STEM = 1
 VARIANTS: dict[str, dict] = {
-    "full": {},
-    "no-fov": {"use_fov": False},
-    "no-deformable": {"use_deformable": False},
-    "no-context": {"use_context": False},
+    "full": FULL,
+    "no-fov": {**FULL, "use_fov": False},
+    "no-deformable": {**FULL, "use_deformable": False},
+    "no-context": {**FULL, "use_context": False},
     "plain-unet": ALL_OFF,
 }
 
@@ -40,7 +46,7 @@ def variants_for(arch: str) -> dict[str, dict]:
 
 def _config(arch: str, width: int, crop: int | None, switches: dict[str, Any]) -> dict[str, Any]:
     """The model config train() builds for these settings (TrainConfig.model_kwargs)."""
-    return TrainConfig(arch=arch, width=width, crop=crop, **switches).model_kwargs()
+    return TrainConfig(arch=arch, width=width, crop=crop, stem=STEM, **switches).model_kwargs()
 
 
 def run_ablation(pairs_dir: str | Path, out_dir: str | Path, time_budget_s: float, width: int | None = None,
@@ -67,7 +73,7 @@ def run_ablation(pairs_dir: str | Path, out_dir: str | Path, time_budget_s: floa
         raise InputError(None, "time_budget_s", f"expected a positive number of seconds, got {time_budget_s:g}")
     manifest = read_pairs_manifest(pairs_dir)
     if width is None:
-        full = {k: v for k, v in _config(arch, 1, crop, {}).items() if k not in ("arch", "width", "depth")}
+        full = {k: v for k, v in _config(arch, 1, crop, FULL).items() if k not in ("arch", "width", "depth")}
         width = default_width(arch, **full)
     with folder_lock(out_dir):
         return _run_variants(pairs_dir, manifest, Path(out_dir), time_budget_s, width, crop, seed,
@@ -80,7 +86,7 @@ def _plain_width(arch: str, width: int, crop: int | None) -> int:
     from lensim.restore.nafnet import nafnet_width
     from lensim.restore.network import count_parameters, plain_unet_width
 
-    full = count_parameters(build_model(_config(arch, width, crop, {})))
+    full = count_parameters(build_model(_config(arch, width, crop, FULL)))
     if arch == "unet":
         return plain_unet_width(full, 3)
     plain = {k: v for k, v in _config(arch, 1, crop, ALL_OFF).items() if k not in ("arch", "width", "depth")}
@@ -122,7 +128,7 @@ def _run_variants(pairs_dir: str | Path, manifest: dict, out: Path, time_budget_
         if not marker.exists():
             say(f"training {name} ({time_budget_s:g} s)")
             res = _train_variant(pairs_dir, run, time_budget_s, device, progress,
-                                 dict(arch=arch, width=w, crop=crop, seed=seed, **switches))
+                                 dict(arch=arch, width=w, crop=crop, seed=seed, stem=STEM, **switches))
             atomic_write_json(marker, {"steps": res.step, "seconds": res.seconds})
         held_out = held_out or read_held_out(run)
         params = count_parameters(build_model(_config(arch, w, crop, switches)))

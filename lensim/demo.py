@@ -124,12 +124,14 @@ def _train(pairs: Path, run: Path, settings: DemoSettings, plain: bool, seed: in
                               seed=seed, time_budget_s=settings.train_seconds, val_fraction=0.25, device=device)
     target = count_parameters(FieldAwareUNet(width=settings.width, deformable_scales=settings.deformable_scales))
     if plain:
-        kw.update(width=plain_unet_width(target, 3), use_fov=False, use_deformable=False, use_context=False)
+        kw.update(arch="unet", width=plain_unet_width(target, 3), use_fov=False, use_deformable=False,
+                  use_context=False)
     elif settings.arch == "nafnet":
         switches: dict[str, Any] = dict(use_fov=True, use_deformable=False, use_context=False, stem=settings.stem)
         kw.update(arch="nafnet", width=nafnet_width(target, **switches), **switches)
     else:
-        kw.update(width=settings.width, deformable_scales=settings.deformable_scales)
+        kw.update(arch="unet", width=settings.width, deformable_scales=settings.deformable_scales, use_fov=True,
+                  use_deformable=True, use_context=True)
     res = train(pairs, run, progress=budget_progress(progress, settings.train_seconds), **kw)
     info = {k: v for k, v in asdict(res).items() if k != "history"}
     atomic_write_json(marker, info)

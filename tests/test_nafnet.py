@@ -267,9 +267,12 @@ def test_deformable_groups_checked_only_with_deformable_blocks() -> None:
     """An odd width is fine without deformable blocks (benchmarks train the plain UNet at 37)."""
     from lensim.cli.train_cmd import _check_network
 
-    _check_network("unet", 37, 3, 2, -1, False, True, 1, no_deformable=True)
-    with pytest.raises(InputError, match="--deformable-groups"):
-        _check_network("unet", 37, 3, 2, -1, False, True, 1, no_deformable=False)
+    _check_network("unet", 37, 3, 2, -1, False, True, 1, deformable=False)
+    _check_network("nafnet", 37, 3, 2, -1, False, True, 0)  # the default: no deformable blocks
+    for arch, deformable in (("unet", True), ("unet", None), ("nafnet", True)):  # unet's default: deformable
+        with pytest.raises(InputError, match="--deformable-groups"):
+            _check_network(arch, 37, 3, 2, -1, False, True, 1, deformable=deformable)
+    _check_network(None, 37, 3, 2, -1, False, True, 1)  # a resume without --arch: the run's settings hold
 
 
 def test_train_and_evaluate_with_arch(tmp_path: Path) -> None:

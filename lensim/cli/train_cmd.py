@@ -1,7 +1,9 @@
-"""`lensim train`: train the field-aware restoration network on a pairs folder.
+"""`lensim train`: train a restoration network on a pairs folder (by default NAFNet with
+FOV input channels and a 2x pixel-unshuffle stem; --arch unet: the paper's field-aware UNet).
 
-Every default comes from lensim.restore.config.TrainConfig (the one place that sets them);
-torch and the training modules load when the command runs.
+Every default comes from lensim.restore.config.TrainConfig (the one place that sets them;
+the architecture's own, ARCH_DEFAULTS, where an option is left unset); torch and the
+training modules load when the command runs.
 
 Register in lensim/cli/__init__.py with
     app.command("train")(train_command)
@@ -42,12 +44,15 @@ def train_command(
     loss: str = typer.Option(_D.loss, "--loss", help="mse (the paper's), charbonnier, or charbonnier-edge "
                              "(Charbonnier plus an edge term that does not reward over-smoothing)."),
     crop: int = typer.Option(_D.crop or 0, "--crop", help="Training sub-crop size in pixels (0: the stored crops)."),
-    arch: str = typer.Option(_D.arch, "--arch", help="Network: unet (the field-aware UNet) or nafnet (NAFNet "
-                             "blocks; the same switches)."),
-    width: int = typer.Option(0, "--width", help="Channels at the first scale, doubled at each further one (0: the "
-                              "architecture's default, the size of the default network: unet 32, nafnet about 46)."),
-    stem: int = typer.Option(_D.stem, "--stem", help="nafnet: 2 for a pixel-unshuffle stem (every layer at half "
-                             "resolution, about 4x faster), 1 for none."),
+    arch: str = typer.Option(_D.arch, "--arch", help="Network: nafnet (the default: NAFNet blocks with FOV input "
+                             "channels and a 2x pixel-unshuffle stem, no deformable convolution, no context block) "
+                             "or unet (the paper's field-aware UNet: FOV input, deformable decoder, context block)."),
+    width: int = typer.Option(_D.width, "--width", help="Channels at the first scale, doubled at each further one (0: "
+                              "the architecture's default, the size of the paper's UNet: unet 32, nafnet the "
+                              "matching width)."),
+    stem: int = typer.Option(_D.stem, "--stem", help="2 for a pixel-unshuffle stem (every layer at half resolution, "
+                             "about 4x faster; nafnet only), 1 for none; 0: the architecture's default (nafnet 2, "
+                             "unet 1)."),
     depth: int = typer.Option(_D.depth, "--depth", help="Number of scales."),
     deformable_groups: int = typer.Option(_D.deformable_groups, "--deformable-groups",
                                           help="Offset groups of each deformable conv."),
@@ -58,9 +63,11 @@ def train_command(
                                           "features by functions of the sensor position at every decoder scale "
                                           "(lensim's extension of the paper's FOV input)."),
     no_fov: bool = typer.Option(not _D.use_fov, "--no-fov", help="Ablation: no field-of-view input channels."),
-    no_deformable: bool = typer.Option(not _D.use_deformable, "--no-deformable",
-                                       help="Ablation: plain residual decoder blocks."),
-    no_context: bool = typer.Option(not _D.use_context, "--no-context", help="Ablation: no context block."),
+    deformable: bool = typer.Option(_D.use_deformable, "--deformable/--no-deformable", show_default=False,
+                                    help="Deformable decoder blocks, or plain residual ones (default: the "
+                                    "architecture's: on for unet, off for nafnet)."),
+    context: bool = typer.Option(_D.use_context, "--context/--no-context", show_default=False,
+                                 help="The context block (default: the architecture's: on for unet, off for nafnet)."),
     no_settings: bool = typer.Option(not _D.use_settings, "--no-settings", help="Pairs made across shooting settings: "
                                      "train without the settings as inputs (an unconditioned network; the ranges are "
                                      "still recorded and checked when restoring)."),
@@ -85,9 +92,9 @@ def train_command(
     quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
     json_out: bool = typer.Option(False, "--json", help="Print a summary as JSON (no progress output)."),
 ) -> None:
-    """Train a restoration network, the field-aware UNet or NAFNet (Adam, MSE or --loss, halving learning rate,
-    FOV-consistent augmentation, validation PSNR/SSIM per epoch; RUN/log.csv, steps.csv,
-    last.pt, best.pt). Multi-GPU: torchrun --nproc_per_node N -m lensim train ... --device cuda
+    """Train a restoration network: NAFNet with FOV input and a 2x stem (default) or the paper's field-aware UNet
+    (--arch unet). Adam, MSE or --loss, halving learning rate, FOV-consistent augmentation, validation PSNR/SSIM
+    per epoch; RUN/log.csv, steps.csv, last.pt, best.pt. Multi-GPU: torchrun --nproc_per_node N -m lensim train ... --device cuda
 
     Example: lensim train data/ -o runs/a --epochs 30 --crop 128 --time-budget-s 1800
     """
@@ -97,8 +104,9 @@ def train_command(
     from lensim.restore.train import train
 
     _check_recipe(epochs, batch_size, lr, lr_halve_every, lr_schedule, val_fraction, steps_per_epoch, time_budget_s)
-    _check_network(arch, width, depth, deformable_groups, deformable_scales, field_modulation, no_fov, stem,
-                   no_deformable)
+    # a resumed run has its own architecture: the rules that depend on it are left to the run's (frozen) settings
+    _check_network(arch if not resume or _given(ctx, "arch") else None, width, depth, deformable_groups,
+                   deformable_scales, field_modulation, no_fov, stem, deformable)
     choice(loss, tuple(LOSSES), "--loss")
     at_least(threads, 0, "--threads", what="a number of threads (0: PyTorch's default)")
     at_least(checkpoint_every_s, 0.0, "--checkpoint-every-s", "s", "an interval (0: at epoch ends only)")
@@ -116,7 +124,7 @@ def train_command(
         "stem": stem,
         "deformable_groups": deformable_groups,
         "deformable_scales": None if deformable_scales < 0 else deformable_scales, "use_fov": not no_fov,
-        "field_modulation": field_modulation, "use_deformable": not no_deformable, "use_context": not no_context,
+        "field_modulation": field_modulation, "use_deformable": deformable, "use_context": context,
         "val_fraction": val_fraction, "max_steps_per_epoch": steps_per_epoch or None,
         "time_budget_s": time_budget_s if time_budget_s > 0 else None, "seed": seed, "device": device,
         "amp": not no_amp, "checkpoint_every_s": checkpoint_every_s if checkpoint_every_s > 0 else None,
@@ -153,30 +161,46 @@ def _check_recipe(epochs: int, batch_size: int, lr: float, lr_halve_every: int, 
     at_least(time_budget_s, 0.0, "--time-budget-s", "s", "a time budget (0: none)")
 
 
-def _check_network(arch: str, width: int, depth: int, groups: int, deformable_scales: int, field_modulation: bool,
-                   no_fov: bool, stem: int, no_deformable: bool = False) -> None:
+def _check_network(arch: str | None, width: int, depth: int, groups: int, deformable_scales: int,
+                   field_modulation: bool, no_fov: bool, stem: int, deformable: bool | None = None) -> None:
     """The network's options (the rules of lensim.restore.network.FieldAwareUNet and
-    lensim.restore.nafnet.NAFNet), before any work."""
+    lensim.restore.nafnet.NAFNet), before any work. ``deformable`` None: the architecture's
+    default (lensim.restore.config.ARCH_DEFAULTS). ``arch`` None (a resumed run whose
+    --arch is not given): the rules that depend on the architecture are skipped; the run's
+    stored settings hold, and a differing network option is refused by train()."""
     from lensim.restore.models import ARCHS
 
-    choice(arch, ARCHS, "--arch")
+    if arch is not None:
+        choice(arch, ARCHS, "--arch")
     at_least(width, 0, "--width", "channels", "a width (0: the architecture's default)")
     at_least(depth, 2, "--depth", "scales", "a depth")
     at_least(groups, 1, "--deformable-groups", what="a number of offset groups")
-    if width and width % groups and not no_deformable:  # the groups split the deformable blocks' channels
-        raise InputError("--deformable-groups", None, f"expected a divisor of --width {width}, got {groups}")
     in_range(deformable_scales, -1, depth - 1, "--deformable-scales", what="a number of decoder scales (-1: all)")
-    if arch == "nafnet" and deformable_scales == 0:
-        raise InputError("--deformable-scales", None, "expected 1 or more (or -1: all) with --arch nafnet; use "
-                         "--no-deformable for none")
+    choice(stem, (0, 1, 2), "--stem")
     if field_modulation and no_fov:
         raise InputError("--field-modulation", None, "is computed from the field-of-view input; expected it without "
                          "--no-fov")
+    if arch is not None:
+        _check_arch_rules(arch, width, groups, deformable_scales, field_modulation, stem, deformable)
+
+
+def _check_arch_rules(arch: str, width: int, groups: int, deformable_scales: int, field_modulation: bool, stem: int,
+                      deformable: bool | None) -> None:
+    """_check_network's rules that depend on the architecture (its defaults resolved)."""
+    from lensim.restore.config import ARCH_DEFAULTS
+
+    if deformable is None:
+        deformable = bool(ARCH_DEFAULTS[arch]["use_deformable"])
+    if deformable and width and width % groups:  # the groups split the deformable blocks' channels
+        raise InputError("--deformable-groups", None, f"expected a divisor of --width {width}, got {groups}")
+    if arch == "nafnet" and deformable and deformable_scales == 0:
+        raise InputError("--deformable-scales", None, "expected 1 or more (or -1: all) with --arch nafnet and "
+                         "--deformable; use --no-deformable for none")
     if field_modulation and arch != "unet":
         raise InputError("--field-modulation", None, f"is an option of --arch unet; expected it without --arch {arch}")
-    choice(stem, (1, 2), "--stem")
-    if stem != 1 and arch != "nafnet":
-        raise InputError("--stem", None, f"is an option of --arch nafnet; expected 1 with --arch {arch}, got {stem}")
+    if stem == 2 and arch != "nafnet":
+        raise InputError("--stem", None, f"is an option of --arch nafnet; expected 0 or 1 with --arch {arch}, got "
+                         f"{stem}")
 
 
 def _check_crop(dataset: Path, crop: int) -> None:
@@ -192,7 +216,7 @@ def _check_crop(dataset: Path, crop: int) -> None:
 
 # TrainConfig fields whose option's parameter has another name
 _OPTION_OF = {"use_fov": "no_fov",
-              "use_deformable": "no_deformable", "use_context": "no_context", "max_steps_per_epoch": "steps_per_epoch",
+              "use_deformable": "deformable", "use_context": "context", "max_steps_per_epoch": "steps_per_epoch",
               "amp": "no_amp", "use_settings": "no_settings"}
 
 

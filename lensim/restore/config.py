@@ -2,10 +2,19 @@
 line reads their defaults without importing torch (lensim.restore.train re-exports it)."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from lensim.errors import InputError
+
+#: Each architecture's defaults of the switches TrainConfig leaves unset (None / 0): the
+#: paper's UNet has the deformable decoder, the context block and no stem; the default
+#: network, NAFNet with FOV channels, has neither and a 2x pixel-unshuffle stem
+#: (benchmarks/nafnet_vs_unet.py: restores as well or better, about 3x faster).
+ARCH_DEFAULTS: dict[str, dict[str, Any]] = {
+    "unet": {"use_deformable": True, "use_context": True, "stem": 1},
+    "nafnet": {"use_deformable": False, "use_context": False, "stem": 2},
+}
 
 
 def settings_dim(conditioning: dict[str, Any] | None) -> int:
@@ -27,15 +36,20 @@ class TrainConfig:
         cos(pi p)) / 2 at progress p in [0, 1]: the share of the time budget spent when
         one is set, else of the epochs; set before every step); lensim.restore.schedule.
     crop: training sub-crop size in pixels (None: the stored crops).
-    arch: "unet" (lensim.restore.network.FieldAwareUNet) or "nafnet"
-        (lensim.restore.nafnet.NAFNet: one NAFBlock per encoder and decoder scale, two at
-        the smallest); lensim.restore.models builds either.
+    arch: "nafnet" (the default: lensim.restore.nafnet.NAFNet, one NAFBlock per encoder
+        and decoder scale, two at the smallest) or "unet" (the paper's field-aware UNet,
+        lensim.restore.network.FieldAwareUNet); lensim.restore.models builds either.
     width: channels at full resolution (0: the architecture's default, the width that
-        matches the default FieldAwareUNet's parameter count: lensim.restore.models.default_width).
-    depth, use_fov, use_deformable, use_context, deformable_groups, deformable_scales: the
-        network's scales and switches, for either architecture.
+        matches the paper's FieldAwareUNet's parameter count: lensim.restore.models.default_width).
+    depth, use_fov, deformable_groups, deformable_scales: the network's scales and
+        switches, for either architecture.
+    use_deformable, use_context: deformable decoder blocks, context block (None: the
+        architecture's default, ARCH_DEFAULTS: on for "unet", off for "nafnet").
     field_modulation: FieldAwareUNet only.
-    stem: NAFNet only: 2 for a pixel-unshuffle stem (every layer at half resolution).
+    stem: 2 for a pixel-unshuffle stem (every layer at half resolution; NAFNet only), 1 for
+        none (0: the architecture's default, ARCH_DEFAULTS: "nafnet" 2, "unet" 1).
+    The defaults (None / 0) are filled in by :meth:`resolved`; train() records the
+    resolved values in RUN/config.json and in checkpoints.
     loss: the training loss, a key of lensim.restore.losses.LOSSES: "mse" (the paper's),
         "charbonnier" or "charbonnier-edge" (Charbonnier plus an edge term that does not
         reward over-smoothing).
@@ -69,17 +83,17 @@ class TrainConfig:
     lr_halve_every: int = 5
     lr_schedule: str = "step"
     crop: int | None = 128
-    arch: str = "unet"
-    width: int = 32
+    arch: str = "nafnet"
+    width: int = 0
     depth: int = 3
     use_fov: bool = True
-    use_deformable: bool = True
-    use_context: bool = True
+    use_deformable: bool | None = None
+    use_context: bool | None = None
     deformable_groups: int = 2
     deformable_scales: int | None = None
     field_modulation: bool = False
     loss: str = "mse"
-    stem: int = 1
+    stem: int = 0
     seed: int = 0
     augment: bool = True
     val_fraction: float = 0.2
@@ -93,8 +107,33 @@ class TrainConfig:
     use_settings: bool = True
     conditioning: dict[str, Any] | None = None
 
+    def resolved(self) -> "TrainConfig":
+        """A copy with the architecture's defaults filled in: use_deformable, use_context
+        (None) and stem (0) from ARCH_DEFAULTS, and width (0) from
+        lensim.restore.models.default_width (imports torch; the size-matched width of the
+        network the other settings describe). An unknown arch is left as it is (train()
+        refuses it)."""
+        defaults = ARCH_DEFAULTS.get(self.arch)
+        if defaults is None:
+            return replace(self)
+        cfg = replace(self, use_deformable=defaults["use_deformable"] if self.use_deformable is None
+                      else self.use_deformable,
+                      use_context=defaults["use_context"] if self.use_context is None else self.use_context,
+                      stem=self.stem or defaults["stem"])
+        if cfg.width == 0:
+            from lensim.restore.models import default_width
+
+            switches = {k: v for k, v in cfg._model_kwargs().items() if k not in ("arch", "width", "depth")}
+            cfg.width = default_width(cfg.arch, **switches)
+        return cfg
+
     def model_kwargs(self) -> dict[str, Any]:
-        """The network's config for lensim.restore.models.build_model ("arch" included)."""
+        """The network's config for lensim.restore.models.build_model ("arch" included), of
+        the resolved settings (:meth:`resolved`)."""
+        return self.resolved()._model_kwargs()
+
+    def _model_kwargs(self) -> dict[str, Any]:
+        """model_kwargs of a config whose switches are resolved (width may still be 0)."""
         switches = {"use_fov": self.use_fov, "use_deformable": self.use_deformable, "use_context": self.use_context,
                     "deformable_groups": self.deformable_groups,
                     "settings_dim": settings_dim(self.conditioning)}

@@ -38,7 +38,7 @@ from __future__ import annotations
 import contextlib
 import math
 import os
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Iterator
 
@@ -70,7 +70,7 @@ from lensim.restore.distributed import (
     wrap_model,
 )
 from lensim.restore.losses import LOSSES, restoration_loss
-from lensim.restore.models import ARCHS, build_model, default_width
+from lensim.restore.models import ARCHS, build_model
 from lensim.restore.run_log import RunLog
 from lensim.restore.schedule import LR_SCHEDULES, BudgetClock, LearningRate
 
@@ -192,22 +192,22 @@ def evaluate_pairs(model: torch.nn.Module, loader: Iterator[dict[str, torch.Tens
 
 def _resolve_config(config: TrainConfig | None, overrides: dict[str, Any], ckpt: dict[str, Any] | None,
                     source: str) -> TrainConfig:
-    """The run's settings: ``config`` with ``overrides``. When resuming, every setting comes
-    from the checkpoint (``config`` is not used) and ``overrides`` change only those outside
-    FROZEN_ON_RESUME (a differing value of a frozen one is an InputError naming ``source``),
-    so a resumed run keeps its epochs and time budget unless told otherwise. Checked
-    before any work starts."""
+    """The run's settings: ``config`` with ``overrides``, resolved (TrainConfig.resolved:
+    the architecture's defaults filled in, as RUN/config.json and checkpoints record them).
+    When resuming, every setting comes from the checkpoint (``config`` is not used) and
+    ``overrides`` change only those outside FROZEN_ON_RESUME (a value of a frozen one that
+    resolves differently is an InputError naming ``source``), so a resumed run keeps its
+    epochs and time budget unless told otherwise. Checked before any work starts."""
     if ckpt is None:
         cfg = TrainConfig(**{**asdict(config or TrainConfig()), **overrides})
     else:
-        known = set(asdict(TrainConfig()))
-        # a setting a checkpoint predates (e.g. loss) had its default value there
-        saved = {**asdict(TrainConfig()), **{k: v for k, v in ckpt["train_config"].items() if k in known}}
-        diff = [k for k in FROZEN_ON_RESUME if k in overrides and overrides[k] != saved.get(k)]
+        saved = saved_config(ckpt["train_config"])
+        diff = _frozen_differences(saved, overrides)
         if diff:
             raise InputError(source, ", ".join(diff), f"differs from the run being resumed "
-                             f"({', '.join(f'{k}={saved.get(k)!r}' for k in diff)}); expected the same value or none")
-        cfg = TrainConfig(**{**saved, **{k: v for k, v in overrides.items() if k not in FROZEN_ON_RESUME}})
+                             f"({', '.join(f'{k}={getattr(saved, k)!r}' for k in diff)}); expected the same value "
+                             "or none")
+        cfg = replace(saved, **{k: v for k, v in overrides.items() if k not in FROZEN_ON_RESUME})
     if cfg.epochs < 1 or cfg.batch_size < 1 or cfg.lr <= 0 or cfg.lr_halve_every < 1:
         raise InputError(None, "config", f"expected epochs, batch_size, lr_halve_every >= 1 and lr > 0, got "
                          f"epochs={cfg.epochs}, batch_size={cfg.batch_size}, lr={cfg.lr}, "
@@ -218,10 +218,28 @@ def _resolve_config(config: TrainConfig | None, overrides: dict[str, Any], ckpt:
         raise InputError(None, "loss", f"expected one of {', '.join(LOSSES)}, got {cfg.loss!r}")
     if cfg.arch not in ARCHS:
         raise InputError(None, "arch", f"expected one of {', '.join(ARCHS)}, got {cfg.arch!r}")
-    if cfg.width == 0:  # the architecture's size-matched default
-        switches = {k: v for k, v in cfg.model_kwargs().items() if k not in ("arch", "width", "depth")}
-        cfg.width = default_width(cfg.arch, **switches)
-    return cfg
+    return cfg.resolved()
+
+
+def saved_config(train_config: dict[str, Any]) -> TrainConfig:
+    """A checkpoint's TrainConfig, resolved. A setting the checkpoint predates had its
+    default value there; a checkpoint without "arch" holds the paper's UNet (written before
+    there was a choice: lensim.restore.models.arch_of), whose missing switches resolve to
+    the UNet's defaults (stem 1)."""
+    known = set(asdict(TrainConfig()))
+    return TrainConfig(**{**asdict(TrainConfig()), "arch": "unet",
+                          **{k: v for k, v in train_config.items() if k in known}}).resolved()
+
+
+def _frozen_differences(saved: TrainConfig, overrides: dict[str, Any]) -> list[str]:
+    """The FROZEN_ON_RESUME settings among ``overrides`` that differ from the resolved
+    ``saved`` run's once resolved themselves (``stem=0`` or ``use_context=None`` ask for
+    the architecture's default, which is no change when it is the run's value)."""
+    given = {k: overrides[k] for k in FROZEN_ON_RESUME if k in overrides}
+    want = replace(saved, **given)
+    with contextlib.suppress(InputError):  # a combination the network refuses: compare as given
+        want = want.resolved()
+    return [k for k in given if getattr(want, k) != getattr(saved, k)]
 
 
 def _device(cfg: TrainConfig) -> tuple[Ranks, torch.device]:
@@ -488,4 +506,4 @@ def _train(dataset_dir: str | Path, run: Path, config: TrainConfig | None, resum
 
 
 __all__ = ["FROZEN_ON_RESUME", "TrainConfig", "TrainProgress", "TrainResult", "budget_progress", "epoch_batches",
-           "epoch_order", "evaluate_pairs", "model_inputs", "train"]
+           "epoch_order", "evaluate_pairs", "model_inputs", "saved_config", "train"]
