@@ -56,7 +56,7 @@ def run_ablation(pairs_dir: str | Path, out_dir: str | Path, time_budget_s: floa
     """Train every variant (cached: a finished run is reused) and evaluate it on the held-out
     photos of the first run's split; returns {"arch", "variants": {name: {params, train,
     metrics}}}. width: of the full network (None: the architecture's default, matched to the
-    default network's size). say(stage) announces each training and the evaluation;
+    paper's UNet's size, lensim.restore.models.reference_parameters). say(stage) announces each training and the evaluation;
     progress(done, total) reports training seconds and evaluated crops within them. out_dir
     is locked while it runs (lensim.io.folder_lock). A variant's run folder left unfinished
     by a kill (no done.json) continues from its last.pt (_train_variant)."""

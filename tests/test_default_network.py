@@ -170,3 +170,33 @@ def test_a_checkpoint_from_before_arch_resumes_as_the_unet(pairs: Path, tmp_path
     code, _, err = run_cli(["train", str(pairs), "-o", str(run), "--resume", "--epochs", "4", "--stem", "0",
                             "--deformable", "--quiet"], capsys, monkeypatch)
     assert code == 0, err
+
+
+def test_demo_trains_the_networks_it_named_before(tmp_path: Path, monkeypatch) -> None:
+    """lensim demo names every architecture and switch: its plain UNet and its UNet variant
+    resolve as with the old defaults, its NAFNet is the default network's switches."""
+    import dataclasses
+
+    import lensim.restore.train as train_module
+    from lensim.demo import DemoSettings, _train
+    from lensim.restore.network import plain_unet_width
+
+    seen: list[TrainConfig] = []
+
+    def fake_train(dataset, run, config=None, resume=False, progress=None, **overrides):
+        seen.append(train_module._resolve_config(config, overrides, None, str(run)))
+        Path(run).mkdir(parents=True)
+        return train_module.TrainResult(str(run), 0, 0, False, 0.0, math.nan, None, None, None, None)
+
+    monkeypatch.setattr(train_module, "train", fake_train)
+    quick = DemoSettings.make(quick=True)
+    _train(tmp_path, tmp_path / "plain", quick, plain=True, seed=0)
+    _train(tmp_path, tmp_path / "model", quick, plain=False, seed=0)
+    _train(tmp_path, tmp_path / "unet", dataclasses.replace(quick, arch="unet"), plain=False, seed=0)
+    plain, model, unet = seen
+    target = count_parameters(FieldAwareUNet(width=quick.width, deformable_scales=quick.deformable_scales))
+    assert plain.model_kwargs() == {**OLD_DEFAULT, "width": plain_unet_width(target, 3), "use_fov": False,
+                                    "use_deformable": False, "use_context": False}
+    assert (model.arch, model.use_fov, model.use_deformable, model.use_context, model.stem) == \
+        ("nafnet", True, False, False, quick.stem)
+    assert unet.model_kwargs() == {**OLD_DEFAULT, "width": quick.width, "deformable_scales": quick.deformable_scales}

@@ -140,7 +140,8 @@ def run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def test_load_checkpoint_rebuilds_the_trained_model(run_dir: Path):
     model, info = load_checkpoint(run_dir)
-    assert info["path"].endswith("best.pt") and info["model_config"]["widths"] == [8, 16]
+    assert info["path"].endswith("best.pt")
+    assert info["model_config"]["arch"] == "nafnet" and info["model_config"]["width"] == 8  # the default network
     ck = torch.load(run_dir / "best.pt", weights_only=True)
     assert all(torch.equal(v, ck["model_state"][k]) for k, v in model.state_dict().items())
     assert not model.training
@@ -166,7 +167,7 @@ def test_corrupt_and_mismatched_checkpoints_are_one_line_errors(run_dir: Path, t
     torch.save({"state_dict": {}}, tmp_path / "foreign.pt")
     cases["foreign.pt"] = "format: expected a 'lensim-restore-checkpoint'"
     ck = torch.load(run_dir / "last.pt", weights_only=True)
-    torch.save({**ck, "model_config": {**ck["model_config"], "widths": [16, 32]}}, tmp_path / "mismatch.pt")
+    torch.save({**ck, "model_config": {**ck["model_config"], "width": 16}}, tmp_path / "mismatch.pt")
     cases["mismatch.pt"] = "model_state: does not match the model config"
     torch.save({**ck, "model_config": {**ck["model_config"], "bogus": 1}}, tmp_path / "badconfig.pt")
     cases["badconfig.pt"] = "model_config: cannot build the network"

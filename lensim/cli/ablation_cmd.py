@@ -22,7 +22,7 @@ def ablation_command(
     arch: str = typer.Option("unet", "--arch", help="Network: unet (the paper's field-aware UNet) or nafnet (NAFNet "
                              "with the same switches; its plain variant is plain-nafnet)."),
     width: int = typer.Option(None, "--width", help="Channels at the first scale of the full network (default: "
-                              "the architecture's, the size of the default network: unet 32)."),
+                              "the architecture's, the size of the paper's UNet: unet 32)."),
     crop: int = typer.Option(_D.crop, "--crop", help="Training sub-crop size in pixels."),
     seed: int = typer.Option(_D.seed, "--seed", help="Seed of every run."),
     variants: str = typer.Option(None, "--variants", help="Comma-separated subset of the variants (default: all: "

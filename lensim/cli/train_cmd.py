@@ -48,8 +48,8 @@ def train_command(
                              "channels and a 2x pixel-unshuffle stem, no deformable convolution, no context block) "
                              "or unet (the paper's field-aware UNet: FOV input, deformable decoder, context block)."),
     width: int = typer.Option(_D.width, "--width", help="Channels at the first scale, doubled at each further one (0: "
-                              "the architecture's default, the size of the paper's UNet: unet 32, nafnet the "
-                              "matching width)."),
+                              "the architecture's default: unet 32, nafnet the width of about the same parameter "
+                              "count)."),
     stem: int = typer.Option(_D.stem, "--stem", help="2 for a pixel-unshuffle stem (every layer at half resolution, "
                              "about 4x faster; nafnet only), 1 for none; 0: the architecture's default (nafnet 2, "
                              "unet 1)."),
@@ -63,11 +63,12 @@ def train_command(
                                           "features by functions of the sensor position at every decoder scale "
                                           "(lensim's extension of the paper's FOV input)."),
     no_fov: bool = typer.Option(not _D.use_fov, "--no-fov", help="Ablation: no field-of-view input channels."),
-    deformable: bool = typer.Option(_D.use_deformable, "--deformable/--no-deformable", show_default=False,
-                                    help="Deformable decoder blocks, or plain residual ones (default: the "
-                                    "architecture's: on for unet, off for nafnet)."),
-    context: bool = typer.Option(_D.use_context, "--context/--no-context", show_default=False,
-                                 help="The context block (default: the architecture's: on for unet, off for nafnet)."),
+    deformable: bool | None = typer.Option(_D.use_deformable, "--deformable/--no-deformable", show_default=False,
+                                           help="Deformable decoder blocks, or plain residual ones (default: the "
+                                           "architecture's: on for unet, off for nafnet)."),
+    context: bool | None = typer.Option(_D.use_context, "--context/--no-context", show_default=False,
+                                        help="The context block (default: the architecture's: on for unet, off for "
+                                        "nafnet)."),
     no_settings: bool = typer.Option(not _D.use_settings, "--no-settings", help="Pairs made across shooting settings: "
                                      "train without the settings as inputs (an unconditioned network; the ranges are "
                                      "still recorded and checked when restoring)."),
@@ -94,7 +95,8 @@ def train_command(
 ) -> None:
     """Train a restoration network: NAFNet with FOV input and a 2x stem (default) or the paper's field-aware UNet
     (--arch unet). Adam, MSE or --loss, halving learning rate, FOV-consistent augmentation, validation PSNR/SSIM
-    per epoch; RUN/log.csv, steps.csv, last.pt, best.pt. Multi-GPU: torchrun --nproc_per_node N -m lensim train ... --device cuda
+    per epoch; RUN/log.csv, steps.csv, last.pt, best.pt.
+    Multi-GPU: torchrun --nproc_per_node N -m lensim train ... --device cuda
 
     Example: lensim train data/ -o runs/a --epochs 30 --crop 128 --time-budget-s 1800
     """

@@ -39,8 +39,9 @@ class TrainConfig:
     arch: "nafnet" (the default: lensim.restore.nafnet.NAFNet, one NAFBlock per encoder
         and decoder scale, two at the smallest) or "unet" (the paper's field-aware UNet,
         lensim.restore.network.FieldAwareUNet); lensim.restore.models builds either.
-    width: channels at full resolution (0: the architecture's default, the width that
-        matches the paper's FieldAwareUNet's parameter count: lensim.restore.models.default_width).
+    width: channels at full resolution (0: the architecture's default, the width at which
+        the network, unconditioned, has the reference FieldAwareUNet's parameter count:
+        lensim.restore.models.default_width).
     depth, use_fov, deformable_groups, deformable_scales: the network's scales and
         switches, for either architecture.
     use_deformable, use_context: deformable decoder blocks, context block (None: the
@@ -111,8 +112,9 @@ class TrainConfig:
         """A copy with the architecture's defaults filled in: use_deformable, use_context
         (None) and stem (0) from ARCH_DEFAULTS, and width (0) from
         lensim.restore.models.default_width (imports torch; the size-matched width of the
-        network the other settings describe). An unknown arch is left as it is (train()
-        refuses it)."""
+        network the other settings describe, without settings inputs, so that it does not
+        depend on the conditioning a run derives from its records). An unknown arch is
+        left as it is (train() refuses it)."""
         defaults = ARCH_DEFAULTS.get(self.arch)
         if defaults is None:
             return replace(self)
@@ -123,7 +125,8 @@ class TrainConfig:
         if cfg.width == 0:
             from lensim.restore.models import default_width
 
-            switches = {k: v for k, v in cfg._model_kwargs().items() if k not in ("arch", "width", "depth")}
+            unconditioned = replace(cfg, conditioning=None)._model_kwargs()
+            switches = {k: v for k, v in unconditioned.items() if k not in ("arch", "width", "depth")}
             cfg.width = default_width(cfg.arch, **switches)
         return cfg
 

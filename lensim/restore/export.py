@@ -20,7 +20,7 @@ Exporter: the TorchScript-based ``torch.onnx.export(..., dynamo=False)``, tracin
 dynamic axes. The grid_sample DCN (lensim.restore.deform) and the padding export as
 ordinary ops (GridSample, opset >= 16), their shape arithmetic recorded from the input's
 shape, so the file runs any size (tests/test_export.py checks sizes other than the traced
-one against PyTorch). It exports the default network in about 1 s; the torch.export
+one against PyTorch). It exports the paper's UNet in about 1 s; the torch.export
 (dynamo) exporter gave the same results at the same onnxruntime speed but took 15-35 s on
 a 2-core CPU and needs onnxscript, which matters for `lensim restore --engine onnxruntime
 RUN`, which exports on the fly.

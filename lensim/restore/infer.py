@@ -17,11 +17,11 @@ remaining overlap - 2 * margin pixels, and is 1 beyond; the weights are separabl
 (w_y(r) * w_x(c)) and normalised to sum to 1 at every pixel, so no (H, W) weight buffer is
 needed. Tile edges on the image border get weight 1 up to the border (the whole-image pass
 pads there exactly as a border tile does). When ``margin`` exceeds the receptive-field
-radius (about 58 px for the default network with zero offsets, plus what learned offsets
+radius (about 58 px for the paper's UNet with zero offsets, plus what learned offsets
 add) the result equals whole-image inference up to float rounding.
 
 Memory: the input, the (3, H, W) float32 output and one tile's activations. Measured on
-CPU: a 512-pixel tile of the default network peaks at about 1.3 GB (the full-resolution
+CPU: a 512-pixel tile of the paper's UNet peaks at about 1.3 GB (the full-resolution
 deformable conv lays its 9 samples out as a (C, 3H, 3W) image), a width-8 network at about
 0.4 GB; a 24-megapixel image takes 0.29 GB each for input and output. Smaller tiles cut
 the tile term (roughly with the tile area) at the cost of more overlap work: with the

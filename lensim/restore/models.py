@@ -6,7 +6,7 @@ the key is missing, so checkpoints written before there was a choice keep loadin
 rebuilds it through :func:`build_model`, "arch" included), ``.size_multiple``, ``.use_fov``
 and ``.settings_dim``.
 
-Size matching: the default FieldAwareUNet (width 32, 3 scales, deformable block at the
+Size matching: the reference FieldAwareUNet (width 32, 3 scales, deformable block at the
 coarsest decoder scale) has 821,209 parameters; :func:`default_width` gives each
 architecture's width at that size (NAFNet: :func:`lensim.restore.nafnet.nafnet_width`).
 """
@@ -22,7 +22,7 @@ from lensim.restore.nafnet import NAFNet, nafnet_width
 from lensim.restore.network import FieldAwareUNet, count_parameters
 
 ARCHS: tuple[str, ...] = ("unet", "nafnet")
-#: Width of the default FieldAwareUNet (and of the reference every default size matches).
+#: Width of `lensim train --arch unet`'s FieldAwareUNet (and of the reference every default size matches).
 UNET_WIDTH = 32
 
 
@@ -46,7 +46,7 @@ def build_model(config: dict[str, Any]) -> nn.Module:
 
 @lru_cache(maxsize=None)
 def reference_parameters() -> int:
-    """Parameters of the default FieldAwareUNet (width 32, 3 scales, DCN at the coarsest
+    """Parameters of the reference FieldAwareUNet (width 32, 3 scales, DCN at the coarsest
     decoder scale, FOV input, context block): the size every default matches."""
     with torch.device("meta"):
         return count_parameters(FieldAwareUNet(width=UNET_WIDTH, deformable_scales=1))
@@ -59,8 +59,9 @@ def _nafnet_default_width(frozen: tuple[tuple[str, Any], ...]) -> int:
 
 def default_width(arch: str, **switches: Any) -> int:
     """The width of ``arch`` (with constructor ``switches`` such as use_fov, stem) whose
-    parameter count matches the default FieldAwareUNet's within 10%: 32 for "unet" (it is
-    the default), the matching width for "nafnet" (46 for the plain and FOV variants)."""
+    parameter count matches the reference FieldAwareUNet's within 10%: 32 for "unet" (the
+    reference's), the matching width for "nafnet" (46 for the plain and FOV variants, with
+    the stem or without)."""
     if arch == "unet":
         return UNET_WIDTH
     if arch == "nafnet":

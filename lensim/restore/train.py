@@ -1,4 +1,5 @@
-"""Training of the field-aware restoration network on a pairs folder.
+"""Training of a restoration network (TrainConfig.arch: NAFNet by default, or the paper's
+field-aware UNet) on a pairs folder.
 
 Recipe (the paper follows Chang et al. 2020): Adam, MSE loss (``loss``: or a Charbonnier
 loss with an edge term, lensim.restore.losses), learning rate ``lr`` halved
