@@ -238,7 +238,7 @@ def report(out: Path, names: list[str], results: dict, seconds: float) -> str:
         model, info = load_checkpoint(out / n / "last.pt")
         lines.append(f"| {n} | {count_parameters(model):,} | {info['step']} | {info['train_seconds']:.0f} |")
     for label, r in results.items():
-        title = (f"Held-out photos, {label.partition('-')[2] or 'seed 0'} ({', '.join(r['photos'])})"
+        title = (f"Held-out photos, {label.partition('-')[2].replace('seed', 'seed ') or 'seed 0'} ({', '.join(r['photos'])})"
                  if label.startswith("held_out") else "Unseen test photos")
         lines += ["", f"## {title}", "", "PSNR (dB), gain over the input, SSIM; zones: PSNR (gain) / SSIM", ""]
         lines += _zone_table(r["summary"])
