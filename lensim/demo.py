@@ -2,8 +2,8 @@
 
 Stages (each cached in the output folder, so a second run reuses what exists and a
 killed run resumes): lens figures -> PSF bank at the sensor's pitch -> training pairs from
-the built-in photos -> the field-aware network and a plain UNet of about the same size,
-trained on the same time budget -> evaluation on held-out photos against the aberrated
+the built-in photos -> the field-aware network and the plain version of it (every
+field-aware part off) of about the same size, trained on the same time budget -> evaluation on held-out photos against the aberrated
 input and the Wiener oracle -> slanted-edge MTF and lateral colour before and after ->
 report.json and a self-contained report.html.
 """
@@ -43,8 +43,9 @@ class DemoSettings:
     the demo matches. arch, stem: the demo's network (the default network): "nafnet" with
     FOV channels and a ``stem``x``stem`` pixel-unshuffle stem (benchmarks/nafnet_vs_unet.py:
     ahead of the UNet on the same budget, restores about 5x faster), or "unet", the UNet
-    itself. The baseline is the plain UNet of the same size (the stronger of the plain
-    networks measured)."""
+    itself. The baseline (:func:`plain_network`) is the same network with every field-aware
+    part off, of the same size: plain NAFNet with the same stem (the stronger plain network
+    measured, benchmarks/nafnet_vs_unet.py), or the plain UNet."""
 
     fields: int
     wavelengths_nm: tuple[float, ...]
@@ -108,11 +109,38 @@ def _photos(out: Path, size: int) -> Path:
     return d
 
 
+def _target_parameters(settings: DemoSettings) -> int:
+    """The parameter count every network of the demo matches: the field-aware UNet of
+    settings.width (deformable blocks at settings.deformable_scales decoder scales)."""
+    import torch
+
+    from lensim.restore.network import FieldAwareUNet, count_parameters
+
+    with torch.device("meta"):
+        return count_parameters(FieldAwareUNet(width=settings.width, deformable_scales=settings.deformable_scales))
+
+
+def plain_network(settings: DemoSettings) -> dict[str, Any]:
+    """The demo's baseline, as train() keyword arguments: the demo's network with every
+    field-aware part off (no FOV channels, deformable blocks or context block), sized like
+    it. arch "nafnet": plain NAFNet with the demo's stem (nafnet_width); "unet": the plain
+    UNet (plain_unet_width, 3 scales)."""
+    from lensim.restore.nafnet import nafnet_width
+    from lensim.restore.network import plain_unet_width
+
+    target = _target_parameters(settings)
+    switches: dict[str, Any] = dict(use_fov=False, use_deformable=False, use_context=False)
+    if settings.arch == "nafnet":
+        switches["stem"] = settings.stem
+        return dict(arch="nafnet", width=nafnet_width(target, **switches), **switches)
+    return dict(arch="unet", width=plain_unet_width(target, 3), **switches)
+
+
 def _train(pairs: Path, run: Path, settings: DemoSettings, plain: bool, seed: int, device: str = "cpu",
            progress: StageProgress | None = None) -> dict:
-    """Train once (cached by RUN/done.json) on a time budget; progress(seconds, budget)."""
+    """Train once (cached by RUN/done.json) on a time budget; progress(seconds, budget).
+    plain: the baseline (:func:`plain_network`), else the demo's network."""
     from lensim.restore.nafnet import nafnet_width
-    from lensim.restore.network import FieldAwareUNet, count_parameters, plain_unet_width
     from lensim.restore.train import budget_progress, train
 
     marker = run / "done.json"
@@ -122,13 +150,11 @@ def _train(pairs: Path, run: Path, settings: DemoSettings, plain: bool, seed: in
         shutil.rmtree(run)  # an unfinished run: start it again (its budget was not spent)
     kw: dict[str, Any] = dict(epochs=100_000, batch_size=4, lr=5e-4, lr_schedule="cosine", crop=settings.train_crop,
                               seed=seed, time_budget_s=settings.train_seconds, val_fraction=0.25, device=device)
-    target = count_parameters(FieldAwareUNet(width=settings.width, deformable_scales=settings.deformable_scales))
     if plain:
-        kw.update(arch="unet", width=plain_unet_width(target, 3), use_fov=False, use_deformable=False,
-                  use_context=False)
+        kw.update(plain_network(settings))
     elif settings.arch == "nafnet":
         switches: dict[str, Any] = dict(use_fov=True, use_deformable=False, use_context=False, stem=settings.stem)
-        kw.update(arch="nafnet", width=nafnet_width(target, **switches), **switches)
+        kw.update(arch="nafnet", width=nafnet_width(_target_parameters(settings), **switches), **switches)
     else:
         kw.update(arch="unet", width=settings.width, deformable_scales=settings.deformable_scales, use_fov=True,
                   use_deformable=True, use_context=True)
@@ -211,7 +237,7 @@ def _run_demo(out: Path, quick: bool, seed: int, workers: int, say: Say | None, 
     say(f"training the field-aware network ({settings.train_seconds:.0f} s)")
     model_info = _train(out / "pairs", out / "run-model", settings, plain=False, seed=seed, device=device,
                         progress=step)
-    say(f"training the plain UNet ({settings.train_seconds:.0f} s)")
+    say(f"training the plain network ({settings.train_seconds:.0f} s)")
     plain_info = _train(out / "pairs", out / "run-plain", settings, plain=True, seed=seed, device=device,
                         progress=step)
     timings["training"] = time.perf_counter() - t
@@ -233,7 +259,8 @@ def _run_demo(out: Path, quick: bool, seed: int, workers: int, say: Say | None, 
                      "kernel_pixels": bank.kernel_pixels},
         "bank": _bank_summary(bank),
         "shooting": described,
-        "training": {"model": model_info, "plain-unet": plain_info},
+        "training": {"model": {**model_info, "network": _network(out / "run-model")},
+                     "plain": {**plain_info, "network": _network(out / "run-plain")}},
         **evaluation,
         "raw_file": raw_file,
         "timings_s": timings,
@@ -256,7 +283,7 @@ def _evaluate(out: Path, bank: PSFBank, sensor: SensorProfile, figs: Path, seed:
     # the last checkpoints: best.pt is picked by validation PSNR on these very photos
     methods = {"model": checkpoint_method(out / "run-model" / "last.pt", manifest.get("lens"), manifest.get("sensor"),
                                           device=device),
-               "plain-unet": checkpoint_method(out / "run-plain" / "last.pt", manifest.get("lens"),
+               "plain": checkpoint_method(out / "run-plain" / "last.pt", manifest.get("lens"),
                                                manifest.get("sensor"), device=device),
                "wiener": builtin_method("wiener")}
     metrics = evaluate(out / "pairs", methods, bank=bank, sources=held_out, progress=progress)
@@ -296,6 +323,15 @@ def _raw_stage(out: Path, bank: PSFBank, sensor: SensorProfile, figs: Path, seed
     record = restore_raw_files([dng], d / "restored", model, settings)[0]
     entry = raw_file_figure(dng, Path(record["output"]), truth, sensor, figs)
     return {"photo": name, "dng": str(dng.relative_to(out)), "sensor_top": top, "sensor_left": left, **entry}
+
+
+def _network(run: Path) -> str:
+    """The network a run's last checkpoint holds, in words (lensim.restore.models.describe_network):
+    read back, not assumed, since done.json reuses a run an older lensim trained."""
+    from lensim.restore.checkpoint import read_checkpoint
+    from lensim.restore.models import describe_network
+
+    return describe_network(read_checkpoint(run / "last.pt")["model_config"])
 
 
 def _bank_summary(bank: PSFBank) -> dict:

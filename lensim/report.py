@@ -183,6 +183,25 @@ def _metrics_html(metrics: Mapping[str, Any]) -> str:
     return "<table>" + "".join(rows) + "</table>"
 
 
+def _networks_html(training: Mapping[str, Any] | None) -> str:
+    """What the report's trained methods are: the demo's network and the plain network (its
+    architecture as report.json's training entries name it, when they do)."""
+    if not isinstance(training, Mapping):
+        return ""
+
+    def named(key: str) -> str:
+        entry = training.get(key)
+        network = entry.get("network") if isinstance(entry, Mapping) else None
+        return f" ({html.escape(str(network))})" if network else ""
+
+    text = f" <code>model</code> is the demo's network{named('model')}."
+    if "plain" in training:
+        text += (f" <code>plain</code> is the plain network{named('plain')}: no field-aware part (FOV channels, "
+                 "deformable blocks, context block), about the size of the demo's network, trained on the same "
+                 "time budget.")
+    return text
+
+
 def _raw_file_html(raw: Mapping[str, Any] | None) -> str:
     if not raw:
         return "<p>(not run)</p>"
@@ -219,7 +238,7 @@ def _report_page(report: dict, figs: Path) -> str:
         ("Restoration on held-out photos", _metrics_html(report["metrics"]) +
          "<p>PSNR / SSIM against the sharp originals; zones by normalized sensor radius (centre &lt; 1/3, "
          "middle, edge &ge; 2/3 of the half-diagonal). <code>input</code> is the simulated camera image; <code>wiener</code> is an oracle "
-         "given the true PSFs.</p>", ["crops_centre.png", "crops_edge.png"]),
+         f"given the true PSFs.{_networks_html(report.get('training'))}</p>", ["crops_centre.png", "crops_edge.png"]),
         ("A camera raw file", _raw_file_html(report.get("raw_file")), ["raw_file.png"]),
         ("Slanted edge and lateral colour", "<pre>" + html.escape(json.dumps(jsonable(
             {"slanted_edge": report["slanted_edge"], "lateral_colour": report["lateral_colour"]}), indent=1)) +

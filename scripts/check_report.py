@@ -12,7 +12,7 @@ out = Path(sys.argv[1])
 report = json.loads((out / "report.json").read_text())
 problems = []
 methods = report["metrics"]["methods"]
-for name in ("input", "model", "plain-unet", "wiener"):
+for name in ("input", "model", "plain", "wiener"):
     m = methods.get(name)
     if m is None:
         problems.append(f"metrics: no method {name}")

@@ -172,14 +172,10 @@ def test_a_checkpoint_from_before_arch_resumes_as_the_unet(pairs: Path, tmp_path
     assert code == 0, err
 
 
-def test_demo_trains_the_networks_it_named_before(tmp_path: Path, monkeypatch) -> None:
-    """lensim demo names every architecture and switch: its plain UNet and its UNet variant
-    resolve as with the old defaults, its NAFNet is the default network's switches."""
-    import dataclasses
-
+def _demo_configs(tmp_path: Path, monkeypatch, settings: list) -> list[TrainConfig]:
+    """The resolved TrainConfig the demo's _train asks train() for, per (settings, plain)."""
     import lensim.restore.train as train_module
-    from lensim.demo import DemoSettings, _train
-    from lensim.restore.network import plain_unet_width
+    from lensim.demo import _train
 
     seen: list[TrainConfig] = []
 
@@ -189,14 +185,62 @@ def test_demo_trains_the_networks_it_named_before(tmp_path: Path, monkeypatch) -
         return train_module.TrainResult(str(run), 0, 0, False, 0.0, math.nan, None, None, None, None)
 
     monkeypatch.setattr(train_module, "train", fake_train)
+    for i, (demo, plain) in enumerate(settings):
+        _train(tmp_path, tmp_path / f"run{i}", demo, plain=plain, seed=0)
+    return seen
+
+
+def test_demo_trains_the_networks_it_named_before(tmp_path: Path, monkeypatch) -> None:
+    """lensim demo names every architecture and switch: its UNet variant and that
+    variant's plain UNet resolve as with the old defaults, its NAFNet is the default
+    network's switches."""
+    import dataclasses
+
+    from lensim.demo import DemoSettings
+    from lensim.restore.network import plain_unet_width
+
     quick = DemoSettings.make(quick=True)
-    _train(tmp_path, tmp_path / "plain", quick, plain=True, seed=0)
-    _train(tmp_path, tmp_path / "model", quick, plain=False, seed=0)
-    _train(tmp_path, tmp_path / "unet", dataclasses.replace(quick, arch="unet"), plain=False, seed=0)
-    plain, model, unet = seen
+    as_unet = dataclasses.replace(quick, arch="unet")
+    plain, model, unet = _demo_configs(tmp_path, monkeypatch, [(as_unet, True), (quick, False), (as_unet, False)])
     target = count_parameters(FieldAwareUNet(width=quick.width, deformable_scales=quick.deformable_scales))
     assert plain.model_kwargs() == {**OLD_DEFAULT, "width": plain_unet_width(target, 3), "use_fov": False,
                                     "use_deformable": False, "use_context": False}
     assert (model.arch, model.use_fov, model.use_deformable, model.use_context, model.stem) == \
         ("nafnet", True, False, False, quick.stem)
     assert unet.model_kwargs() == {**OLD_DEFAULT, "width": quick.width, "deformable_scales": quick.deformable_scales}
+
+
+@pytest.mark.parametrize("quick", [True, False])
+def test_demo_baseline_is_its_network_without_the_field_aware_parts(tmp_path: Path, monkeypatch, quick: bool) -> None:
+    """The demo's baseline (lensim.demo.plain_network) is NAFNet with the demo's stem and no
+    FOV channels, deformable blocks or context block, within 10% of the parameters of the
+    demo's network; train() is asked for exactly that."""
+    from lensim.demo import DemoSettings, plain_network
+
+    settings = DemoSettings.make(quick=quick)
+    plain, model = _demo_configs(tmp_path, monkeypatch, [(settings, True), (settings, False)])
+    assert (plain.arch, plain.use_fov, plain.use_deformable, plain.use_context, plain.stem) == \
+        ("nafnet", False, False, False, settings.stem) == \
+        tuple(plain_network(settings)[k] for k in ("arch", "use_fov", "use_deformable", "use_context", "stem"))
+    assert plain.width == plain_network(settings)["width"]
+    with torch.device("meta"):
+        plain_net, net = build_model(plain.model_kwargs()), build_model(model.model_kwargs())
+    assert isinstance(plain_net, NAFNet) and not plain_net.use_fov and plain_net.stem == settings.stem
+    assert not any(isinstance(m, (DeformResBlock, ContextBlock)) for m in plain_net.modules())
+    assert isinstance(net, NAFNet) and net.use_fov and net.stem == settings.stem
+    assert abs(count_parameters(plain_net) - count_parameters(net)) <= 0.1 * count_parameters(net)
+
+
+def test_networks_described_as_their_configs_say() -> None:
+    """describe_network: "plain ARCH" with every field-aware part off, else the parts on;
+    the stem where it is not 1; a config without arch or switches is the old UNet."""
+    from lensim.restore.models import describe_network
+
+    with torch.device("meta"):
+        plain = NAFNet(23, use_fov=False, stem=2).config
+        fov = NAFNet(23, use_fov=True, stem=2).config
+        unet = FieldAwareUNet(width=37, use_fov=False, use_deformable=False, use_context=False).config
+    assert describe_network(plain) == "plain NAFNet (stem 2, width 23)"
+    assert describe_network(fov) == "NAFNet with FOV (stem 2, width 23)"
+    assert describe_network(unet) == "plain UNet (width 37)"
+    assert describe_network({"width": 32}) == "UNet with FOV, deformable, context (width 32)"

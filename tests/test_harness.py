@@ -138,3 +138,28 @@ def test_checkpoint_method_restores_with_sensor_offsets(pairs, tmp_path):
     got = json.loads(res.stdout)["methods"]
     assert list(got) == ["input", "model"] and math.isfinite(got["model"]["psnr_db"])
     assert got["model"]["psnr_db"] != got["input"]["psnr_db"]
+
+
+def test_plain_network_method_and_its_old_names(pairs, tmp_path):
+    """`lensim evaluate`'s baseline method `plain` (--plain) and its old names `plain-unet`
+    (--plain-unet), in any pairing: the same checkpoint restores (a zero-tail network
+    returns its input), keyed by the name used in --methods."""
+    import torch
+
+    from lensim.restore.checkpoint import CHECKPOINT_FORMAT
+    from lensim.restore.nafnet import NAFNet
+
+    torch.manual_seed(0)
+    net = NAFNet(4, stem=2)  # no FOV, no deformable blocks, no context block: a plain network
+    ckpt = tmp_path / "plain.pt"
+    torch.save({"format": CHECKPOINT_FORMAT, "model_config": net.config, "model_state": net.state_dict()}, ckpt)
+    app = typer.Typer()
+    app.command()(evaluate_command)
+    for method, option in (("plain", "--plain"), ("plain-unet", "--plain-unet"), ("plain-unet", "--plain"),
+                           ("plain", "--plain-unet")):
+        res = CliRunner().invoke(app, ["--pairs", str(pairs), "--methods", f"input,{method}", option, str(ckpt),
+                                       "--json"])
+        assert res.exit_code == 0, (method, option, res.output)
+        got = json.loads(res.stdout)["methods"]
+        assert list(got) == ["input", method], (method, option)
+        assert abs(got[method]["psnr_db"] - got["input"]["psnr_db"]) < 1e-3, (method, option)

@@ -277,7 +277,10 @@ def test_deformable_groups_checked_only_with_deformable_blocks() -> None:
 
 def test_train_and_evaluate_with_arch(tmp_path: Path) -> None:
     """`lensim train --arch nafnet` (default width: the size-matched one) writes a NAFNet
-    checkpoint that load_checkpoint rebuilds; `lensim evaluate --arch` checks what it loads."""
+    checkpoint that load_checkpoint rebuilds; `lensim evaluate --arch` checks what it loads
+    (--model, and --plain or its old name --plain-unet); the default method names."""
+    from lensim.cli.evaluate_cmd import _method_names
+
     pairs = make_pairs(tmp_path / "pairs", photos=2, crops=2, size=32)
     runner = CliRunner()
     args = ["train", str(pairs), "-o", str(tmp_path / "run"), "--epochs", "1", "--crop", "32", "--arch", "nafnet",
@@ -298,3 +301,12 @@ def test_train_and_evaluate_with_arch(tmp_path: Path) -> None:
     res = runner.invoke(_app(), base + ["--arch", "unet"])  # the real CLI turns InputError into exit 2
     assert isinstance(res.exception, InputError)
     assert "model_config: holds a 'nafnet' network; expected 'unet' (--arch)" in str(res.exception)
+    # the baseline: `plain` / --plain, and its old names, keyed by the name used
+    run = tmp_path / "run"
+    for plain in ("--plain", "--plain-unet"):  # --arch checks the plain network's checkpoint too
+        res = runner.invoke(_app(), ["evaluate", "--pairs", str(pairs), "--methods", "input,plain", plain, str(run),
+                                     "--arch", "unet", "--json", "--quiet"])
+        assert "holds a 'nafnet' network; expected 'unet' (--arch)" in str(res.exception), plain
+    # without --methods: the built-in methods plus the plain network, named after its option
+    assert _method_names(None, {"model": None, "plain": run}) == ["input", "wiener", "rl", "unsharp", "plain"]
+    assert _method_names(None, {"model": run, "plain": run}, "plain-unet")[-2:] == ["model", "plain-unet"]

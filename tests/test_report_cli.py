@@ -26,6 +26,22 @@ def test_report_rebuilds_html_from_json(tmp_path):
     assert json.loads((tmp_path / "report.json").read_text())["metrics"]["methods"]["input"]["zones"]["edge"]["psnr_db"] is None
 
 
+def test_report_names_the_trained_networks(tmp_path):
+    """The restoration section says what `model` and `plain` are, as report.json's
+    training entries name them (a report without them still renders)."""
+    (tmp_path / "figures").mkdir()
+    m = _report()["metrics"]["methods"]["model"]
+    report = {**_report(), "metrics": {"methods": {"input": m, "model": m, "plain": m}},
+              "training": {"model": {"network": "NAFNet with FOV (stem 2, width 23)"},
+                           "plain": {"network": "plain NAFNet (stem 2, width 23)"}}}
+    write_report(tmp_path, report, tmp_path / "figures")
+    page = (tmp_path / "report.html").read_text()
+    assert "<td>plain</td><td>20.00</td>" in page
+    assert "<code>model</code> is the demo's network (NAFNet with FOV (stem 2, width 23))" in page
+    assert "<code>plain</code> is the plain network (plain NAFNet (stem 2, width 23))" in page
+    assert "plain UNet" not in page and "plain-unet" not in page
+
+
 def test_report_on_a_folder_without_json_is_one_line(tmp_path):
     res = CliRunner().invoke(app, ["report", str(tmp_path)])
     assert res.exit_code != 0

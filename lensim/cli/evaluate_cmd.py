@@ -21,10 +21,12 @@ DEFAULT_METHODS = "input,wiener,rl,unsharp"
 
 def evaluate_command(
     pairs: Path = typer.Option(..., "--pairs", help="Pairs folder from `lensim dataset make`."),
-    methods: str = typer.Option(None, "--methods", help="Comma list of input, wiener, rl, unsharp, model, plain-unet "
-                                "(default: input,wiener,rl,unsharp plus model / plain-unet when their runs are given)."),
+    methods: str = typer.Option(None, "--methods", help="Comma list of input, wiener, rl, unsharp, model, plain "
+                                "(default: input,wiener,rl,unsharp plus model / plain when their runs are given)."),
     model: Path = typer.Option(None, "--model", help="`lensim train` run folder or checkpoint of the field-aware model."),
-    plain_unet: Path = typer.Option(None, "--plain-unet", help="Run folder or checkpoint of the plain UNet baseline."),
+    plain: Path = typer.Option(None, "--plain", help="Run folder or checkpoint of the plain network baseline (no "
+                               "field-aware part)."),
+    plain_unet: Path = typer.Option(None, "--plain-unet", hidden=True, help="Old name of --plain."),
     bank: Path = typer.Option(None, "--bank", help="The dataset's PSF bank folder (default: the one its manifest names)."),
     held_out: Path = typer.Option(None, "--held-out", help="Evaluate only the validation photos of this training run "
                                   "(RUN/split.json)."),
@@ -33,7 +35,7 @@ def evaluate_command(
     rl_iterations: int = typer.Option(None, "--rl-iterations", help="Richardson-Lucy iterations (default 3)."),
     unsharp_sigma: float = typer.Option(None, "--unsharp-sigma", help="Unsharp-mask Gaussian sigma in pixels (default 1)."),
     unsharp_amount: float = typer.Option(None, "--unsharp-amount", help="Unsharp-mask amount (default 0.6)."),
-    arch: str = typer.Option(None, "--arch", help="Architecture the --model and --plain-unet checkpoints must hold "
+    arch: str = typer.Option(None, "--arch", help="Architecture the --model and --plain checkpoints must hold "
                              "(unet or nafnet; default: whatever they hold)."),
     device: str = typer.Option("cpu", "--device", help="Device of the trained networks (cpu, cuda, cuda:N)."),
     output: Path = typer.Option(None, "-o", "--output", help="Folder for metrics.csv (per crop), metrics.md, metrics.json."),
@@ -43,14 +45,17 @@ def evaluate_command(
     """Restore every input crop of a pairs dataset with each method and score it against
     its sharp target: PSNR (dB) and SSIM overall and per field zone (centre, middle, edge:
     normalized sensor radius < 1/3, 1/3..2/3, > 2/3 of the half-diagonal). `input` is the
-    aberrated crop itself; wiener and rl are oracles given the true PSF bank.
+    aberrated crop itself; wiener and rl are oracles given the true PSF bank. `plain-unet`
+    (method) and --plain-unet (option) are old names of `plain` and --plain; results are
+    keyed by the name used (in --methods, else the option's).
 
     Example: lensim evaluate --pairs data/ --methods input,wiener,rl,unsharp,model --model runs/a --held-out runs/a -o eval/
     """
     from lensim.data.manifest import read_held_out, read_pairs_manifest
     from lensim.evaluate import harness
 
-    names = _method_names(methods, model, plain_unet)
+    runs = _runs(model, plain, plain_unet)
+    names = _method_names(methods, runs, "plain-unet" if plain_unet is not None else "plain")
     _check_options(rl_iterations, unsharp_sigma, unsharp_amount, max_crops, device, output)
     if arch is not None:
         from lensim.restore.models import ARCHS
@@ -62,12 +67,12 @@ def evaluate_command(
         asked = [s.strip() for s in sources.split(",") if s.strip()]
         _check_sources(pairs, manifest, asked)
         keep = (keep or []) + asked
-    runs = {"model": model, "plain-unet": plain_unet}
     options: dict[str, dict[str, Any]] = {"rl": {"iterations": rl_iterations}, "unsharp": {"sigma_px": unsharp_sigma, "amount": unsharp_amount}}
     table: dict[str, harness.Method] = {}
     for n in names:
-        if n in harness.CHECKPOINT_METHODS:
-            table[n] = harness.checkpoint_method(runs[n], manifest.get("lens"), manifest.get("sensor"), device=device,
+        run = runs.get(harness.METHOD_ALIASES.get(n, n))  # a checkpoint method: _method_names checked its run
+        if run is not None:
+            table[n] = harness.checkpoint_method(run, manifest.get("lens"), manifest.get("sensor"), device=device,
                                                  arch=arch)
         elif n != "input":
             table[n] = harness.builtin_method(n, **{k: v for k, v in options.get(n, {}).items() if v is not None})
@@ -112,24 +117,35 @@ def _check_sources(pairs: Path, manifest: dict[str, Any], asked: list[str]) -> N
         raise InputError("--sources", None, f"{', '.join(unknown)} not among the source photos of {pairs}")
 
 
-def _method_names(methods: str | None, model: Path | None, plain_unet: Path | None) -> list[str]:
-    """The methods asked for (default: the built-in ones plus those whose runs are given),
-    checked: known names, and a run for each checkpoint method."""
-    from lensim.evaluate.harness import BUILTIN_METHODS, CHECKPOINT_METHODS
+def _runs(model: Path | None, plain: Path | None, plain_unet: Path | None) -> dict[str, Path | None]:
+    """The run of each checkpoint method ("model", "plain"); --plain-unet is the old name of
+    --plain (not both)."""
+    if plain is not None and plain_unet is not None:
+        raise InputError("--plain-unet", None, "is the old name of --plain; expected one of them, not both")
+    return {"model": model, "plain": plain if plain is not None else plain_unet}
+
+
+def _method_names(methods: str | None, runs: dict[str, Path | None], plain_name: str = "plain") -> list[str]:
+    """The methods asked for (default: the built-in ones plus those whose runs are given,
+    the plain network as ``plain_name``: "plain", or "plain-unet" when --plain-unet gave
+    its run), checked: known names (aliases included), and a run for each checkpoint
+    method."""
+    from lensim.evaluate.harness import BUILTIN_METHODS, CHECKPOINT_METHODS, METHOD_ALIASES
 
     if methods is None:
-        names = DEFAULT_METHODS.split(",") + (["model"] if model else []) + (["plain-unet"] if plain_unet else [])
+        names = DEFAULT_METHODS.split(",") + [plain_name if n == "plain" else n for n in CHECKPOINT_METHODS
+                                              if runs[n] is not None]
     else:
         names = [m.strip() for m in methods.split(",") if m.strip()]
     if not names:
         raise InputError("--methods", None, "expected at least one method")
-    known = BUILTIN_METHODS + CHECKPOINT_METHODS
-    runs = {"model": model, "plain-unet": plain_unet}
     for n in names:
-        if n not in known:
-            raise InputError("--methods", None, f"unknown method {n!r}; expected some of {', '.join(known)}")
-        if n in CHECKPOINT_METHODS and runs[n] is None:
-            raise InputError("--methods", None, f"method {n!r} needs its run: pass --{n} RUN")
+        if n not in BUILTIN_METHODS + CHECKPOINT_METHODS + tuple(METHOD_ALIASES):
+            raise InputError("--methods", None, f"unknown method {n!r}; expected some of "
+                             f"{', '.join(BUILTIN_METHODS + CHECKPOINT_METHODS)}")
+        canonical = METHOD_ALIASES.get(n, n)
+        if canonical in CHECKPOINT_METHODS and runs[canonical] is None:
+            raise InputError("--methods", None, f"method {n!r} needs its run: pass --{canonical} RUN")
     return names
 
 

@@ -13,7 +13,8 @@ A method is a callable ``method(image, ctx) -> image``: image (3, H, W) float32 
 [0, 1]; ctx a :class:`CropContext` (sensor mapping, sensor, PSF bank, capture record, the
 crop's sensor offset). Outputs are clipped to [0, 1] before scoring. Built-in methods:
 ``input``, ``wiener``, ``rl``, ``unsharp`` (lensim.evaluate.baselines; the first two are
-oracles using the true bank), and ``model`` / ``plain-unet`` from `lensim train`
+oracles using the true bank), and ``model`` / ``plain`` (the plain network baseline;
+``plain-unet`` is its old name, an alias: :data:`METHOD_ALIASES`) from `lensim train`
 checkpoints (:func:`checkpoint_method`, via lensim.restore.infer).
 
 Aggregation (the summary JSON):
@@ -55,10 +56,13 @@ from lensim.psf.bank.grid import is_grid
 from lensim.render.mapping import SensorMapping, native_mapping
 from lensim.sensor.profile import SensorProfile, sensor_from_dict
 
-#: Method names understood by :func:`builtin_method` (``model`` and ``plain-unet`` need a
+#: Method names understood by :func:`builtin_method` (``model`` and ``plain`` need a
 #: checkpoint: :func:`checkpoint_method`).
 BUILTIN_METHODS: tuple[str, ...] = ("input", "wiener", "rl", "unsharp")
-CHECKPOINT_METHODS: tuple[str, ...] = ("model", "plain-unet")
+CHECKPOINT_METHODS: tuple[str, ...] = ("model", "plain")
+#: Old method names still understood: alias -> the method it names (results stay keyed by
+#: the name the user wrote).
+METHOD_ALIASES: dict[str, str] = {"plain-unet": "plain"}
 
 
 @dataclass(frozen=True)

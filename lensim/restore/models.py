@@ -44,6 +44,20 @@ def build_model(config: dict[str, Any]) -> nn.Module:
     raise ValueError(f"unknown architecture {arch!r}; expected one of {', '.join(ARCHS)}")
 
 
+def describe_network(config: dict[str, Any]) -> str:
+    """A network's config in words, for reports: "plain NAFNet (stem 2, width 46)" with
+    every field-aware part off, else e.g. "NAFNet with FOV (stem 2, width 40)" or "UNet with
+    FOV, deformable, context (width 32)" (the stem only where it is not 1)."""
+    arch = {"unet": "UNet", "nafnet": "NAFNet"}.get(arch_of(config), arch_of(config))
+    on = arch_of(config) == "unet"  # a switch the config lacks: the constructor's default
+    parts = [name for name, key in (("FOV", "use_fov"), ("deformable", "use_deformable"), ("context", "use_context"))
+             if config.get(key, on)]
+    stem = int(config.get("stem", 1))
+    width = config.get("width", (config.get("widths") or ["?"])[0])  # FieldAwareUNet records its widths
+    sizes = ", ".join(([f"stem {stem}"] if stem != 1 else []) + [f"width {width}"])
+    return f"{arch} with {', '.join(parts)} ({sizes})" if parts else f"plain {arch} ({sizes})"
+
+
 @lru_cache(maxsize=None)
 def reference_parameters() -> int:
     """Parameters of the reference FieldAwareUNet (width 32, 3 scales, DCN at the coarsest
@@ -70,4 +84,4 @@ def default_width(arch: str, **switches: Any) -> int:
     raise ValueError(f"unknown architecture {arch!r}; expected one of {', '.join(ARCHS)}")
 
 
-__all__ = ["ARCHS", "UNET_WIDTH", "arch_of", "build_model", "default_width", "reference_parameters"]
+__all__ = ["ARCHS", "UNET_WIDTH", "arch_of", "build_model", "default_width", "describe_network", "reference_parameters"]
