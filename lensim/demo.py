@@ -3,9 +3,10 @@
 Stages (each cached in the output folder, so a second run reuses what exists and a
 killed run resumes): lens figures -> PSF bank at the sensor's pitch -> training pairs from
 the built-in photos -> the field-aware network and the plain version of it (every
-field-aware part off) of about the same size, trained on the same time budget -> evaluation on held-out photos against the aberrated
-input and the Wiener oracle -> slanted-edge MTF and lateral colour before and after ->
-report.json and a self-contained report.html.
+field-aware part off) of about the same size, trained on the same time budget ->
+evaluation on held-out photos against the aberrated input and the Wiener oracle ->
+slanted-edge MTF and lateral colour before and after -> report.json and a self-contained
+report.html.
 """
 from __future__ import annotations
 
@@ -283,8 +284,8 @@ def _evaluate(out: Path, bank: PSFBank, sensor: SensorProfile, figs: Path, seed:
     # the last checkpoints: best.pt is picked by validation PSNR on these very photos
     methods = {"model": checkpoint_method(out / "run-model" / "last.pt", manifest.get("lens"), manifest.get("sensor"),
                                           device=device),
-               "plain": checkpoint_method(out / "run-plain" / "last.pt", manifest.get("lens"),
-                                               manifest.get("sensor"), device=device),
+               "plain": checkpoint_method(out / "run-plain" / "last.pt", manifest.get("lens"), manifest.get("sensor"),
+                                          device=device),
                "wiener": builtin_method("wiener")}
     metrics = evaluate(out / "pairs", methods, bank=bank, sources=held_out, progress=progress)
     samples = sample_crops(out / "pairs", manifest, held_out, methods["model"], bank, figs)
