@@ -244,3 +244,19 @@ def test_networks_described_as_their_configs_say() -> None:
     assert describe_network(fov) == "NAFNet with FOV (stem 2, width 23)"
     assert describe_network(unet) == "plain UNet (width 37)"
     assert describe_network({"width": 32}) == "UNet with FOV, deformable, context (width 32)"
+
+
+def test_demo_names_the_network_its_run_holds(tmp_path: Path) -> None:
+    """The demo's report names each run's network from its last.pt, not from the settings:
+    a run-plain left by an older lensim (a plain UNet, reused by its done.json) is named
+    as the UNet it holds."""
+    from lensim.demo import _network
+    from lensim.restore.checkpoint import CHECKPOINT_FORMAT
+
+    for name, net, words in (("new", NAFNet(8, stem=2), "plain NAFNet (stem 2, width 8)"),
+                             ("old", FieldAwareUNet(width=8, use_fov=False, use_deformable=False, use_context=False),
+                              "plain UNet (width 8)")):
+        (tmp_path / name).mkdir()
+        atomic_torch_save({"format": CHECKPOINT_FORMAT, "model_config": net.config, "model_state": net.state_dict()},
+                          tmp_path / name / "last.pt")
+        assert _network(tmp_path / name) == words
