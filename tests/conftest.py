@@ -17,3 +17,16 @@ def world(tmp_path_factory):
     from hostile_world import build_world
 
     return build_world(tmp_path_factory.mktemp("world"))
+
+
+@pytest.fixture
+def one_torch_thread():
+    """Run the test with one torch thread (training tests are steadier and no slower on a
+    shared 2-core machine), restoring the count afterwards. Use it per module with
+    ``pytestmark = pytest.mark.usefixtures("one_torch_thread")``."""
+    import torch
+
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)

@@ -29,12 +29,7 @@ OLD_DEFAULT = {"arch": "unet", "width": 32, "depth": 3, "use_fov": True, "use_de
 NETWORK_KEYS = ("arch", "width", "use_fov", "use_deformable", "use_context", "stem")
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.fixture(scope="module")

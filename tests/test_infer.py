@@ -21,13 +21,7 @@ from lensim.restore.network import FieldAwareUNet
 from lensim.restore.train import train
 from test_train import LENS, SENSOR, TINY, make_pairs
 
-
-@pytest.fixture(autouse=True)
-def one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def random_model(depth: int = 2, use_fov: bool = True, field_modulation: bool = False) -> FieldAwareUNet:
