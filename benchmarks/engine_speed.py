@@ -14,6 +14,7 @@ engine, their ratio and the largest difference between the two outputs.
 * dcn-all: the network `lensim train --arch unet` builds by default (DCN at every decoder scale);
 * dcn-coarsest: DCN at the coarsest decoder scale only (the demo's network).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -21,7 +22,7 @@ import json
 import subprocess
 import sys
 
-CHILD = r'''
+CHILD = r"""
 import json, statistics, sys, time
 import lensim  # first, as the `lensim` command: it sets OMP_WAIT_POLICY=PASSIVE before torch loads
 import torch
@@ -57,7 +58,7 @@ med = {k: statistics.median(v) for k, v in times.items()}
 print(json.dumps({"variant": variant, "width": w, "height": h, "export_s": export_s, "seconds": med,
                   "all_seconds": times, "mp_per_s": {k: h * w / 1e6 / v for k, v in med.items()},
                   "max_abs_diff": (outs["torch"] - outs["onnxruntime"]).abs().max().item()}))
-'''
+"""
 
 
 def main() -> None:
@@ -69,17 +70,25 @@ def main() -> None:
     args = ap.parse_args()
     rows = []
     for v in args.variants.split(","):
-        res = subprocess.run([sys.executable, "-c", CHILD, v, str(args.threads), str(args.megapixels),
-                              str(args.rounds)], capture_output=True, text=True, check=True)
+        res = subprocess.run(
+            [sys.executable, "-c", CHILD, v, str(args.threads), str(args.megapixels), str(args.rounds)],
+            capture_output=True,
+            text=True,
+            check=True,
+        )
         rows.append(json.loads(res.stdout.strip().splitlines()[-1]))
     print(f"restore_image, tile 512 / overlap 192, {args.threads} threads, median of {args.rounds} interleaved rounds")
-    print(f"{'variant':<14}{'image':>12}{'export s':>10}{'torch s':>9}{'ORT s':>8}{'torch MP/s':>12}{'ORT MP/s':>10}"
-          f"{'ORT/torch':>11}{'max |diff|':>12}")
+    print(
+        f"{'variant':<14}{'image':>12}{'export s':>10}{'torch s':>9}{'ORT s':>8}{'torch MP/s':>12}{'ORT MP/s':>10}"
+        f"{'ORT/torch':>11}{'max |diff|':>12}"
+    )
     for r in rows:
         s, m = r["seconds"], r["mp_per_s"]
-        print(f"{r['variant']:<14}{r['width']:>7}x{r['height']:<5}{r['export_s']:>9.1f}{s['torch']:>9.2f}"
-              f"{s['onnxruntime']:>8.2f}{m['torch']:>12.3f}{m['onnxruntime']:>10.3f}"
-              f"{m['onnxruntime'] / m['torch']:>10.2f}x{r['max_abs_diff']:>12.2e}")
+        print(
+            f"{r['variant']:<14}{r['width']:>7}x{r['height']:<5}{r['export_s']:>9.1f}{s['torch']:>9.2f}"
+            f"{s['onnxruntime']:>8.2f}{m['torch']:>12.3f}{m['onnxruntime']:>10.3f}"
+            f"{m['onnxruntime'] / m['torch']:>10.2f}x{r['max_abs_diff']:>12.2e}"
+        )
     print(json.dumps(rows))
 
 

@@ -11,6 +11,7 @@ OUT/summary.json (overall and per photo) and OUT/per_photo.md, and prints the ta
 photo, the mean over its crops of PSNR (dB) and its gain over the input, SSIM, and each
 network's margin over the Wiener oracle.
 """
+
 from __future__ import annotations
 
 import csv
@@ -35,15 +36,27 @@ def per_photo(rows: list[dict]) -> dict[str, dict[str, dict[str, float]]]:
         m = out.setdefault(photo, {}).setdefault(r["method"], {"psnr": [], "ssim": []})
         m["psnr"].append(float(r["psnr_db"]))
         m["ssim"].append(float(r["ssim"]))
-    return {p: {k: {"psnr_db": statistics.mean(v["psnr"]), "ssim": statistics.mean(v["ssim"]), "crops": len(v["psnr"])}
-                for k, v in ms.items()} for p, ms in out.items()}
+    return {
+        p: {
+            k: {"psnr_db": statistics.mean(v["psnr"]), "ssim": statistics.mean(v["ssim"]), "crops": len(v["psnr"])}
+            for k, v in ms.items()
+        }
+        for p, ms in out.items()
+    }
 
 
 def table(photos: dict, summary: dict, runs: list[str]) -> str:
     methods = ["input", "wiener", *runs]
-    lines = ["| photo | crops | input PSNR | Wiener oracle | " + " | ".join(RUNS[r] for r in runs) + " | "
-             + " | ".join(f"{r} - Wiener" for r in runs) + " | SSIM " + " / ".join(methods) + " |",
-             "| --- | ---: | ---: | ---: | " + "---: | " * (2 * len(runs)) + "--- |"]
+    lines = [
+        "| photo | crops | input PSNR | Wiener oracle | "
+        + " | ".join(RUNS[r] for r in runs)
+        + " | "
+        + " | ".join(f"{r} - Wiener" for r in runs)
+        + " | SSIM "
+        + " / ".join(methods)
+        + " |",
+        "| --- | ---: | ---: | ---: | " + "---: | " * (2 * len(runs)) + "--- |",
+    ]
 
     def cell(ms: dict, k: str) -> str:
         return f"{ms[k]['psnr_db']:.2f} ({ms[k]['psnr_db'] - ms['input']['psnr_db']:+.2f})"
@@ -51,10 +64,15 @@ def table(photos: dict, summary: dict, runs: list[str]) -> str:
     mean = {k: {"psnr_db": v["psnr_db"], "ssim": v["ssim"], "crops": None} for k, v in summary["methods"].items()}
     for photo, ms in list(photos.items()) + [("**mean over crops**", mean)]:
         crops = ms["input"]["crops"]
-        lines.append(f"| {photo} | {'' if crops is None else crops} | {ms['input']['psnr_db']:.2f} | "
-                     + " | ".join(cell(ms, k) for k in ["wiener", *runs]) + " | "
-                     + " | ".join(f"{ms[r]['psnr_db'] - ms['wiener']['psnr_db']:+.2f}" for r in runs) + " | "
-                     + " / ".join(f"{ms[k]['ssim']:.3f}" for k in methods) + " |")
+        lines.append(
+            f"| {photo} | {'' if crops is None else crops} | {ms['input']['psnr_db']:.2f} | "
+            + " | ".join(cell(ms, k) for k in ["wiener", *runs])
+            + " | "
+            + " | ".join(f"{ms[r]['psnr_db'] - ms['wiener']['psnr_db']:+.2f}" for r in runs)
+            + " | "
+            + " / ".join(f"{ms[k]['ssim']:.3f}" for k in methods)
+            + " |"
+        )
     return "\n".join(lines)
 
 
@@ -99,8 +117,10 @@ def main(out: Path) -> None:
     print(text)
     for run in runs:
         t = training[run]
-        print(f"\n{run} ({RUNS[run]}): above the Wiener oracle on {sum(beats[run].values())} of {len(photos)} "
-              f"photos; {t['steps']} steps in {t['seconds']:.0f} s, validation PSNR {t['val_psnr']:.2f} dB")
+        print(
+            f"\n{run} ({RUNS[run]}): above the Wiener oracle on {sum(beats[run].values())} of {len(photos)} "
+            f"photos; {t['steps']} steps in {t['seconds']:.0f} s, validation PSNR {t['val_psnr']:.2f} dB"
+        )
 
 
 if __name__ == "__main__":

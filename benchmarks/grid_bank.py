@@ -32,6 +32,7 @@ energy domain, no noise; a 384 x 512 crop at the sensor centre and one at its co
 
 Prints markdown tables.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -60,8 +61,9 @@ def bank_args() -> list[str]:
 def bank_settings(kernel: int | None = None):
     from lensim.psf.bank import BankSettings, parse_wavelengths_nm
 
-    return BankSettings(fields=FIELDS, wavelengths_nm=parse_wavelengths_nm(WAVELENGTHS), pupil_samples=PUPIL,
-                        kernel_pixels=kernel)
+    return BankSettings(
+        fields=FIELDS, wavelengths_nm=parse_wavelengths_nm(WAVELENGTHS), pupil_samples=PUPIL, kernel_pixels=kernel
+    )
 
 
 def peak_tree_rss(cmd: list[str], env: dict) -> tuple[float, float, int]:
@@ -110,14 +112,22 @@ def old_pool(out: str, workers: int) -> None:
 
     sensor = load_sensor(SENSOR)
     lens = load_lens(LENS)
-    kernel = grid_kernel_pixels([lens_at(lens, s) for s in GridAxes.from_options(FNOS, FOCI).settings()],
-                                sensor.pixel_pitch_um, bank_settings())
+    kernel = grid_kernel_pixels(
+        [lens_at(lens, s) for s in GridAxes.from_options(FNOS, FOCI).settings()], sensor.pixel_pitch_um, bank_settings()
+    )
     settings = bank_settings(kernel)
-    plan = plan_bank(lens_at(lens, ShootingSettings(fno=5.6)), sensor.pixel_pitch_um, kernel,
-                     response=sensor.spectral_response, out_dir=out, **settings.compute_options())
+    plan = plan_bank(
+        lens_at(lens, ShootingSettings(fno=5.6)),
+        sensor.pixel_pitch_um,
+        kernel,
+        response=sensor.spectral_response,
+        out_dir=out,
+        **settings.compute_options(),
+    )
     plan.open()
-    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"), initializer=_init_old,
-                             initargs=(os.getpid(),)) as ex:
+    with ProcessPoolExecutor(
+        max_workers=workers, mp_context=mp.get_context("spawn"), initializer=_init_old, initargs=(os.getpid(),)
+    ) as ex:
         futures = [ex.submit(_old_worker, t) for t in plan.tasks()]
         for fut in as_completed(futures):
             plan.finish(BankField.from_npz(io.BytesIO(fut.result())))
@@ -141,23 +151,34 @@ def _old_worker(task) -> bytes:
 
 def same_fields(a: Path, b: Path) -> bool:
     names = sorted(p.name for p in a.glob("field_*.npz"))
-    return bool(names) and names == sorted(p.name for p in b.glob("field_*.npz")) and all(
-        (a / n).read_bytes() == (b / n).read_bytes() for n in names)
+    return (
+        bool(names)
+        and names == sorted(p.name for p in b.glob("field_*.npz"))
+        and all((a / n).read_bytes() == (b / n).read_bytes() for n in names)
+    )
 
 
 def timing(out: Path, workers: int) -> tuple[float, float]:
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     common = ["psf", "bank", "--lens", LENS, "--sensor", SENSOR, *bank_args()]
     rows = []
-    grid_time, grid_mb, code = peak_tree_rss(lensim([*common, "--fno", FNOS, "--focus-m", FOCI, "--workers",
-                                                     str(workers), "-o", str(out / "grid")]), env)
+    grid_time, grid_mb, code = peak_tree_rss(
+        lensim([*common, "--fno", FNOS, "--focus-m", FOCI, "--workers", str(workers), "-o", str(out / "grid")]), env
+    )
     assert code == 0
     kernel = json.loads((out / "grid" / "manifest.json").read_text())["bank"]["kernel_pixels"]
     one = [*common, "--fno", "5.6", "--kernel", str(kernel)]
     runs = {
         f"Dask, {workers} workers": lensim([*one, "--workers", str(workers), "-o", str(out / "dask")]),
-        f"old process pool, {workers} workers": [sys.executable, __file__, "--old-pool", str(out / "pool"),
-                                                 "--workers", str(workers), *(["--quick"] if FIELDS < 8 else [])],
+        f"old process pool, {workers} workers": [
+            sys.executable,
+            __file__,
+            "--old-pool",
+            str(out / "pool"),
+            "--workers",
+            str(workers),
+            *(["--quick"] if FIELDS < 8 else []),
+        ],
         "this process (--workers 1)": lensim([*one, "--workers", "1", "-o", str(out / "here")]),
     }
     times = {}
@@ -167,21 +188,30 @@ def timing(out: Path, workers: int) -> tuple[float, float]:
         times[name] = t
         rows.append((name, t, mb))
     load = os.getloadavg()[0]
-    print(f"\n{LENS} on {SENSOR}, {FIELDS} fields, wavelengths {WAVELENGTHS} nm, {PUPIL} pupil samples, "
-          f"kernel {kernel} px; "
-          f"load average {load:.1f} before the runs\n")
+    print(
+        f"\n{LENS} on {SENSOR}, {FIELDS} fields, wavelengths {WAVELENGTHS} nm, {PUPIL} pupil samples, "
+        f"kernel {kernel} px; "
+        f"load average {load:.1f} before the runs\n"
+    )
     print("| run | fields | wall (s) | peak RSS, process tree (MB) |")
     print("| --- | ---: | ---: | ---: |")
-    print(f"| grid, 3 F-numbers x 2 focus distances, Dask {workers} workers | {6 * FIELDS} | {grid_time:.1f} | "
-          f"{grid_mb:.0f} |")
+    print(
+        f"| grid, 3 F-numbers x 2 focus distances, Dask {workers} workers | {6 * FIELDS} | {grid_time:.1f} | "
+        f"{grid_mb:.0f} |"
+    )
     for name, t, mb in rows:
         print(f"| one bank (F/5.6, inf), {name} | {FIELDS} | {t:.1f} | {mb:.0f} |")
     dask_t = times[f"Dask, {workers} workers"]
     pool_t = times[f"old process pool, {workers} workers"]
-    same = same_fields(out / "dask", out / "pool") and same_fields(out / "dask", out / "here") and same_fields(
-        out / "dask", out / "grid" / "s000")
-    print(f"\nDask / old pool wall time: {dask_t / pool_t:.2f}; field files identical (Dask, pool, here, "
-          f"the grid's F/5.6-inf bank): {same}")
+    same = (
+        same_fields(out / "dask", out / "pool")
+        and same_fields(out / "dask", out / "here")
+        and same_fields(out / "dask", out / "grid" / "s000")
+    )
+    print(
+        f"\nDask / old pool wall time: {dask_t / pool_t:.2f}; field files identical (Dask, pool, here, "
+        f"the grid's F/5.6-inf bank): {same}"
+    )
     return grid_time, grid_mb
 
 
@@ -198,10 +228,15 @@ def compare(got, want, photo, sensor) -> dict:
     from lensim.render.mapping import native_mapping
     from lensim.render.pipeline import blur_energy_image
 
-    ncc = min(_ncc(g.rgb[c].astype(np.float64), w.rgb[c].astype(np.float64))
-              for g, w in zip(got.fields, want.fields, strict=True) for c in range(3))
-    l1 = max(float(np.abs(g.rgb.astype(np.float64) - w.rgb).sum() / w.rgb.sum())
-             for g, w in zip(got.fields, want.fields, strict=True))
+    ncc = min(
+        _ncc(g.rgb[c].astype(np.float64), w.rgb[c].astype(np.float64))
+        for g, w in zip(got.fields, want.fields, strict=True)
+        for c in range(3)
+    )
+    l1 = max(
+        float(np.abs(g.rgb.astype(np.float64) - w.rgb).sum() / w.rgb.sum())
+        for g, w in zip(got.fields, want.fields, strict=True)
+    )
     h, w = photo.shape[1:]
     psnr = []
     for top, left in (((sensor.height - h) // 2, (sensor.width - w) // 2), (0, 0)):
@@ -232,8 +267,9 @@ def _blend(banks, weights):
     from lensim.psf.bank.grid_interp import _blend_field
     from lensim.psf.bank.types import PSFBank
 
-    return PSFBank(banks[0].manifest, [_blend_field([b.fields[j] for b in banks], weights)
-                                       for j in range(len(banks[0].fields))])
+    return PSFBank(
+        banks[0].manifest, [_blend_field([b.fields[j] for b in banks], weights) for j in range(len(banks[0].fields))]
+    )
 
 
 def interpolation(out: Path, workers: int) -> None:
@@ -253,16 +289,39 @@ def interpolation(out: Path, workers: int) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         if not (grid_dir / "manifest.json").exists():
-            compute_grid(lens, sensor.pixel_pitch_um, GridAxes.from_options(FNOS, FOCI), bank_settings(), grid_dir,
-                         response=sensor.spectral_response, workers=workers)
+            compute_grid(
+                lens,
+                sensor.pixel_pitch_um,
+                GridAxes.from_options(FNOS, FOCI),
+                bank_settings(),
+                grid_dir,
+                response=sensor.spectral_response,
+                workers=workers,
+            )
         full = GridBank.load(grid_dir)
         kernel = full.bank(0).kernel_pixels
         settings = bank_settings(kernel)
-        direct4m = {n: compute_setting_bank(lens, sensor.pixel_pitch_um, ShootingSettings(fno=n, focus_m=4.0), settings,
-                                            out / f"direct-f{n}-4m", response=sensor.spectral_response,
-                                            workers=workers) for n in (5.6, 11.0)}
-        direct67 = compute_setting_bank(lens, sensor.pixel_pitch_um, ShootingSettings(fno=6.7), settings,
-                                        out / "direct-f6.7-inf", response=sensor.spectral_response, workers=workers)
+        direct4m = {
+            n: compute_setting_bank(
+                lens,
+                sensor.pixel_pitch_um,
+                ShootingSettings(fno=n, focus_m=4.0),
+                settings,
+                out / f"direct-f{n}-4m",
+                response=sensor.spectral_response,
+                workers=workers,
+            )
+            for n in (5.6, 11.0)
+        }
+        direct67 = compute_setting_bank(
+            lens,
+            sensor.pixel_pitch_um,
+            ShootingSettings(fno=6.7),
+            settings,
+            out / "direct-f6.7-inf",
+            response=sensor.spectral_response,
+            workers=workers,
+        )
     coarse = GridBank.load(_coarse_view(grid_dir, out / "coarse", lambda r: r["fno"] != 8.0))
     img, _ = read_image(sample_image_path("kodim23"))
     photo = srgb_to_linear(torch.as_tensor(img[:, :384, :512], dtype=torch.float32))
@@ -273,20 +332,30 @@ def interpolation(out: Path, workers: int) -> None:
         lo, hi = full.bank(idx[(5.6, focus)]), full.bank(idx[(11.0, focus)])
         t_inv = (1 / 5.6 - 1 / 8.0) / (1 / 5.6 - 1 / 11.0)
         where = "inf" if math.isinf(focus) else f"{focus:g} m"
-        rows.append((f"F/8 at {where}, linear in stops", compare(coarse.interpolated(fno=8.0, focus_m=focus), want,
-                                                                 photo, sensor)))
-        rows.append((f"F/8 at {where}, linear in 1/N", compare(_blend([lo, hi], [1 - t_inv, t_inv]), want, photo,
-                                                               sensor)))
+        rows.append(
+            (
+                f"F/8 at {where}, linear in stops",
+                compare(coarse.interpolated(fno=8.0, focus_m=focus), want, photo, sensor),
+            )
+        )
+        rows.append(
+            (f"F/8 at {where}, linear in 1/N", compare(_blend([lo, hi], [1 - t_inv, t_inv]), want, photo, sensor))
+        )
         rows.append((f"F/8 at {where}, nearest (F/5.6)", compare(lo, want, photo, sensor)))
         rows.append((f"F/8 at {where}, nearest (F/11)", compare(hi, want, photo, sensor)))
-    rows.append(("F/6.7 at inf (1 stop apart), linear in stops", compare(full.interpolated(fno=6.7, focus_m=math.inf),
-                                                                          direct67, photo, sensor)))
+    rows.append(
+        (
+            "F/6.7 at inf (1 stop apart), linear in stops",
+            compare(full.interpolated(fno=6.7, focus_m=math.inf), direct67, photo, sensor),
+        )
+    )
     rows.append(("F/6.7 at inf, nearest (F/5.6)", compare(full.bank(idx[(5.6, math.inf)]), direct67, photo, sensor)))
     rows.append(("F/6.7 at inf, nearest (F/8)", compare(full.bank(idx[(8.0, math.inf)]), direct67, photo, sensor)))
     for n in (5.6, 11.0):
         want = direct4m[n]
-        rows.append((f"4 m at F/{n:g}, linear in dioptres", compare(full.interpolated(fno=n, focus_m=4.0), want, photo,
-                                                                    sensor)))
+        rows.append(
+            (f"4 m at F/{n:g}, linear in dioptres", compare(full.interpolated(fno=n, focus_m=4.0), want, photo, sensor))
+        )
         rows.append((f"4 m at F/{n:g}, nearest (inf)", compare(full.bank(idx[(n, math.inf)]), want, photo, sensor)))
         rows.append((f"4 m at F/{n:g}, nearest (2 m)", compare(full.bank(idx[(n, 2.0)]), want, photo, sensor)))
     print(f"\nInterpolated (or nearest) banks against directly computed ones; kernel {kernel} px\n")

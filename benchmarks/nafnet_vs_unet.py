@@ -38,6 +38,7 @@ Every stage is cached in OUT (a rerun skips what exists):
    deviation, crops and photos ahead), and the networks run from two seeds, per seed and
    averaged.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -51,8 +52,23 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 BIN = Path(sys.executable).parent
-RECIPE = ["--threads", "1", "--crop", "96", "--batch-size", "4", "--lr", "5e-4", "--lr-schedule", "cosine",
-          "--epochs", "100000", "--val-fraction", "0.25", "--quiet"]
+RECIPE = [
+    "--threads",
+    "1",
+    "--crop",
+    "96",
+    "--batch-size",
+    "4",
+    "--lr",
+    "5e-4",
+    "--lr-schedule",
+    "cosine",
+    "--epochs",
+    "100000",
+    "--val-fraction",
+    "0.25",
+    "--quiet",
+]
 OFF = ["--no-fov", "--no-deformable", "--no-context"]
 UNET = ["--arch", "unet", "--width", "32", "--deformable-scales", "1"]
 # in the order they train, two at a time: the default UNet beside the fast candidate, ...
@@ -62,17 +78,37 @@ NETWORKS: dict[str, list[str]] = {
     "plain-unet": ["--arch", "unet", "--width", "37", *OFF, "--seed", "0"],
     "nafnet": ["--arch", "nafnet", "--stem", "1", *OFF, "--seed", "0"],
     "nafnet-fov": ["--arch", "nafnet", "--stem", "1", "--no-deformable", "--no-context", "--seed", "0"],
-    "nafnet-full": ["--arch", "nafnet", "--stem", "1", "--deformable", "--context", "--deformable-scales", "1",
-                    "--seed", "0"],
+    "nafnet-full": [
+        "--arch",
+        "nafnet",
+        "--stem",
+        "1",
+        "--deformable",
+        "--context",
+        "--deformable-scales",
+        "1",
+        "--seed",
+        "0",
+    ],
     "unet-seed1": [*UNET, "--seed", "1"],  # the default again from another seed: run-to-run spread
     "nafnet-fov-stem2-seed1": ["--arch", "nafnet", "--stem", "2", "--no-deformable", "--no-context", "--seed", "1"],
     "plain-unet-seed1": ["--arch", "unet", "--width", "37", *OFF, "--seed", "1"],
     "nafnet-stem2": ["--arch", "nafnet", "--stem", "2", *OFF, "--seed", "0"],  # the plain NAFNet, made fast
-    "nafnet-fov-stem2-w64": ["--arch", "nafnet", "--stem", "2", "--width", "64", "--no-deformable", "--no-context",
-                             "--seed", "0"],
+    "nafnet-fov-stem2-w64": [
+        "--arch",
+        "nafnet",
+        "--stem",
+        "2",
+        "--width",
+        "64",
+        "--no-deformable",
+        "--no-context",
+        "--seed",
+        "0",
+    ],
 }
 REFERENCE = "unet"
-BANK = '''import sys
+BANK = """import sys
 from lensim.assets import DEFAULT_LENS
 from lensim.demo import DemoSettings
 from lensim.optics.lens_file import load_lens
@@ -85,7 +121,7 @@ if __name__ == "__main__":
     settings = BankSettings(fields=s.fields, wavelengths_nm=s.wavelengths_nm, pupil_samples=s.pupil_samples,
                             kernel_limit=41)
     build_bank(lens, sensor.pixel_pitch_um, settings, response=sensor.spectral_response, workers=2, out_dir=sys.argv[1])
-'''
+"""
 
 
 def lensim(*args: str) -> None:
@@ -109,8 +145,21 @@ def make_data(out: Path) -> None:
         shutil.rmtree(tmp_all)
         tmp_test.rename(out / "photos-test")
         tmp_old.rename(out / "photos-old")
-    pairs = ["--bank", str(out / "bank"), "--placements", "3", "--crops", "8", "--size", "128", "--seed", "0",
-             "--workers", "2", "--quiet"]
+    pairs = [
+        "--bank",
+        str(out / "bank"),
+        "--placements",
+        "3",
+        "--crops",
+        "8",
+        "--size",
+        "128",
+        "--seed",
+        "0",
+        "--workers",
+        "2",
+        "--quiet",
+    ]
     for name in ("old", "test"):
         if not (out / f"pairs-{name}" / "manifest.json").is_file():
             lensim("dataset", "make", str(out / f"photos-{name}"), "-o", str(out / f"pairs-{name}"), *pairs)
@@ -121,10 +170,19 @@ def train_all(out: Path, names: list[str], seconds: float) -> None:
     todo = [n for n in names if not (out / f"{n}.done").exists()]
     for i in range(0, len(todo), 2):
         procs = []
-        for name in todo[i:i + 2]:
+        for name in todo[i : i + 2]:
             shutil.rmtree(out / name, ignore_errors=True)
-            cmd = [str(BIN / "lensim"), "train", str(out / "pairs-old"), "-o", str(out / name),
-                   "--time-budget-s", f"{seconds:g}", *RECIPE, *NETWORKS[name]]
+            cmd = [
+                str(BIN / "lensim"),
+                "train",
+                str(out / "pairs-old"),
+                "-o",
+                str(out / name),
+                "--time-budget-s",
+                f"{seconds:g}",
+                *RECIPE,
+                *NETWORKS[name],
+            ]
             procs.append((name, subprocess.Popen(cmd, cwd=ROOT)))
         for name, p in procs:
             if p.wait() != 0:
@@ -156,35 +214,43 @@ def evaluate_all(out: Path, names: list[str], wiener: bool = True) -> dict:
     from lensim.evaluate.harness import builtin_method, checkpoint_method, evaluate, write_csv
 
     results: dict = {}
-    stages = [(label, reference, out / "pairs-old", held_out, nets)
-              for label, reference, held_out, nets in _split_groups(out, names)]
+    stages = [
+        (label, reference, out / "pairs-old", held_out, nets)
+        for label, reference, held_out, nets in _split_groups(out, names)
+    ]
     stages.append(("test_photos", REFERENCE, out / "pairs-test", None, names))
     for label, reference, pairs, sources, nets in stages:
         manifest = read_pairs_manifest(pairs)
-        methods = {n: checkpoint_method(out / n / "last.pt", manifest.get("lens"), manifest.get("sensor"))
-                   for n in nets}
+        methods = {
+            n: checkpoint_method(out / n / "last.pt", manifest.get("lens"), manifest.get("sensor")) for n in nets
+        }
         if wiener:
             methods["wiener"] = builtin_method("wiener")
         rows: list[dict] = []
         summary = evaluate(pairs, methods, bank=out / "bank", sources=sources, rows=rows)
         (out / f"{label}.json").write_text(json.dumps(summary, indent=2) + "\n")
         write_csv(rows, out / f"{label}.csv")
-        results[label] = {"summary": summary, "rows": rows, "networks": nets, "reference": reference,
-                          "photos": sources}
+        results[label] = {"summary": summary, "rows": rows, "networks": nets, "reference": reference, "photos": sources}
     return results
 
 
 def _zone_table(summary: dict) -> list[str]:
     methods = summary["methods"]
     base = methods["input"]
-    lines = ["| method | PSNR (dB) | gain | SSIM | centre | middle | edge |", "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
+    lines = [
+        "| method | PSNR (dB) | gain | SSIM | centre | middle | edge |",
+        "| --- | ---: | ---: | ---: | ---: | ---: | ---: |",
+    ]
     for name, m in methods.items():
         zones = []
         for z in ("centre", "middle", "edge"):
             a, b = m["zones"][z]["psnr_db"], base["zones"][z]["psnr_db"]
             zones.append(f"{a:.2f} ({a - b:+.2f}) / {m['zones'][z]['ssim']:.3f}")
-        lines.append(f"| {name} | {m['psnr_db']:.2f} | {m['psnr_db'] - base['psnr_db']:+.2f} | {m['ssim']:.4f} | "
-                     + " | ".join(zones) + " |")
+        lines.append(
+            f"| {name} | {m['psnr_db']:.2f} | {m['psnr_db'] - base['psnr_db']:+.2f} | {m['ssim']:.4f} | "
+            + " | ".join(zones)
+            + " |"
+        )
     return lines
 
 
@@ -192,8 +258,10 @@ def _paired(rows: list[dict], names: list[str], reference: str) -> list[str]:
     crops: dict[tuple, dict] = {}
     for r in rows:
         crops.setdefault((r["record"], r["crop"], r["source"]), {})[r["method"]] = float(r["psnr_db"])
-    lines = [f"| network - {reference} | mean (dB) | sd | crops ahead | photos ahead (by mean) |",
-             "| --- | ---: | ---: | ---: | ---: |"]
+    lines = [
+        f"| network - {reference} | mean (dB) | sd | crops ahead | photos ahead (by mean) |",
+        "| --- | ---: | ---: | ---: | ---: |",
+    ]
     for n in names:
         if n == reference:
             continue
@@ -202,8 +270,10 @@ def _paired(rows: list[dict], names: list[str], reference: str) -> list[str]:
         for (_, _, src), c in crops.items():
             per_photo.setdefault(Path(src).name, []).append(c[n] - c[reference])
         ahead = sum(statistics.mean(v) > 0 for v in per_photo.values())
-        lines.append(f"| {n} | {statistics.mean(diff):+.3f} | {statistics.stdev(diff):.3f} | "
-                     f"{sum(d > 0 for d in diff)} of {len(diff)} | {ahead} of {len(per_photo)} |")
+        lines.append(
+            f"| {n} | {statistics.mean(diff):+.3f} | {statistics.stdev(diff):.3f} | "
+            f"{sum(d > 0 for d in diff)} of {len(diff)} | {ahead} of {len(per_photo)} |"
+        )
     return lines
 
 
@@ -213,17 +283,25 @@ def _seed_table(results: dict, names: list[str]) -> list[str]:
     runs: dict[str, list[str]] = {}
     for n in names:
         runs.setdefault(n.removesuffix("-seed1"), []).append(n)
-    held = {n: r["summary"]["methods"][n]["psnr_db"] for label, r in results.items() if label.startswith("held_out")
-            for n in r["networks"]}
+    held = {
+        n: r["summary"]["methods"][n]["psnr_db"]
+        for label, r in results.items()
+        if label.startswith("held_out")
+        for n in r["networks"]
+    }
     unseen = results["test_photos"]["summary"]["methods"]
-    lines = ["| network | seeds | held out, per seed (dB) | held out, mean | unseen, per seed (dB) | unseen, mean |",
-             "| --- | ---: | --- | ---: | --- | ---: |"]
+    lines = [
+        "| network | seeds | held out, per seed (dB) | held out, mean | unseen, per seed (dB) | unseen, mean |",
+        "| --- | ---: | --- | ---: | --- | ---: |",
+    ]
     for base, seeds in runs.items():
         if len(seeds) < 2:
             continue
         h, u = [held[n] for n in seeds], [unseen[n]["psnr_db"] for n in seeds]
-        lines.append(f"| {base} | {len(seeds)} | {' / '.join(f'{v:.2f}' for v in h)} | {statistics.mean(h):.2f} | "
-                     f"{' / '.join(f'{v:.2f}' for v in u)} | {statistics.mean(u):.2f} |")
+        lines.append(
+            f"| {base} | {len(seeds)} | {' / '.join(f'{v:.2f}' for v in h)} | {statistics.mean(h):.2f} | "
+            f"{' / '.join(f'{v:.2f}' for v in u)} | {statistics.mean(u):.2f} |"
+        )
     return lines
 
 
@@ -238,8 +316,11 @@ def report(out: Path, names: list[str], results: dict, seconds: float) -> str:
         model, info = load_checkpoint(out / n / "last.pt")
         lines.append(f"| {n} | {count_parameters(model):,} | {info['step']} | {info['train_seconds']:.0f} |")
     for label, r in results.items():
-        title = (f"Held-out photos, {label.partition('-')[2].replace('seed', 'seed ') or 'seed 0'} ({', '.join(r['photos'])})"
-                 if label.startswith("held_out") else "Unseen test photos")
+        title = (
+            f"Held-out photos, {label.partition('-')[2].replace('seed', 'seed ') or 'seed 0'} ({', '.join(r['photos'])})"
+            if label.startswith("held_out")
+            else "Unseen test photos"
+        )
         lines += ["", f"## {title}", "", "PSNR (dB), gain over the input, SSIM; zones: PSNR (gain) / SSIM", ""]
         lines += _zone_table(r["summary"])
         lines += ["", "Paired per crop:", ""] + _paired(r["rows"], r["networks"], r["reference"])
@@ -254,8 +335,11 @@ def main() -> None:
     ap.add_argument("out", nargs="?", default="bench-nafnet")
     ap.add_argument("--seconds", type=float, default=1800.0, help="Training seconds per network.")
     ap.add_argument("--networks", default=",".join(NETWORKS), help="Comma list of " + ", ".join(NETWORKS))
-    ap.add_argument("--no-wiener", action="store_true", help="Leave out the Wiener oracle (it does not depend on "
-                    "the networks; the slowest method to evaluate).")
+    ap.add_argument(
+        "--no-wiener",
+        action="store_true",
+        help="Leave out the Wiener oracle (it does not depend on the networks; the slowest method to evaluate).",
+    )
     args = ap.parse_args()
     out = Path(args.out).resolve()
     names = [n.strip() for n in args.networks.split(",") if n.strip()]

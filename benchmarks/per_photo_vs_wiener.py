@@ -10,6 +10,7 @@ GENERALIZATION_RESULTS/per_photo.md (per-photo input and Wiener PSNR, the mean o
 PSNR in dB), and prints a Markdown table: per photo, the mean crop PSNR of each method and
 the margin of each network over the Wiener oracle.
 """
+
 from __future__ import annotations
 
 import csv
@@ -49,16 +50,26 @@ def main() -> None:
     else:
         wiener = wiener_table(general / "per_photo.md")
     methods = list(dict.fromkeys(m for _, m in means if m not in ("input", "wiener")))
-    print("| photo | input | Wiener oracle | " + " | ".join(methods) + " | "
-          + " | ".join(f"{m} - Wiener" for m in methods) + " |")
+    print(
+        "| photo | input | Wiener oracle | "
+        + " | ".join(methods)
+        + " | "
+        + " | ".join(f"{m} - Wiener" for m in methods)
+        + " |"
+    )
     print("| --- |" + " ---: |" * (2 + 2 * len(methods)))
     for photo in sorted(wiener):
         given, oracle = wiener[photo]
         if abs(means[(photo, "input")] - given) > 0.005:
             raise SystemExit(f"{photo}: input PSNR {means[(photo, 'input')]:.2f} != {given:.2f}: not the same crops")
         nets = [means[(photo, m)] for m in methods]
-        print(f"| {photo} | {given:.2f} | {oracle:.2f} | " + " | ".join(f"{v:.2f}" for v in nets) + " | "
-              + " | ".join(f"{v - oracle:+.2f}" for v in nets) + " |")
+        print(
+            f"| {photo} | {given:.2f} | {oracle:.2f} | "
+            + " | ".join(f"{v:.2f}" for v in nets)
+            + " | "
+            + " | ".join(f"{v - oracle:+.2f}" for v in nets)
+            + " |"
+        )
 
 
 if __name__ == "__main__":

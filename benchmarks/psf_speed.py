@@ -32,6 +32,7 @@ measurement. Stages:
 Prints markdown tables (timings in seconds); the machines are noisy, ratios taken inside
 one run are what hold. The load average is printed with them.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -102,8 +103,10 @@ def lensim_round(lens: Lens, para: ParaxialData, aiming: str, repeats: int, best
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         for method in ("huygens", "fft", "geometric"):
-            keep(f"compute_{method}",
-                 lambda m=method: compute_psf(lens, FIELD, WAVELENGTH_UM, m, PUPIL_SAMPLES, GRID, SPACING_UM, aiming))
+            keep(
+                f"compute_{method}",
+                lambda m=method: compute_psf(lens, FIELD, WAVELENGTH_UM, m, PUPIL_SAMPLES, GRID, SPACING_UM, aiming),
+            )
     best["rays"] = int(pf.points.shape[0])
     return pf, psf
 
@@ -118,11 +121,23 @@ def optiland_round(lens: Lens, para: ParaxialData, aiming: str, best: dict) -> N
 
     o = optiland_cooke(aiming, para.stop_semi_diameter_mm)
     pitch = SPACING_UM * 1e-3 * (GRID - 1) / GRID  # optiland's spacing is pitch N/(N-1)
-    t, op = timed(lambda: HuygensPSF(o, (0.0, FIELD), WAVELENGTH_UM, num_rays=PUPIL_SAMPLES, image_size=GRID,
-                                     pixel_pitch=pitch), 1)
+    t, op = timed(
+        lambda: HuygensPSF(o, (0.0, FIELD), WAVELENGTH_UM, num_rays=PUPIL_SAMPLES, image_size=GRID, pixel_pitch=pitch),
+        1,
+    )
     best["total"] = min(best.get("total", math.inf), t)
-    t, _ = timed(lambda: Wavefront(o, fields=[(0.0, FIELD)], wavelengths=[WAVELENGTH_UM], num_rays=PUPIL_SAMPLES,
-                                   distribution="uniform", strategy="chief_ray", remove_tilt=False), 1)
+    t, _ = timed(
+        lambda: Wavefront(
+            o,
+            fields=[(0.0, FIELD)],
+            wavelengths=[WAVELENGTH_UM],
+            num_rays=PUPIL_SAMPLES,
+            distribution="uniform",
+            strategy="chief_ray",
+            remove_tilt=False,
+        ),
+        1,
+    )
     best["pupil"] = min(best.get("pupil", math.inf), t)
     if "ncc" not in best:
         chief_y = chief_ray_image_height(lens, FIELD * lens.max_field, aiming, para, wavelength_um=WAVELENGTH_UM)
@@ -159,8 +174,13 @@ def main() -> None:
 
         numba.set_num_threads(min(args.threads, numba.config.NUMBA_NUM_THREADS))
         t0 = time.perf_counter()  # warm-up: numba compiles its kernel on the first call
-        HuygensPSF(optiland_cooke("paraxial", para.stop_semi_diameter_mm), (0.0, FIELD), WAVELENGTH_UM,
-                   num_rays=16, image_size=8)
+        HuygensPSF(
+            optiland_cooke("paraxial", para.stop_semi_diameter_mm),
+            (0.0, FIELD),
+            WAVELENGTH_UM,
+            num_rays=16,
+            image_size=8,
+        )
         warmup = time.perf_counter() - t0
         theirs = {a: {} for a in aimings}
     # interleaved rounds: a burst of load from elsewhere slows one round of every stage
@@ -188,9 +208,11 @@ def main() -> None:
             }
     load_end = os.getloadavg()
 
-    print(f"Cooke triplet, field {FIELD:g} (20 deg), {WAVELENGTH_UM} um, {PUPIL_SAMPLES}^2 pupil grid, "
-          f"{GRID}^2 image at {SPACING_UM} um; torch threads {torch.get_num_threads()}, cores {os.cpu_count()}; "
-          f"load average {load_start[0]:.2f} at start, {load_end[0]:.2f} at end")
+    print(
+        f"Cooke triplet, field {FIELD:g} (20 deg), {WAVELENGTH_UM} um, {PUPIL_SAMPLES}^2 pupil grid, "
+        f"{GRID}^2 image at {SPACING_UM} um; torch threads {torch.get_num_threads()}, cores {os.cpu_count()}; "
+        f"load average {load_start[0]:.2f} at start, {load_end[0]:.2f} at end"
+    )
     print()
     print("| stage | lensim paraxial (s) | lensim real (s) | optiland paraxial (s) | optiland iterative (s) |")
     print("| --- | --- | --- | --- | --- |")
@@ -207,22 +229,30 @@ def main() -> None:
     row("geometric PSF on the pupil field", "geometric", None)
     row("geometric PSF, whole compute_psf", "compute_geometric", None)
     print()
-    print(f"rays in the pupil: lensim {ours['paraxial']['rays']}"
-          + (f", optiland {theirs['paraxial']['rays']}" if theirs else ""))
+    print(
+        f"rays in the pupil: lensim {ours['paraxial']['rays']}"
+        + (f", optiland {theirs['paraxial']['rays']}" if theirs else "")
+    )
     if theirs:
         print(f"optiland numba warm-up (compile, once): {warmup:.1f} s")
         for a in aimings:
             ratio = theirs[a]["total"] / ours[a]["compute_huygens"]
-            print(f"{a}: optiland HuygensPSF / lensim compute_psf = {ratio:.0f}x; "
-                  f"NCC lensim vs optiland on optiland's sample points {theirs[a]['ncc']:.5f}")
+            print(
+                f"{a}: optiland HuygensPSF / lensim compute_psf = {ratio:.0f}x; "
+                f"NCC lensim vs optiland on optiland's sample points {theirs[a]['ncc']:.5f}"
+            )
     if direct:
         print()
-        print("| aiming | direct summation (s) | 1 - NCC fast vs direct | max abs diff / peak | Strehl fast | Strehl direct |")
+        print(
+            "| aiming | direct summation (s) | 1 - NCC fast vs direct | max abs diff / peak | Strehl fast | Strehl direct |"
+        )
         print("| --- | --- | --- | --- | --- | --- |")
         for a in aimings:
             d = direct[a]
-            print(f"| {a} | {d['time']:.1f} | {1.0 - d['ncc']:.1e} | {d['maxdiff']:.2e} | {d['strehl_fast']:.5f} "
-                  f"| {d['strehl_direct']:.5f} |")
+            print(
+                f"| {a} | {d['time']:.1f} | {1.0 - d['ncc']:.1e} | {d['maxdiff']:.2e} | {d['strehl_fast']:.5f} "
+                f"| {d['strehl_direct']:.5f} |"
+            )
 
 
 if __name__ == "__main__":

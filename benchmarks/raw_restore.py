@@ -12,6 +12,7 @@ tile at the CLI's defaults (tile 512, overlap 192), write the 16-bit sRGB TIFF (
 --dng the LinearRaw DNG). The child reports its wall time and peak RSS (getrusage), with
 the CLI's allocator setting (lensim.cli.allocator), as `lensim restore` runs.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -21,7 +22,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-CHILD = r'''
+CHILD = r"""
 import json, resource, sys, time
 import torch
 torch.set_num_threads(int(sys.argv[1]))
@@ -35,7 +36,7 @@ except SystemExit as e:
         raise
 print(json.dumps({"seconds": time.perf_counter() - t,
                   "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
-'''
+"""
 
 
 def make_inputs(folder: Path) -> tuple[Path, Path]:
@@ -62,9 +63,17 @@ def make_inputs(folder: Path) -> tuple[Path, Path]:
     dng = write_capture_dng(folder / "frame.dng", raw, sensor, params)
     torch.manual_seed(0)
     model = FieldAwareUNet(width=32, deformable_scales=1).eval()
-    atomic_torch_save({"format": CHECKPOINT_FORMAT, "version": 1, "model_config": model.config,
-                       "model_state": model.state_dict(), "sensor": sensor.to_dict(), "lens": None},
-                      folder / "run" / "last.pt")
+    atomic_torch_save(
+        {
+            "format": CHECKPOINT_FORMAT,
+            "version": 1,
+            "model_config": model.config,
+            "model_state": model.state_dict(),
+            "sensor": sensor.to_dict(),
+            "lens": None,
+        },
+        folder / "run" / "last.pt",
+    )
     return dng, folder / "run"
 
 
@@ -72,19 +81,25 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--dng", action="store_true", help="Also write the LinearRaw DNG (--dng).")
-    ap.add_argument("--keep", type=Path, default=None, help="Work in this folder and keep it (default: a temporary one).")
+    ap.add_argument(
+        "--keep", type=Path, default=None, help="Work in this folder and keep it (default: a temporary one)."
+    )
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         folder = args.keep or Path(tmp)
         folder.mkdir(parents=True, exist_ok=True)
         dng, run = make_inputs(folder)
         cmd = [str(run), str(dng), "-o", str(folder / "out"), "--quiet"] + (["--dng"] if args.dng else [])
-        res = subprocess.run([sys.executable, "-c", CHILD, str(args.threads), *cmd], capture_output=True, text=True, check=False)
+        res = subprocess.run(
+            [sys.executable, "-c", CHILD, str(args.threads), *cmd], capture_output=True, text=True, check=False
+        )
         if res.returncode:
             sys.exit(res.stderr)
         row = json.loads(res.stdout.strip().splitlines()[-1])
-    print(f"lensim restore on a 6000 x 4000 DNG (develop + restore + write{' + linear DNG' if args.dng else ''}), "
-          f"{args.threads} threads, width-32 network (DCN at the coarsest scale), random weights")
+    print(
+        f"lensim restore on a 6000 x 4000 DNG (develop + restore + write{' + linear DNG' if args.dng else ''}), "
+        f"{args.threads} threads, width-32 network (DCN at the coarsest scale), random weights"
+    )
     print(f"{'seconds':>10}{'MP/s':>8}{'peak RSS MB':>13}")
     print(f"{row['seconds']:>10.1f}{24.0 / row['seconds']:>8.3f}{row['peak_rss_mb']:>13.0f}")
 

@@ -29,6 +29,7 @@ residual scales and the zero-initialised last convs would be). Variants:
 
 With --big the named variants also restore a 24-megapixel (6000 x 4000) frame to 8 bits.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -37,7 +38,7 @@ import statistics
 import subprocess
 import sys
 
-CHILD = r'''
+CHILD = r"""
 import json, resource, sys, time, torch
 torch.set_num_threads(int(sys.argv[2]))
 from lensim.cli.allocator import keep_freed_memory
@@ -102,15 +103,25 @@ dt = time.perf_counter() - t
 print(json.dumps({"variant": variant, "width": w, "height": h, "params": params, "seconds": dt,
                   "mp_per_s": h * w / 1e6 / dt, "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
                   "before_mb": before / 1024}))
-'''
+"""
 
-DEFAULT_VARIANTS = ("unet", "nafnet-fov", "nafnet-fov-stem2", "nafnet-fov-stem2+cl", "nafnet-fov-stem2+ort",
-                    "nafnet-fov-stem2+t1024", "nafnet-fov-stem2+ort+t1024")
+DEFAULT_VARIANTS = (
+    "unet",
+    "nafnet-fov",
+    "nafnet-fov-stem2",
+    "nafnet-fov-stem2+cl",
+    "nafnet-fov-stem2+ort",
+    "nafnet-fov-stem2+t1024",
+    "nafnet-fov-stem2+ort+t1024",
+)
 
 
 def run(variant: str, threads: int, mp: float, big: bool) -> dict:
-    res = subprocess.run([sys.executable, "-c", CHILD, variant, str(threads), str(mp), "big" if big else "small"],
-                         capture_output=True, text=True)
+    res = subprocess.run(
+        [sys.executable, "-c", CHILD, variant, str(threads), str(mp), "big" if big else "small"],
+        capture_output=True,
+        text=True,
+    )
     if res.returncode:
         raise SystemExit(f"{variant} failed:\n{res.stderr[-2000:]}")
     return json.loads(res.stdout.strip().splitlines()[-1])
@@ -129,24 +140,30 @@ def main() -> None:
         variants.insert(0, "unet")
     rows: dict[str, list[dict]] = {v: [] for v in variants}
     for r in range(args.rounds):
-        order = variants[r % len(variants):] + variants[:r % len(variants)]
+        order = variants[r % len(variants) :] + variants[: r % len(variants)]
         for v in order:
             rows[v].append(run(v, args.threads, args.megapixels, big=False))
             print(f"round {r + 1}: {v} {rows[v][-1]['mp_per_s']:.3f} MP/s", file=sys.stderr, flush=True)
     big = {v: run(v, args.threads, 0, big=True) for v in args.big.split(",") if v}
     first = rows["unet"][0]
-    print(f"restore_image, {args.threads} threads, {first['width']}x{first['height']} image, random weights, "
-          f"{args.rounds} interleaved rounds (medians)\n")
-    print("| variant | params | MP/s | vs old (unet) | peak RSS (MB) | 24 MP time (s), from MP/s | 24 MP measured (s) "
-          "| 24 MP peak RSS (MB) |")
+    print(
+        f"restore_image, {args.threads} threads, {first['width']}x{first['height']} image, random weights, "
+        f"{args.rounds} interleaved rounds (medians)\n"
+    )
+    print(
+        "| variant | params | MP/s | vs old (unet) | peak RSS (MB) | 24 MP time (s), from MP/s | 24 MP measured (s) "
+        "| 24 MP peak RSS (MB) |"
+    )
     print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
     for v, rs in rows.items():
         mps = statistics.median(x["mp_per_s"] for x in rs)
         ratio = statistics.median(x["mp_per_s"] / u["mp_per_s"] for x, u in zip(rs, rows["unet"], strict=True))
         peak = max(x["peak_rss_mb"] for x in rs)
         b = big.get(v)
-        print(f"| {v} | {rs[0]['params']:,} | {mps:.3f} | {ratio:.2f}x | {peak:.0f} | {24.0 / mps:.0f} | "
-              + (f"{b['seconds']:.0f} | {b['peak_rss_mb']:.0f} |" if b else " | |"))
+        print(
+            f"| {v} | {rs[0]['params']:,} | {mps:.3f} | {ratio:.2f}x | {peak:.0f} | {24.0 / mps:.0f} | "
+            + (f"{b['seconds']:.0f} | {b['peak_rss_mb']:.0f} |" if b else " | |")
+        )
     print("\nraw:", json.dumps({"rounds": rows, "big": big}))
 
 

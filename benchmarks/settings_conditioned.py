@@ -33,6 +33,7 @@ What it does:
 
 Writes OUT/results.json (every figure, steps and seconds per run) and OUT/table.md.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -55,6 +56,8 @@ SINGLE = (5.0, math.inf)
 def _settings(text: str) -> list[tuple[float, float]]:
     """'F:D,F:D' -> [(fno, focus_m)] (D may be inf)."""
     return [(float(a), float(b)) for a, b in (item.split(":") for item in text.split(","))]
+
+
 ZONES = ("centre", "middle", "edge")
 
 
@@ -76,7 +79,7 @@ def photos(out: Path, k: int) -> Path:
         _, h, w = arr.shape
         s = min(256, h, w)
         y, x = (h - s) // 2, (w - s) // 2
-        write_image(d / f"{img.name}.png", arr[:, y:y + s, x:x + s])
+        write_image(d / f"{img.name}.png", arr[:, y : y + s, x : x + s])
     return d
 
 
@@ -96,10 +99,14 @@ def pairs_for(out: Path, sharp: Path, fno: float, focus: float) -> Path:
     lens, sensor = load_lens(LENS), load_sensor("apsc_mirrorless")
     shot = ShootingSettings(fno=fno, focus_m=focus)
     at = lens_at(lens, shot)
-    bank = ensure_bank(at, sensor.pixel_pitch_um, BankSettings(fields=6, wavelengths_nm=(450.0, 500.0, 550.0, 600.0,
-                                                                                           650.0),
-                                                               pupil_samples=96, cache_dir=out / "banks"),
-                       response=sensor.spectral_response)
+    bank = ensure_bank(
+        at,
+        sensor.pixel_pitch_um,
+        BankSettings(
+            fields=6, wavelengths_nm=(450.0, 500.0, 550.0, 600.0, 650.0), pupil_samples=96, cache_dir=out / "banks"
+        ),
+        response=sensor.spectral_response,
+    )
     make_dataset(sharp, d, bank, "apsc_mirrorless", sensor, crops=2, size=96, placements=3, seed=0)
     manifest = read_json(d / "manifest.json", "pairs manifest")
     settings = describe(lens, shot)
@@ -124,11 +131,13 @@ def merged(out: Path, parts: list[Path]) -> Path:
         manifest = read_json(p / "manifest.json", "pairs manifest")
         for r in manifest["records"]:
             r = dict(r, index=len(records))
-            r["crops"] = [dict(c, input=f"../{p.name}/{c['input']}", target=f"../{p.name}/{c['target']}")
-                          for c in r["crops"]]
+            r["crops"] = [
+                dict(c, input=f"../{p.name}/{c['input']}", target=f"../{p.name}/{c['target']}") for c in r["crops"]
+            ]
             records.append(r)
-    atomic_write_json(d / "manifest.json", {**manifest, "records": records, "bank": None,
-                                            "merged_from": [p.name for p in parts]})
+    atomic_write_json(
+        d / "manifest.json", {**manifest, "records": records, "bank": None, "merged_from": [p.name for p in parts]}
+    )
     return d
 
 
@@ -153,9 +162,23 @@ def train_run(pairs: Path, run: Path, steps: int, **extra: Any) -> dict[str, Any
     # the fewest epochs of at most a whole epoch's batches each that make exactly ``steps`` steps
     epochs = next(e for e in range(max(1, math.ceil(steps / per_epoch)), steps + 1) if steps % e == 0)
     t0 = time.perf_counter()
-    result = train(pairs, run, epochs=epochs, max_steps_per_epoch=steps // epochs, batch_size=4, lr=5e-4,
-                   lr_schedule="cosine", crop=64, arch="unet", width=16, deformable_scales=1, val_fraction=0.25, seed=0,
-                   checkpoint_every_s=None, **extra)
+    result = train(
+        pairs,
+        run,
+        epochs=epochs,
+        max_steps_per_epoch=steps // epochs,
+        batch_size=4,
+        lr=5e-4,
+        lr_schedule="cosine",
+        crop=64,
+        arch="unet",
+        width=16,
+        deformable_scales=1,
+        val_fraction=0.25,
+        seed=0,
+        checkpoint_every_s=None,
+        **extra,
+    )
     done = {"steps": result.step, "seconds": time.perf_counter() - t0, "val_psnr": result.val_psnr}
     marker.write_text(json.dumps(done))
     return done
@@ -195,8 +218,12 @@ def sensitivity(out: Path, held_out: list[str]) -> dict[str, dict[str, float]]:
     res: dict[str, dict[str, float]] = {}
     for data in (GRID[0], GRID[-1]):
         d = out / "pairs" / tag(*data)
-        crops = [c for r in read_json(d / "manifest.json", "pairs")["records"] if Path(r["source"]).name in held_out
-                 for c in r["crops"]]
+        crops = [
+            c
+            for r in read_json(d / "manifest.json", "pairs")["records"]
+            if Path(r["source"]).name in held_out
+            for c in r["crops"]
+        ]
         res[tag(*data)] = {}
         for given in GRID:
             vec = cond.vector({"fno": given[0], "focus_m": given[1]})
@@ -212,11 +239,13 @@ def sensitivity(out: Path, held_out: list[str]) -> dict[str, dict[str, float]]:
 
 def nearest(fno: float, focus: float) -> tuple[float, float]:
     """The grid setting nearest in stops and dioptres, each over the grid's span."""
+
     def d(g: tuple[float, float]) -> float:
         n = [math.log2(x[0]) for x in GRID]
         dpt = [1 / x[1] for x in GRID]
         span_n, span_d = (max(n) - min(n)) or 1.0, (max(dpt) - min(dpt)) or 1.0
         return math.hypot((math.log2(fno) - math.log2(g[0])) / span_n, (1 / focus - 1 / g[1]) / span_d)
+
     return min(GRID, key=d)
 
 
@@ -236,9 +265,12 @@ def main() -> None:
     ap.add_argument("out", nargs="?", default="bench-settings")
     ap.add_argument("--steps", type=int, default=1600)
     ap.add_argument("--photos", type=int, default=24)
-    ap.add_argument("--stage", default="all", choices=["data", "conditioned", "mixed", "single", "per-setting",
-                                                        "evaluate", "all"],
-                    help="run the stages up to this one only (each is cached), to keep heavy jobs short")
+    ap.add_argument(
+        "--stage",
+        default="all",
+        choices=["data", "conditioned", "mixed", "single", "per-setting", "evaluate", "all"],
+        help="run the stages up to this one only (each is cached), to keep heavy jobs short",
+    )
     ap.add_argument("--lens", default=LENS)
     ap.add_argument("--grid", help="grid settings FNO:FOCUS_M,... (default: the module's GRID)")
     ap.add_argument("--between", help="settings between grid points, FNO:FOCUS_M,...")
@@ -258,8 +290,15 @@ def main() -> None:
     sets = {s: pairs_for(out, sharp, *s) for s in GRID + BETWEEN}
     grid = merged(out, [sets[s] for s in GRID])
     runs = out / "runs"
-    record: dict[str, Any] = {"lens": LENS, "grid": GRID, "between": BETWEEN, "single": SINGLE,
-                              "steps_budget": args.steps, "photos": args.photos, "runs": {}}
+    record: dict[str, Any] = {
+        "lens": LENS,
+        "grid": GRID,
+        "between": BETWEEN,
+        "single": SINGLE,
+        "steps_budget": args.steps,
+        "photos": args.photos,
+        "runs": {},
+    }
     stages = ["data", "conditioned", "mixed", "single", "per-setting", "evaluate", "all"]
     last = stages.index(args.stage)
     if last >= 1:
@@ -270,8 +309,9 @@ def main() -> None:
         record["runs"]["single"] = train_run(sets[SINGLE], runs / "single", args.steps)
     if last >= 4:
         for s in GRID:
-            record["runs"][f"per-setting {tag(*s)}"] = train_run(sets[s], runs / f"per_{tag(*s)}",
-                                                                 args.steps // len(GRID))
+            record["runs"][f"per-setting {tag(*s)}"] = train_run(
+                sets[s], runs / f"per_{tag(*s)}", args.steps // len(GRID)
+            )
     if last < 5:
         return
     held_out = json.loads((runs / "conditioned" / "split.json").read_text())["val"]
@@ -279,8 +319,12 @@ def main() -> None:
     results: dict[str, Any] = {}
     for s in GRID + BETWEEN:
         near = nearest(*s)
-        models = {"conditioned": runs / "conditioned" / "last.pt", "mixed": runs / "mixed" / "last.pt",
-                  "single": runs / "single" / "last.pt", "per-setting": runs / f"per_{tag(*near)}" / "last.pt"}
+        models = {
+            "conditioned": runs / "conditioned" / "last.pt",
+            "mixed": runs / "mixed" / "last.pt",
+            "single": runs / "single" / "last.pt",
+            "per-setting": runs / f"per_{tag(*near)}" / "last.pt",
+        }
         summary = evaluate(sets[s], held_out, models)
         results[tag(*s)] = {"on_grid": s in GRID, "per_setting_model": tag(*near), **summary}
     record["results"] = results
@@ -314,18 +358,24 @@ def table(record: dict[str, Any]) -> str:
             s = r["methods"][m]
             z = s["zones"]
             label = f"per-setting ({r['per_setting_model']})" if m == "per-setting" else m
-            lines.append(f"| {name} ({where}) | {label} | {s['psnr_db']:.2f} | {z['centre']['psnr_db']:.2f} | "
-                         f"{z['middle']['psnr_db']:.2f} | {z['edge']['psnr_db']:.2f} |")
+            lines.append(
+                f"| {name} ({where}) | {label} | {s['psnr_db']:.2f} | {z['centre']['psnr_db']:.2f} | "
+                f"{z['middle']['psnr_db']:.2f} | {z['edge']['psnr_db']:.2f} |"
+            )
     means = ["", "| mean | method | PSNR | centre | middle | edge |", "|---|---|---:|---:|---:|---:|"]
     for on_grid in (True, False):
         for m in methods:
             vals = [_avg(record["results"], on_grid, m, z) for z in (None, *ZONES)]
-            means.append(f"| {'on grid' if on_grid else 'between grid'} | {m} | "
-                         + " | ".join(f"{v:.2f}" for v in vals) + " |")
+            means.append(
+                f"| {'on grid' if on_grid else 'between grid'} | {m} | " + " | ".join(f"{v:.2f}" for v in vals) + " |"
+            )
     sens = record["conditioned_psnr_given_other_settings"]
     given = list(next(iter(sens.values())))
-    spots = ["", "| crops at | " + " | ".join(f"conditioned given {g}" for g in given) + " |",
-             "|---|" + "---:|" * len(given)]
+    spots = [
+        "",
+        "| crops at | " + " | ".join(f"conditioned given {g}" for g in given) + " |",
+        "|---|" + "---:|" * len(given),
+    ]
     spots += [f"| {k} | " + " | ".join(f"{v[g]:.2f}" for g in given) + " |" for k, v in sens.items()]
     spots += ["", "| setting | RMS spot radius (um) at the axis, half and all the half-diagonal |", "|---|---|"]
     spots += [f"| {k} | {' / '.join(f'{v:.1f}' for v in vals)} |" for k, vals in record["rms_spot_um"].items()]

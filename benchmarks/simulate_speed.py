@@ -7,6 +7,7 @@ convolution (torch conv2d of each 64x64 tile, padded by the kernel radius, with 
 tile's kernel; no blending, so it also shows seams), with the ratio and peak memory (each
 variant in its own subprocess, peak RSS from getrusage).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -14,7 +15,7 @@ import json
 import subprocess
 import sys
 
-CHILD = r'''
+CHILD = r"""
 import json, resource, sys, time, torch, torch.nn.functional as F
 torch.set_num_threads(int(sys.argv[2]))
 from lensim.optics.lens_file import load_lens
@@ -59,7 +60,7 @@ else:  # naive per-tile direct convolution
 dt = time.perf_counter() - t
 print(json.dumps({"variant": variant, "seconds": dt, "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
                   "kernel": bank.kernel_pixels, "pitch_um": m.pitch_um}))
-'''
+"""
 
 
 def main() -> None:
@@ -70,12 +71,18 @@ def main() -> None:
     rows = []
     for variant in ("blur", "naive", "simulate"):
         for _ in range(2):  # the first run of a variant may compute and cache the bank
-            res = subprocess.run([sys.executable, "-c", CHILD, variant, str(args.threads), args.cache],
-                                 capture_output=True, text=True, check=True)
+            res = subprocess.run(
+                [sys.executable, "-c", CHILD, variant, str(args.threads), args.cache],
+                capture_output=True,
+                text=True,
+                check=True,
+            )
         rows.append(json.loads(res.stdout.strip().splitlines()[-1]))
     naive = next(r for r in rows if r["variant"] == "naive")["seconds"]
-    print(f"2048x1365, default lens and sensor, pitch {rows[0]['pitch_um']:.2f} um, kernel {rows[0]['kernel']} px, "
-          f"{args.threads} threads")
+    print(
+        f"2048x1365, default lens and sensor, pitch {rows[0]['pitch_um']:.2f} um, kernel {rows[0]['kernel']} px, "
+        f"{args.threads} threads"
+    )
     print(f"{'variant':<12}{'seconds':>10}{'peak RSS MB':>14}{'vs naive':>10}")
     for r in rows:
         print(f"{r['variant']:<12}{r['seconds']:>10.2f}{r['peak_rss_mb']:>14.0f}{naive / r['seconds']:>9.2f}x")

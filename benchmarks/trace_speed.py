@@ -12,6 +12,7 @@ the rays for the pupil grid and tracing them to the image plane. optiland traces
 `record=False` (no per-surface history) and lensim's glass data, so that both do the
 same work; the image-plane intercepts are compared to show it.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -129,19 +130,36 @@ def main() -> None:
         ok_l, ok_o = np.isfinite(xy_l[:, 0]), np.isfinite(xy_o[:, 0])
         both = ok_l & ok_o
         diff = float(np.abs(xy_l[both] - xy_o[both]).max()) if both.any() else float("nan")
-        rows.append((len(pupil), statistics.median(t_l), statistics.median(t_tr), statistics.median(t_o), ratio,
-                     ratio_tr, diff, int(ok_l.sum()), int(ok_o.sum())))
+        rows.append(
+            (
+                len(pupil),
+                statistics.median(t_l),
+                statistics.median(t_tr),
+                statistics.median(t_o),
+                ratio,
+                ratio_tr,
+                diff,
+                int(ok_l.sum()),
+                int(ok_o.sum()),
+            )
+        )
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    print(f"lens: {lens.name} ({lens.num_surfaces} surfaces), field {FIELD_DEG} deg, "
-          f"{lens.primary_wavelength_um * 1000:.1f} nm, paraxial aiming; torch {torch.__version__}, "
-          f"{torch.get_num_threads()} threads, {os.cpu_count()} CPUs, load average {load:.1f}; "
-          f"median of {args.repeats} interleaved runs")
-    print("| rays | lensim (s) | lensim rays/s | optiland (s) | optiland rays/s | speed-up | lensim trace() only (s) "
-          "| speed-up, trace() only | max abs dxy (mm) | rays reaching the image lensim / optiland |")
+    print(
+        f"lens: {lens.name} ({lens.num_surfaces} surfaces), field {FIELD_DEG} deg, "
+        f"{lens.primary_wavelength_um * 1000:.1f} nm, paraxial aiming; torch {torch.__version__}, "
+        f"{torch.get_num_threads()} threads, {os.cpu_count()} CPUs, load average {load:.1f}; "
+        f"median of {args.repeats} interleaved runs"
+    )
+    print(
+        "| rays | lensim (s) | lensim rays/s | optiland (s) | optiland rays/s | speed-up | lensim trace() only (s) "
+        "| speed-up, trace() only | max abs dxy (mm) | rays reaching the image lensim / optiland |"
+    )
     print("| ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
     for n, t_l, t_tr, t_o, ratio, ratio_tr, diff, v_l, v_o in rows:
-        print(f"| {n:,} | {t_l:.3f} | {n / t_l:,.0f} | {t_o:.3f} | {n / t_o:,.0f} | {ratio:.2f}x | {t_tr:.3f} "
-              f"| {ratio_tr:.2f}x | {diff:.1e} | {v_l:,} / {v_o:,} |")
+        print(
+            f"| {n:,} | {t_l:.3f} | {n / t_l:,.0f} | {t_o:.3f} | {n / t_o:,.0f} | {ratio:.2f}x | {t_tr:.3f} "
+            f"| {ratio_tr:.2f}x | {diff:.1e} | {v_l:,} / {v_o:,} |"
+        )
     print("speed-up: median over the runs of optiland's time / lensim's (lensim: generate_rays + trace)")
 
 

@@ -1,4 +1,5 @@
 """lensim: optical aberration simulation and correction from a lens prescription."""
+
 import os as _os
 
 # torch's OpenMP threads spin-wait for partners; on shared machines another process holding

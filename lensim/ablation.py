@@ -9,6 +9,7 @@ A killed ablation resumes when run again with the same options: finished variant
 reused (RUN/done.json), an unfinished one continues from its RUN/last.pt on the rest of its
 time budget (lensim.restore.train's resume), and one killed before its first checkpoint
 starts again. torch and the training modules load when run_ablation runs."""
+
 from __future__ import annotations
 
 import shutil
@@ -49,10 +50,19 @@ def _config(arch: str, width: int, crop: int | None, switches: dict[str, Any]) -
     return TrainConfig(arch=arch, width=width, crop=crop, stem=STEM, **switches).model_kwargs()
 
 
-def run_ablation(pairs_dir: str | Path, out_dir: str | Path, time_budget_s: float, width: int | None = None,
-                 crop: int | None = TrainConfig.crop, seed: int = TrainConfig.seed, variants: list[str] | None = None,
-                 say: Callable[[str], None] | None = None, device: str = TrainConfig.device,
-                 progress: Callable[[float, float], None] | None = None, arch: str = "unet") -> dict:
+def run_ablation(
+    pairs_dir: str | Path,
+    out_dir: str | Path,
+    time_budget_s: float,
+    width: int | None = None,
+    crop: int | None = TrainConfig.crop,
+    seed: int = TrainConfig.seed,
+    variants: list[str] | None = None,
+    say: Callable[[str], None] | None = None,
+    device: str = TrainConfig.device,
+    progress: Callable[[float, float], None] | None = None,
+    arch: str = "unet",
+) -> dict:
     """Train every variant (cached: a finished run is reused) and evaluate it on the held-out
     photos of the first run's split; returns {"arch", "variants": {name: {params, train,
     metrics}}}. width: of the full network (None: the architecture's default, matched to the
@@ -76,8 +86,20 @@ def run_ablation(pairs_dir: str | Path, out_dir: str | Path, time_budget_s: floa
         full = {k: v for k, v in _config(arch, 1, crop, FULL).items() if k not in ("arch", "width", "depth")}
         width = default_width(arch, **full)
     with folder_lock(out_dir):
-        return _run_variants(pairs_dir, manifest, Path(out_dir), time_budget_s, width, crop, seed,
-                             {n: table[n] for n in names}, say or (lambda m: None), device, progress, arch)
+        return _run_variants(
+            pairs_dir,
+            manifest,
+            Path(out_dir),
+            time_budget_s,
+            width,
+            crop,
+            seed,
+            {n: table[n] for n in names},
+            say or (lambda m: None),
+            device,
+            progress,
+            arch,
+        )
 
 
 def _plain_width(arch: str, width: int, crop: int | None) -> int:
@@ -93,8 +115,14 @@ def _plain_width(arch: str, width: int, crop: int | None) -> int:
     return nafnet_width(full, **plain)
 
 
-def _train_variant(pairs_dir: str | Path, run: Path, time_budget_s: float, device: str,
-                   progress: Callable[[float, float], None] | None, network: dict[str, Any]) -> Any:
+def _train_variant(
+    pairs_dir: str | Path,
+    run: Path,
+    time_budget_s: float,
+    device: str,
+    progress: Callable[[float, float], None] | None,
+    network: dict[str, Any],
+) -> Any:
     """Train one variant into ``run`` for ``time_budget_s`` seconds in all: a fresh run, or
     the continuation of one a kill left there (RUN/last.pt: same data order and schedule, the
     budget counts the seconds trained before; a changed network or crop is refused in one
@@ -106,14 +134,34 @@ def _train_variant(pairs_dir: str | Path, run: Path, time_budget_s: float, devic
     resume = (run / LAST).is_file()
     if run.exists() and not resume:
         shutil.rmtree(run)
-    return train(pairs_dir, run, resume=resume, epochs=100_000, lr=5e-4, lr_schedule="cosine",
-                 time_budget_s=time_budget_s, device=device, progress=budget_progress(progress, time_budget_s),
-                 **network)
+    return train(
+        pairs_dir,
+        run,
+        resume=resume,
+        epochs=100_000,
+        lr=5e-4,
+        lr_schedule="cosine",
+        time_budget_s=time_budget_s,
+        device=device,
+        progress=budget_progress(progress, time_budget_s),
+        **network,
+    )
 
 
-def _run_variants(pairs_dir: str | Path, manifest: dict, out: Path, time_budget_s: float, width: int,
-                  crop: int | None, seed: int, variants: dict[str, dict], say: Callable[[str], None], device: str,
-                  progress: Callable[[float, float], None] | None, arch: str) -> dict:
+def _run_variants(
+    pairs_dir: str | Path,
+    manifest: dict,
+    out: Path,
+    time_budget_s: float,
+    width: int,
+    crop: int | None,
+    seed: int,
+    variants: dict[str, dict],
+    say: Callable[[str], None],
+    device: str,
+    progress: Callable[[float, float], None] | None,
+    arch: str,
+) -> dict:
     """run_ablation's training and evaluation, the output folder locked."""
     from lensim.evaluate.harness import checkpoint_method, evaluate
     from lensim.restore.models import build_model
@@ -127,20 +175,38 @@ def _run_variants(pairs_dir: str | Path, manifest: dict, out: Path, time_budget_
         marker = run / "done.json"
         if not marker.exists():
             say(f"training {name} ({time_budget_s:g} s)")
-            res = _train_variant(pairs_dir, run, time_budget_s, device, progress,
-                                 dict(arch=arch, width=w, crop=crop, seed=seed, stem=STEM, **switches))
+            res = _train_variant(
+                pairs_dir,
+                run,
+                time_budget_s,
+                device,
+                progress,
+                dict(arch=arch, width=w, crop=crop, seed=seed, stem=STEM, **switches),
+            )
             atomic_write_json(marker, {"steps": res.step, "seconds": res.seconds})
         held_out = held_out or read_held_out(run)
         params = count_parameters(build_model(_config(arch, w, crop, switches)))
-        results[name] = {"params": params, "arch": arch, "width": w, **switches,
-                         "train": read_json(marker, "training record")}
+        results[name] = {
+            "params": params,
+            "arch": arch,
+            "width": w,
+            **switches,
+            "train": read_json(marker, "training record"),
+        }
     say("evaluating on the held-out photos")
-    methods = {name: checkpoint_method(out / name, manifest.get("lens"), manifest.get("sensor"), device=device)
-               for name in variants}
+    methods = {
+        name: checkpoint_method(out / name, manifest.get("lens"), manifest.get("sensor"), device=device)
+        for name in variants
+    }
     metrics = evaluate(pairs_dir, methods, sources=held_out, progress=progress)
     for name in variants:
         results[name]["metrics"] = metrics["methods"][name]
-    summary = {"arch": arch, "held_out_photos": held_out, "time_budget_s": time_budget_s,
-               "input": metrics["methods"]["input"], "variants": results}
+    summary = {
+        "arch": arch,
+        "held_out_photos": held_out,
+        "time_budget_s": time_budget_s,
+        "input": metrics["methods"]["input"],
+        "variants": results,
+    }
     atomic_write_json(out / "ablation.json", summary)
     return summary

@@ -8,6 +8,7 @@ evaluation on held-out photos against the aberrated input and the Wiener oracle 
 slanted-edge MTF and lateral colour before and after -> report.json and a self-contained
 report.html.
 """
+
 from __future__ import annotations
 
 import json
@@ -80,18 +81,26 @@ def _claim_folder(out: Path, settings: DemoSettings, quick: bool, seed: int, sho
     cached stages would not match. shooting: the lens's shooting settings (to_dict), when
     any is given."""
     marker = out / "demo.json"
-    mine = json.loads(json.dumps({**asdict(settings), "quick": quick, "seed": seed,
-                                  **({"shooting": shooting} if shooting else {})}))
+    mine = json.loads(
+        json.dumps({**asdict(settings), "quick": quick, "seed": seed, **({"shooting": shooting} if shooting else {})})
+    )
     if marker.exists():
         try:
             theirs = read_json(marker, "demo settings record")
         except InputError:
             theirs = None  # unreadable: made by something else
         if theirs != mine:
-            what = "other settings" if not isinstance(theirs, dict) else ", ".join(
-                f"{k}={theirs.get(k)!r}" for k in mine if theirs.get(k) != mine[k])
-            raise InputError(str(marker), "settings", f"this folder holds a demo run with {what}; expected the "
-                             "same options (--quick, --seed) to resume it, or a new output folder")
+            what = (
+                "other settings"
+                if not isinstance(theirs, dict)
+                else ", ".join(f"{k}={theirs.get(k)!r}" for k in mine if theirs.get(k) != mine[k])
+            )
+            raise InputError(
+                str(marker),
+                "settings",
+                f"this folder holds a demo run with {what}; expected the "
+                "same options (--quick, --seed) to resume it, or a new output folder",
+            )
     else:
         atomic_write_json(marker, mine)
 
@@ -106,7 +115,7 @@ def _photos(out: Path, size: int) -> Path:
             _, h, w = arr.shape
             s = min(size, h, w)
             y, x = (h - s) // 2, (w - s) // 2
-            write_image(target, arr[:, y:y + s, x:x + s])
+            write_image(target, arr[:, y : y + s, x : x + s])
     return d
 
 
@@ -137,8 +146,15 @@ def plain_network(settings: DemoSettings) -> dict[str, Any]:
     return dict(arch="unet", width=plain_unet_width(target, 3), **switches)
 
 
-def _train(pairs: Path, run: Path, settings: DemoSettings, plain: bool, seed: int, device: str = "cpu",
-           progress: StageProgress | None = None) -> dict:
+def _train(
+    pairs: Path,
+    run: Path,
+    settings: DemoSettings,
+    plain: bool,
+    seed: int,
+    device: str = "cpu",
+    progress: StageProgress | None = None,
+) -> dict:
     """Train once (cached by RUN/done.json) on a time budget; progress(seconds, budget).
     plain: the baseline (:func:`plain_network`), else the demo's network."""
     from lensim.restore.nafnet import nafnet_width
@@ -149,25 +165,47 @@ def _train(pairs: Path, run: Path, settings: DemoSettings, plain: bool, seed: in
         return read_json(marker, "training record")
     if run.exists():
         shutil.rmtree(run)  # an unfinished run: start it again (its budget was not spent)
-    kw: dict[str, Any] = dict(epochs=100_000, batch_size=4, lr=5e-4, lr_schedule="cosine", crop=settings.train_crop,
-                              seed=seed, time_budget_s=settings.train_seconds, val_fraction=0.25, device=device)
+    kw: dict[str, Any] = dict(
+        epochs=100_000,
+        batch_size=4,
+        lr=5e-4,
+        lr_schedule="cosine",
+        crop=settings.train_crop,
+        seed=seed,
+        time_budget_s=settings.train_seconds,
+        val_fraction=0.25,
+        device=device,
+    )
     if plain:
         kw.update(plain_network(settings))
     elif settings.arch == "nafnet":
         switches: dict[str, Any] = dict(use_fov=True, use_deformable=False, use_context=False, stem=settings.stem)
         kw.update(arch="nafnet", width=nafnet_width(_target_parameters(settings), **switches), **switches)
     else:
-        kw.update(arch="unet", width=settings.width, deformable_scales=settings.deformable_scales, use_fov=True,
-                  use_deformable=True, use_context=True)
+        kw.update(
+            arch="unet",
+            width=settings.width,
+            deformable_scales=settings.deformable_scales,
+            use_fov=True,
+            use_deformable=True,
+            use_context=True,
+        )
     res = train(pairs, run, progress=budget_progress(progress, settings.train_seconds), **kw)
     info = {k: v for k, v in asdict(res).items() if k != "history"}
     atomic_write_json(marker, info)
     return info
 
 
-def run_demo(out_dir: str | Path, quick: bool = False, seed: int = 0, workers: int = 1, say: Say | None = None,
-             device: str = "cpu", progress: StageProgress | None = None,
-             shooting: ShootingSettings | None = None) -> dict:
+def run_demo(
+    out_dir: str | Path,
+    quick: bool = False,
+    seed: int = 0,
+    workers: int = 1,
+    say: Say | None = None,
+    device: str = "cpu",
+    progress: StageProgress | None = None,
+    shooting: ShootingSettings | None = None,
+) -> dict:
     """Run the demo into out_dir; returns the report's JSON (also written). device: where the
     networks train and run ("cpu", "cuda", "cuda:N"). say(stage) announces each stage and
     progress(done, total) reports within it. shooting: the built-in lens's shooting
@@ -187,8 +225,16 @@ def _set_lens(shooting: ShootingSettings | None) -> tuple[Any, dict | None]:
     return lens_at(lens, shooting), record(describe(lens, shooting))
 
 
-def _run_demo(out: Path, quick: bool, seed: int, workers: int, say: Say | None, device: str,
-              progress: StageProgress | None, shooting: ShootingSettings | None = None) -> dict:
+def _run_demo(
+    out: Path,
+    quick: bool,
+    seed: int,
+    workers: int,
+    say: Say | None,
+    device: str,
+    progress: StageProgress | None,
+    shooting: ShootingSettings | None = None,
+) -> dict:
     """run_demo's stages, the folder locked."""
     from lensim.data.pairs import make_dataset
     from lensim.plots.bank import write_bank_figures
@@ -214,33 +260,63 @@ def _run_demo(out: Path, quick: bool, seed: int, workers: int, say: Say | None, 
 
     t = time.perf_counter()
     say("PSF bank")
-    bank_settings = BankSettings(fields=settings.fields, wavelengths_nm=settings.wavelengths_nm,
-                                 pupil_samples=settings.pupil_samples, kernel_limit=41)
+    bank_settings = BankSettings(
+        fields=settings.fields,
+        wavelengths_nm=settings.wavelengths_nm,
+        pupil_samples=settings.pupil_samples,
+        kernel_limit=41,
+    )
     if shooting is None or shooting.is_default:
-        bank = build_bank(lens, sensor.pixel_pitch_um, bank_settings, response=sensor.spectral_response,
-                          out_dir=out / "bank", workers=workers, progress=step)
+        bank = build_bank(
+            lens,
+            sensor.pixel_pitch_um,
+            bank_settings,
+            response=sensor.spectral_response,
+            out_dir=out / "bank",
+            workers=workers,
+            progress=step,
+        )
     else:  # the bank's manifest records the settings, and so do the pairs made from it
         from lensim.psf.bank.grid import compute_setting_bank
 
-        bank = compute_setting_bank(load_lens(DEFAULT_LENS), sensor.pixel_pitch_um, shooting, bank_settings,
-                                    out / "bank", response=sensor.spectral_response, workers=workers, progress=step)
+        bank = compute_setting_bank(
+            load_lens(DEFAULT_LENS),
+            sensor.pixel_pitch_um,
+            shooting,
+            bank_settings,
+            out / "bank",
+            response=sensor.spectral_response,
+            workers=workers,
+            progress=step,
+        )
     write_bank_figures(bank, figs)
     timings["bank"] = time.perf_counter() - t
 
     t = time.perf_counter()
     say("training pairs")
     photos = _photos(out, settings.photo_size)
-    make_dataset(photos, out / "pairs", bank, DEFAULT_SENSOR, sensor, crops=settings.crops, size=settings.crop_size,
-                 seed=seed, placements=settings.placements, workers=workers, progress=step)
+    make_dataset(
+        photos,
+        out / "pairs",
+        bank,
+        DEFAULT_SENSOR,
+        sensor,
+        crops=settings.crops,
+        size=settings.crop_size,
+        seed=seed,
+        placements=settings.placements,
+        workers=workers,
+        progress=step,
+    )
     timings["pairs"] = time.perf_counter() - t
 
     t = time.perf_counter()
     say(f"training the field-aware network ({settings.train_seconds:.0f} s)")
-    model_info = _train(out / "pairs", out / "run-model", settings, plain=False, seed=seed, device=device,
-                        progress=step)
+    model_info = _train(
+        out / "pairs", out / "run-model", settings, plain=False, seed=seed, device=device, progress=step
+    )
     say(f"training the plain network ({settings.train_seconds:.0f} s)")
-    plain_info = _train(out / "pairs", out / "run-plain", settings, plain=True, seed=seed, device=device,
-                        progress=step)
+    plain_info = _train(out / "pairs", out / "run-plain", settings, plain=True, seed=seed, device=device, progress=step)
     timings["training"] = time.perf_counter() - t
 
     t = time.perf_counter()
@@ -256,12 +332,20 @@ def _run_demo(out: Path, quick: bool, seed: int, workers: int, say: Say | None, 
     report = {
         "lens": summary,
         "sensor": {"name": sensor.name, "pixel_pitch_um": sensor.pixel_pitch_um, "resolution": list(sensor.resolution)},
-        "settings": {**asdict(settings), "quick": quick, "seed": seed, "workers": workers, "device": device,
-                     "kernel_pixels": bank.kernel_pixels},
+        "settings": {
+            **asdict(settings),
+            "quick": quick,
+            "seed": seed,
+            "workers": workers,
+            "device": device,
+            "kernel_pixels": bank.kernel_pixels,
+        },
         "bank": _bank_summary(bank),
         "shooting": described,
-        "training": {"model": {**model_info, "network": _network(out / "run-model")},
-                     "plain": {**plain_info, "network": _network(out / "run-plain")}},
+        "training": {
+            "model": {**model_info, "network": _network(out / "run-model")},
+            "plain": {**plain_info, "network": _network(out / "run-plain")},
+        },
         **evaluation,
         "raw_file": raw_file,
         "timings_s": timings,
@@ -270,8 +354,9 @@ def _run_demo(out: Path, quick: bool, seed: int, workers: int, say: Say | None, 
     return report
 
 
-def _evaluate(out: Path, bank: PSFBank, sensor: SensorProfile, figs: Path, seed: int, device: str,
-              progress: StageProgress) -> dict:
+def _evaluate(
+    out: Path, bank: PSFBank, sensor: SensorProfile, figs: Path, seed: int, device: str, progress: StageProgress
+) -> dict:
     """The held-out evaluation of both networks and the Wiener oracle, the sample crops and
     the edge study (slanted-edge MTF, lateral colour): the report's entries
     held_out_photos, sample_crops, metrics, slanted_edge and lateral_colour."""
@@ -282,16 +367,25 @@ def _evaluate(out: Path, bank: PSFBank, sensor: SensorProfile, figs: Path, seed:
     held_out = read_held_out(out / "run-model")
     manifest = read_pairs_manifest(out / "pairs")
     # the last checkpoints: best.pt is picked by validation PSNR on these very photos
-    methods = {"model": checkpoint_method(out / "run-model" / "last.pt", manifest.get("lens"), manifest.get("sensor"),
-                                          device=device),
-               "plain": checkpoint_method(out / "run-plain" / "last.pt", manifest.get("lens"), manifest.get("sensor"),
-                                          device=device),
-               "wiener": builtin_method("wiener")}
+    methods = {
+        "model": checkpoint_method(
+            out / "run-model" / "last.pt", manifest.get("lens"), manifest.get("sensor"), device=device
+        ),
+        "plain": checkpoint_method(
+            out / "run-plain" / "last.pt", manifest.get("lens"), manifest.get("sensor"), device=device
+        ),
+        "wiener": builtin_method("wiener"),
+    }
     metrics = evaluate(out / "pairs", methods, bank=bank, sources=held_out, progress=progress)
     samples = sample_crops(out / "pairs", manifest, held_out, methods["model"], bank, figs)
     edges = edge_study(bank, sensor, methods["model"], figs, seed=seed)
-    return {"held_out_photos": held_out, "sample_crops": samples, "metrics": metrics,
-            "slanted_edge": edges["slanted_edge"], "lateral_colour": edges["lateral_colour"]}
+    return {
+        "held_out_photos": held_out,
+        "sample_crops": samples,
+        "metrics": metrics,
+        "slanted_edge": edges["slanted_edge"],
+        "lateral_colour": edges["lateral_colour"],
+    }
 
 
 def _raw_stage(out: Path, bank: PSFBank, sensor: SensorProfile, figs: Path, seed: int, device: str) -> dict:
@@ -316,8 +410,14 @@ def _raw_stage(out: Path, bank: PSFBank, sensor: SensorProfile, figs: Path, seed
     top, left = (sensor.height - h) // 4 * 2, (sensor.width - w - 16) // 2 * 2  # mid-height, at the right edge
     dng = d / f"{name}.dng"
     if not dng.exists():
-        simulate(truth, bank, sensor, torch.Generator().manual_seed(seed), mapping=native_mapping(h, w, sensor, top, left),
-                 raw_path=dng)
+        simulate(
+            truth,
+            bank,
+            sensor,
+            torch.Generator().manual_seed(seed),
+            mapping=native_mapping(h, w, sensor, top, left),
+            raw_path=dng,
+        )
     checkpoint = out / "run-model" / "last.pt"
     model, _ = load_checkpoint(checkpoint, device=device)
     settings = RestoreSettings(str(checkpoint), sensor.to_dict(), device=device)
@@ -338,7 +438,9 @@ def _network(run: Path) -> str:
 def _bank_summary(bank: PSFBank) -> dict:
     """The report's bank entry: normalized fields, image heights (mm), Strehl ratios and the
     green channel's relative illumination, one value per field."""
-    return {"fields": [float(f.field) for f in bank.fields],
-            "image_height_mm": [float(r) for r in bank.radii_mm],
-            "strehl": [float(f.strehl) for f in bank.fields],
-            "relative_illumination_green": [float(f.rgb[1].sum()) for f in bank.fields]}
+    return {
+        "fields": [float(f.field) for f in bank.fields],
+        "image_height_mm": [float(r) for r in bank.radii_mm],
+        "strehl": [float(f.strehl) for f in bank.fields],
+        "relative_illumination_green": [float(f.rgb[1].sum()) for f in bank.fields],
+    }

@@ -1,4 +1,5 @@
 """Error types with one-line messages that name the file, the field and what was expected."""
+
 from __future__ import annotations
 
 

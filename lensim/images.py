@@ -5,6 +5,7 @@ file). Grayscale is expanded to three equal channels; an alpha channel is refuse
 it is fully opaque (then dropped), since transparent pixels have no defined colour.
 Writes are atomic (temporary name, then rename).
 """
+
 from __future__ import annotations
 
 import io
@@ -45,7 +46,9 @@ def read_image(path: str | Path) -> tuple[torch.Tensor, int]:
                     elif im.mode in ("1", "L", "LA", "RGB", "RGBA"):
                         arr = np.array(im)
                     else:
-                        raise InputError(src, "mode", f"unsupported pixel mode {im.mode}; expected grayscale, RGB or RGBA")
+                        raise InputError(
+                            src, "mode", f"unsupported pixel mode {im.mode}; expected grayscale, RGB or RGBA"
+                        )
     except InputError:
         raise
     except Exception as e:  # a corrupt or truncated file
@@ -84,8 +87,12 @@ def _read_tiff(path: Path, src: str) -> np.ndarray:
     with tifffile.TiffFile(path) as tf:
         page = tf.pages.first
         if int(page.photometric) == int(tifffile.PHOTOMETRIC.SEPARATED):
-            raise InputError(src, "photometric", f"is a CMYK (separated) TIFF with {page.samplesperpixel} inks; "
-                             "expected RGB or grayscale (convert it to RGB first)")
+            raise InputError(
+                src,
+                "photometric",
+                f"is a CMYK (separated) TIFF with {page.samplesperpixel} inks; "
+                "expected RGB or grayscale (convert it to RGB first)",
+            )
         arr = tf.asarray()  # the first series (all its pages), as tifffile.imread reads it
         planar = int(page.planarconfig) == int(tifffile.PLANARCONFIG.SEPARATE)
         rgb = int(page.photometric) == int(tifffile.PHOTOMETRIC.RGB)
@@ -149,8 +156,8 @@ def _quantized(image: torch.Tensor, bits: int, block_rows: int = 256) -> np.ndar
     q = np.empty((h, w, 3), dtype=np.uint8 if bits == 8 else np.uint16)
     maxv = 255 if bits == 8 else 65535
     for y0 in range(0, h, block_rows):
-        blk = image[:, y0:y0 + block_rows].detach().cpu().clamp(0, 1).numpy().transpose(1, 2, 0)
-        q[y0:y0 + block_rows] = np.round(blk * maxv)
+        blk = image[:, y0 : y0 + block_rows].detach().cpu().clamp(0, 1).numpy().transpose(1, 2, 0)
+        q[y0 : y0 + block_rows] = np.round(blk * maxv)
     return q
 
 

@@ -10,6 +10,7 @@ failure inside the ``with`` block removes it.
 One writer at a time per output folder: :func:`folder_lock` (an flock on
 FOLDER/.lensim.lock, the one file written in place, since a lock must keep its inode).
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -110,7 +111,9 @@ def read_text(path: str | Path, what: str = "file") -> str:
     try:
         return raw.decode("utf-8-sig")
     except UnicodeDecodeError as e:
-        found = "UTF-16 text" if raw.startswith(_UTF16_BOMS) else f"not UTF-8 text (byte {e.start} is 0x{raw[e.start]:02x})"
+        found = (
+            "UTF-16 text" if raw.startswith(_UTF16_BOMS) else f"not UTF-8 text (byte {e.start} is 0x{raw[e.start]:02x})"
+        )
         raise InputError(str(path), None, f"is {found}; expected a {what} in UTF-8 (save it as UTF-8)") from None
 
 
@@ -179,9 +182,13 @@ def _acquire(folder: Path) -> int:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             os.close(fd)
-            raise InputError(str(folder), None, f"another lensim run ({_lock_holder(path)}) is writing into this "
-                             "folder; expected one writer at a time: wait for it to finish or choose another "
-                             "folder") from None
+            raise InputError(
+                str(folder),
+                None,
+                f"another lensim run ({_lock_holder(path)}) is writing into this "
+                "folder; expected one writer at a time: wait for it to finish or choose another "
+                "folder",
+            ) from None
         try:
             same = os.stat(path).st_ino == os.fstat(fd).st_ino
         except FileNotFoundError:
@@ -220,8 +227,9 @@ def folder_lock(folder: str | Path) -> Iterator[Path]:
         if created:
             with contextlib.suppress(OSError):
                 folder.rmdir()
-        raise InputError(str(folder), None, f"cannot use it as an output folder ({e.strerror or e}); expected a "
-                         "writable folder") from None
+        raise InputError(
+            str(folder), None, f"cannot use it as an output folder ({e.strerror or e}); expected a writable folder"
+        ) from None
     except BaseException:
         if created:
             with contextlib.suppress(OSError):
@@ -240,5 +248,15 @@ def folder_lock(folder: str | Path) -> Iterator[Path]:
                 folder.rmdir()  # only succeeds when empty
 
 
-__all__ = ["LOCK_NAME", "atomic_write_bytes", "atomic_write_json", "atomic_write_text", "atomic_writer",
-           "decode_text", "folder_lock", "read_bytes", "read_json", "read_text"]
+__all__ = [
+    "LOCK_NAME",
+    "atomic_write_bytes",
+    "atomic_write_json",
+    "atomic_write_text",
+    "atomic_writer",
+    "decode_text",
+    "folder_lock",
+    "read_bytes",
+    "read_json",
+    "read_text",
+]

@@ -3,6 +3,7 @@ numbers, tuples become lists, and non-finite floats become null (jsonable: resul
 a non-finite number means "none") or the strings "inf", "-inf", "nan" (strict_json: settings
 and metadata, where an infinite focus distance keeps its meaning; from_strict reads them
 back)."""
+
 from __future__ import annotations
 
 import math

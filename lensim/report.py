@@ -1,5 +1,6 @@
 """The demo report: sample crops, slanted-edge and lateral-colour studies, and a
 self-contained HTML page (images embedded) beside report.json."""
+
 from __future__ import annotations
 
 import base64
@@ -38,17 +39,27 @@ def _save(fig, path: Path) -> Path:
     return path
 
 
-def _context(manifest: Mapping[str, Any], rec: Mapping[str, Any], k: int, sensor: SensorProfile,
-             bank: PSFBank) -> tuple[CropContext, int]:
+def _context(
+    manifest: Mapping[str, Any], rec: Mapping[str, Any], k: int, sensor: SensorProfile, bank: PSFBank
+) -> tuple[CropContext, int]:
     crop = rec["crops"][k]
     size = int(manifest["size"])
     m = native_mapping(size, size, sensor, int(crop["sensor_top"]), int(crop["sensor_left"]))
-    return CropContext(m, sensor, bank, crop_capture(rec, crop), int(crop["sensor_top"]), int(crop["sensor_left"]),
-                       int(rec["index"]), k), size
+    return CropContext(
+        m,
+        sensor,
+        bank,
+        crop_capture(rec, crop),
+        int(crop["sensor_top"]),
+        int(crop["sensor_left"]),
+        int(rec["index"]),
+        k,
+    ), size
 
 
-def sample_crops(pairs_dir: Path, manifest: Mapping[str, Any], held_out: list[str], model: Method, bank: PSFBank,
-                 figs: Path) -> list[dict]:
+def sample_crops(
+    pairs_dir: Path, manifest: Mapping[str, Any], held_out: list[str], model: Method, bank: PSFBank, figs: Path
+) -> list[dict]:
     """Before / after / ground-truth strips of the held-out crops nearest the centre and
     nearest the edge of the sensor; returns their positions and file names."""
     from lensim.sensor.profile import sensor_from_dict
@@ -88,8 +99,15 @@ def sample_crops(pairs_dir: Path, manifest: Mapping[str, Any], held_out: list[st
     return out
 
 
-def edge_study(bank: PSFBank, sensor: SensorProfile, model: Method, figs: Path, seed: int = 0,
-               fields: tuple[float, ...] = (0.0, 0.5, 0.9), size: int = 96) -> dict:
+def edge_study(
+    bank: PSFBank,
+    sensor: SensorProfile,
+    model: Method,
+    figs: Path,
+    seed: int = 0,
+    fields: tuple[float, ...] = (0.0, 0.5, 0.9),
+    size: int = 96,
+) -> dict:
     """A sharp slanted edge (5 deg) imaged by the simulated camera without noise at several
     fields, then restored: MTF50 and MTF area (to Nyquist) of the green channel, and the
     R-G / B-G edge shifts (px), before and after."""
@@ -109,8 +127,9 @@ def edge_study(bank: PSFBank, sensor: SensorProfile, model: Method, figs: Path, 
         edge = torch.from_numpy(make_slanted_edge(size, 5.0, 0.15, 0.85)).float()
         sharp = edge.unsqueeze(0).repeat(3, 1, 1)
         m = native_mapping(size, size, sensor, top, left)
-        cam, params = simulate(sharp, bank, sensor, torch.Generator().manual_seed(seed), noise=False, kelvin=5500.0,
-                               mapping=m)
+        cam, params = simulate(
+            sharp, bank, sensor, torch.Generator().manual_seed(seed), noise=False, kelvin=5500.0, mapping=m
+        )
         ctx = CropContext(m, sensor, bank, params.to_dict(), top, left, -1, i)
         with torch.no_grad():
             restored = model(cam, ctx).clamp(0, 1)
@@ -151,11 +170,18 @@ def raw_file_figure(dng: Path, restored: Path, truth: torch.Tensor, sensor: Sens
 
     developed, _ = develop_raw(read_raw(dng), sensor, bits=None, orient=False)
     out, _ = read_image(restored)
-    scores = {"developed_psnr_db": psnr(developed.numpy(), truth.numpy()),
-              "restored_psnr_db": psnr(out.numpy(), truth.numpy())}
+    scores = {
+        "developed_psnr_db": psnr(developed.numpy(), truth.numpy()),
+        "restored_psnr_db": psnr(out.numpy(), truth.numpy()),
+    }
     fig = _figure((9, 3.3))
-    for i, (img, title) in enumerate(((developed, f"raw file, developed ({scores['developed_psnr_db']:.2f} dB)"),
-                                      (out, f"restored ({scores['restored_psnr_db']:.2f} dB)"), (truth, "ground truth"))):
+    for i, (img, title) in enumerate(
+        (
+            (developed, f"raw file, developed ({scores['developed_psnr_db']:.2f} dB)"),
+            (out, f"restored ({scores['restored_psnr_db']:.2f} dB)"),
+            (truth, "ground truth"),
+        )
+    ):
         ax = fig.add_subplot(1, 3, i + 1)
         ax.imshow(img.clamp(0, 1).permute(1, 2, 0).numpy(), interpolation="nearest")
         ax.set_title(title, fontsize=9)
@@ -177,9 +203,12 @@ def _metrics_html(metrics: Mapping[str, Any]) -> str:
 
         def f(v, d=2):
             return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.{d}f}"
-        rows.append(f"<tr><td>{html.escape(name)}</td><td>{f(m['psnr_db'])}</td><td>{f(m['ssim'], 3)}</td>"
-                    f"<td>{f(z['centre']['psnr_db'])}</td><td>{f(z['middle']['psnr_db'])}</td>"
-                    f"<td>{f(z['edge']['psnr_db'])}</td></tr>")
+
+        rows.append(
+            f"<tr><td>{html.escape(name)}</td><td>{f(m['psnr_db'])}</td><td>{f(m['ssim'], 3)}</td>"
+            f"<td>{f(z['centre']['psnr_db'])}</td><td>{f(z['middle']['psnr_db'])}</td>"
+            f"<td>{f(z['edge']['psnr_db'])}</td></tr>"
+        )
     return "<table>" + "".join(rows) + "</table>"
 
 
@@ -196,21 +225,25 @@ def _networks_html(training: Mapping[str, Any] | None) -> str:
 
     text = f" <code>model</code> is the demo's network{named('model')}."
     if "plain" in training:
-        text += (f" <code>plain</code> is the plain network{named('plain')}: no field-aware part (FOV channels, "
-                 "deformable blocks, context block), about the size of the demo's network, trained on the same "
-                 "time budget.")
+        text += (
+            f" <code>plain</code> is the plain network{named('plain')}: no field-aware part (FOV channels, "
+            "deformable blocks, context block), about the size of the demo's network, trained on the same "
+            "time budget."
+        )
     return text
 
 
 def _raw_file_html(raw: Mapping[str, Any] | None) -> str:
     if not raw:
         return "<p>(not run)</p>"
-    return (f"<p>The held-out photo <code>{html.escape(raw['photo'])}</code> simulated at the sensor's right edge "
-            f"(top-left sensor pixel {raw['sensor_top']}, {raw['sensor_left']}) and written as a CFA DNG "
-            f"(<code>{html.escape(raw['dng'])}</code>, what <code>lensim simulate --raw</code> writes), then "
-            "restored by <code>lensim restore</code>'s raw path: developed with the simulator's chain (no "
-            "sharpening), restored with the field of view of its place on the sensor. PSNR against the truth: "
-            f"developed {raw['developed_psnr_db']:.2f} dB, restored {raw['restored_psnr_db']:.2f} dB.</p>")
+    return (
+        f"<p>The held-out photo <code>{html.escape(raw['photo'])}</code> simulated at the sensor's right edge "
+        f"(top-left sensor pixel {raw['sensor_top']}, {raw['sensor_left']}) and written as a CFA DNG "
+        f"(<code>{html.escape(raw['dng'])}</code>, what <code>lensim simulate --raw</code> writes), then "
+        "restored by <code>lensim restore</code>'s raw path: developed with the simulator's chain (no "
+        "sharpening), restored with the field of view of its place on the sensor. PSNR against the truth: "
+        f"developed {raw['developed_psnr_db']:.2f} dB, restored {raw['restored_psnr_db']:.2f} dB.</p>"
+    )
 
 
 def write_report(out: Path, report: dict, figs: Path) -> Path:
@@ -229,20 +262,39 @@ def _report_page(report: dict, figs: Path) -> str:
     """The self-contained HTML page of a report (figures from ``figs`` inlined)."""
     lens = report["lens"]
     sections = [
-        ("Lens", f"<p>{html.escape(lens['name'])}: EFL {lens['efl_mm']:.2f} mm, F/{lens['fno']:.2f}, image height "
-                 f"{lens['image_height_mm']:.2f} mm. Sensor: {html.escape(report['sensor']['name'])}.</p>",
-         ["layout.png", "spots.png"]),
-        ("Point spread functions", "<p>Huygens PSFs over the sensor (RGB kernels, gamma-stretched), Strehl ratio "
-         "and MTF against field, relative illumination.</p>",
-         ["psf_map.png", "strehl.png", "mtf.png", "relative_illumination.png"]),
-        ("Restoration on held-out photos", _metrics_html(report["metrics"]) +
-         "<p>PSNR / SSIM against the sharp originals; zones by normalized sensor radius (centre &lt; 1/3, "
-         "middle, edge &ge; 2/3 of the half-diagonal). <code>input</code> is the simulated camera image; <code>wiener</code> is an oracle "
-         f"given the true PSFs.{_networks_html(report.get('training'))}</p>", ["crops_centre.png", "crops_edge.png"]),
+        (
+            "Lens",
+            f"<p>{html.escape(lens['name'])}: EFL {lens['efl_mm']:.2f} mm, F/{lens['fno']:.2f}, image height "
+            f"{lens['image_height_mm']:.2f} mm. Sensor: {html.escape(report['sensor']['name'])}.</p>",
+            ["layout.png", "spots.png"],
+        ),
+        (
+            "Point spread functions",
+            "<p>Huygens PSFs over the sensor (RGB kernels, gamma-stretched), Strehl ratio "
+            "and MTF against field, relative illumination.</p>",
+            ["psf_map.png", "strehl.png", "mtf.png", "relative_illumination.png"],
+        ),
+        (
+            "Restoration on held-out photos",
+            _metrics_html(report["metrics"])
+            + "<p>PSNR / SSIM against the sharp originals; zones by normalized sensor radius (centre &lt; 1/3, "
+            "middle, edge &ge; 2/3 of the half-diagonal). <code>input</code> is the simulated camera image; <code>wiener</code> is an oracle "
+            f"given the true PSFs.{_networks_html(report.get('training'))}</p>",
+            ["crops_centre.png", "crops_edge.png"],
+        ),
         ("A camera raw file", _raw_file_html(report.get("raw_file")), ["raw_file.png"]),
-        ("Slanted edge and lateral colour", "<pre>" + html.escape(json.dumps(jsonable(
-            {"slanted_edge": report["slanted_edge"], "lateral_colour": report["lateral_colour"]}), indent=1)) +
-         "</pre>", ["slanted_edge.png"]),
+        (
+            "Slanted edge and lateral colour",
+            "<pre>"
+            + html.escape(
+                json.dumps(
+                    jsonable({"slanted_edge": report["slanted_edge"], "lateral_colour": report["lateral_colour"]}),
+                    indent=1,
+                )
+            )
+            + "</pre>",
+            ["slanted_edge.png"],
+        ),
     ]
     body = []
     for title, text, images in sections:
@@ -255,9 +307,9 @@ img{{max-width:100%;margin:0.5em 0;display:block}} table{{border-collapse:collap
 td,th{{border:1px solid #bbb;padding:0.25em 0.6em;text-align:right}} pre{{font-size:0.8em}}</style></head>
 <body><h1>lensim report</h1>
 <p>Optical aberration simulation and correction after Chen et al., "Optical aberrations correction in
-postprocessing using imaging simulation", ACM TOG 2021. Settings: {html.escape(json.dumps(report['settings']))}.</p>
-{''.join(body)}
-<p>Timings (s): {html.escape(json.dumps({k: round(v, 1) for k, v in report['timings_s'].items()}))}</p>
+postprocessing using imaging simulation", ACM TOG 2021. Settings: {html.escape(json.dumps(report["settings"]))}.</p>
+{"".join(body)}
+<p>Timings (s): {html.escape(json.dumps({k: round(v, 1) for k, v in report["timings_s"].items()}))}</p>
 </body></html>
 """
     return page

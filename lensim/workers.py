@@ -17,6 +17,7 @@ changes). Linux's ``PR_SET_PDEATHSIG`` is not used: it fires when the *thread* t
 started the worker ends. tests/test_kill_resume.py checks each command. Workers of a
 cluster given by address belong to that cluster and are left alone.
 """
+
 from __future__ import annotations
 
 import os
@@ -88,8 +89,13 @@ def _in_worker(fn: Callable[[Any], Any], job: Any, parent_pid: int | None) -> An
             return _Failed(e)
 
 
-def run_jobs(fn: Callable[[J], R], jobs: Sequence[J], workers: int = 1, scheduler: str | None = None,
-             on_result: Callable[[J, R], None] | None = None) -> None:
+def run_jobs(
+    fn: Callable[[J], R],
+    jobs: Sequence[J],
+    workers: int = 1,
+    scheduler: str | None = None,
+    on_result: Callable[[J, R], None] | None = None,
+) -> None:
     """Run ``fn(job)`` for every job, calling ``on_result(job, result)`` in this process as
     each finishes (in order of completion; results are not kept).
 
@@ -127,8 +133,12 @@ def _client(client_type: Any, address: Any) -> Any:
         return client_type(address)
     except OSError as e:  # TimeoutError included
         reason = str(e).splitlines()[0] if str(e) else type(e).__name__
-        raise InputError(str(address), None, f"no Dask scheduler answered ({reason}); expected the address of a "
-                         "running scheduler (dask scheduler, or a cluster's scheduler_address)") from None
+        raise InputError(
+            str(address),
+            None,
+            f"no Dask scheduler answered ({reason}); expected the address of a "
+            "running scheduler (dask scheduler, or a cluster's scheduler_address)",
+        ) from None
 
 
 def _local_cluster(workers: int) -> Any:
@@ -145,12 +155,18 @@ def _local_cluster(workers: int) -> Any:
     from distributed import LocalCluster
 
     with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
-        return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0",
-                            silence_logs=logging.ERROR)
+        return LocalCluster(
+            n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0", silence_logs=logging.ERROR
+        )
 
 
-def _run_on_dask(fn: Callable[[J], R], jobs: Sequence[J], workers: int, scheduler: str | None,
-                 on_result: Callable[[J, R], None] | None) -> None:
+def _run_on_dask(
+    fn: Callable[[J], R],
+    jobs: Sequence[J],
+    workers: int,
+    scheduler: str | None,
+    on_result: Callable[[J, R], None] | None,
+) -> None:
     from distributed import Client, as_completed
 
     cluster = None if scheduler else _local_cluster(workers)

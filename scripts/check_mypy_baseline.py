@@ -11,6 +11,7 @@ its baseline (a module not listed has 0); when a module has fewer, it says so, a
 A module renamed or split takes its counts along: edit the file by hand in the same commit
 (the total must not grow).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -22,8 +23,10 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 BASELINE = REPO / ".mypy-baseline.txt"
-HEADER = ("# mypy errors per module (python scripts/check_mypy_baseline.py); counts may only fall:\n"
-          "# fix errors, then run it with --update\n")
+HEADER = (
+    "# mypy errors per module (python scripts/check_mypy_baseline.py); counts may only fall:\n"
+    "# fix errors, then run it with --update\n"
+)
 ERROR = re.compile(r"^(?P<path>[^:\s]+\.pyi?):\d+(?::\d+)?: error: ")
 
 
@@ -85,14 +88,20 @@ def main() -> int:
         write_baseline({m: min(b, counts.get(m, 0)) for m, b in baseline.items()})
         fell = {}
     for module, (before, now) in sorted(grew.items()):
-        print(f"mypy: {module} has {now} errors, its baseline is {before}: fix the new ones "
-              f"(`.venv/bin/mypy -m {module}` lists them)")
+        print(
+            f"mypy: {module} has {now} errors, its baseline is {before}: fix the new ones "
+            f"(`.venv/bin/mypy -m {module}` lists them)"
+        )
     if fell:
         lower = ", ".join(f"{m} ({b} -> {n})" for m, (b, n) in sorted(fell.items()))
-        print(f"mypy: fewer errors than the baseline in {lower}; "
-              "run `python scripts/check_mypy_baseline.py --update` to lower it")
-    print(f"mypy: {sum(counts.values())} errors in {len(counts)} modules (baseline {sum(baseline.values())})"
-          + ("" if not grew else f"; {len(grew)} modules over their baseline"))
+        print(
+            f"mypy: fewer errors than the baseline in {lower}; "
+            "run `python scripts/check_mypy_baseline.py --update` to lower it"
+        )
+    print(
+        f"mypy: {sum(counts.values())} errors in {len(counts)} modules (baseline {sum(baseline.values())})"
+        + ("" if not grew else f"; {len(grew)} modules over their baseline")
+    )
     return 1 if grew else 0
 
 

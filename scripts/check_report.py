@@ -1,6 +1,7 @@
 """Check a demo report: report.json and report.html exist, the metrics of the methods the
 report must hold are finite numbers, every embedded image is a PNG. Exit 1 with a reason
 otherwise. Usage: python scripts/check_report.py DEMO_DIR"""
+
 import base64
 import json
 import math
@@ -38,5 +39,7 @@ for i, data in enumerate(images):
 if problems:
     print("report check failed: " + "; ".join(problems))
     sys.exit(1)
-print(f"report check passed: {len(images)} figures, " +
-      ", ".join(f"{k} {v['psnr_db']:.2f} dB" for k, v in methods.items()))
+print(
+    f"report check passed: {len(images)} figures, "
+    + ", ".join(f"{k} {v['psnr_db']:.2f} dB" for k, v in methods.items())
+)

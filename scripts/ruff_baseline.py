@@ -9,6 +9,7 @@ this script never adds an entry (except with ``--init``).
 
 Run from any folder; ruff is the one beside this Python (.venv/bin/ruff) or on PATH.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -37,8 +38,22 @@ def ruff_executable() -> str:
 
 def current_violations() -> dict[str, set[str]]:
     """{repository-relative path: rule codes} of every violation with the baseline ignored."""
-    run = subprocess.run([ruff_executable(), "check", "--config", "lint.per-file-ignores = {}", "--output-format",
-                          "json", "--exit-zero", "--no-cache"], cwd=REPO, capture_output=True, text=True, check=False)
+    run = subprocess.run(
+        [
+            ruff_executable(),
+            "check",
+            "--config",
+            "lint.per-file-ignores = {}",
+            "--output-format",
+            "json",
+            "--exit-zero",
+            "--no-cache",
+        ],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
     if run.returncode != 0:
         raise SystemExit(f"ruff failed ({run.returncode}): {run.stderr.strip()}")
     found: dict[str, set[str]] = {}
@@ -52,7 +67,7 @@ def read_baseline(text: str) -> dict[str, set[str]]:
     """The entries between the markers of pyproject.toml's text."""
     start, end = text.index(BEGIN), text.index(END)
     baseline: dict[str, set[str]] = {}
-    for line in text[start + len(BEGIN):end].strip().splitlines():
+    for line in text[start + len(BEGIN) : end].strip().splitlines():
         match = ENTRY.match(line.strip())
         if match is None:
             raise SystemExit(f"{PYPROJECT}: not a baseline entry: {line!r} (edit only through this script)")
@@ -61,8 +76,11 @@ def read_baseline(text: str) -> dict[str, set[str]]:
 
 
 def render(baseline: dict[str, set[str]]) -> str:
-    lines = [f'"{path}" = [{", ".join(json.dumps(c) for c in sorted(codes))}]'
-             for path, codes in sorted(baseline.items()) if codes]
+    lines = [
+        f'"{path}" = [{", ".join(json.dumps(c) for c in sorted(codes))}]'
+        for path, codes in sorted(baseline.items())
+        if codes
+    ]
     return "\n".join([BEGIN, *lines, END])
 
 
@@ -82,16 +100,20 @@ def main() -> int:
     dropped = sorted(f"{path}: {code}" for path, codes in old.items() for code in codes - new.get(path, set()))
     if args.check:
         if dropped:
-            print(f"ruff baseline: {len(dropped)} entries no longer needed ({', '.join(dropped)}); "
-                  "run `python scripts/ruff_baseline.py` to shrink it")
+            print(
+                f"ruff baseline: {len(dropped)} entries no longer needed ({', '.join(dropped)}); "
+                "run `python scripts/ruff_baseline.py` to shrink it"
+            )
         return 0
     start, end = text.index(BEGIN), text.index(END) + len(END)
     from lensim.io import atomic_write_text
 
     atomic_write_text(PYPROJECT, text[:start] + render(new) + text[end:])
     total = sum(len(c) for c in new.values())
-    print(f"ruff baseline: {total} file/rule entries in {len(new)} files"
-          + (f"; dropped {len(dropped)}" if dropped else ""))
+    print(
+        f"ruff baseline: {total} file/rule entries in {len(new)} files"
+        + (f"; dropped {len(dropped)}" if dropped else "")
+    )
     return 0
 
 

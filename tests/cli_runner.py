@@ -1,4 +1,5 @@
 """Run the `lensim` console script in-process for tests (shared by the CLI test modules)."""
+
 import sys
 import warnings
 

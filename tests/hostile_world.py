@@ -3,6 +3,7 @@ session (lens and sensor files, tiny photos, a 2-field bank, a pairs folder, a t
 run, a DNG), the case table's row type, and a runner that checks one bad command: exit
 status 2, one line on stderr, no traceback, the message naming what is wrong, and nothing
 new (or changed) on disk afterwards."""
+
 from __future__ import annotations
 
 import json
@@ -29,15 +30,15 @@ class World:
     """Valid inputs every case may point at (read-only for the cases)."""
 
     root: Path
-    lens: Path          # cooke_triplet.yaml copy
-    sensor: Path        # apsc_mirrorless.yaml copy
-    photo: Path         # 48 x 64 8-bit PNG
-    photos: Path        # folder of three 64 x 80 PNGs
-    bank: Path          # 2 fields, 550 nm, 32 pupil samples, at the APS-C pitch
-    data: Path          # pairs folder made from photos/ with bank/
-    run: Path           # one epoch of a 4-channel, 2-scale network on data/
-    dng: Path           # a 32 x 48 CFA DNG (pidng)
-    cache: Path         # the bank cache the commands see (LENSIM_CACHE)
+    lens: Path  # cooke_triplet.yaml copy
+    sensor: Path  # apsc_mirrorless.yaml copy
+    photo: Path  # 48 x 64 8-bit PNG
+    photos: Path  # folder of three 64 x 80 PNGs
+    bank: Path  # 2 fields, 550 nm, 32 pupil samples, at the APS-C pitch
+    data: Path  # pairs folder made from photos/ with bank/
+    run: Path  # one epoch of a 4-channel, 2-scale network on data/
+    dng: Path  # a 32 x 48 CFA DNG (pidng)
+    cache: Path  # the bank cache the commands see (LENSIM_CACHE)
 
 
 def _png(path: Path, h: int, w: int, seed: int) -> Path:
@@ -64,8 +65,13 @@ def build_world(root: Path) -> World:
         _png(photos / f"p{i}.png", 64, 80, i + 1)
     profile = lensim.load_sensor("apsc_mirrorless")
     settings = BankSettings(fields=2, wavelengths_nm=[550.0], pupil_samples=32)
-    bank = build_bank(lensim.load_lens("cooke_triplet"), profile.pixel_pitch_um, settings,
-                      response=profile.spectral_response, out_dir=root / "bank")
+    bank = build_bank(
+        lensim.load_lens("cooke_triplet"),
+        profile.pixel_pitch_um,
+        settings,
+        response=profile.spectral_response,
+        out_dir=root / "bank",
+    )
     lensim.make_dataset(photos, root / "data", bank, "apsc_mirrorless", profile, crops=1, size=32)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -98,10 +104,12 @@ def case(id: str, command: str, *expect: str, make: Make | tuple[Make, ...] = ()
 
 # --- makers of bad files ---------------------------------------------------------------
 
+
 def text(name: str, content: str, encoding: str = "utf-8") -> Make:
     def make(t: Path, w: World) -> None:
         (t / name).parent.mkdir(parents=True, exist_ok=True)
         (t / name).write_bytes(content.encode(encoding))
+
     return make
 
 
@@ -109,23 +117,27 @@ def binary(name: str, data: bytes) -> Make:
     def make(t: Path, w: World) -> None:
         (t / name).parent.mkdir(parents=True, exist_ok=True)
         (t / name).write_bytes(data)
+
     return make
 
 
 def folder(name: str) -> Make:
     def make(t: Path, w: World) -> None:
         (t / name).mkdir(parents=True, exist_ok=True)
+
     return make
 
 
 def copy_of(source: Callable[[World], Path], name: str) -> Make:
     """A copy of a World file or folder under t/name."""
+
     def make(t: Path, w: World) -> None:
         src = source(w)
         if src.is_dir():
             shutil.copytree(src, t / name)
         else:
             shutil.copy(src, t / name)
+
     return make
 
 
@@ -136,11 +148,13 @@ def edited(name: str, source: Callable[[World], Path], edit: Callable[[Path], No
     def make(t: Path, w: World) -> None:
         base(t, w)
         edit(t / name)
+
     return make
 
 
 def image(name: str, array: np.ndarray, **tiff: object) -> Make:
     """An image file from an array: .tif through tifffile (with its keywords), else Pillow."""
+
     def make(t: Path, w: World) -> None:
         path = t / name
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -152,10 +166,12 @@ def image(name: str, array: np.ndarray, **tiff: object) -> Make:
             from PIL import Image
 
             Image.fromarray(array).save(path)
+
     return make
 
 
 # --- running and checking ----------------------------------------------------------------
+
 
 def snapshot(*roots: Path) -> dict[str, tuple[int, int]]:
     """Every path under the roots with its (size, mtime_ns): files, folders, links."""
@@ -233,9 +249,20 @@ def check_case(c: Case, t: Path, w: World, capsys, monkeypatch) -> None:
     tally = os.environ.get("LENSIM_HOSTILE_TALLY")
     if tally:  # counts for the issue's closing note
         with open(tally, "a") as fh:
-            fh.write(json.dumps({"id": c.id, "traceback": out.traceback, "code": out.code, "lines": len(out.lines),
-                                 "changed": out.changed, "seconds": round(out.seconds, 2),
-                                 "named": all(s in out.stderr for s in c.expect)}) + "\n")
+            fh.write(
+                json.dumps(
+                    {
+                        "id": c.id,
+                        "traceback": out.traceback,
+                        "code": out.code,
+                        "lines": len(out.lines),
+                        "changed": out.changed,
+                        "seconds": round(out.seconds, 2),
+                        "named": all(s in out.stderr for s in c.expect),
+                    }
+                )
+                + "\n"
+            )
     assert out.traceback is None, f"{c.id}: {out.traceback}\n{out.stderr}"
     assert out.code == 2, f"{c.id}: exit status {out.code}\n{out.stderr}"
     assert len(out.lines) == 1, f"{c.id}: expected one line on stderr, got:\n{out.stderr}"

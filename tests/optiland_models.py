@@ -20,6 +20,7 @@ too; benchmarks add tests/ to sys.path first.
 * assert_agrees_with_optiland(lens, ...): first-order data and those RMS spot radii of a
   lens against optiland_from_lens(lens).
 """
+
 from __future__ import annotations
 
 import functools
@@ -79,8 +80,12 @@ def lensim_glass(material: Material):
     return _lensim_glass_class()(material)
 
 
-def optiland_from_lens(lens: Lens, aiming: str = "paraxial", fields_deg: Sequence[float] | None = None,
-                       wavelengths_um: Sequence[float] | None = None):
+def optiland_from_lens(
+    lens: Lens,
+    aiming: str = "paraxial",
+    fields_deg: Sequence[float] | None = None,
+    wavelengths_um: Sequence[float] | None = None,
+):
     """The lens in optiland, surface for surface, with lensim's glass data (lensim_glass).
 
     Object at infinity, angle fields only. Surfaces: radius, thickness (the image defocus
@@ -104,16 +109,25 @@ def optiland_from_lens(lens: Lens, aiming: str = "paraxial", fields_deg: Sequenc
     for i, s in enumerate(lens.surfaces, start=1):
         if s.is_mirror:
             raise ValueError("optiland_from_lens: mirrors are not supported")
-        kw = dict(index=i, radius=s.radius, thickness=s.thickness + (lens.image_defocus if i == last else 0.0),
-                  material="air" if isinstance(s.material, Air) else lensim_glass(s.material), is_stop=s.is_stop)
+        kw = dict(
+            index=i,
+            radius=s.radius,
+            thickness=s.thickness + (lens.image_defocus if i == last else 0.0),
+            material="air" if isinstance(s.material, Air) else lensim_glass(s.material),
+            is_stop=s.is_stop,
+        )
         if s.is_aspheric:
-            kw.update(surface_type="even_asphere", conic=s.conic,
-                      coefficients=[float(s.asphere.get(p, 0.0)) for p in range(2, max(s.asphere) + 1, 2)])
+            kw.update(
+                surface_type="even_asphere",
+                conic=s.conic,
+                coefficients=[float(s.asphere.get(p, 0.0)) for p in range(2, max(s.asphere) + 1, 2)],
+            )
         elif s.conic:
             kw["conic"] = s.conic
         if s.clear_radius is not None or s.obscuration_radius is not None:
-            kw["aperture"] = RadialAperture(r_max=be.inf if s.clear_radius is None else s.clear_radius,
-                                            r_min=s.obscuration_radius or 0.0)
+            kw["aperture"] = RadialAperture(
+                r_max=be.inf if s.clear_radius is None else s.clear_radius, r_min=s.obscuration_radius or 0.0
+            )
         op.surfaces.add(**kw)
     op.surfaces.add(index=last + 1)
     if lens.aperture_type == "epd":
@@ -138,9 +152,13 @@ def optiland_from_lens(lens: Lens, aiming: str = "paraxial", fields_deg: Sequenc
     return op
 
 
-def optiland_cooke(aiming: str = "paraxial", stop_semi_diameter_mm: float | None = None,
-                   materials: Sequence | None = None, wavelengths_um: Sequence[float] = (0.55,),
-                   primary_um: float = 0.55):
+def optiland_cooke(
+    aiming: str = "paraxial",
+    stop_semi_diameter_mm: float | None = None,
+    materials: Sequence | None = None,
+    wavelengths_um: Sequence[float] = (0.55,),
+    primary_um: float = 0.55,
+):
     """The Cooke triplet of COOKE_TABLE in optiland: EPD 10 mm, angle fields 0 / 14 / 20 deg.
 
     materials: one optiland material for each glass of the table, in order (SK16, F2,
@@ -162,8 +180,9 @@ def optiland_cooke(aiming: str = "paraxial", stop_semi_diameter_mm: float | None
     o.surfaces.add(index=0, radius=be.inf, thickness=be.inf)
     for k, (radius, thickness, glass) in enumerate(COOKE_TABLE):
         material = "air" if glass is None else chosen.get(k, glass)
-        o.surfaces.add(index=k + 1, radius=radius, thickness=thickness, material=material,
-                       is_stop=(k + 1 == COOKE_STOP_INDEX))
+        o.surfaces.add(
+            index=k + 1, radius=radius, thickness=thickness, material=material, is_stop=(k + 1 == COOKE_STOP_INDEX)
+        )
     o.surfaces.add(index=len(COOKE_TABLE) + 1)
     o.set_aperture(aperture_type="EPD", value=COOKE_EPD_MM)
     o.fields.set_type(field_type="angle")
@@ -217,8 +236,9 @@ def lensim_rms(lens: Lens, fields: Sequence[float], pupil: torch.Tensor, aiming:
     return rms.T.numpy(), v.sum(-1).T.numpy().astype(int)
 
 
-def assert_agrees_with_optiland(lens: Lens, rms_rtol: float, fractions: Sequence[float] = (0.0, 0.7, 1.0),
-                                rings: int = 6) -> np.ndarray:
+def assert_agrees_with_optiland(
+    lens: Lens, rms_rtol: float, fractions: Sequence[float] = (0.0, 0.7, 1.0), rings: int = 6
+) -> np.ndarray:
     """Check a lens against its optiland model (optiland_from_lens, paraxial aiming): EFL,
     F-number and entrance-pupil position to 1e-9; at the field fractions, the same rays
     vignetted and optiland's RMS spot radii (F, W) within rms_rtol. Returns lensim's

@@ -2,6 +2,7 @@
 
 Every value a test checks is chosen here and written as plain DNG/EXIF tags, so what
 lensim reads back can be compared with what was written."""
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -28,13 +29,26 @@ def srational(x: float) -> list[int]:
     return [f.numerator, f.denominator]
 
 
-def write_dng(path: Path, mosaic: np.ndarray, pattern: str = "RGGB", black: Sequence[float] = (512, 512, 512, 512),
-              white: int = 16383, wb_gains: tuple[float, float] | None = (2.0, 1.5),
-              color_matrix: Sequence[float] | None = SONY_ILCE7_MATRIX, illuminant: int = 21,
-              color_matrix2: Sequence[float] | None = None, illuminant2: int = 17, orientation: int = 1,
-              make: str = "Acme", model: str = "Model 1", exif: dict[str, Any] | None = None,
-              active_area: Sequence[int] | None = None, photometric: int = 32803,
-              cfa_dims: tuple[int, int] = (2, 2), cfa_codes: Sequence[int] | None = None) -> Path:
+def write_dng(
+    path: Path,
+    mosaic: np.ndarray,
+    pattern: str = "RGGB",
+    black: Sequence[float] = (512, 512, 512, 512),
+    white: int = 16383,
+    wb_gains: tuple[float, float] | None = (2.0, 1.5),
+    color_matrix: Sequence[float] | None = SONY_ILCE7_MATRIX,
+    illuminant: int = 21,
+    color_matrix2: Sequence[float] | None = None,
+    illuminant2: int = 17,
+    orientation: int = 1,
+    make: str = "Acme",
+    model: str = "Model 1",
+    exif: dict[str, Any] | None = None,
+    active_area: Sequence[int] | None = None,
+    photometric: int = 32803,
+    cfa_dims: tuple[int, int] = (2, 2),
+    cfa_codes: Sequence[int] | None = None,
+) -> Path:
     """Write ``mosaic`` ((H, W) uint16 DN, or (H, W, 3) for LinearRaw) as an uncompressed
     DNG. black: 4 levels in CFA order (BlackLevelRepeatDim 2x2); wb_gains: (r, b) as-shot
     multipliers (AsShotNeutral = 1/gain); exif: optional focal_length_mm, fno, iso,

@@ -4,6 +4,7 @@ Test modules and benchmarks import REFERENCE_LENSES from here (tests/ is on sys.
 for cli_runner); fixtures get it through conftest's `reference_lenses`. Nothing in the
 tests reads files from outside the repository.
 """
+
 from pathlib import Path
 
 REFERENCE_LENSES = Path(__file__).resolve().parent / "data" / "lenses"

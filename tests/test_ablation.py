@@ -3,6 +3,7 @@ exactly the component it names; every variant is trained on the same photos and 
 the same held-out photos, none of them seen in training; the input's score matches
 scikit-image's PSNR of the held-out crops; the untrained-from-identity networks score
 close to the input after a 3-second budget; finished runs are reused."""
+
 import json
 from pathlib import Path
 
@@ -55,8 +56,15 @@ def pairs(tmp_path_factory: pytest.TempPathFactory) -> Path:
         img, _ = read_image(sample_image_path(name))
         write_image(base / "sharp" / f"{name}.png", img[:, :96, :96])
     sensor = load_sensor("apsc_mirrorless")
-    bank = compute_bank(load_lens("cooke_triplet"), sensor.pixel_pitch_um, 15, fields=[0.0, 1.0],
-                        wavelengths_nm=[550], pupil_samples=64, out_dir=base / "bank")
+    bank = compute_bank(
+        load_lens("cooke_triplet"),
+        sensor.pixel_pitch_um,
+        15,
+        fields=[0.0, 1.0],
+        wavelengths_nm=[550],
+        pupil_samples=64,
+        out_dir=base / "bank",
+    )
     make_dataset(base / "sharp", base / "pairs", bank, "apsc_mirrorless", sensor, crops=2, size=48, seed=1)
     return base
 
@@ -118,14 +126,16 @@ def test_nafnet_ablation(pairs: Path) -> None:
 
     assert list(variants_for("nafnet")) == ["full", "no-fov", "no-deformable", "no-context", "plain-nafnet"]
     out = pairs / "ablation-nafnet"
-    s = run_ablation(pairs / "pairs", out, time_budget_s=2.0, width=8, crop=32, variants=["full", "plain-nafnet"],
-                     arch="nafnet")
+    s = run_ablation(
+        pairs / "pairs", out, time_budget_s=2.0, width=8, crop=32, variants=["full", "plain-nafnet"], arch="nafnet"
+    )
     assert s["arch"] == "nafnet"
     full = NAFNet(8, use_fov=True, use_deformable=True, use_context=True, deformable_scales=2)
     assert s["variants"]["full"]["params"] == count_parameters(full)
     plain = s["variants"]["plain-nafnet"]
-    assert plain["width"] == nafnet_width(count_parameters(full)) and abs(plain["params"] - count_parameters(full)) \
-        <= 0.1 * count_parameters(full)
+    assert plain["width"] == nafnet_width(count_parameters(full)) and abs(
+        plain["params"] - count_parameters(full)
+    ) <= 0.1 * count_parameters(full)
     model, _ = load_checkpoint(out / "plain-nafnet")
     assert isinstance(model, NAFNet) and not (model.use_fov or model.use_deformable or model.use_context)
     assert abs(s["variants"]["full"]["metrics"]["psnr_db"] - s["input"]["psnr_db"]) < 1.0
@@ -151,15 +161,26 @@ def test_a_killed_ablation_resumes(pairs: Path) -> None:
 
     out = pairs / "ablation-killed"
     # what a kill leaves: the full variant trained part of its budget, the plain one only begun
-    partial = train(pairs / "pairs", out / "full", epochs=100_000, arch="unet", width=8, crop=32, seed=0, lr=5e-4,
-                    lr_schedule="cosine", time_budget_s=0.5)
+    partial = train(
+        pairs / "pairs",
+        out / "full",
+        epochs=100_000,
+        arch="unet",
+        width=8,
+        crop=32,
+        seed=0,
+        lr=5e-4,
+        lr_schedule="cosine",
+        time_budget_s=0.5,
+    )
     (out / "plain-unet").mkdir(parents=True)
     (out / "plain-unet" / "log.csv").write_text("epoch,step\n")
     with pytest.raises(InputError, match=r"full/last.pt: crop: differs from the run being resumed"):
         run_ablation(pairs / "pairs", out, time_budget_s=2.0, width=8, crop=48, variants=["full"])
     said: list[str] = []
-    s = run_ablation(pairs / "pairs", out, time_budget_s=2.0, width=8, crop=32, variants=["full", "plain-unet"],
-                     say=said.append)
+    s = run_ablation(
+        pairs / "pairs", out, time_budget_s=2.0, width=8, crop=32, variants=["full", "plain-unet"], say=said.append
+    )
     assert said[:2] == ["training full (2 s)", "training plain-unet (2 s)"]
     ckpt = read_checkpoint(out / "full" / "last.pt")
     assert s["variants"]["full"]["train"]["steps"] > partial.step  # continued, not started again

@@ -1,5 +1,6 @@
 """The CLI's glibc allocator setting (lensim.cli.allocator): applied through mallopt on
 glibc, left alone when the user set the equivalent environment variables."""
+
 from __future__ import annotations
 
 import ctypes.util

@@ -1,5 +1,6 @@
 """PSF bank: energy (kernels sum to the relative illumination), symmetry, resume,
 rotation and interpolation in psf_at, spectral weights, CLI. Tolerances per test."""
+
 import json
 import math
 import shutil
@@ -124,8 +125,9 @@ def test_resume_recomputes_only_missing_fields_and_refuses_other_settings(lens, 
     calls = []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        again = compute_bank(lens, PITCH, KERNEL, out_dir=d, progress=lambda done, total: calls.append((done, total)),
-                             **SETTINGS)
+        again = compute_bank(
+            lens, PITCH, KERNEL, out_dir=d, progress=lambda done, total: calls.append((done, total)), **SETTINGS
+        )
     assert calls == [(3, 4), (4, 4)]  # the start (3 on disk), then the one recomputed field
     assert (d / field_file(2)).exists()
     np.testing.assert_allclose(again.fields[2].rgb, before.fields[2].rgb, rtol=0, atol=1e-7)
@@ -146,7 +148,7 @@ def test_truncated_or_foreign_field_files_are_named_by_readers_and_recomputed_on
     shutil.copytree(bank_dir, d)
     before = PSFBank.load(d)
     good = (d / field_file(1)).read_bytes()
-    (d / field_file(1)).write_bytes(good[:len(good) // 2])  # a write cut short (not by lensim.io)
+    (d / field_file(1)).write_bytes(good[: len(good) // 2])  # a write cut short (not by lensim.io)
     with pytest.raises(InputError) as err:
         PSFBank.load(d)
     assert str(err.value).startswith(str(d / field_file(1))) and "BadZipFile" in str(err.value)
@@ -163,8 +165,9 @@ def test_truncated_or_foreign_field_files_are_named_by_readers_and_recomputed_on
     calls = []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        again = compute_bank(lens, PITCH, KERNEL, out_dir=d, progress=lambda done, total: calls.append(done),
-                             **SETTINGS)
+        again = compute_bank(
+            lens, PITCH, KERNEL, out_dir=d, progress=lambda done, total: calls.append(done), **SETTINGS
+        )
     assert calls == [2, 3, 4]  # fields 1 and 3 recomputed
     for a, b in zip(PSFBank.load(d).fields, before.fields):
         np.testing.assert_array_equal(a.rgb, b.rgb)
@@ -242,8 +245,9 @@ def test_parallel_workers_match_serial(lens, tmp_path):
         warnings.simplefilter("ignore")
         serial = compute_bank(lens, PITCH, KERNEL, **kw)
         calls = []
-        par = compute_bank(lens, PITCH, KERNEL, workers=2, out_dir=tmp_path / "par",
-                           progress=lambda d, t: calls.append((d, t)), **kw)
+        par = compute_bank(
+            lens, PITCH, KERNEL, workers=2, out_dir=tmp_path / "par", progress=lambda d, t: calls.append((d, t)), **kw
+        )
     assert calls[0] == (0, 2) and calls[-1] == (2, 2) and len(calls) == 3
     for a, b in zip(serial.fields, par.fields):
         np.testing.assert_allclose(b.rgb, a.rgb, rtol=0, atol=1e-7)
@@ -295,12 +299,15 @@ def test_user_csv_is_interpolated(tmp_path):
     assert r.name == str(p)
 
 
-@pytest.mark.parametrize("text, where", [
-    ("wavelength_nm,r,g\n400,1,1\n500,1,1\n", "header: missing column(s) b"),
-    ("wavelength_nm,r,g,b\n400,1,1,1\n500,1,x,1\n", "line 3, column g: expected a number, got 'x'"),
-    ("wavelength_nm,r,g,b\n400,1,1,1\n500,1,-1,1\n", "line 3, column g"),
-    ("wavelength_nm,r,g,b\n500,1,1,1\n400,1,1,1\n", "line 3, column wavelength_nm: expected strictly increasing"),
-])
+@pytest.mark.parametrize(
+    "text, where",
+    [
+        ("wavelength_nm,r,g\n400,1,1\n500,1,1\n", "header: missing column(s) b"),
+        ("wavelength_nm,r,g,b\n400,1,1,1\n500,1,x,1\n", "line 3, column g: expected a number, got 'x'"),
+        ("wavelength_nm,r,g,b\n400,1,1,1\n500,1,-1,1\n", "line 3, column g"),
+        ("wavelength_nm,r,g,b\n500,1,1,1\n400,1,1,1\n", "line 3, column wavelength_nm: expected strictly increasing"),
+    ],
+)
 def test_malformed_csv_gives_a_one_line_error(tmp_path, text, where):
     p = tmp_path / "bad.csv"
     p.write_text(text)
@@ -320,8 +327,28 @@ def test_cli_bank_and_show_write_the_files(tmp_path):
 
     runner = CliRunner()
     out = tmp_path / "bank"
-    res = runner.invoke(app, ["psf", "bank", "cooke_triplet", "--pixel-um", "4", "--kernel", "15", "--fields", "3",
-                              "--wavelengths-nm", "500:600:50", "--pupil-samples", "48", "--illuminant", "D65", "-o", str(out)])
+    res = runner.invoke(
+        app,
+        [
+            "psf",
+            "bank",
+            "cooke_triplet",
+            "--pixel-um",
+            "4",
+            "--kernel",
+            "15",
+            "--fields",
+            "3",
+            "--wavelengths-nm",
+            "500:600:50",
+            "--pupil-samples",
+            "48",
+            "--illuminant",
+            "D65",
+            "-o",
+            str(out),
+        ],
+    )
     assert res.exit_code == 0, res.output
     assert "wrote" in res.output
     assert sorted(p.name for p in out.iterdir()) == sorted([MANIFEST, field_file(0), field_file(1), field_file(2)])
@@ -344,8 +371,26 @@ def test_cli_bank_takes_the_sensor_profile_and_prints_json(tmp_path):
     from lensim.sensor.profile import load_sensor
 
     out = tmp_path / "bank"
-    res = CliRunner().invoke(app, ["psf", "bank", "--lens", "cooke_triplet", "--sensor", "apsc_mirrorless", "--fields",
-                                   "2", "--wavelengths-nm", "550", "--pupil-samples", "48", "-o", str(out), "--json"])
+    res = CliRunner().invoke(
+        app,
+        [
+            "psf",
+            "bank",
+            "--lens",
+            "cooke_triplet",
+            "--sensor",
+            "apsc_mirrorless",
+            "--fields",
+            "2",
+            "--wavelengths-nm",
+            "550",
+            "--pupil-samples",
+            "48",
+            "-o",
+            str(out),
+            "--json",
+        ],
+    )
     assert res.exit_code == 0, res.output
     info = json.loads(res.output)
     sensor = load_sensor("apsc_mirrorless")
@@ -353,11 +398,14 @@ def test_cli_bank_takes_the_sensor_profile_and_prints_json(tmp_path):
     assert info["fields"] == 2 and info["kernel_pixels"] % 2 == 1 and (out / MANIFEST).exists()
 
 
-@pytest.mark.parametrize("args, field", [
-    ([], "--sensor/--pixel-um"),
-    (["--sensor", "phone", "--pixel-um", "4"], "--sensor/--pixel-um"),
-    (["--lens", "double_gauss", "--pixel-um", "4"], "lens"),
-])
+@pytest.mark.parametrize(
+    "args, field",
+    [
+        ([], "--sensor/--pixel-um"),
+        (["--sensor", "phone", "--pixel-um", "4"], "--sensor/--pixel-um"),
+        (["--lens", "double_gauss", "--pixel-um", "4"], "lens"),
+    ],
+)
 def test_cli_bank_refuses_ambiguous_options(tmp_path, args, field):
     from typer.testing import CliRunner
 
@@ -376,8 +424,22 @@ def test_cli_bad_csv_is_a_one_line_error(tmp_path):
 
     p = tmp_path / "bad.csv"
     p.write_text("wavelength_nm,r,g,b\n400,1,1,1\n500,1,oops,1\n")
-    res = CliRunner().invoke(app, ["psf", "bank", "cooke_triplet", "--pixel-um", "4", "--fields", "2",
-                                   "--response", str(p), "-o", str(tmp_path / "b")])
+    res = CliRunner().invoke(
+        app,
+        [
+            "psf",
+            "bank",
+            "cooke_triplet",
+            "--pixel-um",
+            "4",
+            "--fields",
+            "2",
+            "--response",
+            str(p),
+            "-o",
+            str(tmp_path / "b"),
+        ],
+    )
     # run_guarded (the console entry point) prints str(error) on one line and exits 2
     assert res.exit_code != 0 and isinstance(res.exception, InputError)
     msg = str(res.exception)
@@ -408,8 +470,9 @@ def test_coarse_pitch_uses_the_alias_free_window():
     # stay zero; the on-axis kernel still holds all the energy (sum 1 within 1e-6)
     from lensim.psf.bank import compute_bank
 
-    bank = compute_bank(load_lens("cooke_triplet"), 30.0, 9, fields=[0.0, 1.0], wavelengths_nm=[450, 550],
-                        pupil_samples=48)
+    bank = compute_bank(
+        load_lens("cooke_triplet"), 30.0, 9, fields=[0.0, 1.0], wavelengths_nm=[450, 550], pupil_samples=48
+    )
     k0 = bank.fields[0].rgb
     assert abs(float(k0.sum(axis=(-2, -1)).max()) - 1.0) < 1e-5
     assert float(np.abs(k0[:, 0, :]).max()) == 0.0  # outer ring untouched

@@ -1,6 +1,7 @@
 """BankSettings: the one way to ask for a bank. The wavelength parser against hand-counted
 ranges, field positions against their formulas, refusals on one line, and the commands
 asking for the same cached bank with the same options (no bank is computed here)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -42,11 +43,17 @@ def test_field_positions_follow_their_spacing():
         field_positions(n, "log")
 
 
-@pytest.mark.parametrize("kw, field", [
-    ({"fields": 1}, "fields"), ({"wavelengths_nm": ()}, "wavelengths_nm"), ({"pupil_samples": 0}, "pupil_samples"),
-    ({"aiming": "none"}, "aiming"), ({"kernel_pixels": 14}, "kernel_pixels"),
-    ({"field_spacing": "log"}, "field_spacing"),
-])
+@pytest.mark.parametrize(
+    "kw, field",
+    [
+        ({"fields": 1}, "fields"),
+        ({"wavelengths_nm": ()}, "wavelengths_nm"),
+        ({"pupil_samples": 0}, "pupil_samples"),
+        ({"aiming": "none"}, "aiming"),
+        ({"kernel_pixels": 14}, "kernel_pixels"),
+        ({"field_spacing": "log"}, "field_spacing"),
+    ],
+)
 def test_bad_settings_are_refused(kw, field):
     with pytest.raises(InputError, match=field):
         BankSettings(**kw)
@@ -58,8 +65,12 @@ def test_the_cache_key_names_what_shapes_the_bank():
     key = base.cache_key(lens, 4.0, 21, "Nikon 5100 (NPL)")
     assert BankSettings(cache_dir="elsewhere").cache_key(lens, 4.0, 21, "Nikon 5100 (NPL)") == key
     assert BankSettings(wavelengths_nm=list(base.wavelengths_nm)).cache_key(lens, 4.0, 21, "Nikon 5100 (NPL)") == key
-    for other in (BankSettings(fields=33), BankSettings(pupil_samples=64), BankSettings(aiming="paraxial"),
-                  BankSettings(field_spacing="linear")):
+    for other in (
+        BankSettings(fields=33),
+        BankSettings(pupil_samples=64),
+        BankSettings(aiming="paraxial"),
+        BankSettings(field_spacing="linear"),
+    ):
         assert other.cache_key(lens, 4.0, 21, "Nikon 5100 (NPL)") != key
     assert base.cache_key(lens, 4.0, 23, "Nikon 5100 (NPL)") != key
     assert base.cache_key(lens, 4.1, 21, "Nikon 5100 (NPL)") != key
@@ -92,9 +103,11 @@ def test_the_commands_ask_for_the_same_bank_with_the_same_options(tmp_path, aske
     write_image(photos / "a.png", torch.full((3, 40, 60), 0.5))
     common = ["--lens", "cooke_triplet", "--sensor", "apsc_mirrorless"]
     runner = CliRunner()
-    for args in (["simulate", str(photos / "a.png"), "-o", str(tmp_path / "sim"), *common],
-                 ["dataset", "make", str(photos), "-o", str(tmp_path / "data"), "--size", "32", *common],
-                 ["psf", "bank", "-o", str(tmp_path / "bank"), *common]):
+    for args in (
+        ["simulate", str(photos / "a.png"), "-o", str(tmp_path / "sim"), *common],
+        ["dataset", "make", str(photos), "-o", str(tmp_path / "data"), "--size", "32", *common],
+        ["psf", "bank", "-o", str(tmp_path / "bank"), *common],
+    ):
         res = runner.invoke(app, args)
         assert isinstance(res.exception, _Asked), (args, res.output)
     (_, _, simulate, response), (_, native, dataset, _), (_, pitch, bank, _) = asked
@@ -105,10 +118,14 @@ def test_the_commands_ask_for_the_same_bank_with_the_same_options(tmp_path, aske
     assert dataset.cache_key(lens, native, 21, response) == bank.cache_key(lens, pitch, 21, response)
 
 
-@pytest.mark.parametrize("command", [
-    ["simulate", "{photo}", "-o", "{out}"], ["dataset", "make", "{photos}", "-o", "{out}"],
-    ["psf", "bank", "cooke_triplet", "--pixel-um", "4", "-o", "{out}"],
-])
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["simulate", "{photo}", "-o", "{out}"],
+        ["dataset", "make", "{photos}", "-o", "{out}"],
+        ["psf", "bank", "cooke_triplet", "--pixel-um", "4", "-o", "{out}"],
+    ],
+)
 def test_one_field_is_a_one_line_error_before_any_work(tmp_path, command):
     from lensim.images import write_image
 

@@ -1,4 +1,5 @@
 """Classical baselines: Wiener and Richardson-Lucy with the true kernels, unsharp mask."""
+
 import numpy as np
 import pytest
 import torch
@@ -34,10 +35,24 @@ def _bank() -> PSFBank:
     radii = [0.0, 1.5, 3.0, 4.5]
     fields = []
     for i, r in enumerate(radii):
-        fields.append(BankField(index=i, field=r / 4.5, field_value=r, rgb=_kernel(r), reference_xy_mm=np.array([0.0, r]),
-                                paraxial_xy_mm=np.array([0.0, r]), chief_offsets_mm=np.zeros((2, 2)),
-                                relative_illumination=np.ones(2), transmission=np.ones(2), window_energy=np.ones(2),
-                                strehl=float("nan"), working_fno=5.0, primary_fine=np.zeros((1, 1)), warnings=[]))
+        fields.append(
+            BankField(
+                index=i,
+                field=r / 4.5,
+                field_value=r,
+                rgb=_kernel(r),
+                reference_xy_mm=np.array([0.0, r]),
+                paraxial_xy_mm=np.array([0.0, r]),
+                chief_offsets_mm=np.zeros((2, 2)),
+                relative_illumination=np.ones(2),
+                transmission=np.ones(2),
+                window_energy=np.ones(2),
+                strehl=float("nan"),
+                working_fno=5.0,
+                primary_fine=np.zeros((1, 1)),
+                warnings=[],
+            )
+        )
     manifest = {"pixel_pitch_um": PITCH_UM, "kernel_pixels": P, "fields": [f.field for f in fields]}
     return PSFBank(manifest, fields, None)
 
@@ -118,6 +133,7 @@ def test_unsharp_mask_adds_high_frequencies(blurred):
         fy = np.fft.fftfreq(a.shape[-2])[:, None]
         fx = np.fft.fftfreq(a.shape[-1])[None, :]
         return float(f[:, np.hypot(fy, fx) > 0.25].sum())
+
     # the mask's gain is 1 + 0.6 (1 - exp(-2 pi^2 sigma^2 f^2)) >= 1.42 above 0.25 cycles/px,
     # i.e. >= 2.0 in power; clipping to [0, 1] takes a little of it
     assert high(out) > 1.8 * high(observed)

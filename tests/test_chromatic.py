@@ -1,5 +1,6 @@
 """Lateral colour: per-channel edge positions (R-G, B-G shifts along the edge normal) and
 point-image centroid shifts."""
+
 from __future__ import annotations
 
 import math
@@ -21,11 +22,20 @@ def gaussian_psf(sigma: float, k: int = K, half_px: float = 5.0) -> np.ndarray:
     return np.outer(g, g)
 
 
-def rgb_edge(size: int, angle: float, shifts: tuple[float, float, float], sigmas: tuple[float, float, float],
-             orientation: str = "vertical", noise: float = 0.0, seed: int = 0) -> np.ndarray:
+def rgb_edge(
+    size: int,
+    angle: float,
+    shifts: tuple[float, float, float],
+    sigmas: tuple[float, float, float],
+    orientation: str = "vertical",
+    noise: float = 0.0,
+    seed: int = 0,
+) -> np.ndarray:
     """Channels shifted along the edge normal by `shifts` (pixels), blurred by Gaussians."""
-    chans = [make_slanted_edge(size, angle, 0.15, 0.85, psf=gaussian_psf(s), offset_px=o, orientation=orientation)  # type: ignore[arg-type]
-             for o, s in zip(shifts, sigmas)]
+    chans = [
+        make_slanted_edge(size, angle, 0.15, 0.85, psf=gaussian_psf(s), offset_px=o, orientation=orientation)  # type: ignore[arg-type]
+        for o, s in zip(shifts, sigmas)
+    ]
     img = np.stack(chans, axis=-1)
     if noise:
         img = img + np.random.default_rng(seed).normal(0.0, noise, img.shape)
@@ -38,7 +48,15 @@ def test_edge_shifts_recovered(angle: float, orientation: str) -> None:
     """R shifted +0.3 px and B -0.5 px from G along the normal, each channel blurred
     differently (sigma 0.9 / 0.5 / 1.2 px, as lateral colour comes with chromatic blur),
     noise 0.003 on a contrast of 0.7: brief tolerance 0.05 px (measured <= 0.012 px)."""
-    img = rgb_edge(80, angle, (0.3, 0.0, -0.5), (0.9, 0.5, 1.2), orientation, noise=0.003, seed=int(abs(angle) * 10) + (orientation == "vertical"))
+    img = rgb_edge(
+        80,
+        angle,
+        (0.3, 0.0, -0.5),
+        (0.9, 0.5, 1.2),
+        orientation,
+        noise=0.003,
+        seed=int(abs(angle) * 10) + (orientation == "vertical"),
+    )
     res = lateral_color_edge(img)
     assert res.orientation == orientation
     assert res.angle_deg == pytest.approx(angle, abs=0.05)
@@ -76,10 +94,12 @@ def test_edge_shift_sign_convention(orientation: str) -> None:
 
 def area_sampled_spot(n: int, cx: float, cy: float, sigma: float) -> np.ndarray:
     """A Gaussian spot integrated exactly over each pixel (centre (cx, cy), pixels)."""
+
     def axis(c: float) -> np.ndarray:
         edges = np.arange(n + 1) - 0.5
         cdf = 0.5 * (1 + erf((edges - c) / (math.sqrt(2) * sigma)))
         return np.diff(cdf)
+
     return np.outer(axis(cy), axis(cx))
 
 
@@ -89,8 +109,11 @@ def test_point_shifts_recovered() -> None:
     edge brief's bound (measured 0.004 px with this seed, <= 0.023 px over 10 seeds: the
     noise inside the centroid window); the radial projection is the dot product."""
     cx, cy = 20.3, 19.8
-    spots = [area_sampled_spot(41, cx + 0.3, cy - 0.2, 1.6), area_sampled_spot(41, cx, cy, 1.2),
-             area_sampled_spot(41, cx - 0.5, cy + 0.4, 1.9)]
+    spots = [
+        area_sampled_spot(41, cx + 0.3, cy - 0.2, 1.6),
+        area_sampled_spot(41, cx, cy, 1.2),
+        area_sampled_spot(41, cx - 0.5, cy + 0.4, 1.9),
+    ]
     img = np.stack(spots, axis=-1) + 0.05 + np.random.default_rng(3).normal(0.0, 1e-4, (41, 41, 3))
     res = lateral_color_point(img)
     assert res.r_minus_g_xy == pytest.approx([0.3, -0.2], abs=0.05)

@@ -1,6 +1,7 @@
 """CLI coherence: every subcommand exists, has help with an example, and spells the
 common options one way (--lens, --sensor, --device, --workers, --seed, -o/--output,
 --quiet, --json)."""
+
 from __future__ import annotations
 
 from typing import Any
@@ -10,11 +11,40 @@ import typer
 
 from lensim.cli import app
 
-TOP = {"lens", "psf", "simulate", "dataset", "train", "restore", "evaluate", "ablation", "report", "demo", "assets",
-       "raw", "develop", "sensor", "export"}
+TOP = {
+    "lens",
+    "psf",
+    "simulate",
+    "dataset",
+    "train",
+    "restore",
+    "evaluate",
+    "ablation",
+    "report",
+    "demo",
+    "assets",
+    "raw",
+    "develop",
+    "sensor",
+    "export",
+}
 # other spellings of the common options that must not appear anywhere
-FORBIDDEN = {"--out", "--outdir", "--output-dir", "--num-workers", "--jobs", "-j", "--gpu", "--cuda", "--random-seed",
-             "--lens-file", "--camera", "--silent", "--verbose-json", "--dev"}
+FORBIDDEN = {
+    "--out",
+    "--outdir",
+    "--output-dir",
+    "--num-workers",
+    "--jobs",
+    "-j",
+    "--gpu",
+    "--cuda",
+    "--random-seed",
+    "--lens-file",
+    "--camera",
+    "--silent",
+    "--verbose-json",
+    "--dev",
+}
 
 
 def _leaves(cmd: Any, path: tuple[str, ...] = ()) -> list[tuple[tuple[str, ...], Any]]:
@@ -42,8 +72,15 @@ def test_common_options_are_spelled_one_way(path: tuple[str, ...], cmd: Any) -> 
     assert not opts & FORBIDDEN, f"{' '.join(path)}: {sorted(opts & FORBIDDEN)}"
     if "--output" in opts:
         assert "-o" in opts, f"{' '.join(path)}: --output without -o"
-    if "--json" in opts and path not in {("lens", "info"), ("lens", "spot"), ("lens", "field"), ("psf", "compute"),
-                                         ("assets",), ("raw", "info"), ("sensor", "from-raw")}:
+    if "--json" in opts and path not in {
+        ("lens", "info"),
+        ("lens", "spot"),
+        ("lens", "field"),
+        ("psf", "compute"),
+        ("assets",),
+        ("raw", "info"),
+        ("sensor", "from-raw"),
+    }:
         assert "--quiet" in opts, f"{' '.join(path)}: long job with --json but no --quiet"
     assert "Example:" in (cmd.help or ""), f"{' '.join(path)}: --help has no example"
 

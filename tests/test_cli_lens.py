@@ -1,4 +1,5 @@
 """`lensim lens info|plot|spot` end to end, and the layout / spot plots they draw."""
+
 from __future__ import annotations
 
 import json
@@ -58,9 +59,20 @@ def test_info_json_first_order_data(capsys, monkeypatch):
     code, out, err = run_cli(["lens", "info", "cooke_triplet", "--json"], capsys, monkeypatch)
     assert code == 0, err
     d = json.loads(out)
-    for key in ("efl_mm", "bfl_mm", "fno", "epd_mm", "entrance_pupil_z_mm", "exit_pupil_z_mm",
-                "exit_pupil_diameter_mm", "max_field", "field_type", "wavelengths_um", "primary_wavelength_um",
-                "image_height_mm"):
+    for key in (
+        "efl_mm",
+        "bfl_mm",
+        "fno",
+        "epd_mm",
+        "entrance_pupil_z_mm",
+        "exit_pupil_z_mm",
+        "exit_pupil_diameter_mm",
+        "max_field",
+        "field_type",
+        "wavelengths_um",
+        "primary_wavelength_um",
+        "image_height_mm",
+    ):
         assert key in d, key
     assert d["efl_mm"] == pytest.approx(50.0, abs=0.01)
     assert d["epd_mm"] == pytest.approx(10.0)
@@ -80,8 +92,12 @@ def test_info_json_first_order_data(capsys, monkeypatch):
 def test_python_dash_m_lensim_runs_the_cli(tmp_path):
     lens_file = tmp_path / "mirror.json"  # no catalogue glass: a quick start
     lens_file.write_text(json.dumps(mirror_dict()))
-    r = subprocess.run([sys.executable, "-m", "lensim", "lens", "info", str(lens_file), "--json"],
-                       capture_output=True, text=True, timeout=120)
+    r = subprocess.run(
+        [sys.executable, "-m", "lensim", "lens", "info", str(lens_file), "--json"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert r.returncode == 0, r.stderr
     d = json.loads(r.stdout)
     assert d["efl_mm"] == pytest.approx(100.0) and d["fno"] == pytest.approx(5.0)
@@ -141,7 +157,7 @@ def test_layout_vignetted_rays_end_on_the_blocking_surface():
     for f, p in zip(*np.nonzero(blocked)):
         k = int(failed_at[0, f, p])
         reached = paths.reached[f, p]
-        assert reached[: k + 2].all() and not reached[k + 2:].any()  # start point + surfaces 0..k
+        assert reached[: k + 2].all() and not reached[k + 2 :].any()  # start point + surfaces 0..k
         y = paths.points[f, p, k + 1, 1]
         assert abs(y) > lens.surfaces[k].clear_radius  # stopped outside the clear aperture
     fig = plot_layout(lens, rays_per_field=9)
@@ -168,9 +184,16 @@ def test_mirror_layout_and_image_position(tmp_path):
 def test_cassegrain_layout_with_central_obscuration(tmp_path):
     # primary f = 200 with the secondary's shadow as an obscuration, convex secondary,
     # image 50 mm behind the primary: EFL 800 mm. Its chief rays are obscured, not an error.
-    lens = Lens([Surface(-1 / 400, -150.0, is_mirror=True, is_stop=True, obscuration_radius=12.0, semi_diameter=32.0),
-                 Surface(-3 / 400, 200.0, is_mirror=True, semi_diameter=10.0)],
-                aperture_value=60.0, fields=[0.0, 0.3], wavelengths_um=[0.55], name="Cassegrain")
+    lens = Lens(
+        [
+            Surface(-1 / 400, -150.0, is_mirror=True, is_stop=True, obscuration_radius=12.0, semi_diameter=32.0),
+            Surface(-3 / 400, 200.0, is_mirror=True, semi_diameter=10.0),
+        ],
+        aperture_value=60.0,
+        fields=[0.0, 0.3],
+        wavelengths_um=[0.55],
+        name="Cassegrain",
+    )
     assert paraxial_data(lens).efl_mm == pytest.approx(800.0, rel=1e-6)
     out_png = tmp_path / "cass.png"
     plot_layout(lens, rays_per_field=7, path=out_png)
@@ -211,8 +234,9 @@ def test_spot_writes_png_and_json(tmp_path, capsys, monkeypatch):
 def test_spot_json_of_a_paraboloid_is_perfect_on_axis(tmp_path, capsys, monkeypatch):
     lens_file = tmp_path / "parabola.yaml"
     lens_file.write_text(yaml.safe_dump(mirror_dict(conic=-1.0)))
-    code, out, err = run_cli(["lens", "spot", str(lens_file), "--json", "--field", "0", "--field", "1"],
-                             capsys, monkeypatch)
+    code, out, err = run_cli(
+        ["lens", "spot", str(lens_file), "--json", "--field", "0", "--field", "1"], capsys, monkeypatch
+    )
     assert code == 0, err
     d = json.loads(out)
     on_axis, off_axis = d["fields"]
@@ -224,8 +248,9 @@ def test_spot_json_of_a_paraboloid_is_perfect_on_axis(tmp_path, capsys, monkeypa
 
 def test_spot_fields_normalized_in_degrees_or_as_image_height(capsys, monkeypatch):
     def chief_y(*field_args: str) -> tuple[float, dict]:
-        code, out, err = run_cli(["lens", "spot", "cooke_triplet", "--json", "--aiming", "real", *field_args],
-                                 capsys, monkeypatch)
+        code, out, err = run_cli(
+            ["lens", "spot", "cooke_triplet", "--json", "--aiming", "real", *field_args], capsys, monkeypatch
+        )
         assert code == 0, err
         f = json.loads(out)["fields"][0]
         return f["wavelengths"][load_lens("cooke_triplet").primary]["chief_y_mm"], f
@@ -237,8 +262,9 @@ def test_spot_fields_normalized_in_degrees_or_as_image_height(capsys, monkeypatc
     # --image-height-mm: the real chief ray lands at the asked height
     height, f = chief_y("--image-height-mm", "12.5")
     assert height == pytest.approx(12.5, abs=1e-8) and f["field_unit"] == "mm"
-    code, _, err = run_cli(["lens", "spot", "cooke_triplet", "--json", "--field", "1", "--field-deg", "20"],
-                           capsys, monkeypatch)
+    code, _, err = run_cli(
+        ["lens", "spot", "cooke_triplet", "--json", "--field", "1", "--field-deg", "20"], capsys, monkeypatch
+    )
     assert code == 2 and len(err.strip().splitlines()) == 1 and "--field-deg" in err
     code, _, err = run_cli(["lens", "plot", "cooke_triplet", "-o", "x.png", "--field", "1.5"], capsys, monkeypatch)
     assert code == 2 and len(err.strip().splitlines()) == 1 and "between 0 and 1" in err
@@ -270,8 +296,17 @@ def test_plot_spots_centroid_reference_and_image_height_fields(tmp_path):
 
 def test_layout_refuses_a_chief_ray_that_cannot_be_aimed():
     # a 60 degree chief ray cannot be aimed through a steep clipped front lens onto the stop
-    lens = Lens([Surface(1 / 5, 3.0, ConstantIndex(1.5), clear_radius=3.0), Surface(0.0, 20.0, is_stop=True),
-                 Surface(0.0, 10.0)], aperture_value=2.0, fields=[0.0, 60.0], wavelengths_um=[0.55], source="clip.yaml")
+    lens = Lens(
+        [
+            Surface(1 / 5, 3.0, ConstantIndex(1.5), clear_radius=3.0),
+            Surface(0.0, 20.0, is_stop=True),
+            Surface(0.0, 10.0),
+        ],
+        aperture_value=2.0,
+        fields=[0.0, 60.0],
+        wavelengths_um=[0.55],
+        source="clip.yaml",
+    )
     with pytest.raises(RayTraceError, match=r"clip.yaml: fields: the chief ray at field 60 deg could not be aimed"):
         plot_layout(lens, aiming="real")
     with pytest.raises(RayTraceError, match=r"clip.yaml: fields: the chief ray at field 60 deg is totally internally"):

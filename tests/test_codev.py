@@ -1,5 +1,6 @@
 """CODE V .seq import: the double Gauss against its published real-ray trace (1e-5 mm),
 the paraxial image solve, the built-in conversion, and one-line errors on bad input."""
+
 import math
 import warnings
 
@@ -16,8 +17,19 @@ from lensim.optics.paraxial import paraxial_data
 from lensim.optics.trace import trace
 
 # tests/data/lenses/README.md: axial marginal ray, 587.6 nm, entering parallel at 25 mm
-TRUTH_HEIGHTS = [25.000000, 24.109772, 22.844992, 20.958242, 16.784894, 15.702464, 14.610682, 15.815163,
-                 16.882946, 16.583956, 16.261006]
+TRUTH_HEIGHTS = [
+    25.000000,
+    24.109772,
+    22.844992,
+    20.958242,
+    16.784894,
+    15.702464,
+    14.610682,
+    15.815163,
+    16.882946,
+    16.583956,
+    16.261006,
+]
 TRUTH_IMAGE_HEIGHT = 0.014138
 TRUTH_TAN_U = -0.258832
 TOL_MM = 1e-5
@@ -60,8 +72,13 @@ def test_system_data(dblgauss):
     # RDM N: the numbers are curvatures
     assert lens.surfaces[0].curvature == pytest.approx(0.01779284094091543, rel=1e-15)
     assert [s.material for s in lens.surfaces if isinstance(s.material, CatalogGlass)] == [
-        CatalogGlass("N-SSK2", "Schott", None), CatalogGlass("N-SK2", "Schott", None), CatalogGlass("F5", "Schott", None),
-        CatalogGlass("F5", "Schott", None), CatalogGlass("N-SK16", "Schott", None), CatalogGlass("N-SK16", "Schott", None)]
+        CatalogGlass("N-SSK2", "Schott", None),
+        CatalogGlass("N-SK2", "Schott", None),
+        CatalogGlass("F5", "Schott", None),
+        CatalogGlass("F5", "Schott", None),
+        CatalogGlass("N-SK16", "Schott", None),
+        CatalogGlass("N-SK16", "Schott", None),
+    ]
     assert any("VUY" in n and "not applied" in n for n in lens.notes)
     assert paraxial_data(lens).efl_mm == pytest.approx(100.0, abs=0.01)
 
@@ -126,14 +143,17 @@ def test_radius_mode_asphere_and_bare_glass_name(tmp_path):
     assert lens.name == "test singlet" and lens.fields == [0.0, 5.0] and lens.image_defocus == 0.25
 
 
-@pytest.mark.parametrize("old, new, field, words", [
-    ("S 50 5 BK7", "S 50 5 BK7\n  XDE 1.0", "line 9 (XDE)", ["unsupported", "XDE"]),
-    ("DIM M", "DIM I", "line 3 (DIM)", ["millimetres"]),
-    ("S -200 90", "S -2OO 90", "line 12 (S 2)", ["number", "-2OO"]),
-    ("  STO\n", "", "STO", ["missing", "stop"]),
-    ("S 50 5 BK7", "S 50 5 NOSUCHGLASS_SCHOTT", "line 8 (S 1 glass)", ["unknown glass", "close names"]),
-    ("YAN 0 5", "YAN 0 5\nXAN 0 3", "line 7 (XAN)", ["rotationally symmetric"]),
-])
+@pytest.mark.parametrize(
+    "old, new, field, words",
+    [
+        ("S 50 5 BK7", "S 50 5 BK7\n  XDE 1.0", "line 9 (XDE)", ["unsupported", "XDE"]),
+        ("DIM M", "DIM I", "line 3 (DIM)", ["millimetres"]),
+        ("S -200 90", "S -2OO 90", "line 12 (S 2)", ["number", "-2OO"]),
+        ("  STO\n", "", "STO", ["missing", "stop"]),
+        ("S 50 5 BK7", "S 50 5 NOSUCHGLASS_SCHOTT", "line 8 (S 1 glass)", ["unknown glass", "close names"]),
+        ("YAN 0 5", "YAN 0 5\nXAN 0 3", "line 7 (XAN)", ["rotationally symmetric"]),
+    ],
+)
 def test_bad_input_names_file_and_field(tmp_path, old, new, field, words):
     assert old in SINGLET
     p = write(tmp_path, SINGLET.replace(old, new))

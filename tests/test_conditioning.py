@@ -1,5 +1,6 @@
 """Shooting-settings conditioning (issue 16): the settings vector and its trained ranges,
 the range check, settings planes, and FieldAwareUNet with settings_dim."""
+
 from __future__ import annotations
 
 import math
@@ -12,8 +13,11 @@ from lensim.restore.conditioning import Conditioning, feature, record_settings, 
 from lensim.restore.fov import fov_channels
 from lensim.restore.network import FieldAwareUNet
 
-GRID = [{"fno": n, "focus_m": d, "focal_mm": 50.0, "object_m": d, "config": None}
-        for n in (2.0, 4.0, 8.0) for d in (1.0, math.inf)]
+GRID = [
+    {"fno": n, "focus_m": d, "focal_mm": 50.0, "object_m": d, "config": None}
+    for n in (2.0, 4.0, 8.0)
+    for d in (1.0, math.inf)
+]
 
 
 def test_features_are_stops_dioptres_and_log_focal():

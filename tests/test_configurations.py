@@ -1,5 +1,6 @@
 """Lens configurations (zoom and focus positions): the data model, apply_configuration, the
 native file's configurations block (round trip) and the Zemax multi-configuration import."""
+
 from __future__ import annotations
 
 import copy
@@ -50,8 +51,9 @@ def test_unknown_key_lists_the_configurations() -> None:
     for key in ("3", "0", "mid", ""):
         with pytest.raises(InputError) as e:
             apply_configuration(lens, key)
-        assert str(e.value) == (f"c.yaml: configuration: unknown configuration {key!r}; expected a name or a number "
-                                "1..2: 1 (near), 2 (far)")
+        assert str(e.value) == (
+            f"c.yaml: configuration: unknown configuration {key!r}; expected a name or a number 1..2: 1 (near), 2 (far)"
+        )
     plain = lens_from_dict(cooke(None), source="p.yaml")
     with pytest.raises(InputError, match="p.yaml: configuration: the lens declares no configurations"):
         apply_configuration(plain, "1")
@@ -59,7 +61,10 @@ def test_unknown_key_lists_the_configurations() -> None:
 
 def test_numbered_names_must_be_their_position() -> None:
     lens_from_dict(cooke({"1": {"thicknesses": {1: 5.0}}, "2": {"thicknesses": {}}}))
-    with pytest.raises(InputError, match=r"configurations\.2: a configuration named by a number must be that number in the list \(it is number 1\)"):
+    with pytest.raises(
+        InputError,
+        match=r"configurations\.2: a configuration named by a number must be that number in the list \(it is number 1\)",
+    ):
         lens_from_dict(cooke({"2": {"thicknesses": {1: 5.0}}, "1": {"thicknesses": {}}}))
 
 
@@ -77,8 +82,11 @@ def test_round_trip(tmp_path, suffix) -> None:
 # ---------------------------------------------------------------- Zemax multi-configuration
 
 ZOOM = "nikon_80-200_zoom.zmx"  # tests/data/lenses/README.md: three zoom positions in the MCE
-ZOOM_GAPS = {"1": {4: 1.86, 9: 36.928, 12: 16.55}, "2": {4: 25.27, 9: 26.8207, 12: 3.2473},
-             "3": {4: 48.678, 9: 1.536, 12: 5.133}}
+ZOOM_GAPS = {
+    "1": {4: 1.86, 9: 36.928, 12: 16.55},
+    "2": {4: 25.27, 9: 26.8207, 12: 3.2473},
+    "3": {4: 48.678, 9: 1.536, 12: 5.133},
+}
 
 
 def test_zemax_thic_operands_are_read_into_configurations(reference_lenses) -> None:
@@ -120,26 +128,31 @@ def _zmx_with(text: str, tmp_path, extra: str):
     return path
 
 
-@pytest.mark.parametrize("extra, match", [
-    ("THIC 5 1 2.0 0 0 0 1 1 1 0 0 \"\" 0\r\n", r"line \d+ \(THIC\): a multi-configuration operand before MNUM"),
-    ("MNUM 3 1\r\nTHIC 5 4 2.0 0 0 0 1 1 1 0 0 \"\" 0\r\n", r"expected a configuration number 1..3 \(MNUM\), got 4"),
-    ("MNUM 3 1\r\nTHIC 5 1 x\r\n", "expected a number, got 'x'"),
-    ("MNUM 0 1\r\n", "expected a number of configurations >= 1"),
-    ("MNUM 3 5\r\n", "the active one 1..n, got 3 5"),
-    ("MNUM 3 1\r\nTHIC 8 1 2.0\r\n", "surface 8 has no value for configuration 2 of 3"),
-    ("MNUM 3 1\r\nTHIC 8 1 -6\r\nTHIC 8 2 5\r\nTHIC 8 3 5\r\n", r"configurations.1: surfaces\[7\].thickness"),
-])
+@pytest.mark.parametrize(
+    "extra, match",
+    [
+        ('THIC 5 1 2.0 0 0 0 1 1 1 0 0 "" 0\r\n', r"line \d+ \(THIC\): a multi-configuration operand before MNUM"),
+        ('MNUM 3 1\r\nTHIC 5 4 2.0 0 0 0 1 1 1 0 0 "" 0\r\n', r"expected a configuration number 1..3 \(MNUM\), got 4"),
+        ("MNUM 3 1\r\nTHIC 5 1 x\r\n", "expected a number, got 'x'"),
+        ("MNUM 0 1\r\n", "expected a number of configurations >= 1"),
+        ("MNUM 3 5\r\n", "the active one 1..n, got 3 5"),
+        ("MNUM 3 1\r\nTHIC 8 1 2.0\r\n", "surface 8 has no value for configuration 2 of 3"),
+        ("MNUM 3 1\r\nTHIC 8 1 -6\r\nTHIC 8 2 5\r\nTHIC 8 3 5\r\n", r"configurations.1: surfaces\[7\].thickness"),
+    ],
+)
 def test_bad_multi_configuration_operands_are_named(reference_lenses, tmp_path, extra: str, match: str) -> None:
     text = (reference_lenses / ZOOM).read_text(encoding="utf-8")
-    text = text[:text.index("MNUM")] + "MNUM 3 1\r\n"  # the file without its THIC operands
+    text = text[: text.index("MNUM")] + "MNUM 3 1\r\n"  # the file without its THIC operands
     with pytest.raises(InputError, match=match):
         load_lens(_zmx_with(text, tmp_path, extra), warn=False)
 
 
 def test_operands_lensim_does_not_apply_are_noted(reference_lenses, tmp_path) -> None:
     text = (reference_lenses / ZOOM).read_text(encoding="utf-8")
-    text = text.replace("MNUM 3 1\n", "MNUM 3 1\r\nAPER 0 1 2.8 0 0 0 1 1 1 0 0 \"\" 0\r\nTHIC 0 1 5000 0\r\n"
-                                        "THIC 0 2 5000 0\r\nTHIC 0 3 5000 0\r\n")
+    text = text.replace(
+        "MNUM 3 1\n",
+        'MNUM 3 1\r\nAPER 0 1 2.8 0 0 0 1 1 1 0 0 "" 0\r\nTHIC 0 1 5000 0\r\nTHIC 0 2 5000 0\r\nTHIC 0 3 5000 0\r\n',
+    )
     path = tmp_path / "zoom.zmx"
     path.write_text(text, encoding="utf-8")
     lens = load_lens(path, warn=False)

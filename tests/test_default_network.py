@@ -4,6 +4,7 @@ stem, no deformable convolution, no context block, at the paper's UNet's size; `
 unet` alone is the paper's UNet exactly as the old default; the tri-state switches
 override either; the resolved values are what a run records; a checkpoint from before
 "arch" and "stem" resumes as the UNet."""
+
 from __future__ import annotations
 
 import json
@@ -24,8 +25,18 @@ from lensim.restore.network import ContextBlock, DeformResBlock, FieldAwareUNet,
 from test_train import make_pairs
 
 # the model config TrainConfig() gave before NAFNet became the default (written out, not computed)
-OLD_DEFAULT = {"arch": "unet", "width": 32, "depth": 3, "use_fov": True, "use_deformable": True, "use_context": True,
-               "deformable_groups": 2, "settings_dim": 0, "deformable_scales": None, "field_modulation": False}
+OLD_DEFAULT = {
+    "arch": "unet",
+    "width": 32,
+    "depth": 3,
+    "use_fov": True,
+    "use_deformable": True,
+    "use_context": True,
+    "deformable_groups": 2,
+    "settings_dim": 0,
+    "deformable_scales": None,
+    "field_modulation": False,
+}
 NETWORK_KEYS = ("arch", "width", "use_fov", "use_deformable", "use_context", "stem")
 
 
@@ -71,8 +82,9 @@ def test_given_switches_beat_the_architecture_defaults() -> None:
     assert TrainConfig(width=8).resolved().width == 8
     # the size-matched width of what the switches describe
     deform = TrainConfig(use_deformable=True, use_context=True).resolved()
-    assert deform.width == default_width("nafnet", **{k: v for k, v in deform.model_kwargs().items()
-                                                       if k not in ("arch", "width", "depth")})
+    assert deform.width == default_width(
+        "nafnet", **{k: v for k, v in deform.model_kwargs().items() if k not in ("arch", "width", "depth")}
+    )
 
 
 def _captured_config(args: list[str], pairs: Path, tmp_path: Path, capsys, monkeypatch) -> tuple[int, str, Any]:
@@ -87,22 +99,26 @@ def _captured_config(args: list[str], pairs: Path, tmp_path: Path, capsys, monke
         return train_module.TrainResult(str(run), 0, 0, False, 0.0, math.nan, None, None, None, None)
 
     monkeypatch.setattr(train_module, "train", fake_train)
-    code, _, err = run_cli(["train", str(pairs), "-o", str(tmp_path / "run"), "--crop", "32", "--json", *args],
-                           capsys, monkeypatch)
+    code, _, err = run_cli(
+        ["train", str(pairs), "-o", str(tmp_path / "run"), "--crop", "32", "--json", *args], capsys, monkeypatch
+    )
     return code, err, seen[0] if seen else None
 
 
-@pytest.mark.parametrize("args, expected", [
-    ([], ("nafnet", True, False, False, 2)),
-    (["--arch", "unet"], ("unet", True, True, True, 1)),
-    (["--arch", "unet", "--stem", "0"], ("unet", True, True, True, 1)),
-    (["--deformable"], ("nafnet", True, True, False, 2)),
-    (["--context", "--stem", "1"], ("nafnet", True, False, True, 1)),
-    (["--no-fov", "--no-deformable", "--no-context"], ("nafnet", False, False, False, 2)),
-    (["--arch", "unet", "--no-deformable"], ("unet", True, False, True, 1)),
-    (["--arch", "unet", "--no-context"], ("unet", True, True, False, 1)),
-    (["--arch", "unet", "--deformable", "--context"], ("unet", True, True, True, 1)),
-])
+@pytest.mark.parametrize(
+    "args, expected",
+    [
+        ([], ("nafnet", True, False, False, 2)),
+        (["--arch", "unet"], ("unet", True, True, True, 1)),
+        (["--arch", "unet", "--stem", "0"], ("unet", True, True, True, 1)),
+        (["--deformable"], ("nafnet", True, True, False, 2)),
+        (["--context", "--stem", "1"], ("nafnet", True, False, True, 1)),
+        (["--no-fov", "--no-deformable", "--no-context"], ("nafnet", False, False, False, 2)),
+        (["--arch", "unet", "--no-deformable"], ("unet", True, False, True, 1)),
+        (["--arch", "unet", "--no-context"], ("unet", True, True, False, 1)),
+        (["--arch", "unet", "--deformable", "--context"], ("unet", True, True, True, 1)),
+    ],
+)
 def test_cli_switches(args: list[str], expected: tuple, pairs: Path, tmp_path: Path, capsys, monkeypatch) -> None:
     code, err, cfg = _captured_config(args, pairs, tmp_path, capsys, monkeypatch)
     assert code == 0, err
@@ -121,9 +137,27 @@ def test_cli_refuses_the_stem_on_the_unet_in_one_line(pairs: Path, tmp_path: Pat
 
 def test_a_run_records_the_resolved_network(pairs: Path, tmp_path: Path, capsys, monkeypatch) -> None:
     run = tmp_path / "run"
-    code, _, err = run_cli(["train", str(pairs), "-o", str(run), "--epochs", "1", "--steps-per-epoch", "1",
-                            "--crop", "32", "--batch-size", "2", "--val-fraction", "0.5", "--quiet"],
-                           capsys, monkeypatch)
+    code, _, err = run_cli(
+        [
+            "train",
+            str(pairs),
+            "-o",
+            str(run),
+            "--epochs",
+            "1",
+            "--steps-per-epoch",
+            "1",
+            "--crop",
+            "32",
+            "--batch-size",
+            "2",
+            "--val-fraction",
+            "0.5",
+            "--quiet",
+        ],
+        capsys,
+        monkeypatch,
+    )
     assert code == 0, err
     want = TrainConfig().resolved()
     recorded = json.loads((run / "config.json").read_text())
@@ -133,16 +167,25 @@ def test_a_run_records_the_resolved_network(pairs: Path, tmp_path: Path, capsys,
     assert isinstance(model, NAFNet) and model.stem == 2 and model.width == want.width > 0
 
 
-def test_a_checkpoint_from_before_arch_resumes_as_the_unet(pairs: Path, tmp_path: Path, capsys,
-                                                            monkeypatch) -> None:
+def test_a_checkpoint_from_before_arch_resumes_as_the_unet(pairs: Path, tmp_path: Path, capsys, monkeypatch) -> None:
     """A run written before "arch" and "stem" existed (they are removed from its
     checkpoint; model_config without "arch" too) continues as the UNet, through train()
     and through the command line, whose --arch now defaults to nafnet."""
     from lensim.restore.train import train
 
     run = tmp_path / "run"
-    train(pairs, run, epochs=1, max_steps_per_epoch=1, arch="unet", width=8, depth=2, crop=32, batch_size=2,
-          val_fraction=0.5)
+    train(
+        pairs,
+        run,
+        epochs=1,
+        max_steps_per_epoch=1,
+        arch="unet",
+        width=8,
+        depth=2,
+        crop=32,
+        batch_size=2,
+        val_fraction=0.5,
+    )
     ckpt = torch.load(run / "last.pt", weights_only=True)
     for key in ("arch", "stem"):
         del ckpt["train_config"][key]
@@ -152,18 +195,27 @@ def test_a_checkpoint_from_before_arch_resumes_as_the_unet(pairs: Path, tmp_path
     res = train(pairs, run, resume=True, epochs=2)
     assert res.epochs_done == 2
     saved = torch.load(run / "last.pt", weights_only=True)["train_config"]
-    assert (saved["arch"], saved["stem"], saved["width"], saved["use_deformable"], saved["use_context"]) == \
-        ("unet", 1, 8, True, True)
+    assert (saved["arch"], saved["stem"], saved["width"], saved["use_deformable"], saved["use_context"]) == (
+        "unet",
+        1,
+        8,
+        True,
+        True,
+    )
     assert {k: saved[k] for k in asdict(TrainConfig()) if k in saved}.keys() == asdict(TrainConfig()).keys()
-    code, out, err = run_cli(["train", str(pairs), "-o", str(run), "--resume", "--epochs", "3", "--json"],
-                             capsys, monkeypatch)
+    code, out, err = run_cli(
+        ["train", str(pairs), "-o", str(run), "--resume", "--epochs", "3", "--json"], capsys, monkeypatch
+    )
     assert code == 0 and json.loads(out)["epochs_done"] == 3, err
     assert isinstance(load_checkpoint(run / "last.pt")[0], FieldAwareUNet)
     code, _, err = run_cli(["train", str(pairs), "-o", str(run), "--resume", "--arch", "nafnet"], capsys, monkeypatch)
     assert code == 2 and "arch" in err and err.count("\n") == 1
     # asking for the architecture's default of a frozen switch is no change
-    code, _, err = run_cli(["train", str(pairs), "-o", str(run), "--resume", "--epochs", "4", "--stem", "0",
-                            "--deformable", "--quiet"], capsys, monkeypatch)
+    code, _, err = run_cli(
+        ["train", str(pairs), "-o", str(run), "--resume", "--epochs", "4", "--stem", "0", "--deformable", "--quiet"],
+        capsys,
+        monkeypatch,
+    )
     assert code == 0, err
 
 
@@ -198,10 +250,20 @@ def test_demo_trains_the_networks_it_named_before(tmp_path: Path, monkeypatch) -
     as_unet = dataclasses.replace(quick, arch="unet")
     plain, model, unet = _demo_configs(tmp_path, monkeypatch, [(as_unet, True), (quick, False), (as_unet, False)])
     target = count_parameters(FieldAwareUNet(width=quick.width, deformable_scales=quick.deformable_scales))
-    assert plain.model_kwargs() == {**OLD_DEFAULT, "width": plain_unet_width(target, 3), "use_fov": False,
-                                    "use_deformable": False, "use_context": False}
-    assert (model.arch, model.use_fov, model.use_deformable, model.use_context, model.stem) == \
-        ("nafnet", True, False, False, quick.stem)
+    assert plain.model_kwargs() == {
+        **OLD_DEFAULT,
+        "width": plain_unet_width(target, 3),
+        "use_fov": False,
+        "use_deformable": False,
+        "use_context": False,
+    }
+    assert (model.arch, model.use_fov, model.use_deformable, model.use_context, model.stem) == (
+        "nafnet",
+        True,
+        False,
+        False,
+        quick.stem,
+    )
     assert unet.model_kwargs() == {**OLD_DEFAULT, "width": quick.width, "deformable_scales": quick.deformable_scales}
 
 
@@ -214,9 +276,11 @@ def test_demo_baseline_is_its_network_without_the_field_aware_parts(tmp_path: Pa
 
     settings = DemoSettings.make(quick=quick)
     plain, model = _demo_configs(tmp_path, monkeypatch, [(settings, True), (settings, False)])
-    assert (plain.arch, plain.use_fov, plain.use_deformable, plain.use_context, plain.stem) == \
-        ("nafnet", False, False, False, settings.stem) == \
-        tuple(plain_network(settings)[k] for k in ("arch", "use_fov", "use_deformable", "use_context", "stem"))
+    assert (
+        (plain.arch, plain.use_fov, plain.use_deformable, plain.use_context, plain.stem)
+        == ("nafnet", False, False, False, settings.stem)
+        == tuple(plain_network(settings)[k] for k in ("arch", "use_fov", "use_deformable", "use_context", "stem"))
+    )
     assert plain.width == plain_network(settings)["width"]
     with torch.device("meta"):
         plain_net, net = build_model(plain.model_kwargs()), build_model(model.model_kwargs())
@@ -248,10 +312,17 @@ def test_demo_names_the_network_its_run_holds(tmp_path: Path) -> None:
     from lensim.demo import _network
     from lensim.restore.checkpoint import CHECKPOINT_FORMAT
 
-    for name, net, words in (("new", NAFNet(8, stem=2), "plain NAFNet (stem 2, width 8)"),
-                             ("old", FieldAwareUNet(width=8, use_fov=False, use_deformable=False, use_context=False),
-                              "plain UNet (width 8)")):
+    for name, net, words in (
+        ("new", NAFNet(8, stem=2), "plain NAFNet (stem 2, width 8)"),
+        (
+            "old",
+            FieldAwareUNet(width=8, use_fov=False, use_deformable=False, use_context=False),
+            "plain UNet (width 8)",
+        ),
+    ):
         (tmp_path / name).mkdir()
-        atomic_torch_save({"format": CHECKPOINT_FORMAT, "model_config": net.config, "model_state": net.state_dict()},
-                          tmp_path / name / "last.pt")
+        atomic_torch_save(
+            {"format": CHECKPOINT_FORMAT, "model_config": net.config, "model_state": net.state_dict()},
+            tmp_path / name / "last.pt",
+        )
         assert _network(tmp_path / name) == words

@@ -1,5 +1,6 @@
 """Modulated deformable convolution (lensim.restore.deform): plain-conv limit, direct
 reference, the (dy, dx) layout, gradients. Tiny sizes: the whole file runs in seconds."""
+
 from __future__ import annotations
 
 import pytest
@@ -26,7 +27,15 @@ def _one_thread():  # type: ignore[no-untyped-def]
 
 
 def _case(
-    dtype: torch.dtype, b: int = 2, c: int = 4, h: int = 5, w: int = 7, out: int = 3, g: int = 2, k: int = 3, seed: int = 0
+    dtype: torch.dtype,
+    b: int = 2,
+    c: int = 4,
+    h: int = 5,
+    w: int = 7,
+    out: int = 3,
+    g: int = 2,
+    k: int = 3,
+    seed: int = 0,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     gen = torch.Generator().manual_seed(seed)
     x = torch.randn(b, c, h, w, generator=gen, dtype=dtype)
@@ -37,9 +46,7 @@ def _case(
     return x, offset, mask, weight, bias
 
 
-@pytest.mark.parametrize(
-    ("dtype", "tol"), [(torch.float32, 1e-6), (torch.float64, 1e-12)], ids=["float32", "float64"]
-)
+@pytest.mark.parametrize(("dtype", "tol"), [(torch.float32, 1e-6), (torch.float64, 1e-12)], ids=["float32", "float64"])
 @pytest.mark.parametrize("k", [1, 3, 5])
 def test_zero_offset_unit_mask_is_plain_conv(dtype: torch.dtype, tol: float, k: int) -> None:
     """offset 0, mask 1 -> exactly conv2d with 'same' zero padding (atol = rtol = tol)."""
@@ -126,9 +133,7 @@ def test_gradcheck_all_inputs() -> None:
     weight = torch.randn(out, c, 3, 3, generator=gen, dtype=torch.float64, requires_grad=True)
     bias = torch.randn(out, generator=gen, dtype=torch.float64, requires_grad=True)
 
-    def fn(
-        x_: torch.Tensor, o_: torch.Tensor, m_: torch.Tensor, w_: torch.Tensor, b_: torch.Tensor
-    ) -> torch.Tensor:
+    def fn(x_: torch.Tensor, o_: torch.Tensor, m_: torch.Tensor, w_: torch.Tensor, b_: torch.Tensor) -> torch.Tensor:
         return deform_conv2d_grid_sample(x_, o_, m_, w_, b_, g)
 
     assert torch.autograd.gradcheck(fn, (x, offset, mask, weight, bias), eps=1e-6, atol=1e-5)

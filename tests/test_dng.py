@@ -1,6 +1,7 @@
 """DNG writing (lensim.raw.dng): LibRaw (rawpy) reads back what was written; pidng, an
 independent DNG writer, gives LibRaw the same file contents; the colour matrix is the
 exact inverse of the CCM derivation and matches the camera's published Adobe matrix."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -29,7 +30,9 @@ rawpy = pytest.importorskip("rawpy")
 
 # Sony ILCE-7 Adobe DNG ColorMatrix (D65), dcraw's adobe_coeff / 10000: the source of the
 # built-in profiles' CCM (lensim/assets/sensors/fullframe_dslr.yaml)
-ILCE7_XYZ_TO_CAM = np.array([5271, -712, -347, -6153, 13653, 2763, -1601, 2366, 7242], dtype=np.float64).reshape(3, 3) / 1e4
+ILCE7_XYZ_TO_CAM = (
+    np.array([5271, -712, -347, -6153, 13653, 2763, -1601, 2366, 7242], dtype=np.float64).reshape(3, 3) / 1e4
+)
 LIBRAW_FLIP = {1: 0, 3: 3, 6: 6, 8: 5}  # TIFF orientation -> LibRaw's sizes.flip
 CAMERA = DngCamera("Lensim", "Test Camera")
 
@@ -58,9 +61,11 @@ def test_color_matrix_inverts_the_ccm_derivation_and_matches_adobe():
     np.testing.assert_allclose(cm @ d65, [1 / r65, 1.0, 1 / b65], rtol=1e-4)
 
 
-@pytest.mark.parametrize("pattern,bits,orientation", [("RGGB", 12, 1), ("BGGR", 14, 3), ("GRBG", 16, 6), ("GBRG", 14, 8)])
+@pytest.mark.parametrize(
+    "pattern,bits,orientation", [("RGGB", 12, 1), ("BGGR", 14, 3), ("GRBG", 16, 6), ("GBRG", 14, 8)]
+)
 def test_cfa_dng_reads_back_in_libraw(tmp_path: Path, pattern: str, bits: int, orientation: int):
-    white = 2 ** bits - 1
+    white = 2**bits - 1
     black = [64 * (bits - 10) + k for k in range(4)]  # a different level per CFA position
     mosaic = _mosaic(24, 36, white)
     colour = DngColour.from_gains(ILCE7_XYZ_TO_CAM, 2.1, 1.6)
@@ -108,13 +113,26 @@ def test_pidng_writes_what_libraw_reads_the_same(tmp_path: Path):
         return [round(v * 10000), 10000]
 
     t = DNGTags()
-    for tag, value in [(Tag.ImageWidth, 48), (Tag.ImageLength, 32), (Tag.TileWidth, 48), (Tag.TileLength, 32),
-                       (Tag.BitsPerSample, 16), (Tag.SamplesPerPixel, 1), (Tag.PhotometricInterpretation, 32803),
-                       (Tag.CFARepeatPatternDim, [2, 2]), (Tag.CFAPattern, [1, 2, 0, 1]), (Tag.BlackLevel, 512),
-                       (Tag.WhiteLevel, 16383), (Tag.ColorMatrix1, [rational(v) for v in cm.ravel()]),
-                       (Tag.CalibrationIlluminant1, 21), (Tag.AsShotNeutral, [rational(v) for v in neutral]),
-                       (Tag.Make, "Lensim"), (Tag.Model, "Test Camera"), (Tag.Orientation, 1),
-                       (Tag.DNGVersion, [1, 4, 0, 0])]:
+    for tag, value in [
+        (Tag.ImageWidth, 48),
+        (Tag.ImageLength, 32),
+        (Tag.TileWidth, 48),
+        (Tag.TileLength, 32),
+        (Tag.BitsPerSample, 16),
+        (Tag.SamplesPerPixel, 1),
+        (Tag.PhotometricInterpretation, 32803),
+        (Tag.CFARepeatPatternDim, [2, 2]),
+        (Tag.CFAPattern, [1, 2, 0, 1]),
+        (Tag.BlackLevel, 512),
+        (Tag.WhiteLevel, 16383),
+        (Tag.ColorMatrix1, [rational(v) for v in cm.ravel()]),
+        (Tag.CalibrationIlluminant1, 21),
+        (Tag.AsShotNeutral, [rational(v) for v in neutral]),
+        (Tag.Make, "Lensim"),
+        (Tag.Model, "Test Camera"),
+        (Tag.Orientation, 1),
+        (Tag.DNGVersion, [1, 4, 0, 0]),
+    ]:
         t.set(tag, value)
     writer = RAW2DNG()
     writer.options(t, path=str(tmp_path), compress=False)
@@ -131,8 +149,9 @@ def test_linear_dng_reads_back_in_libraw(tmp_path: Path):
     rng = np.random.default_rng(2)
     cam = rng.uniform(-0.05, 1.05, (3, 24, 30)).astype(np.float32)
     colour = DngColour.from_gains(ILCE7_XYZ_TO_CAM, 2.0, 1.5, 21).with_second_matrix(ILCE7_XYZ_TO_CAM * 1.1, 17)
-    path = write_linear_dng(tmp_path / "lin.dng", torch.from_numpy(cam), colour, CAMERA, orientation=6,
-                            exif=DngExif(iso=100), block_rows=7)
+    path = write_linear_dng(
+        tmp_path / "lin.dng", torch.from_numpy(cam), colour, CAMERA, orientation=6, exif=DngExif(iso=100), block_rows=7
+    )
     expected = np.rint(np.clip(cam, 0, 1) * 65535).astype(np.uint16).transpose(1, 2, 0)
     with rawpy.imread(str(path)) as raw:
         assert raw.raw_type == rawpy.RawType.Stack
@@ -172,8 +191,20 @@ def test_capture_dng_holds_the_simulated_adc_output(tmp_path: Path):
     record = read_simulation_record(path)
     assert record is not None and record["sensor"] == prof.name and record["capture"]["r_gain"] == params.r_gain
     assert (record["x0_mm"], record["pitch_um"]) == (-prof.sensor_size_mm[0] / 2, prof.pixel_pitch_um)
-    assert read_simulation_record(write_cfa_dng(tmp_path / "other.dng", _mosaic(24, 24, 4095), "RGGB", 0, 4095,
-                                                DngColour.from_gains(np.eye(3), 1, 1), CAMERA)) is None
+    assert (
+        read_simulation_record(
+            write_cfa_dng(
+                tmp_path / "other.dng",
+                _mosaic(24, 24, 4095),
+                "RGGB",
+                0,
+                4095,
+                DngColour.from_gains(np.eye(3), 1, 1),
+                CAMERA,
+            )
+        )
+        is None
+    )
     with rawpy.imread(str(path)) as r:
         back = (r.raw_image_visible.astype(np.float64) - prof.black_level) / (prof.white_level - prof.black_level)
         np.testing.assert_allclose(back, raw.numpy(), atol=1e-6)
@@ -182,15 +213,27 @@ def test_capture_dng_holds_the_simulated_adc_output(tmp_path: Path):
         np.testing.assert_allclose(r.camera_whitebalance[:3], [params.r_gain, 1.0, params.b_gain], rtol=1e-5)
 
 
-@pytest.mark.parametrize("kwargs,field", [({"cfa_pattern": "RGBX"}, "cfa_pattern"), ({"orientation": 9}, "orientation"),
-                                          ({"white_level": 1000}, "mosaic"), ({"black_level": [1, 2, 3]}, "black_level"),
-                                          ({"mosaic": np.zeros((20, 40), np.uint16)}, "mosaic")])
+@pytest.mark.parametrize(
+    "kwargs,field",
+    [
+        ({"cfa_pattern": "RGBX"}, "cfa_pattern"),
+        ({"orientation": 9}, "orientation"),
+        ({"white_level": 1000}, "mosaic"),
+        ({"black_level": [1, 2, 3]}, "black_level"),
+        ({"mosaic": np.zeros((20, 40), np.uint16)}, "mosaic"),
+    ],
+)
 def test_bad_arguments_write_nothing(tmp_path: Path, kwargs: dict, field: str):
-    args = {"mosaic": _mosaic(24, 24, 4095), "cfa_pattern": "RGGB", "black_level": 0, "white_level": 4095,
-            "orientation": 1, **kwargs}
+    args = {
+        "mosaic": _mosaic(24, 24, 4095),
+        "cfa_pattern": "RGGB",
+        "black_level": 0,
+        "white_level": 4095,
+        "orientation": 1,
+        **kwargs,
+    }
     with pytest.raises(InputError) as err:
-        write_cfa_dng(tmp_path / "bad.dng", colour=DngColour.from_gains(np.eye(3), 1, 1),
-                      camera=CAMERA, **args)
+        write_cfa_dng(tmp_path / "bad.dng", colour=DngColour.from_gains(np.eye(3), 1, 1), camera=CAMERA, **args)
     assert err.value.field == field
     assert list(tmp_path.iterdir()) == []
 
@@ -204,8 +247,16 @@ def test_simulate_writes_the_mosaic_it_develops(tmp_path: Path):
     prof = load_sensor("apsc_mirrorless")
     photo = torch.rand(3, 32, 48, generator=torch.Generator().manual_seed(5))
     mapping = native_mapping(32, 48, prof, 1000, 2000)
-    out, params = simulate(photo, None, prof, torch.Generator().manual_seed(6), blur=False, bits=None, mapping=mapping,
-                           raw_path=tmp_path / "s.dng")
+    out, params = simulate(
+        photo,
+        None,
+        prof,
+        torch.Generator().manual_seed(6),
+        blur=False,
+        bits=None,
+        mapping=mapping,
+        raw_path=tmp_path / "s.dng",
+    )
     with rawpy.imread(str(tmp_path / "s.dng")) as r:
         dn = torch.from_numpy(r.raw_image_visible.astype(np.float32))
     raw = (dn - prof.black_level) / (prof.white_level - prof.black_level)
@@ -220,8 +271,11 @@ def test_simulate_command_writes_a_dng(tmp_path: Path, capsys, monkeypatch):
     from lensim.images import write_image
 
     write_image(tmp_path / "photo.png", torch.rand(3, 24, 36, generator=torch.Generator().manual_seed(7)))
-    code, _, err = run_cli(["simulate", str(tmp_path / "photo.png"), "-o", str(tmp_path / "out"), "--no-blur", "--raw",
-                            "--quiet"], capsys, monkeypatch)
+    code, _, err = run_cli(
+        ["simulate", str(tmp_path / "photo.png"), "-o", str(tmp_path / "out"), "--no-blur", "--raw", "--quiet"],
+        capsys,
+        monkeypatch,
+    )
     assert code == 0, err
     with rawpy.imread(str(tmp_path / "out" / "photo.dng")) as r:
         assert r.raw_image_visible.shape == (24, 36) and _pattern_from_libraw(r) == "RGGB"

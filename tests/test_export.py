@@ -2,6 +2,7 @@
 (`lensim restore --engine onnxruntime`, lensim.restore.engines): the exported graph equals
 the PyTorch network within 1e-3 on a 512 x 512 tile, on sizes other than the traced one,
 batched; metadata round trip; one-line refusals; restore with either engine agrees."""
+
 from __future__ import annotations
 
 import json
@@ -49,14 +50,27 @@ def perturbed(seed: int = 0, **kw) -> FieldAwareUNet:
     return model.eval()
 
 
-def save_run(folder: Path, model: torch.nn.Module, sensor: dict | None = None,
-             conditioning: dict | None = None) -> Path:
+def save_run(
+    folder: Path, model: torch.nn.Module, sensor: dict | None = None, conditioning: dict | None = None
+) -> Path:
     folder.mkdir(parents=True, exist_ok=True)
     sensor = sensor or load_sensor("apsc_mirrorless").to_dict()
-    atomic_torch_save({"format": CHECKPOINT_FORMAT, "version": 1, "model_config": model.config,
-                       "model_state": model.state_dict(), "sensor": sensor, "sensor_name": sensor["name"],
-                       "lens": {"name": "test lens"}, "train_config": {"crop": 96, "lr": 5e-4}, "epoch": 3,
-                       "step": 42, "conditioning": conditioning}, folder / "best.pt")
+    atomic_torch_save(
+        {
+            "format": CHECKPOINT_FORMAT,
+            "version": 1,
+            "model_config": model.config,
+            "model_state": model.state_dict(),
+            "sensor": sensor,
+            "sensor_name": sensor["name"],
+            "lens": {"name": "test lens"},
+            "train_config": {"crop": 96, "lr": 5e-4},
+            "epoch": 3,
+            "step": 42,
+            "conditioning": conditioning,
+        },
+        folder / "best.pt",
+    )
     return folder
 
 
@@ -109,7 +123,7 @@ def test_one_file_runs_any_size_and_batch(narrow):
     dynamic."""
     model, _, path = narrow
     engine = OnnxEngine(path)
-    for (n, h, w) in [(1, 96, 160), (1, 53, 37), (3, 30, 18), (1, 1, 9)]:
+    for n, h, w in [(1, 96, 160), (1, 53, 37), (3, 30, 18), (1, 1, 9)]:
         rgb, fov = tile_inputs(h, w, n, seed=h)
         assert max_diff(model, engine, rgb, fov) < TOL, (n, h, w)
 
@@ -211,8 +225,9 @@ def test_restore_command_onnxruntime_equals_torch(narrow, tmp_path: Path, capsys
     common = [str(photo), "--sensor-offset", "1000,2000", "--tile", "48", "--overlap", "24", "--quiet"]
     outs = {}
     for name, source, engine in [("torch", run, "torch"), ("file", path, "onnxruntime"), ("fly", run, "onnxruntime")]:
-        code, _, err = run_cli(["restore", str(source), *common, "-o", str(tmp_path / name), "--engine", engine],
-                               capsys, monkeypatch)
+        code, _, err = run_cli(
+            ["restore", str(source), *common, "-o", str(tmp_path / name), "--engine", engine], capsys, monkeypatch
+        )
         assert code == 0, err
         outs[name] = read_tif16(tmp_path / name / "a.tif")
     assert np.abs(outs["torch"] - read_tif16(photo)).max() > 0.05
@@ -240,37 +255,72 @@ def test_conditioned_restore_reads_the_conditioning_from_the_file(tmp_path: Path
     photo = write_tif16(tmp_path / "a.tif", 40, 56, 3)
     outs = {}
     for name, source, engine in [("torch", run, "torch"), ("ort", path, "onnxruntime")]:
-        code, _, err = run_cli(["restore", str(source), str(photo), "-o", str(tmp_path / name), "--quiet", "--engine",
-                                engine, "--fno", "4", "--focus-m", "3", "--sensor-offset", "100,200"], capsys,
-                               monkeypatch)
+        code, _, err = run_cli(
+            [
+                "restore",
+                str(source),
+                str(photo),
+                "-o",
+                str(tmp_path / name),
+                "--quiet",
+                "--engine",
+                engine,
+                "--fno",
+                "4",
+                "--focus-m",
+                "3",
+                "--sensor-offset",
+                "100,200",
+            ],
+            capsys,
+            monkeypatch,
+        )
         assert code == 0, err
         outs[name] = read_tif16(tmp_path / name / "a.tif")
     assert np.abs(outs["ort"] - outs["torch"]).max() < TOL
     assert np.abs(outs["torch"] - read_tif16(photo)).max() > 0.05
-    code, _, err = run_cli(["restore", str(path), str(photo), "-o", str(tmp_path / "x"), "--engine", "onnxruntime",
-                            "--sensor-offset", "100,200"], capsys, monkeypatch)
+    code, _, err = run_cli(
+        [
+            "restore",
+            str(path),
+            str(photo),
+            "-o",
+            str(tmp_path / "x"),
+            "--engine",
+            "onnxruntime",
+            "--sensor-offset",
+            "100,200",
+        ],
+        capsys,
+        monkeypatch,
+    )
     assert code == 2 and len(err.strip().splitlines()) == 1 and "--fno" in err, err
 
 
 def test_export_command(narrow, tmp_path: Path, capsys, monkeypatch):
     _, run, _ = narrow
-    code, out, err = run_cli(["export", str(run), "-o", str(tmp_path / "sub" / "m.onnx"), "--opset", "18", "--json"],
-                             capsys, monkeypatch)
+    code, out, err = run_cli(
+        ["export", str(run), "-o", str(tmp_path / "sub" / "m.onnx"), "--opset", "18", "--json"], capsys, monkeypatch
+    )
     assert code == 0, err
     doc = json.loads(out)
     assert doc["metadata"]["opset"] == 18 and (tmp_path / "sub" / "m.onnx").is_file()
     assert [p.name for p in (tmp_path / "sub").iterdir()] == ["m.onnx"]  # no temporary left
 
 
-@pytest.mark.parametrize("make, expect", [
-    (lambda t: torch.save({"weights": torch.zeros(3)}, t / "other.pt"), "format"),
-    (lambda t: (t / "other.pt").write_bytes(b"not a checkpoint at all"), "corrupt"),
-    (lambda t: (t / "other.pt").mkdir(), "no best.pt or last.pt"),
-])
+@pytest.mark.parametrize(
+    "make, expect",
+    [
+        (lambda t: torch.save({"weights": torch.zeros(3)}, t / "other.pt"), "format"),
+        (lambda t: (t / "other.pt").write_bytes(b"not a checkpoint at all"), "corrupt"),
+        (lambda t: (t / "other.pt").mkdir(), "no best.pt or last.pt"),
+    ],
+)
 def test_export_refuses_what_is_not_a_restoration_run(make, expect, tmp_path: Path, capsys, monkeypatch):
     make(tmp_path)
-    code, out, err = run_cli(["export", str(tmp_path / "other.pt"), "-o", str(tmp_path / "m.onnx")], capsys,
-                             monkeypatch)
+    code, out, err = run_cli(
+        ["export", str(tmp_path / "other.pt"), "-o", str(tmp_path / "m.onnx")], capsys, monkeypatch
+    )
     assert code == 2 and out == ""
     assert len(err.strip().splitlines()) == 1 and expect in err and "other.pt" in err, err
     assert not (tmp_path / "m.onnx").exists()
@@ -312,8 +362,24 @@ def test_raw_restore_onnxruntime_equals_torch(tmp_path: Path, capsys, monkeypatc
     run, onnx_file, dngs = raw_run(tmp_path)
     outs = {}
     for name, source, engine in [("torch", run, "torch"), ("ort", onnx_file, "onnxruntime")]:
-        code, _, err = run_cli(["restore", str(source), str(dngs[0]), "-o", str(tmp_path / name), "--quiet",
-                                "--tile", "32", "--overlap", "8", "--engine", engine], capsys, monkeypatch)
+        code, _, err = run_cli(
+            [
+                "restore",
+                str(source),
+                str(dngs[0]),
+                "-o",
+                str(tmp_path / name),
+                "--quiet",
+                "--tile",
+                "32",
+                "--overlap",
+                "8",
+                "--engine",
+                engine,
+            ],
+            capsys,
+            monkeypatch,
+        )
         assert code == 0, err
         outs[name] = read_tif16(tmp_path / name / "s0.tif")
     assert np.abs(outs["ort"] - outs["torch"]).max() < TOL
@@ -325,8 +391,22 @@ def test_raw_worker_processes_run_onnxruntime(tmp_path: Path, capsys, monkeypatc
     exported bytes (the run exported on the fly) and writes what the torch engine writes."""
     run, _, dngs = raw_run(tmp_path)
     for name, engine, workers in [("torch", "torch", "1"), ("ort", "onnxruntime", "2")]:
-        code, _, err = run_cli(["restore", str(run), str(tmp_path / "raws"), "-o", str(tmp_path / name), "--quiet",
-                                "--engine", engine, "--workers", workers], capsys, monkeypatch)
+        code, _, err = run_cli(
+            [
+                "restore",
+                str(run),
+                str(tmp_path / "raws"),
+                "-o",
+                str(tmp_path / name),
+                "--quiet",
+                "--engine",
+                engine,
+                "--workers",
+                workers,
+            ],
+            capsys,
+            monkeypatch,
+        )
         assert code == 0, err
     for d in dngs:
         a, b = read_tif16(tmp_path / "torch" / f"{d.stem}.tif"), read_tif16(tmp_path / "ort" / f"{d.stem}.tif")

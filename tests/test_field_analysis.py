@@ -1,4 +1,5 @@
 """Distortion and relative illumination (lensim.optics.field_analysis); tolerances per test."""
+
 from __future__ import annotations
 
 import math
@@ -29,14 +30,25 @@ def _symmetric_unit_magnification() -> Lens:
         Surface(-1 / 80.0, 6.0, glass),
         Surface(-1 / 30.0, d),
     ]
-    return Lens(surfaces, aperture_type="epd", aperture_value=6.0, field_type="object_height",
-                fields=[0.0, 10.0, 20.0], wavelengths_um=[0.55], object_distance=d)
+    return Lens(
+        surfaces,
+        aperture_type="epd",
+        aperture_value=6.0,
+        field_type="object_height",
+        fields=[0.0, 10.0, 20.0],
+        wavelengths_um=[0.55],
+        object_distance=d,
+    )
 
 
 def _thin_lens(thickness: float, epd: float) -> Lens:
     """A plano-convex singlet, f = 100 mm, stop on its first surface, image at the BFL."""
-    lens = Lens([Surface(1 / 50.0, thickness, ConstantIndex(1.5), is_stop=True), Surface(0.0, 100.0)],
-                aperture_value=epd, fields=[0.0, 30.0], wavelengths_um=[0.55])
+    lens = Lens(
+        [Surface(1 / 50.0, thickness, ConstantIndex(1.5), is_stop=True), Surface(0.0, 100.0)],
+        aperture_value=epd,
+        fields=[0.0, 30.0],
+        wavelengths_um=[0.55],
+    )
     lens.surfaces[-1].thickness = paraxial_data(lens).bfl_mm
     return lens
 
@@ -58,10 +70,18 @@ def test_distortion_vanishes_for_symmetric_lens_at_unit_magnification():
 def test_distortion_sign_follows_stop_position():
     # textbook: a positive lens with the stop in front gives barrel (negative) distortion,
     # with the stop behind pincushion (positive); both grow with the field
-    front = Lens([Surface(0.0, 20.0, is_stop=True), Surface(1 / 50.0, 4.0, ConstantIndex(1.5)), Surface(0.0, 95.0)],
-                 aperture_value=4.0, fields=[0.0, 20.0], wavelengths_um=[0.55])
-    behind = Lens([Surface(1 / 50.0, 4.0, ConstantIndex(1.5)), Surface(0.0, 20.0), Surface(0.0, 75.0, is_stop=True)],
-                  aperture_value=4.0, fields=[0.0, 20.0], wavelengths_um=[0.55])
+    front = Lens(
+        [Surface(0.0, 20.0, is_stop=True), Surface(1 / 50.0, 4.0, ConstantIndex(1.5)), Surface(0.0, 95.0)],
+        aperture_value=4.0,
+        fields=[0.0, 20.0],
+        wavelengths_um=[0.55],
+    )
+    behind = Lens(
+        [Surface(1 / 50.0, 4.0, ConstantIndex(1.5)), Surface(0.0, 20.0), Surface(0.0, 75.0, is_stop=True)],
+        aperture_value=4.0,
+        fields=[0.0, 20.0],
+        wavelengths_um=[0.55],
+    )
     fields = [5.0, 10.0, 20.0]
     barrel = distortion(front, fields)["distortion_percent"]
     pincushion = distortion(behind, fields)["distortion_percent"]
@@ -152,9 +172,16 @@ def test_clear_aperture_lowers_relative_illumination_by_blocked_fraction():
     # unvignetted RI must equal it; tolerance 2e-3 (64 cells across the pupil with 2 x 2
     # vignetting subsamples, and the 1 % variation of the map's Jacobian over the pupil).
     def system(clear):
-        lens = Lens([Surface(0.0, 20.0, Air(), clear_radius=clear),
-                     Surface(1 / 500.0, 0.5, ConstantIndex(1.5), is_stop=True), Surface(0.0, 1000.0)],
-                    aperture_value=10.0, fields=[0.0, 15.0], wavelengths_um=[0.55])
+        lens = Lens(
+            [
+                Surface(0.0, 20.0, Air(), clear_radius=clear),
+                Surface(1 / 500.0, 0.5, ConstantIndex(1.5), is_stop=True),
+                Surface(0.0, 1000.0),
+            ],
+            aperture_value=10.0,
+            fields=[0.0, 15.0],
+            wavelengths_um=[0.55],
+        )
         lens.surfaces[-1].thickness = 995.0
         return lens
 

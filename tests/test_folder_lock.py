@@ -1,4 +1,5 @@
 """lensim.io.folder_lock: one writer per output folder, never stuck after a kill."""
+
 import os
 import signal
 import socket
@@ -13,8 +14,10 @@ from lensim.errors import InputError
 from lensim.io import LOCK_NAME, folder_lock
 
 ROOT = Path(__file__).resolve().parents[1]
-HOLDER = "import sys, time; from lensim.io import folder_lock\nwith folder_lock(sys.argv[1]):\n" \
-         "    print('held', flush=True); time.sleep(60)\n"
+HOLDER = (
+    "import sys, time; from lensim.io import folder_lock\nwith folder_lock(sys.argv[1]):\n"
+    "    print('held', flush=True); time.sleep(60)\n"
+)
 
 
 def _hold_in_subprocess(folder: Path) -> subprocess.Popen:
@@ -70,8 +73,10 @@ def test_a_failed_run_removes_the_folder_it_created_when_left_empty(tmp_path):
 def test_a_folder_that_cannot_be_written_is_one_line(tmp_path):
     afile = tmp_path / "afile"
     afile.write_text("x")
-    with pytest.raises(InputError, match=f"^{afile / 'out'}: cannot use it as an output folder"), \
-            folder_lock(afile / "out"):
+    with (
+        pytest.raises(InputError, match=f"^{afile / 'out'}: cannot use it as an output folder"),
+        folder_lock(afile / "out"),
+    ):
         pass
     if os.geteuid() != 0:  # root writes anywhere
         locked = tmp_path / "ro"
@@ -92,11 +97,12 @@ def test_commands_refuse_a_folder_another_run_writes(command, tmp_path, capsys, 
     if command == "report":
         folder.mkdir()
         (folder / "report.json").write_text("{}")
-    args = {"demo": ["demo", "--quick", "--quiet", "-o", str(folder)],
-            "train": ["train", str(pairs), "-o", str(folder), "--width", "8", "--depth", "2", "--crop", "32",
-                      "--quiet"],
-            "ablation": ["ablation", str(pairs), "-o", str(folder), "--time-budget-s", "1", "--crop", "32"],
-            "report": ["report", str(folder)]}[command]
+    args = {
+        "demo": ["demo", "--quick", "--quiet", "-o", str(folder)],
+        "train": ["train", str(pairs), "-o", str(folder), "--width", "8", "--depth", "2", "--crop", "32", "--quiet"],
+        "ablation": ["ablation", str(pairs), "-o", str(folder), "--time-budget-s", "1", "--crop", "32"],
+        "report": ["report", str(folder)],
+    }[command]
     proc = _hold_in_subprocess(folder)
     try:
         before = sorted(p.name for p in folder.iterdir())

@@ -1,6 +1,7 @@
 """FOV channels (lensim.restore.fov): values, crops, and dihedral augmentation that keeps
 the channels equal to the coordinates of the transformed sensor (the authors' release only
 moved the values with the pixels; that is shown to fail here)."""
+
 from __future__ import annotations
 
 import math

@@ -1,6 +1,7 @@
 """Banks over a grid of shooting settings (lensim.psf.bank.grid): one bank per setting
 under one manifest, each the very bank of that one setting; resume; refusals; the lists
 on the command line; nearest and interpolated settings."""
+
 from __future__ import annotations
 
 import json
@@ -47,8 +48,14 @@ def test_parse_setting_lists():
     assert parse_setting_list("inf,3,1", "focus_m") == (math.inf, 3.0, 1.0)
     assert parse_setting_list("wide,tele", "config") == ("wide", "tele")
     assert parse_setting_list(None, "fno") is None
-    for text, needle in (("2,,3", "empty"), ("0", "positive"), ("2,2.0", "twice"), ("nan", "positive"),
-                         ("", "empty"), ("2,x", "number")):
+    for text, needle in (
+        ("2,,3", "empty"),
+        ("0", "positive"),
+        ("2,2.0", "twice"),
+        ("nan", "positive"),
+        ("", "empty"),
+        ("2,x", "number"),
+    ):
         with pytest.raises(InputError, match=needle) as e:
             parse_setting_list(text, "fno")
         assert e.value.field == "--fno" and "\n" not in str(e.value)
@@ -60,8 +67,12 @@ def test_parse_setting_lists():
 
 def test_axes_product_order():
     shots = GridAxes(fno=(2.0, 4.0), focus_m=(math.inf, 1.0), config=("a",)).settings()
-    assert [(s.config, s.fno, s.focus_m) for s in shots] == [("a", 2.0, math.inf), ("a", 2.0, 1.0),
-                                                            ("a", 4.0, math.inf), ("a", 4.0, 1.0)]
+    assert [(s.config, s.fno, s.focus_m) for s in shots] == [
+        ("a", 2.0, math.inf),
+        ("a", 2.0, 1.0),
+        ("a", 4.0, math.inf),
+        ("a", 4.0, 1.0),
+    ]
     assert GridAxes(fno=(2.0,)).given and not GridAxes(fno=(2.0,)).is_grid and not GridAxes().given
 
 
@@ -132,11 +143,18 @@ def test_nearest_and_interpolated(grid_dir):
     np.testing.assert_allclose(mid.fields[1].rgb, want, rtol=1e-6, atol=1e-9)
     assert [round(f["weight"], 9) for f in mid.manifest["interpolated"]["from"]] == [0.25] * 4
     edge = grid.interpolated(fno=8.0, focus_m=4.0)  # on the F/8 edge: two banks, 3/4 at infinity
-    np.testing.assert_allclose(edge.fields[2].rgb, 0.75 * grid.bank(2).fields[2].rgb.astype(np.float64)
-                               + 0.25 * grid.bank(3).fields[2].rgb, rtol=1e-6, atol=1e-9)
-    for bad, needle in ((dict(fno=4.0, focus_m=2.0), "outside the grid"), (dict(fno=6.0, focus_m=0.5), "outside"),
-                        (dict(focus_m=2.0), "expected a value"), (dict(fno=6.0, focus_m=2.0, object_m=2.0),
-                                                                   "does not vary")):
+    np.testing.assert_allclose(
+        edge.fields[2].rgb,
+        0.75 * grid.bank(2).fields[2].rgb.astype(np.float64) + 0.25 * grid.bank(3).fields[2].rgb,
+        rtol=1e-6,
+        atol=1e-9,
+    )
+    for bad, needle in (
+        (dict(fno=4.0, focus_m=2.0), "outside the grid"),
+        (dict(fno=6.0, focus_m=0.5), "outside"),
+        (dict(focus_m=2.0), "expected a value"),
+        (dict(fno=6.0, focus_m=2.0, object_m=2.0), "does not vary"),
+    ):
         with pytest.raises(InputError, match=needle):
             grid.interpolated(**bad)
 
@@ -149,8 +167,10 @@ def test_f_numbers_blended_across_more_than_a_stop_warn(grid_dir):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         GridBank.load(grid_dir).interpolated(fno=6.7, focus_m=3.0)  # F/5.6 to F/8: one stop, no warning
-        assert _bracket("focus_m", [math.inf, 1.0], 3.0, "g") == [(math.inf, pytest.approx(2 / 3)),
-                                                                  (1.0, pytest.approx(1 / 3))]
+        assert _bracket("focus_m", [math.inf, 1.0], 3.0, "g") == [
+            (math.inf, pytest.approx(2 / 3)),
+            (1.0, pytest.approx(1 / 3)),
+        ]
     with pytest.warns(GridInterpolationWarning, match="1.9 stops apart"):
         assert [v for v, _ in _bracket("fno", [5.6, 11.0], 8.0, "g")] == [5.6, 11.0]
 
@@ -159,15 +179,37 @@ def test_command_line_grid_json_and_show(grid_dir, tmp_path, capsys, monkeypatch
     from cli_runner import run_cli
 
     out = tmp_path / "g"
-    code, text, err = run_cli(["psf", "bank", "cooke_triplet", "--pixel-um", "4", "--kernel", "15", "--fields", "2",
-                               "--wavelengths-nm", "550", "--pupil-samples", "32", "--fno", "8,5.6", "-o", str(out),
-                               "--json"], capsys, monkeypatch)
+    code, text, err = run_cli(
+        [
+            "psf",
+            "bank",
+            "cooke_triplet",
+            "--pixel-um",
+            "4",
+            "--kernel",
+            "15",
+            "--fields",
+            "2",
+            "--wavelengths-nm",
+            "550",
+            "--pupil-samples",
+            "32",
+            "--fno",
+            "8,5.6",
+            "-o",
+            str(out),
+            "--json",
+        ],
+        capsys,
+        monkeypatch,
+    )
     assert code == 0, err
     info = json.loads(text)
     assert info["settings"] == 2 and [e["request"]["fno"] for e in info["grid"]] == [8.0, 5.6]
     assert [p.name for p in sorted(out.iterdir()) if p.is_dir()] == ["s000", "s001"]
-    code, text, err = run_cli(["psf", "show", str(grid_dir), "-o", str(tmp_path / "one"), "--setting", "3"], capsys,
-                              monkeypatch)
+    code, text, err = run_cli(
+        ["psf", "show", str(grid_dir), "-o", str(tmp_path / "one"), "--setting", "3"], capsys, monkeypatch
+    )
     assert code == 0 and "F/8, focus 1 m" in text and (tmp_path / "one" / "psf_map.png").is_file()
     code, text, err = run_cli(["psf", "show", str(out), "-o", str(tmp_path / "all")], capsys, monkeypatch)
     assert code == 0 and all((tmp_path / "all" / s / "strehl.png").is_file() for s in ("s000", "s001"))
@@ -176,6 +218,7 @@ def test_command_line_grid_json_and_show(grid_dir, tmp_path, capsys, monkeypatch
     from lensim.images import write_image
 
     write_image(tmp_path / "x.png", torch.rand(3, 32, 48), 8)
-    code, _, err = run_cli(["simulate", str(tmp_path / "x.png"), "--bank", str(out), "-o", str(tmp_path / "s")],
-                           capsys, monkeypatch)
+    code, _, err = run_cli(
+        ["simulate", str(tmp_path / "x.png"), "--bank", str(out), "-o", str(tmp_path / "s")], capsys, monkeypatch
+    )
     assert code == 2 and err.count("\n") == 1 and "grid of 2 banks" in err, err

@@ -1,6 +1,7 @@
 """Training pairs across a grid of shooting settings (dataset make --bank GRID): each photo
 gets one setting, seeded and balanced; its record carries the resolved settings; a photo's
 pairs are those its setting's bank alone gives; resume and refusals as for one bank."""
+
 from __future__ import annotations
 
 import json
@@ -32,8 +33,9 @@ def world(tmp_path_factory):
     sensor = load_sensor(SENSOR)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        grid = compute_grid(load_lens("cooke_triplet"), sensor.pixel_pitch_um, GridAxes(fno=(5.6, 8.0)), SETTINGS,
-                            base / "grid")
+        grid = compute_grid(
+            load_lens("cooke_triplet"), sensor.pixel_pitch_um, GridAxes(fno=(5.6, 8.0)), SETTINGS, base / "grid"
+        )
         made = make_dataset(base / "sharp", base / "data", grid, SENSOR, sensor, **OPTIONS)
     return base, sensor, grid, made
 
@@ -42,8 +44,14 @@ def test_settings_of_photos_are_balanced_and_seeded():
     picks = grid_settings_of_photos(0, 10, 4)
     assert picks == grid_settings_of_photos(0, 10, 4) and len(picks) == 10
     assert sorted(picks[:4]) == [0, 1, 2, 3] and sorted(picks[4:8]) == [0, 1, 2, 3]
-    assert [picks.count(k) for k in range(4)] in ([3, 3, 2, 2], [3, 2, 3, 2], [3, 2, 2, 3], [2, 3, 3, 2],
-                                                  [2, 3, 2, 3], [2, 2, 3, 3])
+    assert [picks.count(k) for k in range(4)] in (
+        [3, 3, 2, 2],
+        [3, 2, 3, 2],
+        [3, 2, 2, 3],
+        [2, 3, 3, 2],
+        [2, 3, 2, 3],
+        [2, 2, 3, 3],
+    )
     assert any(grid_settings_of_photos(s, 10, 4) != picks for s in range(1, 5))
     assert grid_settings_of_photos(5, 3, 1) == [0, 0, 0]
 
@@ -80,8 +88,9 @@ def test_resume_and_refusals(world, tmp_path):
     (out / "records" / "000001.json").unlink()
     (out / made["records"][1]["crops"][0]["input"]).unlink()
     calls = []
-    again = make_dataset(base / "sharp", out, grid, SENSOR, sensor, progress=lambda d, t: calls.append((d, t)),
-                         **OPTIONS)
+    again = make_dataset(
+        base / "sharp", out, grid, SENSOR, sensor, progress=lambda d, t: calls.append((d, t)), **OPTIONS
+    )
     assert calls[0] == (2, 3) and again["records"] == made["records"]
     for rec in made["records"]:
         for c in rec["crops"]:

@@ -1,4 +1,5 @@
 """The evaluation harness and `lensim evaluate` on a tiny generated pairs dataset."""
+
 import json
 import math
 
@@ -33,15 +34,25 @@ def pairs(tmp_path_factory):
     sensor_file = base / "tiny_sensor.json"
     sensor_file.write_text(json.dumps(d))
     sensor = sensor_from_dict(d, str(sensor_file))
-    bank = compute_bank(load_lens("cooke_triplet"), sensor.pixel_pitch_um, 21, fields=[0.0, 0.5, 1.0],
-                        wavelengths_nm=[500, 600], pupil_samples=64, out_dir=base / "bank")
+    bank = compute_bank(
+        load_lens("cooke_triplet"),
+        sensor.pixel_pitch_um,
+        21,
+        fields=[0.0, 0.5, 1.0],
+        wavelengths_nm=[500, 600],
+        pupil_samples=64,
+        out_dir=base / "bank",
+    )
     make_dataset(sharp, base / "pairs", bank, str(sensor_file), sensor, crops=1, size=96, seed=1)
     return base / "pairs"
 
 
 def _methods():
-    return {"wiener": harness.builtin_method("wiener"), "rl": harness.builtin_method("rl", iterations=2),
-            "unsharp": harness.builtin_method("unsharp")}
+    return {
+        "wiener": harness.builtin_method("wiener"),
+        "rl": harness.builtin_method("rl", iterations=2),
+        "unsharp": harness.builtin_method("unsharp"),
+    }
 
 
 def _check_summary(summary):
@@ -101,8 +112,20 @@ def test_cli_json_and_files(pairs, tmp_path):
     app = typer.Typer()
     app.command()(evaluate_command)
     out = tmp_path / "eval"
-    res = CliRunner().invoke(app, ["--pairs", str(pairs), "--methods", "input,wiener,rl,unsharp", "--rl-iterations", "2",
-                                   "--json", "-o", str(out)])
+    res = CliRunner().invoke(
+        app,
+        [
+            "--pairs",
+            str(pairs),
+            "--methods",
+            "input,wiener,rl,unsharp",
+            "--rl-iterations",
+            "2",
+            "--json",
+            "-o",
+            str(out),
+        ],
+    )
     assert res.exit_code == 0, res.output
     summary = json.loads(res.stdout)
     _check_summary(summary)
@@ -155,10 +178,15 @@ def test_plain_network_method_and_its_old_names(pairs, tmp_path):
     torch.save({"format": CHECKPOINT_FORMAT, "model_config": net.config, "model_state": net.state_dict()}, ckpt)
     app = typer.Typer()
     app.command()(evaluate_command)
-    for method, option in (("plain", "--plain"), ("plain-unet", "--plain-unet"), ("plain-unet", "--plain"),
-                           ("plain", "--plain-unet")):
-        res = CliRunner().invoke(app, ["--pairs", str(pairs), "--methods", f"input,{method}", option, str(ckpt),
-                                       "--json"])
+    for method, option in (
+        ("plain", "--plain"),
+        ("plain-unet", "--plain-unet"),
+        ("plain-unet", "--plain"),
+        ("plain", "--plain-unet"),
+    ):
+        res = CliRunner().invoke(
+            app, ["--pairs", str(pairs), "--methods", f"input,{method}", option, str(ckpt), "--json"]
+        )
         assert res.exit_code == 0, (method, option, res.output)
         got = json.loads(res.stdout)["methods"]
         assert list(got) == ["input", method], (method, option)

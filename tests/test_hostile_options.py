@@ -2,6 +2,7 @@
 (with their units in the message), unknown names (devices, methods, variants, formats),
 output paths that are the wrong kind, under a file or unwritable, and command-line usage
 errors. Same checks as test_hostile_inputs.py (tests/hostile_world.py)."""
+
 from __future__ import annotations
 
 import pytest
@@ -53,17 +54,35 @@ PSF_BANK = [
     case("bank-kernel-negative", BANK + "--kernel -3", "--kernel"),
     case("bank-fields-one", "psf bank --lens cooke_triplet --pixel-um 4 --fields 1 -o {t}/b", "--fields"),
     case("bank-fields-zero", "psf bank --lens cooke_triplet --pixel-um 4 --fields 0 -o {t}/b", "--fields"),
-    case("bank-wavelengths-text", "psf bank --lens cooke_triplet --pixel-um 4 --wavelengths-nm abc -o {t}/b",
-         "--wavelengths-nm", "abc"),
-    case("bank-wavelengths-zero", "psf bank --lens cooke_triplet --pixel-um 4 --wavelengths-nm 0 -o {t}/b",
-         "--wavelengths-nm"),
-    case("bank-wavelengths-reversed", "psf bank --lens cooke_triplet --pixel-um 4 --wavelengths-nm 700:400:10 -o {t}/b",
-         "--wavelengths-nm"),
-    case("bank-pupil-samples-zero", "psf bank --lens cooke_triplet --pixel-um 4 --pupil-samples 0 -o {t}/b",
-         "--pupil-samples"),
+    case(
+        "bank-wavelengths-text",
+        "psf bank --lens cooke_triplet --pixel-um 4 --wavelengths-nm abc -o {t}/b",
+        "--wavelengths-nm",
+        "abc",
+    ),
+    case(
+        "bank-wavelengths-zero",
+        "psf bank --lens cooke_triplet --pixel-um 4 --wavelengths-nm 0 -o {t}/b",
+        "--wavelengths-nm",
+    ),
+    case(
+        "bank-wavelengths-reversed",
+        "psf bank --lens cooke_triplet --pixel-um 4 --wavelengths-nm 700:400:10 -o {t}/b",
+        "--wavelengths-nm",
+    ),
+    case(
+        "bank-pupil-samples-zero",
+        "psf bank --lens cooke_triplet --pixel-um 4 --pupil-samples 0 -o {t}/b",
+        "--pupil-samples",
+    ),
     case("bank-response-missing-csv", BANK + "--response {t}/nofile.csv", "nofile.csv"),
     case("bank-response-unknown", BANK + "--response 'Banana 9000'", "--response", "Banana 9000"),
-    case("bank-response-bad-csv", BANK + "--response {t}/r.csv", "r.csv", make=text("r.csv", "wavelength_nm,r,g,b\n1,x\n")),
+    case(
+        "bank-response-bad-csv",
+        BANK + "--response {t}/r.csv",
+        "r.csv",
+        make=text("r.csv", "wavelength_nm,r,g,b\n1,x\n"),
+    ),
     case("bank-illuminant-unknown", BANK + "--illuminant banana", "--illuminant", "banana"),
     case("bank-method-unknown", BANK + "--method banana", "--method", "banana"),
     case("bank-aiming-unknown", BANK + "--aiming banana", "--aiming", "banana"),
@@ -86,8 +105,12 @@ PSF_BANK = [
     case("bank-output-file", BANK.replace("{t}/b", "{t}/afile"), "afile", make=AFILE),
     case("bank-output-under-file", BANK.replace("{t}/b", "{t}/afile/b"), "afile", make=AFILE),
     case("bank-output-unwritable", BANK.replace("{t}/b", UNWRITABLE + "/b"), UNWRITABLE),
-    case("bank-output-other-settings", "psf bank --lens cooke_triplet --sensor apsc_mirrorless --fields 3 "
-         "--wavelengths-nm 550 --pupil-samples 32 -o {w.bank}", "bank"),
+    case(
+        "bank-output-other-settings",
+        "psf bank --lens cooke_triplet --sensor apsc_mirrorless --fields 3 "
+        "--wavelengths-nm 550 --pupil-samples 32 -o {w.bank}",
+        "bank",
+    ),
     case("show-gamma-zero", "psf show {w.bank} -o {t}/fig --gamma 0", "--gamma"),
     case("show-gamma-nan", "psf show {w.bank} -o {t}/fig --gamma nan", "--gamma"),
     case("show-output-file", "psf show {w.bank} -o {t}/afile", "afile", make=AFILE),
@@ -114,16 +137,26 @@ LENS = [
     case("spot-image-height-nan", "lens spot cooke_triplet --json --image-height-mm nan", "--image-height-mm"),
 ]
 
-LENSFUN = ("lens lensfun cooke_triplet --maker m --model x --mount Generic --crop-factor 1.5 --focal 50 "
-           "--aperture 5.6 -o {t}/p.xml ")
+LENSFUN = (
+    "lens lensfun cooke_triplet --maker m --model x --mount Generic --crop-factor 1.5 --focal 50 "
+    "--aperture 5.6 -o {t}/p.xml "
+)
 LENS_OUTPUTS = [
     case("field-sensor-missing", "lens field cooke_triplet --sensor {t}/nofile.yaml", "nofile.yaml"),
-    case("field-sensor-utf16", "lens field cooke_triplet --sensor {t}/s.yaml", "s.yaml",
-         make=text("s.yaml", "name: x\n", "utf-16")),
+    case(
+        "field-sensor-utf16",
+        "lens field cooke_triplet --sensor {t}/s.yaml",
+        "s.yaml",
+        make=text("s.yaml", "name: x\n", "utf-16"),
+    ),
     case("field-field-above-1", "lens field cooke_triplet --field 2", "field", "2"),
     case("field-image-height-inf", "lens field cooke_triplet --image-height-mm inf", "--image-height-mm"),
-    case("plot-kind-output-folder", "lens plot cooke_triplet --kind distortion -o {t}/d.png", "d.png",
-         make=folder("d.png")),
+    case(
+        "plot-kind-output-folder",
+        "lens plot cooke_triplet --kind distortion -o {t}/d.png",
+        "d.png",
+        make=folder("d.png"),
+    ),
     case("plot-layout-with-sensor", "lens plot cooke_triplet -o {t}/p.png --sensor phone", "--sensor"),
     case("lensfun-output-folder", LENSFUN, "p.xml", make=folder("p.xml")),
     case("lensfun-output-under-file", LENSFUN.replace("{t}/p.xml", "{t}/afile/p.xml"), "afile", make=AFILE),
@@ -159,8 +192,9 @@ DATASET_MAKE = [
     case("dataset-workers-zero", DATASET + "--workers 0", "--workers"),
     case("dataset-bank-and-fno", DATASET + "--fno 5.6,8", "--bank", "not both"),
     case("dataset-fno-duplicate", "dataset make {w.photos} -o {t}/d --crops 1 --size 32 --fno 8,8", "--fno", "twice"),
-    case("dataset-focus-empty-item", "dataset make {w.photos} -o {t}/d --crops 1 --size 32 --focus-m inf,,1",
-         "--focus-m"),
+    case(
+        "dataset-focus-empty-item", "dataset make {w.photos} -o {t}/d --crops 1 --size 32 --focus-m inf,,1", "--focus-m"
+    ),
     case("dataset-scheduler-spaces", DATASET + "--scheduler 'tcp://a b:1'", "--scheduler", "tcp://a b:1"),
     case("dataset-demosaic-unknown", DATASET + "--demosaic banana", "--demosaic", "banana"),
     case("dataset-exposure-reversed", DATASET + "--exposure-ev 1,-1", "--exposure-ev", "1,-1"),
@@ -170,8 +204,11 @@ DATASET_MAKE = [
     case("dataset-output-file", DATASET.replace("{t}/d", "{t}/afile"), "afile", make=AFILE),
     case("dataset-output-under-file", DATASET.replace("{t}/d", "{t}/afile/d"), "afile", make=AFILE),
     case("dataset-output-unwritable", DATASET.replace("{t}/d", UNWRITABLE), UNWRITABLE),
-    case("dataset-output-other-settings", "dataset make {w.photos} -o {w.data} --bank {w.bank} --crops 2 --size 32",
-         "data"),
+    case(
+        "dataset-output-other-settings",
+        "dataset make {w.photos} -o {w.data} --bank {w.bank} --crops 2 --size 32",
+        "data",
+    ),
 ]
 
 TRAINING = [
@@ -215,10 +252,18 @@ RESTORING = [
     case("restore-device-banana", RESTORE + "--device banana", "--device", "banana"),
     case("restore-device-cuda9", RESTORE + "--device cuda:9", "--device", "cuda:9"),
     case("restore-workers-zero", "restore {w.run} {w.dng} -o {t}/out --workers 0", "--workers"),
-    case("restore-scheduler-http", "restore {w.run} {w.dng} -o {t}/out --scheduler http://10.0.0.5:8786", "--scheduler",
-         "http://10.0.0.5:8786"),
-    case("restore-scheduler-no-port", "restore {w.run} {w.dng} -o {t}/out --scheduler tcp://host:", "--scheduler",
-         "tcp://host:"),
+    case(
+        "restore-scheduler-http",
+        "restore {w.run} {w.dng} -o {t}/out --scheduler http://10.0.0.5:8786",
+        "--scheduler",
+        "http://10.0.0.5:8786",
+    ),
+    case(
+        "restore-scheduler-no-port",
+        "restore {w.run} {w.dng} -o {t}/out --scheduler tcp://host:",
+        "--scheduler",
+        "tcp://host:",
+    ),
     case("restore-scheduler-without-raws", RESTORE + "--scheduler tcp://10.0.0.5:8786", "--scheduler", "raw"),
     case("restore-threads-negative", RESTORE + "--threads -1", "--threads"),
     case("restore-fno-zero", RESTORE + "--fno 0", "--fno", "0"),
@@ -234,8 +279,13 @@ RESTORING = [
     case("restore-output-under-file", RESTORE.replace("{t}/out", "{t}/afile/out"), "afile", make=AFILE),
     case("restore-output-unwritable", RESTORE.replace("{t}/out", UNWRITABLE), UNWRITABLE),
     case("restore-engine-banana", RESTORE + "--engine banana", "--engine", "banana"),
-    case("restore-onnx-engine-torch", "restore {t}/m.onnx {w.photo} -o {t}/out", "m.onnx", "--engine onnxruntime",
-         make=text("m.onnx", "x")),
+    case(
+        "restore-onnx-engine-torch",
+        "restore {t}/m.onnx {w.photo} -o {t}/out",
+        "m.onnx",
+        "--engine onnxruntime",
+        make=text("m.onnx", "x"),
+    ),
     case("restore-onnx-device-banana", RESTORE + "--engine onnxruntime --device banana", "--device", "banana"),
     case("export-opset-16", EXPORT + "--opset 16", "--opset", "16"),
     case("export-opset-99", EXPORT + "--opset 99", "--opset", "99"),
@@ -252,10 +302,15 @@ RESTORING = [
     case("from-raw-output-suffix", "sensor from-raw {w.dng} --pixel-um 4 -o {t}/cam.txt", "cam.txt"),
     case("from-raw-pixel-zero", "sensor from-raw {w.dng} --pixel-um 0 -o {t}/cam.yaml", "--pixel-um", "um"),
     case("from-raw-pixel-nan", "sensor from-raw {w.dng} --pixel-um nan -o {t}/cam.yaml", "--pixel-um"),
-    case("from-raw-output-folder", "sensor from-raw {w.dng} --pixel-um 4 -o {t}/cam.yaml", "cam.yaml",
-         make=folder("cam.yaml")),
-    case("from-raw-output-under-file", "sensor from-raw {w.dng} --pixel-um 4 -o {t}/afile/cam.yaml", "afile",
-         make=AFILE),
+    case(
+        "from-raw-output-folder",
+        "sensor from-raw {w.dng} --pixel-um 4 -o {t}/cam.yaml",
+        "cam.yaml",
+        make=folder("cam.yaml"),
+    ),
+    case(
+        "from-raw-output-under-file", "sensor from-raw {w.dng} --pixel-um 4 -o {t}/afile/cam.yaml", "afile", make=AFILE
+    ),
 ]
 
 EVALUATING = [
@@ -263,30 +318,46 @@ EVALUATING = [
     case("evaluate-model-without-run", "evaluate --pairs {w.data} --methods model", "--methods", "model"),
     case("evaluate-model-missing", "evaluate --pairs {w.data} --methods model --model {t}/norun", "norun"),
     case("evaluate-plain-without-run", "evaluate --pairs {w.data} --methods plain", "--methods", "--plain"),
-    case("evaluate-plain-unet-without-run", "evaluate --pairs {w.data} --methods plain-unet", "'plain-unet'",
-         "--plain"),
-    case("evaluate-plain-and-its-old-name", EVAL + "--plain {w.run} --plain-unet {w.run}", "--plain-unet",
-         "not both"),
-    case("evaluate-plain-arch-mismatch", "evaluate --pairs {w.data} --methods plain --plain {w.run} --arch unet",
-         "holds a 'nafnet' network", "--arch"),
+    case(
+        "evaluate-plain-unet-without-run", "evaluate --pairs {w.data} --methods plain-unet", "'plain-unet'", "--plain"
+    ),
+    case("evaluate-plain-and-its-old-name", EVAL + "--plain {w.run} --plain-unet {w.run}", "--plain-unet", "not both"),
+    case(
+        "evaluate-plain-arch-mismatch",
+        "evaluate --pairs {w.data} --methods plain --plain {w.run} --arch unet",
+        "holds a 'nafnet' network",
+        "--arch",
+    ),
     case("evaluate-rl-iterations-negative", EVAL + "--rl-iterations -3", "--rl-iterations", "-3"),
     case("evaluate-unsharp-sigma-zero", EVAL + "--unsharp-sigma 0", "--unsharp-sigma"),
     case("evaluate-unsharp-amount-nan", EVAL + "--unsharp-amount nan", "--unsharp-amount"),
     case("evaluate-max-crops-zero", EVAL + "--max-crops 0", "--max-crops"),
-    case("evaluate-device-banana", "evaluate --pairs {w.data} --methods model --model {w.run} --device banana",
-         "--device", "banana"),
+    case(
+        "evaluate-device-banana",
+        "evaluate --pairs {w.data} --methods model --model {w.run} --device banana",
+        "--device",
+        "banana",
+    ),
     case("evaluate-sources-unknown", EVAL + "--sources nophoto.png", "nophoto.png"),
     case("evaluate-arch-unknown", EVAL + "--arch banana", "--arch", "banana"),
-    case("evaluate-arch-mismatch", "evaluate --pairs {w.data} --methods model --model {w.run} --arch unet",
-         "holds a 'nafnet' network", "--arch"),
+    case(
+        "evaluate-arch-mismatch",
+        "evaluate --pairs {w.data} --methods model --model {w.run} --arch unet",
+        "holds a 'nafnet' network",
+        "--arch",
+    ),
     case("evaluate-output-file", EVAL + "-o {t}/afile", "afile", make=AFILE),
     case("evaluate-output-under-file", EVAL + "-o {t}/afile/e", "afile", make=AFILE),
     case("ablation-variant-unknown", "ablation {w.data} -o {t}/a --variants full,banana", "--variants", "banana"),
     case("ablation-budget-negative", "ablation {w.data} -o {t}/a --time-budget-s -1", "--time-budget-s"),
     case("ablation-width-zero", "ablation {w.data} -o {t}/a --width 0", "--width"),
     case("ablation-arch-unknown", "ablation {w.data} -o {t}/a --arch banana", "--arch", "banana"),
-    case("ablation-variant-of-other-arch", "ablation {w.data} -o {t}/a --arch nafnet --variants plain-unet",
-         "--variants", "plain-unet"),
+    case(
+        "ablation-variant-of-other-arch",
+        "ablation {w.data} -o {t}/a --arch nafnet --variants plain-unet",
+        "--variants",
+        "plain-unet",
+    ),
     case("ablation-crop-tiny", "ablation {w.data} -o {t}/a --crop 8", "--crop"),
     case("ablation-device-banana", "ablation {w.data} -o {t}/a --device banana", "--device", "banana"),
     case("ablation-output-file", "ablation {w.data} -o {t}/afile", "afile", make=AFILE),
@@ -299,8 +370,12 @@ EVALUATING = [
     case("assets-export-under-file", "assets --export-photos {t}/afile/p", "afile", make=AFILE),
     case("assets-export-unwritable", "assets --export-photos " + UNWRITABLE, UNWRITABLE),
     case("assets-export-test-file", "assets --export-test-photos {t}/afile", "afile", make=AFILE),
-    case("assets-export-test-same", "assets --export-photos {t}/p --export-test-photos {t}/p",
-         "--export-test-photos", "--export-photos"),
+    case(
+        "assets-export-test-same",
+        "assets --export-photos {t}/p --export-test-photos {t}/p",
+        "--export-test-photos",
+        "--export-photos",
+    ),
 ]
 
 ZOOM = str(REFERENCE_LENSES / "nikon_80-200_zoom.zmx")
@@ -351,11 +426,29 @@ USAGE = [
 ]
 
 if "CUDAExecutionProvider" not in __import__("onnxruntime").get_available_providers():  # the CPU build (CI's)
-    RESTORING.append(case("restore-onnx-device-cuda", RESTORE + "--engine onnxruntime --device cuda:0", "--device",
-                          "cuda:0", "CUDAExecutionProvider"))
+    RESTORING.append(
+        case(
+            "restore-onnx-device-cuda",
+            RESTORE + "--engine onnxruntime --device cuda:0",
+            "--device",
+            "cuda:0",
+            "CUDAExecutionProvider",
+        )
+    )
 
-ALL: list[Case] = (PSF_COMPUTE + PSF_BANK + LENS + LENS_OUTPUTS + SIMULATE + DATASET_MAKE + TRAINING + RESTORING
-                   + EVALUATING + SHOOTING + USAGE)
+ALL: list[Case] = (
+    PSF_COMPUTE
+    + PSF_BANK
+    + LENS
+    + LENS_OUTPUTS
+    + SIMULATE
+    + DATASET_MAKE
+    + TRAINING
+    + RESTORING
+    + EVALUATING
+    + SHOOTING
+    + USAGE
+)
 
 
 @pytest.mark.parametrize("c", ALL, ids=[c.id for c in ALL])
@@ -373,5 +466,7 @@ def test_warnings_and_errors_print_text_literally(capsys) -> None:
 
     _show_warning("bad[bold]name.yaml: ccm [[1, 2], [3, 4]]", UserWarning, "x.py", 1)
     print_error_line("error", "red", "a\x00b [red]c[/red]\nd")
-    assert capsys.readouterr().err.splitlines() == ["warning: bad[bold]name.yaml: ccm [[1, 2], [3, 4]]",
-                                                    "error: a\\x00b [red]c[/red] d"]
+    assert capsys.readouterr().err.splitlines() == [
+        "warning: bad[bold]name.yaml: ccm [[1, 2], [3, 4]]",
+        "error: a\\x00b [red]c[/red] d",
+    ]

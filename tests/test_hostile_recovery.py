@@ -1,6 +1,7 @@
 """After a refusal or a failure, the corrected command works: inputs the checks must let
 through (a planar RGB TIFF, a small photo with the default pupil grid), and failed runs
 that leave nothing in the way of the rerun (dataset make, train)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -54,6 +55,7 @@ def test_failed_dataset_make_leaves_nothing_in_the_way(world, tmp_path, monkeypa
 
     def fail(job):
         raise RuntimeError("killed")
+
     monkeypatch.setattr(pairs, "make_pairs_for_image", fail)
     with pytest.raises(RuntimeError):
         pairs.make_dataset(world.photos, tmp_path / "d", bank, "apsc_mirrorless", sensor, crops=1, size=32)
@@ -69,10 +71,28 @@ def test_failed_train_leaves_no_run_without_a_checkpoint(world, tmp_path, capsys
     def fail(loop, batches):
         assert (tmp_path / "r" / "config.json").exists()  # the run had started writing
         raise RuntimeError("out of memory")
+
     monkeypatch.setattr(train_module, "_train_epoch", fail)
     with pytest.raises(RuntimeError):
-        run_cli(["train", str(world.data), "-o", str(tmp_path / "r"), "--epochs", "1", "--width", "4", "--depth", "2",
-                 "--crop", "32", "--quiet"], capsys, monkeypatch)
+        run_cli(
+            [
+                "train",
+                str(world.data),
+                "-o",
+                str(tmp_path / "r"),
+                "--epochs",
+                "1",
+                "--width",
+                "4",
+                "--depth",
+                "2",
+                "--crop",
+                "32",
+                "--quiet",
+            ],
+            capsys,
+            monkeypatch,
+        )
     assert not (tmp_path / "r").exists()
 
 
@@ -82,8 +102,10 @@ def test_input_errors_cross_process_boundaries() -> None:
 
     from lensim.errors import InputError, UnknownGlassError
 
-    for err in (InputError("a.yaml", "surfaces[1].radius", "expected a number, got 'x'"),
-                UnknownGlassError(None, "material", "unknown glass 'N-BKK7'")):
+    for err in (
+        InputError("a.yaml", "surfaces[1].radius", "expected a number, got 'x'"),
+        UnknownGlassError(None, "material", "unknown glass 'N-BKK7'"),
+    ):
         back = pickle.loads(pickle.dumps(err))
         assert type(back) is type(err) and str(back) == str(err)
         assert (back.source, back.field, back.message) == (err.source, err.field, err.message)
@@ -97,4 +119,8 @@ def test_pupil_sampling_error_carries_the_needed_samples_across_processes():
     from lensim.errors import InputError, PupilSamplingError
 
     err = pickle.loads(pickle.dumps(PupilSamplingError("lens.yaml", "pupil_samples", "expected at least 90", 90)))
-    assert isinstance(err, InputError) and err.needed == 90 and str(err) == "lens.yaml: pupil_samples: expected at least 90"
+    assert (
+        isinstance(err, InputError)
+        and err.needed == 90
+        and str(err) == "lens.yaml: pupil_samples: expected at least 90"
+    )

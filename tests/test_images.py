@@ -1,4 +1,5 @@
 """Image I/O: bit depths, channels, refusals."""
+
 import numpy as np
 import pytest
 import torch

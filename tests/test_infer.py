@@ -1,5 +1,6 @@
 """Inference: tiled == whole-image restoration, absolute FOV per tile, sensor geometry,
 checkpoint loading errors and warnings, and the train/restore commands end to end."""
+
 from __future__ import annotations
 
 import json
@@ -94,8 +95,8 @@ def test_each_tile_gets_its_absolute_fov_channels():
             rgb, fov = rec.calls[k]
             h, w = rgb.shape[-2:]
             assert y0 % 4 == 0 and x0 % 4 == 0
-            assert torch.equal(rgb[0], img[:, y0:y0 + h, x0:x0 + w])
-            assert torch.allclose(fov[0], whole_fov[:, y0:y0 + h, x0:x0 + w], atol=1e-7), (y0, x0)
+            assert torch.equal(rgb[0], img[:, y0 : y0 + h, x0 : x0 + w])
+            assert torch.allclose(fov[0], whole_fov[:, y0 : y0 + h, x0 : x0 + w], atol=1e-7), (y0, x0)
             k += 1
 
 
@@ -185,24 +186,75 @@ def test_train_and_restore_commands(tmp_path: Path):
     app.command("restore")(restore_command)
     pairs = make_pairs(tmp_path / "pairs", photos=2, crops=2, size=32)
     runner = CliRunner()
-    res = runner.invoke(app, ["train", str(pairs), "-o", str(tmp_path / "run"), "--epochs", "1", "--crop", "32",
-                              "--width", "8", "--depth", "2", "--steps-per-epoch", "1", "--batch-size", "2",
-                              "--val-fraction", "0.5", "--json", "--threads", "1"])
+    res = runner.invoke(
+        app,
+        [
+            "train",
+            str(pairs),
+            "-o",
+            str(tmp_path / "run"),
+            "--epochs",
+            "1",
+            "--crop",
+            "32",
+            "--width",
+            "8",
+            "--depth",
+            "2",
+            "--steps-per-epoch",
+            "1",
+            "--batch-size",
+            "2",
+            "--val-fraction",
+            "0.5",
+            "--json",
+            "--threads",
+            "1",
+        ],
+    )
     assert res.exit_code == 0, res.output
     summary = json.loads(res.output)
     assert summary["steps"] == 1 and summary["epochs_done"] == 1
     img = torch.rand(3, 40, 56, generator=torch.Generator().manual_seed(0))
     write_image(tmp_path / "a.png", img, 16)
-    res = runner.invoke(app, ["restore", str(tmp_path / "run"), str(tmp_path / "a.png"), "-o", str(tmp_path / "out"),
-                              "--sensor-offset", "100,200", "--tile", "32", "--overlap", "16", "--json"])
+    res = runner.invoke(
+        app,
+        [
+            "restore",
+            str(tmp_path / "run"),
+            str(tmp_path / "a.png"),
+            "-o",
+            str(tmp_path / "out"),
+            "--sensor-offset",
+            "100,200",
+            "--tile",
+            "32",
+            "--overlap",
+            "16",
+            "--json",
+        ],
+    )
     assert res.exit_code == 0, res.output
     out, bits = read_image(tmp_path / "out" / "a.png")
     assert bits == 16 and out.shape == (3, 40, 56)
     model, _ = load_checkpoint(tmp_path / "run")
-    expected = restore_image(model, read_image(tmp_path / "a.png")[0], (100.0, 200.0), (480.0, 640.0), tile=32,
-                             overlap=16).clamp(0, 1)
+    expected = restore_image(
+        model, read_image(tmp_path / "a.png")[0], (100.0, 200.0), (480.0, 640.0), tile=32, overlap=16
+    ).clamp(0, 1)
     assert (out - expected).abs().max() <= 0.5 / 65535 + 1e-6  # 16-bit quantisation only
-    res = runner.invoke(app, ["restore", str(tmp_path / "run"), str(tmp_path / "a.png"), "-o", str(tmp_path / "o8"),
-                              "--bits", "8", "--sensor-offset", "100,200"])
+    res = runner.invoke(
+        app,
+        [
+            "restore",
+            str(tmp_path / "run"),
+            str(tmp_path / "a.png"),
+            "-o",
+            str(tmp_path / "o8"),
+            "--bits",
+            "8",
+            "--sensor-offset",
+            "100,200",
+        ],
+    )
     assert res.exit_code == 0, res.output
     assert read_image(tmp_path / "o8" / "a.png")[1] == 8

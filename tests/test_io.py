@@ -1,4 +1,5 @@
 """lensim.io: atomic writes leave the old file or the new one, never a partial one."""
+
 import os
 import stat
 
@@ -36,8 +37,11 @@ def test_read_json_round_trip_and_one_line_errors(tmp_path):
     assert read_json(good) == {"a": [1, 2], "p": str(tmp_path)}
     bad = tmp_path / "bad.json"
     bad.write_bytes(b"\xff\xfe{not json")
-    for path, words in ((bad, "could not parse"), (tmp_path, "found a directory"),
-                        (tmp_path / "none.json", "found nothing")):
+    for path, words in (
+        (bad, "could not parse"),
+        (tmp_path, "found a directory"),
+        (tmp_path / "none.json", "found nothing"),
+    ):
         with pytest.raises(InputError) as err:
             read_json(path, "manifest")
         assert str(path) in str(err.value) and words in str(err.value) and "\n" not in str(err.value)

@@ -1,5 +1,6 @@
 """ISP stages: sRGB curve, unprocess/process round trip on natural images, Bayer
 mosaics, noise statistics, demosaicing (AHD vs Malvar on natural images), raw output."""
+
 from __future__ import annotations
 
 import os
@@ -13,6 +14,7 @@ from lensim.render.pipeline import simulate_capture
 from lensim.sensor import isp, load_sensor
 
 # ----------------------------------------------------------------- natural test images
+
 
 def _natural_images() -> dict[str, np.ndarray]:
     """Three or more natural 8-bit RGB photos available offline: scikit-image's bundled
@@ -49,10 +51,11 @@ def _t(a: np.ndarray) -> torch.Tensor:
 
 def _psnr(a: torch.Tensor, b: torch.Tensor, crop: int = 8) -> float:
     d = (a - b)[..., crop:-crop, crop:-crop]
-    return float(10.0 * torch.log10(1.0 / (d ** 2).mean()))
+    return float(10.0 * torch.log10(1.0 / (d**2).mean()))
 
 
 # ----------------------------------------------------------------- 1. transfer curve, unprocess
+
 
 def test_srgb_curve_exact_values_inverse_and_eps_clamp():
     x = torch.tensor([0.0, 0.04045, 0.5, 1.0])
@@ -110,6 +113,7 @@ def test_round_trip_unprocess_process_within_one_code(natural, sensor):
 
 # ----------------------------------------------------------------- 3. mosaic, noise
 
+
 @pytest.mark.parametrize("pattern", ["RGGB", "BGGR", "GRBG", "GBRG"])
 def test_mosaic_places_colours_by_pattern(pattern):
     h, w = 6, 8
@@ -137,9 +141,9 @@ def test_noise_variance_matches_shot_x_plus_read_squared():
         flat = torch.full((n, n), level)
         noisy = isp.add_noise(flat, shot, read, torch.Generator().manual_seed(int(level * 1000)))
         var = float(noisy.var())
-        want = shot * level + read ** 2
+        want = shot * level + read**2
         assert abs(var / want - 1.0) < 0.05, (level, var, want)
-        assert abs(float(noisy.mean()) - level) < 4 * (want / n ** 2) ** 0.5
+        assert abs(float(noisy.mean()) - level) < 4 * (want / n**2) ** 0.5
     g1, g2 = torch.Generator().manual_seed(1), torch.Generator().manual_seed(1)
     assert torch.equal(isp.add_noise(flat, shot, read, g1), isp.add_noise(flat, shot, read, g2))
     assert torch.equal(isp.add_noise(flat, 0.0, 0.0), flat)
@@ -159,6 +163,7 @@ def test_quantize_raw_snaps_to_digital_numbers_and_saturates():
 
 
 # ----------------------------------------------------------------- 4. demosaic
+
 
 @pytest.mark.parametrize("method", ["ahd", "bilinear", "malvar", "menon"])
 @pytest.mark.parametrize("pattern", ["RGGB", "GBRG"])
@@ -203,7 +208,9 @@ def test_ahd_psnr_on_natural_images_at_least_malvars(natural):
     for name, a in natural.items():
         x = _t(a)
         cam, params = isp.unprocess(x, prof, kelvin=5000.0)
-        raw = isp.white_balance_mosaic(isp.mosaic(cam, prof.bayer_pattern), prof.bayer_pattern, params.r_gain, params.b_gain)
+        raw = isp.white_balance_mosaic(
+            isp.mosaic(cam, prof.bayer_pattern), prof.bayer_pattern, params.r_gain, params.b_gain
+        )
         scores = {}
         for method in ("ahd", "malvar", "bilinear"):
             rgb = isp.demosaic(raw, prof.bayer_pattern, method)
@@ -213,6 +220,7 @@ def test_ahd_psnr_on_natural_images_at_least_malvars(natural):
 
 
 # ----------------------------------------------------------------- 5. process, full chain, raw files
+
 
 def test_process_quantizes_and_white_balanced_flag_skips_gains():
     prof = load_sensor("fullframe_dslr")

@@ -1,6 +1,7 @@
 """Long jobs killed with SIGKILL: their worker processes die with them, a second writer
 into the same folder is refused at once, and a resumed run ends with the very arrays of
 an uninterrupted one. The jobs run as `lensim` subprocesses on small sizes."""
+
 from __future__ import annotations
 
 import json
@@ -30,8 +31,14 @@ ROOT = Path(lensim.__file__).resolve().parents[1]  # the lensim the subprocesses
 def lensim_process(args: list[str], **kw) -> subprocess.Popen:
     """`python -m lensim ARGS` in a subprocess (the lensim under test, output captured)."""
     env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1"}
-    return subprocess.Popen([sys.executable, "-m", "lensim", *args], env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, **kw)
+    return subprocess.Popen(
+        [sys.executable, "-m", "lensim", *args],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        **kw,
+    )
 
 
 def children(pid: int) -> list[int]:
@@ -42,7 +49,7 @@ def children(pid: int) -> list[int]:
             text = stat.read_text()
         except OSError:
             continue
-        fields = text[text.rindex(")") + 2:].split()  # after "pid (comm) ": state, ppid, ...
+        fields = text[text.rindex(")") + 2 :].split()  # after "pid (comm) ": state, ppid, ...
         if fields[0] != "Z" and int(fields[1]) == pid:
             found.append(int(stat.parent.name))
     return found
@@ -81,8 +88,22 @@ def workers_of(pid: int, marker: str) -> list[int]:
 
 # a bank whose fields take several seconds each (61 wavelengths): a worker that outlived
 # its parent would still be computing long after the kill
-SLOW_BANK = ["psf", "bank", "cooke_triplet", "--pixel-um", "4", "--kernel", "15", "--fields", "4",
-             "--wavelengths-nm", "400:700:5", "--pupil-samples", "64", "--quiet"]
+SLOW_BANK = [
+    "psf",
+    "bank",
+    "cooke_triplet",
+    "--pixel-um",
+    "4",
+    "--kernel",
+    "15",
+    "--fields",
+    "4",
+    "--wavelengths-nm",
+    "400:700:5",
+    "--pupil-samples",
+    "64",
+    "--quiet",
+]
 
 
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
@@ -93,8 +114,23 @@ def test_killed_bank_leaves_no_worker_and_a_second_writer_is_refused_meanwhile(t
         assert wait_for(lambda: len(workers_of(proc.pid, "spawn_main")) == 2, 60), proc.stderr
         workers = workers_of(proc.pid, "spawn_main")
         # another bank into the same folder, meanwhile (in this process: no start-up)
-        quick = ["psf", "bank", "cooke_triplet", "--pixel-um", "4", "--kernel", "15", "--fields", "2",
-                 "--wavelengths-nm", "550", "--pupil-samples", "32", "-o", str(out)]
+        quick = [
+            "psf",
+            "bank",
+            "cooke_triplet",
+            "--pixel-um",
+            "4",
+            "--kernel",
+            "15",
+            "--fields",
+            "2",
+            "--wavelengths-nm",
+            "550",
+            "--pupil-samples",
+            "32",
+            "-o",
+            str(out),
+        ]
         code, _, err = run_cli(quick, capsys, monkeypatch)
         assert code == 2 and err.count("\n") == 1, err
         assert str(out) in err and f"pid {proc.pid}" in err and "another lensim run" in err
@@ -108,11 +144,46 @@ def test_killed_bank_leaves_no_worker_and_a_second_writer_is_refused_meanwhile(t
 
 # ----------------------------------------------------------------------------- kill and resume
 
-BANK = ["psf", "bank", "cooke_triplet", "--sensor", "apsc_mirrorless", "--kernel", "21", "--fields", "5",
-        "--wavelengths-nm", "500:600:100", "--pupil-samples", "40", "--quiet"]
+BANK = [
+    "psf",
+    "bank",
+    "cooke_triplet",
+    "--sensor",
+    "apsc_mirrorless",
+    "--kernel",
+    "21",
+    "--fields",
+    "5",
+    "--wavelengths-nm",
+    "500:600:100",
+    "--pupil-samples",
+    "40",
+    "--quiet",
+]
 PAIRS = ["--sensor", "apsc_mirrorless", "--crops", "2", "--size", "64", "--seed", "3", "--quiet"]
-TRAIN = ["--width", "8", "--depth", "2", "--crop", "32", "--batch-size", "2", "--val-fraction", "0.25", "--seed", "3",
-         "--epochs", "2", "--steps-per-epoch", "4", "--checkpoint-every-steps", "1", "--threads", "1", "--quiet"]
+TRAIN = [
+    "--width",
+    "8",
+    "--depth",
+    "2",
+    "--crop",
+    "32",
+    "--batch-size",
+    "2",
+    "--val-fraction",
+    "0.25",
+    "--seed",
+    "3",
+    "--epochs",
+    "2",
+    "--steps-per-epoch",
+    "4",
+    "--checkpoint-every-steps",
+    "1",
+    "--threads",
+    "1",
+    "--quiet",
+]
 DEFAULT_SEEDS = [0]
 SLOW_SEEDS = [1, 5, 7]  # with seed 0: every kill point 1..total-2 of the bank and the pairs, steps 2-5 of 8
 
@@ -153,8 +224,10 @@ def reference(tmp_path_factory):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             assert cli([*BANK, "-o", str(base / "bank")]) == 0
-            assert cli(["dataset", "make", str(sharp), "-o", str(base / "pairs"), "--bank", str(base / "bank"),
-                        *PAIRS]) == 0
+            assert (
+                cli(["dataset", "make", str(sharp), "-o", str(base / "pairs"), "--bank", str(base / "bank"), *PAIRS])
+                == 0
+            )
             assert cli(["train", str(pairs), "-o", str(base / "run"), *TRAIN]) == 0
     finally:
         torch.set_num_threads(threads)
@@ -204,8 +277,7 @@ def _bank_kill_resume(reference: Path, tmp_path: Path, seed: int) -> None:
 def _pairs_kill_resume(reference: Path, tmp_path: Path, seed: int) -> None:
     out = tmp_path / "pairs"
     args = ["dataset", "make", str(reference / "sharp"), "-o", str(out), "--bank", str(reference / "bank"), *PAIRS]
-    photos = kill_when(args, lambda: len(list((out / "records").glob("*.json"))), 4, seed,
-                       0.05)
+    photos = kill_when(args, lambda: len(list((out / "records").glob("*.json"))), 4, seed, 0.05)
     assert cli(args) == 0
     assert_same_tree(reference / "pairs", out, "pairs/*.png", f"killed at {photos} photos")
     assert_same_tree(reference / "pairs", out, "records/*.json", f"killed at {photos} photos")
@@ -218,9 +290,11 @@ def _train_kill_resume(reference: Path, tmp_path: Path, seed: int) -> None:
     steps = kill_when(["train", str(pairs), "-o", str(run), *TRAIN], lambda: _rows(run / "steps.csv"), 8, seed, 0.02)
     threads = torch.get_num_threads()
     try:
-        code = cli(["train", str(pairs), "-o", str(run), "--resume", "--threads", "1", "--quiet"]
-                   if (run / "last.pt").exists()
-                   else ["train", str(pairs), "-o", str(run), *TRAIN])
+        code = cli(
+            ["train", str(pairs), "-o", str(run), "--resume", "--threads", "1", "--quiet"]
+            if (run / "last.pt").exists()
+            else ["train", str(pairs), "-o", str(run), *TRAIN]
+        )
     finally:
         torch.set_num_threads(threads)
     assert code == 0
@@ -250,8 +324,26 @@ def _rows(path: Path) -> int:
         return 0
 
 
-GRID = ["psf", "bank", "cooke_triplet", "--sensor", "apsc_mirrorless", "--kernel", "21", "--fields", "3",
-        "--wavelengths-nm", "500:600:100", "--pupil-samples", "40", "--fno", "5.6,8", "--focus-m", "inf,1", "--quiet"]
+GRID = [
+    "psf",
+    "bank",
+    "cooke_triplet",
+    "--sensor",
+    "apsc_mirrorless",
+    "--kernel",
+    "21",
+    "--fields",
+    "3",
+    "--wavelengths-nm",
+    "500:600:100",
+    "--pupil-samples",
+    "40",
+    "--fno",
+    "5.6,8",
+    "--focus-m",
+    "inf,1",
+    "--quiet",
+]
 
 
 @pytest.fixture(scope="module")
@@ -316,8 +408,18 @@ def test_killed_dataset_make_leaves_no_dask_worker(reference, tmp_path):
     img, _ = read_image(sample_image_path("kodim23"))
     for k in range(4):  # whole photos: a few seconds each
         write_image(sharp / f"p{k}.png", img)
-    args = ["dataset", "make", str(sharp), "-o", str(tmp_path / "pairs"), "--bank", str(reference / "bank"),
-            "--workers", "2", *PAIRS]
+    args = [
+        "dataset",
+        "make",
+        str(sharp),
+        "-o",
+        str(tmp_path / "pairs"),
+        "--bank",
+        str(reference / "bank"),
+        "--workers",
+        "2",
+        *PAIRS,
+    ]
     proc = lensim_process(args)
     try:
         assert wait_for(lambda: len(workers_of(proc.pid, "spawn_main")) >= 2, 120)
@@ -340,14 +442,33 @@ def test_killed_restore_leaves_no_dask_worker(tmp_path):
 
     torch.manual_seed(0)
     model = FieldAwareUNet(8, 2, zero_init_tail=False).eval()
-    atomic_torch_save({"format": CHECKPOINT_FORMAT, "version": 1, "model_config": model.config,
-                       "model_state": model.state_dict(), "sensor": small_sensor().to_dict(), "lens": None},
-                      tmp_path / "run" / "last.pt")
+    atomic_torch_save(
+        {
+            "format": CHECKPOINT_FORMAT,
+            "version": 1,
+            "model_config": model.config,
+            "model_state": model.state_dict(),
+            "sensor": small_sensor().to_dict(),
+            "lens": None,
+        },
+        tmp_path / "run" / "last.pt",
+    )
     for k in range(6):  # raws larger than the sensor (restored as full frames of it): seconds each
         raw, params = capture(k, (768, 1024))
         write_capture_dng(tmp_path / "raws" / f"s{k}.dng", raw, small_sensor(), params)
-    proc = lensim_process(["restore", str(tmp_path / "run"), str(tmp_path / "raws"), "-o", str(tmp_path / "out"),
-                           "--allow-other-camera", "--workers", "2", "--quiet"])
+    proc = lensim_process(
+        [
+            "restore",
+            str(tmp_path / "run"),
+            str(tmp_path / "raws"),
+            "-o",
+            str(tmp_path / "out"),
+            "--allow-other-camera",
+            "--workers",
+            "2",
+            "--quiet",
+        ]
+    )
     try:
         assert wait_for(lambda: len(workers_of(proc.pid, "spawn_main")) >= 2, 120), proc.poll()
         workers = workers_of(proc.pid, "spawn_main")

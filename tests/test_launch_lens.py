@@ -1,5 +1,6 @@
 """Lens.launch_lens: what rays are launched with, for every object distance and field type
 the four former copies of the rule handled (field analysis, ray aiming, PSF, PSF bank)."""
+
 from __future__ import annotations
 
 import math
@@ -18,9 +19,14 @@ F_MM = 100.0  # plano-convex, R = 50 mm, n = 1.5: EFL = R / (n - 1), whatever th
 
 def _singlet(field_type: str, fields: list[float], object_distance: float, image_distance: float) -> Lens:
     """A thin plano-convex singlet (0.01 mm thick), stop on its first surface."""
-    return Lens([Surface(1 / 50.0, 0.01, ConstantIndex(1.5), is_stop=True), Surface(0.0, image_distance)],
-                aperture_value=5.0, field_type=field_type, fields=fields, wavelengths_um=[0.55],
-                object_distance=object_distance)
+    return Lens(
+        [Surface(1 / 50.0, 0.01, ConstantIndex(1.5), is_stop=True), Surface(0.0, image_distance)],
+        aperture_value=5.0,
+        field_type=field_type,
+        fields=fields,
+        wavelengths_um=[0.55],
+        object_distance=object_distance,
+    )
 
 
 CASES = [  # (field type, object distance mm, expected launch type)

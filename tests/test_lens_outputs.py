@@ -3,6 +3,7 @@ profile of `lensim lens lensfun`, checked with the lensfun library itself (lensf
 lensfun 0.3.4): it loads the file, and its Modifier, applied to a 24-megapixel frame,
 moves every pixel where lensim's own chief rays say (distortion, and red and blue for
 lateral colour) and darkens it as lensim's relative illumination says."""
+
 import json
 import math
 import warnings
@@ -24,8 +25,9 @@ WIDTH, HEIGHT = 6000, 4000  # a 24-megapixel 3:2 frame
 
 
 def test_lens_field_json(capsys, monkeypatch):
-    code, out, err = run_cli(["lens", "field", "cooke_triplet", "--json", "--field", "0", "--field", "1"],
-                             capsys, monkeypatch)
+    code, out, err = run_cli(
+        ["lens", "field", "cooke_triplet", "--json", "--field", "0", "--field", "1"], capsys, monkeypatch
+    )
     assert code == 0, err
     report = json.loads(out)
     axis, edge = report["fields"]
@@ -43,15 +45,19 @@ def test_lens_field_json(capsys, monkeypatch):
     # the sign of the triplet's lateral colour at full field: blue lands outside green and
     # red inside (450 nm +0.99 um and 650 nm -0.86 um from 550 nm, tests/test_model_glass.py)
     assert edge["lateral_colour_um"]["b"] > 0.3 and edge["lateral_colour_um"]["r"] < -0.3
-    assert edge["relative_illumination"] == pytest.approx(relative_illumination(lens, [20.0], samples=32)
-                                                          ["relative_illumination"][0], abs=1e-12)
+    assert edge["relative_illumination"] == pytest.approx(
+        relative_illumination(lens, [20.0], samples=32)["relative_illumination"][0], abs=1e-12
+    )
 
 
 @pytest.mark.parametrize("kind", ["distortion", "lateral-colour", "illumination"])
 def test_lens_plot_kinds(kind, tmp_path, capsys, monkeypatch):
     target = tmp_path / f"{kind}.png"
-    code, _, err = run_cli(["lens", "plot", "cooke_triplet", "--kind", kind, "--field", "0", "--field", "1",
-                            "-o", str(target)], capsys, monkeypatch)
+    code, _, err = run_cli(
+        ["lens", "plot", "cooke_triplet", "--kind", kind, "--field", "0", "--field", "1", "-o", str(target)],
+        capsys,
+        monkeypatch,
+    )
     assert code == 0, err
     assert target.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
@@ -67,9 +73,26 @@ def profile_file(tmp_path_factory, reference_lenses):
     from lensim.cli import main
 
     path = tmp_path_factory.mktemp("lensfun") / "profile.xml"
-    args = ["lensim", "lens", "lensfun", str(reference_lenses / ASPHERIC), "--maker", "Patent", "--model",
-            "US 8,427,765 Ex. 1", "--mount", "Generic", "--crop-factor", str(CROP), "--focal", str(FOCAL),
-            "--aperture", str(APERTURE), "-o", str(path)]
+    args = [
+        "lensim",
+        "lens",
+        "lensfun",
+        str(reference_lenses / ASPHERIC),
+        "--maker",
+        "Patent",
+        "--model",
+        "US 8,427,765 Ex. 1",
+        "--mount",
+        "Generic",
+        "--crop-factor",
+        str(CROP),
+        "--focal",
+        str(FOCAL),
+        "--aperture",
+        str(APERTURE),
+        "-o",
+        str(path),
+    ]
     out = io.StringIO()
     with mock.patch.object(sys, "argv", args), contextlib.redirect_stdout(out), warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -148,8 +171,9 @@ def test_lensfun_reproduces_lensims_distortion_and_lateral_colour(profile_file, 
 
     path, _ = profile_file
     mod = lensfunpy.Modifier(lensfun_lens(path), CROP, WIDTH, HEIGHT)
-    mod.initialize(FOCAL, APERTURE, 1000.0, scale=1.0,
-                   flags=lensfunpy.ModifyFlags.DISTORTION | lensfunpy.ModifyFlags.TCA)
+    mod.initialize(
+        FOCAL, APERTURE, 1000.0, scale=1.0, flags=lensfunpy.ModifyFlags.DISTORTION | lensfunpy.ModifyFlags.TCA
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         lens = lens_at(load_lens(reference_lenses / ASPHERIC), ShootingSettings(fno=APERTURE))
@@ -162,8 +186,9 @@ def test_lensfun_reproduces_lensims_distortion_and_lateral_colour(profile_file, 
     ours = _lensim_source_radii(lens, ru)
     for channel in (1, 0, 2):  # green (distortion), red, blue
         scale = np.where(ru > 0, ours[:, channel] / np.maximum(ru, 1e-12), 1.0)
-        theirs = np.array([mod.apply_subpixel_geometry_distortion(float(x), float(y), 1, 1)[0, 0, channel]
-                           for x, y in zip(px, py)])
+        theirs = np.array(
+            [mod.apply_subpixel_geometry_distortion(float(x), float(y), 1, 1)[0, 0, channel] for x, y in zip(px, py)]
+        )
         err = np.hypot(theirs[:, 0] - (cx + dx * scale), theirs[:, 1] - (cy + dy * scale))
         errors.append(err.max())
         moved = max(moved, np.hypot(dx * (scale - 1), dy * (scale - 1)).max())
@@ -197,28 +222,40 @@ def test_lensfun_vignetting_matches_relative_illumination(profile_file, referenc
     assert min(ri) < 0.8  # the corner is visibly darker: the check can fail
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--crop-factor", "0"], "--crop-factor: expected a positive number"),
-    (["--crop-factor", "0.5"], "does not reach the corner of a 3:2 frame at crop factor 0.5"),
-    (["--aperture", "-2"], "--aperture: expected a positive number"),
-    (["--distance", "0"], "--distance: expected a positive focus distance"),
-    (["--maker", " "], "--maker: expected a non-empty name"),
-    (["-o", "profile.txt"], "--output: expected a .xml file name"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--crop-factor", "0"], "--crop-factor: expected a positive number"),
+        (["--crop-factor", "0.5"], "does not reach the corner of a 3:2 frame at crop factor 0.5"),
+        (["--aperture", "-2"], "--aperture: expected a positive number"),
+        (["--distance", "0"], "--distance: expected a positive focus distance"),
+        (["--maker", " "], "--maker: expected a non-empty name"),
+        (["-o", "profile.txt"], "--output: expected a .xml file name"),
+    ],
+)
 def test_lensfun_bad_settings_are_one_line_errors(args, message, tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    base = {"--maker": "M", "--model": "L", "--mount": "Generic", "--crop-factor": "1.5", "--focal": "50",
-            "--aperture": "5.6", "-o": "profile.xml"}
+    base = {
+        "--maker": "M",
+        "--model": "L",
+        "--mount": "Generic",
+        "--crop-factor": "1.5",
+        "--focal": "50",
+        "--aperture": "5.6",
+        "-o": "profile.xml",
+    }
     base.update(dict(zip(args[::2], args[1::2])))
-    code, _, err = run_cli(["lens", "lensfun", "cooke_triplet", *[x for kv in base.items() for x in kv]],
-                           capsys, monkeypatch)
+    code, _, err = run_cli(
+        ["lens", "lensfun", "cooke_triplet", *[x for kv in base.items() for x in kv]], capsys, monkeypatch
+    )
     assert code == 2 and message in err and len(err.strip().splitlines()) == 1, err
     assert not list(tmp_path.iterdir())
 
 
 def test_field_plot_bad_inputs_are_one_line_errors(tmp_path, capsys, monkeypatch):
-    code, _, err = run_cli(["lens", "plot", "cooke_triplet", "--kind", "distortion", "-o", str(tmp_path / "d.txt")],
-                           capsys, monkeypatch)
+    code, _, err = run_cli(
+        ["lens", "plot", "cooke_triplet", "--kind", "distortion", "-o", str(tmp_path / "d.txt")], capsys, monkeypatch
+    )
     assert code == 2 and "expected an image name ending in .png, .pdf or .svg" in err
     code, _, err = run_cli(["lens", "field", "cooke_triplet", "--sensor", "no-such-sensor"], capsys, monkeypatch)
     assert code == 2 and len(err.strip().splitlines()) == 1 and "no-such-sensor" in err

@@ -2,6 +2,7 @@
 too so that a change shows its findings before it lands. The baseline of what the code had
 when the lint came in is pyproject.toml's per-file ignores (scripts/ruff_baseline.py).
 Skipped where ruff is not installed; scripts/setup.sh installs it."""
+
 from __future__ import annotations
 
 import importlib.util
@@ -27,6 +28,11 @@ def test_ruff_passes_with_its_baseline() -> None:
         ruff = script.ruff_executable()
     except SystemExit:
         pytest.skip("ruff is not installed (scripts/setup.sh installs it)")
-    run = subprocess.run([ruff, "check", "--no-cache", "--output-format", "concise"], cwd=REPO, capture_output=True,
-                         text=True, check=False)
+    run = subprocess.run(
+        [ruff, "check", "--no-cache", "--output-format", "concise"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
     assert run.returncode == 0, f"ruff check found problems; fix them (do not add them to the baseline):\n{run.stdout}"

@@ -2,6 +2,7 @@
 Laplacian against its formula, each loss's value at a perfect output, the edge term
 ranking an over-smoothed output below one with an equally large smooth error (MSE ranks
 them equal), training with each loss, and the loss frozen on resume."""
+
 from __future__ import annotations
 
 import math
@@ -35,8 +36,9 @@ def test_laplacian_matches_its_formula() -> None:
     want = x[..., :-2, 1:-1] + x[..., 2:, 1:-1] + x[..., 1:-1, :-2] + x[..., 1:-1, 2:] - 4 * x[..., 1:-1, 1:-1]
     torch.testing.assert_close(lap[..., 1:-1, 1:-1], want)
     torch.testing.assert_close(lap[..., 0, 0], 2 * x[..., 1, 0] + 2 * x[..., 0, 1] - 4 * x[..., 0, 0])
-    yy, xx = torch.meshgrid(torch.arange(9.0, dtype=torch.float64), torch.arange(11.0, dtype=torch.float64),
-                            indexing="ij")
+    yy, xx = torch.meshgrid(
+        torch.arange(9.0, dtype=torch.float64), torch.arange(11.0, dtype=torch.float64), indexing="ij"
+    )
     plane = (0.3 + 0.02 * yy - 0.01 * xx).expand(1, 3, 9, 11)
     assert float(laplacian(plane)[..., 1:-1, 1:-1].abs().max()) < 1e-12
 
@@ -65,7 +67,7 @@ def test_the_edge_term_does_not_reward_over_smoothing() -> None:
     mse = F.mse_loss(smooth, t)
     yy, xx = torch.meshgrid(torch.linspace(-1, 1, 64), torch.linspace(-1, 1, 64), indexing="ij")
     ramp = (0.5 * xx + 0.3 * yy).expand_as(t)
-    shaded = t + ramp * torch.sqrt(mse / (ramp ** 2).mean())
+    shaded = t + ramp * torch.sqrt(mse / (ramp**2).mean())
     assert math.isclose(float(restoration_loss("mse", shaded, t)), float(mse), rel_tol=1e-4)
     edge_smooth, edge_shaded = (float(restoration_loss("charbonnier-edge", o, t)) for o in (smooth, shaded))
     assert edge_smooth > 1.15 * edge_shaded

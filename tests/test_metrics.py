@@ -1,4 +1,5 @@
 """PSNR / SSIM against scikit-image, and the field zones."""
+
 import math
 
 import numpy as np
@@ -39,14 +40,16 @@ def test_psnr_matches_skimage(seed):
 @pytest.mark.parametrize("seed", [0, 1])
 def test_ssim_matches_skimage(seed):
     test, ref = _pair(seed)
-    want = structural_similarity(ref, test, channel_axis=0, data_range=1.0, gaussian_weights=True, sigma=1.5,
-                                 use_sample_covariance=False)
+    want = structural_similarity(
+        ref, test, channel_axis=0, data_range=1.0, gaussian_weights=True, sigma=1.5, use_sample_covariance=False
+    )
     got = ssim(test, ref)
     assert 0.1 < want < 0.95
     assert abs(got - want) < 1e-4
     # the map is the valid part of skimage's full map
-    _, full = structural_similarity(ref[0], test[0], data_range=1.0, gaussian_weights=True, sigma=1.5,
-                                    use_sample_covariance=False, full=True)
+    _, full = structural_similarity(
+        ref[0], test[0], data_range=1.0, gaussian_weights=True, sigma=1.5, use_sample_covariance=False, full=True
+    )
     assert np.max(np.abs(ssim_map(test, ref)[0] - full[5:-5, 5:-5])) < 1e-6
 
 
@@ -103,8 +106,15 @@ def test_torch_batch_entry_points_match_references_and_the_numpy_ones():
     assert torch.allclose(ssim_batch(a, a), torch.ones(2, dtype=torch.float64), atol=1e-12)
     metrics = pytest.importorskip("skimage.metrics")
     for i in range(2):
-        ref = metrics.structural_similarity(b[i].numpy(), a[i].numpy(), channel_axis=0, data_range=1.0,
-                                            gaussian_weights=True, sigma=1.5, use_sample_covariance=False)
+        ref = metrics.structural_similarity(
+            b[i].numpy(),
+            a[i].numpy(),
+            channel_axis=0,
+            data_range=1.0,
+            gaussian_weights=True,
+            sigma=1.5,
+            use_sample_covariance=False,
+        )
         assert abs(float(s[i]) - ref) < 1e-6, (float(s[i]), ref)
     p = psnr_batch(b, a)
     for i in range(2):

@@ -4,6 +4,7 @@ lateral colour they give a lens, the files that carry them, and --match-glass.
 Truth: each vendor's own dispersion formula (the `opticalglass` package); Schott's normal
 line P_g,F = 0.6438 - 0.001682 Vd, which K7 and F2 lie on by construction.
 """
+
 import dataclasses
 import json
 import warnings
@@ -31,9 +32,20 @@ from lensim.optics.materials import (
 VISIBLE_UM = np.linspace(0.400, 0.700, 301)
 # a dozen glasses from five makers across the glass map: crowns, fluor crowns, barium and
 # lanthanum crowns and flints, a short flint (KZFS) and dense flints
-DOZEN = [("N-BK7", "Schott"), ("F2", "Schott"), ("N-SF6", "Schott"), ("N-FK51A", "Schott"),
-         ("N-KZFS4", "Schott"), ("N-BAF10", "Schott"), ("S-LAH66", "Ohara"), ("S-TIH53", "Ohara"),
-         ("S-FPL51", "Ohara"), ("J-SK16", "Hikari"), ("TAFD25", "Hoya"), ("H-K9L", "CDGM")]
+DOZEN = [
+    ("N-BK7", "Schott"),
+    ("F2", "Schott"),
+    ("N-SF6", "Schott"),
+    ("N-FK51A", "Schott"),
+    ("N-KZFS4", "Schott"),
+    ("N-BAF10", "Schott"),
+    ("S-LAH66", "Ohara"),
+    ("S-TIH53", "Ohara"),
+    ("S-FPL51", "Ohara"),
+    ("J-SK16", "Hikari"),
+    ("TAFD25", "Hoya"),
+    ("H-K9L", "CDGM"),
+]
 
 
 @pytest.fixture(scope="module")
@@ -84,8 +96,10 @@ def test_model_indices_against_a_dozen_catalogue_glasses(dozen):
 
 
 def modelled(lens, on_normal_line: bool):
-    surfaces = [s if isinstance(s.material, Air) else
-                dataclasses.replace(s, material=s.material.as_model(on_normal_line)) for s in lens.surfaces]
+    surfaces = [
+        s if isinstance(s.material, Air) else dataclasses.replace(s, material=s.material.as_model(on_normal_line))
+        for s in lens.surfaces
+    ]
     return lens.with_changes(surfaces=surfaces)
 
 
@@ -118,10 +132,12 @@ def test_native_files_carry_dpgf_and_reject_bad_values():
     data["surfaces"][0]["material"] = m.spec()
     again = lens_from_dict(data)
     assert again.surfaces[0].material.dpgf_value == 0.0308
-    for bad, what in (({"nd": 1.5, "vd": 60, "dpgf": 0.5}, "between -0.2 and 0.2"),
-                      ({"nd": 1.5, "vd": 60, "dpfg": 0.01}, "unknown model-glass key"),
-                      ({"nd": 1.5, "vd": "x"}, "must be numbers"),
-                      ({"nd": 0.5, "vd": 60}, "1 <= nd < 5")):
+    for bad, what in (
+        ({"nd": 1.5, "vd": 60, "dpgf": 0.5}, "between -0.2 and 0.2"),
+        ({"nd": 1.5, "vd": 60, "dpfg": 0.01}, "unknown model-glass key"),
+        ({"nd": 1.5, "vd": "x"}, "must be numbers"),
+        ({"nd": 0.5, "vd": 60}, "1 <= nd < 5"),
+    ):
         data["surfaces"][0]["material"] = bad
         with pytest.raises(InputError, match=what):
             lens_from_dict(data, source="t.yaml")
@@ -156,25 +172,35 @@ def test_match_glass_replaces_model_glasses_and_reports_them(tmp_path, capsys, m
     assert records[-1]["glass"] == "N-BK7" and records[-1]["rms_index_difference"] < 3e-4
     assert sum("nearest catalogue glass" in n for n in matched.notes) == len(models)
 
-    code, out, _ = run_cli(["lens", "info", "phone_wide", "--match-glass", "--glass-makers", "schott", "--json"],
-                           capsys, monkeypatch)
+    code, out, _ = run_cli(
+        ["lens", "info", "phone_wide", "--match-glass", "--glass-makers", "schott", "--json"], capsys, monkeypatch
+    )
     assert code == 0 and [r["glass"] for r in json.loads(out)["glass_matches"]] == [r["glass"] for r in records]
     # lens field reports the lens with the matched glasses, and the matches
-    code, out, _ = run_cli(["lens", "field", "phone_wide", "--match-glass", "--glass-makers", "Schott", "--field", "1",
-                            "--json"], capsys, monkeypatch)
+    code, out, _ = run_cli(
+        ["lens", "field", "phone_wide", "--match-glass", "--glass-makers", "Schott", "--field", "1", "--json"],
+        capsys,
+        monkeypatch,
+    )
     report = json.loads(out)
     assert code == 0 and [r["glass"] for r in report["glass_matches"]] == [r["glass"] for r in records]
     assert report["fields"][0]["lateral_colour_um"]["b"] != 0.0
     target = tmp_path / "matched.yaml"
-    code, _, _ = run_cli(["lens", "convert", "phone_wide", "--match-glass", "--glass-makers", "Schott",
-                          "-o", str(target)], capsys, monkeypatch)
+    code, _, _ = run_cli(
+        ["lens", "convert", "phone_wide", "--match-glass", "--glass-makers", "Schott", "-o", str(target)],
+        capsys,
+        monkeypatch,
+    )
     assert code == 0 and "N-BK7@Schott" in target.read_text()
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--match-glass", "--glass-makers", "Zeiss"], "--glass-makers: unknown glass maker(s) Zeiss"),
-    (["--glass-makers", "Schott"], "--glass-makers: only applies with --match-glass"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--match-glass", "--glass-makers", "Zeiss"], "--glass-makers: unknown glass maker(s) Zeiss"),
+        (["--glass-makers", "Schott"], "--glass-makers: only applies with --match-glass"),
+    ],
+)
 def test_bad_glass_makers_are_one_line_errors(args, message, tmp_path, capsys, monkeypatch):
     target = tmp_path / "out.yaml"
     code, _, err = run_cli(["lens", "convert", "phone_wide", *args, "-o", str(target)], capsys, monkeypatch)

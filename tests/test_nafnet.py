@@ -4,6 +4,7 @@ layer, the block's algebra against a direct formula, identity at init, the field
 variants, the receptive field the docstring states, tiled == whole-image restoration,
 checkpoints through build_model (old ones included), training with --arch, and the size
 matching to the default network."""
+
 from __future__ import annotations
 
 import json
@@ -50,8 +51,16 @@ def _conv(cin: int, cout: int, k: int, groups: int = 1, bias: bool = True) -> in
 def _block_by_hand(c: int) -> int:
     """The paper's NAFBlock, layer by layer: LN(c) x2, 1x1 c->2c, depthwise 3x3 on 2c,
     SCA 1x1 c->c, 1x1 c->c, 1x1 c->2c, 1x1 c->c, beta and gamma (c each)."""
-    return (2 * 2 * c + _conv(c, 2 * c, 1) + _conv(2 * c, 2 * c, 3, groups=2 * c) + _conv(c, c, 1) + _conv(c, c, 1)
-            + _conv(c, 2 * c, 1) + _conv(c, c, 1) + 2 * c)
+    return (
+        2 * 2 * c
+        + _conv(c, 2 * c, 1)
+        + _conv(2 * c, 2 * c, 3, groups=2 * c)
+        + _conv(c, c, 1)
+        + _conv(c, c, 1)
+        + _conv(c, 2 * c, 1)
+        + _conv(c, c, 1)
+        + 2 * c
+    )
 
 
 def _nafnet_by_hand(w: int, enc: list[int], middle: int, dec: list[int], cin: int = 3, stem: int = 1) -> int:
@@ -83,10 +92,15 @@ def test_block_layer_shapes() -> None:
     assert shapes["norm1.weight"] == shapes["norm2.bias"] == (c,)
 
 
-@pytest.mark.parametrize(("w", "enc", "middle", "dec", "stem", "fov"), [
-    (16, [1, 1], 2, [1, 1], 1, False), (8, [2, 1, 3], 1, [1, 2, 1], 1, True), (12, [1], 0, [2], 2, True),
-    (46, [1, 1], 2, [1, 1], 1, False),
-])
+@pytest.mark.parametrize(
+    ("w", "enc", "middle", "dec", "stem", "fov"),
+    [
+        (16, [1, 1], 2, [1, 1], 1, False),
+        (8, [2, 1, 3], 1, [1, 2, 1], 1, True),
+        (12, [1], 0, [2], 2, True),
+        (46, [1, 1], 2, [1, 1], 1, False),
+    ],
+)
 def test_network_parameters_by_hand(w: int, enc: list[int], middle: int, dec: list[int], stem: int, fov: bool) -> None:
     net = NAFNet(w, enc, middle, dec, use_fov=fov, stem=stem)
     assert count_parameters(net) == _nafnet_by_hand(w, enc, middle, dec, 5 if fov else 3, stem)
@@ -108,8 +122,13 @@ def test_block_forward_is_the_formula() -> None:
 
     t = b.conv2(b.conv1(ln(x, b.norm1)))
     t = t[:, :c] * t[:, c:]
-    pooled = torch.stack([torch.stack([t[:, :, max(i - 1, 0):i + 2, max(j - 1, 0):j + 2].mean((-2, -1))
-                                       for j in range(7)], -1) for i in range(9)], -2)
+    pooled = torch.stack(
+        [
+            torch.stack([t[:, :, max(i - 1, 0) : i + 2, max(j - 1, 0) : j + 2].mean((-2, -1)) for j in range(7)], -1)
+            for i in range(9)
+        ],
+        -2,
+    )
     y = x + b.beta * b.conv3(t * b.sca(pooled))
     u = b.conv4(ln(y, b.norm2))
     expected = y + b.gamma * b.conv5(u[:, :c] * u[:, c:])
@@ -121,7 +140,7 @@ def test_helpers() -> None:
     assert torch.equal(simple_gate(x), x[:, :3] * x[:, 3:])
     m = box_mean(x, 5)
     for i, j in [(0, 0), (2, 1), (4, 3)]:
-        box = x[:, :, max(i - 2, 0):i + 3, max(j - 2, 0):j + 3]
+        box = x[:, :, max(i - 2, 0) : i + 3, max(j - 2, 0) : j + 3]
         assert torch.allclose(m[:, :, i, j], box.mean((-2, -1)), atol=1e-12)
     assert torch.equal(box_mean(x, 1), x)
     with pytest.raises(ValueError, match="sca_window"):
@@ -155,8 +174,9 @@ def test_variants_build_what_they_name() -> None:
     one = NAFNet(8, use_deformable=True, deformable_scales=1)
     assert [isinstance(d, DeformResBlock) for d in one.deform] == [True, False]  # coarsest decoder scale first
     plain = NAFNet(8)
-    assert plain.intro.in_channels == 3 and not any(isinstance(m, (DeformResBlock, ContextBlock))
-                                                    for m in plain.modules())
+    assert plain.intro.in_channels == 3 and not any(
+        isinstance(m, (DeformResBlock, ContextBlock)) for m in plain.modules()
+    )
     assert NAFNet(8, stem=2).intro.in_channels == 12 and NAFNet(8, use_fov=True, settings_dim=3).intro.in_channels == 8
     rgb, fov = _inputs(1, 20, 12)
     torch.manual_seed(1)
@@ -167,8 +187,13 @@ def test_variants_build_what_they_name() -> None:
         NAFNet(8, settings_dim=2)(rgb)
     with pytest.raises(ValueError, match="use_fov"):
         NAFNet(8, use_fov=True)(rgb)
-    for bad in ({"stem": 3}, {"enc_blocks": (1,), "dec_blocks": (1, 1)}, {"width": 0}, {"arch": "unet"},
-                {"use_deformable": True, "deformable_groups": 3}):
+    for bad in (
+        {"stem": 3},
+        {"enc_blocks": (1,), "dec_blocks": (1, 1)},
+        {"width": 0},
+        {"arch": "unet"},
+        {"use_deformable": True, "deformable_groups": 3},
+    ):
         with pytest.raises(ValueError):
             NAFNet(**{"width": 8, **bad})  # type: ignore[arg-type]
 
@@ -194,8 +219,9 @@ def _receptive_radius(net: torch.nn.Module, size: int = 256) -> int:
     return int(max((ys - c).abs().max(), (xs - c).abs().max()))
 
 
-@pytest.mark.parametrize(("kw", "radius"), [({}, 31), ({"stem": 2}, 62), ({"use_context": True}, 63),
-                                            ({"sca_window": 5}, 46)])
+@pytest.mark.parametrize(
+    ("kw", "radius"), [({}, 31), ({"stem": 2}, 62), ({"use_context": True}, 63), ({"sca_window": 5}, 46)]
+)
 def test_receptive_field_as_documented(kw: dict, radius: int) -> None:
     """The radii the module docstring states (zero offsets; width does not matter)."""
     assert _receptive_radius(_randomised(NAFNet(4, **kw).double())) == radius
@@ -218,8 +244,12 @@ def test_tiled_equals_whole_image(stem: int) -> None:
 def test_size_matching() -> None:
     ref = reference_parameters()
     assert ref == count_parameters(FieldAwareUNet(width=32, deformable_scales=1)) == 821_209
-    for kw in ({}, {"use_fov": True}, {"stem": 2, "use_fov": True},
-               {"use_fov": True, "use_deformable": True, "use_context": True}):
+    for kw in (
+        {},
+        {"use_fov": True},
+        {"stem": 2, "use_fov": True},
+        {"use_fov": True, "use_deformable": True, "use_context": True},
+    ):
         w = nafnet_width(ref, **kw)
         n = count_parameters(NAFNet(w, **kw))
         assert abs(n - ref) <= 0.1 * ref
@@ -228,7 +258,8 @@ def test_size_matching() -> None:
         assert all(abs(count_parameters(NAFNet(v, **kw)) - ref) >= abs(n - ref) for v in (w - step, w + step))
         assert default_width("nafnet", **kw) == w
     assert count_parameters(nafnet_matching(FieldAwareUNet(width=8), use_fov=True)) == pytest.approx(
-        count_parameters(FieldAwareUNet(width=8)), rel=0.1)
+        count_parameters(FieldAwareUNet(width=8)), rel=0.1
+    )
     assert default_width("unet") == 32
     with pytest.raises(ValueError, match="10%"):
         nafnet_width(10)
@@ -246,8 +277,9 @@ def test_build_model_and_checkpoints(tmp_path: Path) -> None:
         build_model({"arch": "banana"})
     rgb, fov = _inputs(1, 24, 20)
     for name, net, cfg in (("naf", naf, naf.config), ("old", unet, old)):
-        torch.save({"format": CHECKPOINT_FORMAT, "model_config": cfg, "model_state": net.state_dict()},
-                   tmp_path / f"{name}.pt")
+        torch.save(
+            {"format": CHECKPOINT_FORMAT, "model_config": cfg, "model_state": net.state_dict()}, tmp_path / f"{name}.pt"
+        )
         loaded, info = load_checkpoint(tmp_path / f"{name}.pt")
         assert type(loaded) is type(net) and info["model_config"] == cfg
         assert torch.equal(loaded(rgb, fov), net.eval()(rgb, fov))
@@ -283,19 +315,51 @@ def test_train_and_evaluate_with_arch(tmp_path: Path) -> None:
 
     pairs = make_pairs(tmp_path / "pairs", photos=2, crops=2, size=32)
     runner = CliRunner()
-    args = ["train", str(pairs), "-o", str(tmp_path / "run"), "--epochs", "1", "--crop", "32", "--arch", "nafnet",
-            "--stem", "2", "--no-deformable", "--no-context", "--steps-per-epoch", "1", "--batch-size", "2",
-            "--val-fraction", "0.5", "--json", "--threads", "1"]
+    args = [
+        "train",
+        str(pairs),
+        "-o",
+        str(tmp_path / "run"),
+        "--epochs",
+        "1",
+        "--crop",
+        "32",
+        "--arch",
+        "nafnet",
+        "--stem",
+        "2",
+        "--no-deformable",
+        "--no-context",
+        "--steps-per-epoch",
+        "1",
+        "--batch-size",
+        "2",
+        "--val-fraction",
+        "0.5",
+        "--json",
+        "--threads",
+        "1",
+    ]
     res = runner.invoke(_app(), args)
     assert res.exit_code == 0, res.output
     assert json.loads(res.output)["steps"] == 1
     model, info = load_checkpoint(tmp_path / "run")
     assert isinstance(model, NAFNet) and model.stem == 2 and model.use_fov
     assert info["train_config"]["arch"] == "nafnet"
-    assert model.width == default_width("nafnet", **{k: v for k, v in model.config.items()
-                                                     if k not in ("arch", "width")})
-    base = ["evaluate", "--pairs", str(pairs), "--methods", "input,model", "--model", str(tmp_path / "run"), "--json",
-            "--quiet"]
+    assert model.width == default_width(
+        "nafnet", **{k: v for k, v in model.config.items() if k not in ("arch", "width")}
+    )
+    base = [
+        "evaluate",
+        "--pairs",
+        str(pairs),
+        "--methods",
+        "input,model",
+        "--model",
+        str(tmp_path / "run"),
+        "--json",
+        "--quiet",
+    ]
     restore = checkpoint_method(tmp_path / "run", arch="nafnet")  # loads: the architecture matches
     assert callable(restore)
     res = runner.invoke(_app(), base + ["--arch", "unet"])  # the real CLI turns InputError into exit 2
@@ -304,8 +368,22 @@ def test_train_and_evaluate_with_arch(tmp_path: Path) -> None:
     # the baseline: `plain` / --plain, and its old names, keyed by the name used
     run = tmp_path / "run"
     for plain in ("--plain", "--plain-unet"):  # --arch checks the plain network's checkpoint too
-        res = runner.invoke(_app(), ["evaluate", "--pairs", str(pairs), "--methods", "input,plain", plain, str(run),
-                                     "--arch", "unet", "--json", "--quiet"])
+        res = runner.invoke(
+            _app(),
+            [
+                "evaluate",
+                "--pairs",
+                str(pairs),
+                "--methods",
+                "input,plain",
+                plain,
+                str(run),
+                "--arch",
+                "unet",
+                "--json",
+                "--quiet",
+            ],
+        )
         assert "holds a 'nafnet' network; expected 'unet' (--arch)" in str(res.exception), plain
     # without --methods: the built-in methods plus the plain network, named after its option
     assert _method_names(None, {"model": None, "plain": run}) == ["input", "wiener", "rl", "unsharp", "plain"]

@@ -10,6 +10,7 @@ negative thickness inside glass, lens surfaces overlapping) is a one-line error,
 still cannot travel backwards inside glass; (e) a Zemax file with a negative DISZ in air
 loads.
 """
+
 from __future__ import annotations
 
 import copy
@@ -48,7 +49,7 @@ def cooke(clear: bool = True) -> Lens:
 def insert(lens: Lens, after: int, new: list[Surface]) -> Lens:
     """The lens with surfaces `new` inserted after surface `after` (-1: before the first)."""
     surfaces = [copy.copy(s) for s in lens.surfaces]
-    return lens.with_changes(surfaces=surfaces[:after + 1] + new + surfaces[after + 1:])
+    return lens.with_changes(surfaces=surfaces[: after + 1] + new + surfaces[after + 1 :])
 
 
 def dummy_pair(lens: Lens, after: int, d: float) -> Lens:
@@ -122,15 +123,18 @@ def _stop_in_gap(negative: bool) -> Lens:
     else:
         surfaces[3].thickness = a
         new = [Surface(thickness=g - a, is_stop=True)]
-    return base.with_changes(surfaces=surfaces[:4] + new + surfaces[4:], aperture_type="stop_semi_diameter",
-                             aperture_value=3.5)
+    return base.with_changes(
+        surfaces=surfaces[:4] + new + surfaces[4:], aperture_type="stop_semi_diameter", aperture_value=3.5
+    )
 
 
 @pytest.mark.parametrize("aiming", ["paraxial", "real"])
 def test_stop_placed_by_a_negative_thickness_changes_no_ray(aiming):
     positive, negative = _stop_in_gap(False), _stop_in_gap(True)
     assert negative.surfaces[negative.stop_index - 1].thickness < 0
-    assert negative.vertex_z()[negative.stop_index] == pytest.approx(positive.vertex_z()[positive.stop_index], abs=1e-12)
+    assert negative.vertex_z()[negative.stop_index] == pytest.approx(
+        positive.vertex_z()[positive.stop_index], abs=1e-12
+    )
     ref, _, _ = traced(positive, aiming)
     res, _, _ = traced(negative, aiming)
     assert_same_rays(ref, res, lambda k: k - 1 if k > 4 else k)
@@ -139,8 +143,12 @@ def test_stop_placed_by_a_negative_thickness_changes_no_ray(aiming):
 def test_zero_thickness_stop_before_a_concave_surface():
     # a stop on the vertex plane of a surface that curves towards the object: the rays
     # meet the surface behind the stop plane (negative distance), and all reach the image
-    lens = Lens([Surface(0.0, 0.0, is_stop=True), Surface(-1 / 30.0, 4.0, ConstantIndex(1.6)),
-                 Surface(-1 / 12.0, 40.0)], aperture_value=10.0, fields=[0.0, 10.0], wavelengths_um=[0.55])
+    lens = Lens(
+        [Surface(0.0, 0.0, is_stop=True), Surface(-1 / 30.0, 4.0, ConstantIndex(1.6)), Surface(-1 / 12.0, 40.0)],
+        aperture_value=10.0,
+        fields=[0.0, 10.0],
+        wavelengths_um=[0.55],
+    )
     assert lens.virtual_steps().tolist() == [False, True, False, False]
     res, _, _ = traced(lens, "paraxial", [0.0, 10.0])
     assert bool((res.status == OK).all())
@@ -241,14 +249,18 @@ def test_overlapping_lens_surfaces_are_an_error():
     d = _cooke_dict()
     d["surfaces"][1]["thickness"] = -6.0
     line = one_line_error(d)
-    assert line.startswith("neg.yaml: surfaces[1].thickness: expected a positive thickness, got -6: surfaces[2] "
-                           "would lie behind surfaces[1]")
+    assert line.startswith(
+        "neg.yaml: surfaces[1].thickness: expected a positive thickness, got -6: surfaces[2] "
+        "would lie behind surfaces[1]"
+    )
     # ... or through a dummy plane, adding up to less than zero
     d = _cooke_dict()
     d["surfaces"].insert(2, {"thickness": -7.0})
     line = one_line_error(d)
-    assert line.startswith("neg.yaml: surfaces[2].thickness: expected the air from surfaces[1] to surfaces[3] to add "
-                           "up to >= 0 mm along the light's path, got -0.99245 mm")
+    assert line.startswith(
+        "neg.yaml: surfaces[2].thickness: expected the air from surfaces[1] to surfaces[3] to add "
+        "up to >= 0 mm along the light's path, got -0.99245 mm"
+    )
     # ... or putting the image plane before the last lens surface
     d = _cooke_dict()
     d["surfaces"].append({"thickness": -50.0})
@@ -269,8 +281,16 @@ def test_a_ray_cannot_travel_backwards_inside_glass():
     # a biconvex lens (R = 10 mm, 1 mm thick) whose edge thickness is negative beyond
     # r = 3.12 mm, behind a stop placed by a negative thickness: rim rays would have to
     # travel backwards inside the glass to its rear surface, so they miss it there
-    lens = Lens([Surface(0.0, 0.5), Surface(0.0, -0.5, is_stop=True), Surface(0.1, 1.0, ConstantIndex(1.5)),
-                 Surface(-0.1, 20.0)], aperture_value=8.0, wavelengths_um=[0.55])
+    lens = Lens(
+        [
+            Surface(0.0, 0.5),
+            Surface(0.0, -0.5, is_stop=True),
+            Surface(0.1, 1.0, ConstantIndex(1.5)),
+            Surface(-0.1, 20.0),
+        ],
+        aperture_value=8.0,
+        wavelengths_um=[0.55],
+    )
     res, rays, _ = traced(lens, "paraxial", [0.0], square_grid(41))
     r = torch.linalg.norm(rays.position[..., :2], dim=-1)
     assert bool((res.status[r < 3.0] == OK).all())
@@ -328,8 +348,11 @@ def test_zemax_file_with_a_negative_air_thickness_loads(tmp_path):
     assert bool((res.status == OK).all())
     # a negative DISZ that makes lens surfaces overlap names the file and the surface
     path.write_text(_zmx(0.3, -0.3).replace("  DISZ 3.25896", "  DISZ -3.25896"))
-    with pytest.raises(InputError, match=r"stop_behind\.zmx: surfaces\[2\]\.thickness: expected a positive thickness "
-                                         r"inside model 1\.62000/60\.00, got -3\.25896: a ray cannot travel backwards"):
+    with pytest.raises(
+        InputError,
+        match=r"stop_behind\.zmx: surfaces\[2\]\.thickness: expected a positive thickness "
+        r"inside model 1\.62000/60\.00, got -3\.25896: a ray cannot travel backwards",
+    ):
         read_zmx(path)
 
 

@@ -2,6 +2,7 @@
 three ablation switches, the parameter-matched plain UNet; against derivations by hand
 from the block definitions: absolute parameter counts, the receptive field, the residual
 contract and shift equivariance on the downsampling grid. Tiny widths and images."""
+
 from __future__ import annotations
 
 import pytest
@@ -105,12 +106,14 @@ def test_switches_change_parameter_count_as_expected() -> None:
     assert full - count_parameters(plain) == 2 * 9 * W0 + offsets + count_parameters(ContextBlock(c_last))
 
 
-def _block_counts(ws: tuple[int, ...], fov: bool, deformable: int, context: bool, groups: int,
-                  modulation: bool = False) -> int:
+def _block_counts(
+    ws: tuple[int, ...], fov: bool, deformable: int, context: bool, groups: int, modulation: bool = False
+) -> int:
     """Parameter count of FieldAwareUNet written out from the block definitions in the module
     docstring: k x k convs have cout * (cin * k^2 + 1) parameters, the 2x2 transposed conv
     cin * cout * 4 + cout, the DCN as many as the 3x3 conv it replaces; ``deformable`` is
     the number of deformable decoder scales, coarsest first."""
+
     def conv(cin: int, cout: int, k: int = 3) -> int:
         return cout * (cin * k * k + 1)
 
@@ -132,8 +135,9 @@ def _block_counts(ws: tuple[int, ...], fov: bool, deformable: int, context: bool
     return n
 
 
-@pytest.mark.parametrize("ws, groups", [((8, 16, 32), 2), ((32, 64, 128), 2), ((32, 64, 128, 256), 8)],
-                         ids=["tiny", "default", "paper"])
+@pytest.mark.parametrize(
+    "ws, groups", [((8, 16, 32), 2), ((32, 64, 128), 2), ((32, 64, 128, 256), 8)], ids=["tiny", "default", "paper"]
+)
 def test_parameter_counts_from_the_block_definitions(ws: tuple[int, ...], groups: int) -> None:
     """Absolute counts of the full net, every ablation variant, partial deformable scales
     and field modulation, against the block-by-block count above."""
@@ -143,11 +147,15 @@ def test_parameter_counts_from_the_block_definitions(ws: tuple[int, ...], groups
         ({"use_fov": False}, dict(fov=False, deformable=dec, context=True)),
         ({"use_deformable": False}, dict(fov=True, deformable=0, context=True)),
         ({"use_context": False}, dict(fov=True, deformable=dec, context=False)),
-        ({"use_fov": False, "use_deformable": False, "use_context": False},
-         dict(fov=False, deformable=0, context=False)),
+        (
+            {"use_fov": False, "use_deformable": False, "use_context": False},
+            dict(fov=False, deformable=0, context=False),
+        ),
         ({"deformable_scales": 1}, dict(fov=True, deformable=1, context=True)),
-        ({"deformable_scales": 1, "field_modulation": True},
-         dict(fov=True, deformable=1, context=True, modulation=True)),
+        (
+            {"deformable_scales": 1, "field_modulation": True},
+            dict(fov=True, deformable=1, context=True, modulation=True),
+        ),
     ]
     with torch.device("meta"):
         for switches, hand in cases:
@@ -358,6 +366,7 @@ def _receptive_columns(p: int, depth: int) -> tuple[int, int]:
     a 3x3 conv widens an interval by 1 (dilation d: by d); a stride-2 3x3 conv (padding 1)
     maps coarse j to fine 2j-1 .. 2j+1; the 2x2 stride-2 transposed conv maps fine i to
     coarse i // 2; 1x1 convs, the skips and the residual additions add nothing."""
+
     def conv(iv: tuple[int, int], r: int = 1) -> tuple[int, int]:
         return iv[0] - r, iv[1] + r
 
@@ -436,6 +445,6 @@ def test_shift_equivariant_for_multiples_of_the_grid_only() -> None:
     lo, hi = _receptive_columns(0, DEPTH)
     interior = slice(-lo + 4, width - hi - 4)
     for shift, equal in ((4, True), (1, False)):
-        a = net(rgb[..., shift:shift + width])[..., interior]
+        a = net(rgb[..., shift : shift + width])[..., interior]
         b = net(rgb[..., :width])[..., shift:][..., interior]
         assert torch.allclose(a, b, atol=1e-5) == equal, shift

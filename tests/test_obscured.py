@@ -12,6 +12,7 @@
   EFL against its published 57.6 m and against optiland, a near-perfect on-axis PSF whose
   dark ring is that of its annulus.
 """
+
 from __future__ import annotations
 
 import math
@@ -42,8 +43,12 @@ def obscured_paraboloid(eps: float) -> Lens:
     """A paraboloidal mirror (perfect on axis), its stop plane f in front with a central
     obscuration of eps times the pupil radius."""
     stop = Surface(0.0, F_MM, is_stop=True, obscuration_radius=eps * EPD_MM / 2 if eps else None)
-    return Lens([stop, Surface(-1 / (2 * F_MM), -F_MM, conic=-1.0, is_mirror=True)],
-                aperture_value=EPD_MM, fields=[0.0, 0.1], wavelengths_um=[WL])
+    return Lens(
+        [stop, Surface(-1 / (2 * F_MM), -F_MM, conic=-1.0, is_mirror=True)],
+        aperture_value=EPD_MM,
+        fields=[0.0, 0.1],
+        wavelengths_um=[WL],
+    )
 
 
 def annulus_amplitude(v, eps: float):
@@ -71,7 +76,7 @@ def annular(request):
 
 def _radii(psf) -> np.ndarray:
     c = psf.data.shape[0] // 2
-    y, x = np.mgrid[0:psf.data.shape[0], 0:psf.data.shape[1]]
+    y, x = np.mgrid[0 : psf.data.shape[0], 0 : psf.data.shape[1]]
     return np.hypot(x - c, y - c) * psf.spacing_um
 
 
@@ -118,8 +123,11 @@ def test_obscuration_blocks_rays_but_not_the_chief_ray():
 
 
 def test_obscuration_must_be_smaller_than_the_clear_aperture():
-    with pytest.raises(InputError, match=r"surfaces\[0\]\.obscuration: expected a central obscuration radius >= 0 mm "
-                                         r"below the clear semi-diameter 4, got 5"):
+    with pytest.raises(
+        InputError,
+        match=r"surfaces\[0\]\.obscuration: expected a central obscuration radius >= 0 mm "
+        r"below the clear semi-diameter 4, got 5",
+    ):
         Lens([Surface(0.0, 10.0, is_stop=True, clear_radius=4.0, obscuration_radius=5.0), Surface(0.0, 5.0)])
 
 

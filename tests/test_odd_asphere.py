@@ -2,6 +2,7 @@
 real-ray intercepts against optiland (which reads the same .zmx itself and has its own
 odd-asphere geometry), the paraxial focal length against the thick-lens formula, the CODE V
 reading and the native round trip, and one-line errors."""
+
 import warnings
 
 import numpy as np
@@ -43,6 +44,7 @@ def test_sag_and_normal_against_the_formula(lens):
     # dz/dr by central differences against slope_over_r * r (away from the cone tip at r = 0)
     h = 1e-6
     rr = r[1:]
+
     def sag(r):
         return s.sag(torch.tensor(r * r, dtype=DTYPE)).numpy()
 
@@ -70,8 +72,12 @@ def _trace_both(lens, reference_lenses, wavelength_um: float, n: int = 60):
         op = load_zemax_file(str(reference_lenses / ZMX))
         op.surfaces.trace(RealRays(x0, y0, z0, L, M, N, np.ones(n), np.full(n, wavelength_um)))
     theirs = np.stack([be.to_numpy(getattr(op.surfaces, a))[1:] for a in "xyz"], -1)
-    rays = Rays(torch.tensor(np.stack([x0, y0, z0], -1)), torch.tensor(np.stack([L, M, N], -1)),
-                torch.zeros(n, dtype=DTYPE), torch.ones(n, dtype=torch.bool))
+    rays = Rays(
+        torch.tensor(np.stack([x0, y0, z0], -1)),
+        torch.tensor(np.stack([L, M, N], -1)),
+        torch.zeros(n, dtype=DTYPE),
+        torch.ones(n, dtype=torch.bool),
+    )
     res = trace(lens, rays, torch.full((n,), wavelength_um, dtype=DTYPE), record=True, apertures=False)
     assert bool(res.rays.valid.all())
     return res.surface_positions.numpy(), theirs
@@ -135,10 +141,12 @@ def test_bad_odd_asphere_input_is_a_one_line_error(lens, reference_lenses, tmp_p
     with pytest.raises(InputError, match=r"SURF 1 PARM\): expected PARM 1..8 \(r\^1..r\^8\), got PARM 9"):
         read_zmx(bad)
     seq = (reference_lenses / "odd_asphere_singlet.seq").read_text()
-    for old, new, message in (("SPS ODD 0.0", "SPS XYP", "unsupported special surface XYP"),
-                              ("SPS ODD 0.0", "SPS ODD 12.5", "normalization radius 12.5 is not supported"),
-                              ("SCO AR4 1.0E-6", "SCO AR25 1.0E-6", "unsupported coefficient AR25"),
-                              ("  SPS ODD\n", "", "expected SPS ODD before its SCO coefficients")):
+    for old, new, message in (
+        ("SPS ODD 0.0", "SPS XYP", "unsupported special surface XYP"),
+        ("SPS ODD 0.0", "SPS ODD 12.5", "normalization radius 12.5 is not supported"),
+        ("SCO AR4 1.0E-6", "SCO AR25 1.0E-6", "unsupported coefficient AR25"),
+        ("  SPS ODD\n", "", "expected SPS ODD before its SCO coefficients"),
+    ):
         assert old in seq
         p = tmp_path / "bad.seq"
         p.write_text(seq.replace(old, new, 1))

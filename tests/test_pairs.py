@@ -23,16 +23,33 @@ def setup(tmp_path_factory):
         img, _ = read_image(sample_image_path(name))
         write_image(sharp / f"{name}.png", img[:, :192, :256])
     sensor = load_sensor(SENSOR)
-    bank = compute_bank(load_lens("cooke_triplet"), sensor.pixel_pitch_um, 21, fields=[0.0, 0.5, 0.8, 1.0],
-                        wavelengths_nm=[500, 600], pupil_samples=96, out_dir=base / "bank")
+    bank = compute_bank(
+        load_lens("cooke_triplet"),
+        sensor.pixel_pitch_um,
+        21,
+        fields=[0.0, 0.5, 0.8, 1.0],
+        wavelengths_nm=[500, 600],
+        pupil_samples=96,
+        out_dir=base / "bank",
+    )
     return base, sharp, sensor, bank
 
 
 def _run(setup, out, **kw):
     base, sharp, sensor, bank = setup
     calls = []
-    m = make_dataset(sharp, base / out, bank, SENSOR, sensor, crops=2, size=64, seed=3,
-                     progress=lambda d, t: calls.append((d, t)), **kw)
+    m = make_dataset(
+        sharp,
+        base / out,
+        bank,
+        SENSOR,
+        sensor,
+        crops=2,
+        size=64,
+        seed=3,
+        progress=lambda d, t: calls.append((d, t)),
+        **kw,
+    )
     return m, calls
 
 
@@ -81,7 +98,7 @@ def test_a_corrupt_record_is_recomputed_and_a_corrupt_settings_file_is_named(set
     settings.write_text('{"seed": 3, "cro')
     with pytest.raises(InputError, match=f"^{settings}: expected a pairs settings record in JSON"):
         _run(setup, "k")
-    settings.write_text('[1, 2]')
+    settings.write_text("[1, 2]")
     with pytest.raises(InputError, match=f"^{settings}: format: expected the 'lensim-pairs' settings record"):
         _run(setup, "k")
 
@@ -159,13 +176,17 @@ def test_exposure_draws_darken_scene_and_target_together(setup):
             ev = evs[c["placement"]]
             target, _ = read_image(base / "ev" / c["target"])
             inp, _ = read_image(base / "ev" / c["input"])
-            top, left = c["sensor_top"] - rec["placements"][c["placement"]]["sensor_top"], \
-                c["sensor_left"] - rec["placements"][c["placement"]]["sensor_left"]
-            want = expose(src[:, y0 + top:y0 + top + 64, x0 + left:x0 + left + 64], ev)
+            top, left = (
+                c["sensor_top"] - rec["placements"][c["placement"]]["sensor_top"],
+                c["sensor_left"] - rec["placements"][c["placement"]]["sensor_left"],
+            )
+            want = expose(src[:, y0 + top : y0 + top + 64, x0 + left : x0 + left + 64], ev)
             assert float((target - want).abs().max()) <= 0.5 / 255 + 1e-6
-            ratio = srgb_to_linear(target).mean() / srgb_to_linear(src[:, y0 + top:y0 + top + 64,
-                                                                      x0 + left:x0 + left + 64]).mean()
-            assert abs(float(ratio) - 2.0 ** ev) < 0.05 * 2.0 ** ev
+            ratio = (
+                srgb_to_linear(target).mean()
+                / srgb_to_linear(src[:, y0 + top : y0 + top + 64, x0 + left : x0 + left + 64]).mean()
+            )
+            assert abs(float(ratio) - 2.0**ev) < 0.05 * 2.0**ev
             assert abs(float(inp.mean() - target.mean())) < 0.1  # the camera saw the same darker scene
     a, _ = _run(setup, "a")
     off, _ = _run(setup, "ev0", exposure_ev=(0.0, 0.0))

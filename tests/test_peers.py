@@ -34,6 +34,7 @@ What is compared, and how the comparison is made fair:
     used for first-order data here, which apertures do not change.
 * The glass L-TIM28_MOLD of US08427765-1: see test_l_tim28_mold_substitution.
 """
+
 from __future__ import annotations
 
 import math
@@ -82,7 +83,9 @@ def _optiland_cooke(native_glass: bool) -> Optic:
     if native_glass:
         materials = COOKE_NATIVE_GLASSES
     else:
-        materials = [lensim_glass(s.material) for s in _lens("cooke_triplet").surfaces if not isinstance(s.material, Air)]
+        materials = [
+            lensim_glass(s.material) for s in _lens("cooke_triplet").surfaces if not isinstance(s.material, Air)
+        ]
     return optiland_cooke("paraxial", materials=materials, wavelengths_um=COOKE_WAVELENGTHS_UM, primary_um=0.55)
 
 
@@ -190,7 +193,9 @@ def test_rms_spot_radius_public_api_matches_optiland_cooke():
     op = _optiland("cooke_triplet", native_glass=False)
     sd = SpotDiagram(op, fields=[(0.0, f) for f in FIELD_FRACTIONS], wavelengths=[0.55], num_rings=6)
     ref = [float(per_field[0]) for per_field in sd.rms_spot_radius()]
-    ours = [rms_spot_radius(lens, f * 20.0, 0.55, rings=6, aiming="paraxial", reference="chief") for f in FIELD_FRACTIONS]
+    ours = [
+        rms_spot_radius(lens, f * 20.0, 0.55, rings=6, aiming="paraxial", reference="chief") for f in FIELD_FRACTIONS
+    ]
     np.testing.assert_allclose(ours, ref, rtol=RMS_RTOL)
 
 

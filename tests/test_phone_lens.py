@@ -8,6 +8,7 @@ mm behind lens 1's vertex, traced sequentially as in Zemax). The asset's descrip
 why its fields stop at 36 deg (the 42 deg chief ray does not trace) and where the one
 clear aperture comes from; the tests below pin those facts.
 """
+
 from __future__ import annotations
 
 import math
@@ -34,8 +35,22 @@ from optiland_models import assert_agrees_with_optiland  # imports optiland only
 PATENT_EFL_MM = 3.35
 PATENT_FNO = 2.2
 PATENT_TRACK_MM = 3.916  # sum of Table 5's thicknesses, stop dummy (+0.160 - 0.160) included
-PATENT_THICKNESSES = (0.160, -0.160, 0.479, 0.030, 0.195, 0.295, 0.290, 0.491, 0.586, 0.205, 0.330, 0.380, 0.210,
-                      0.425)  # dummy plane, stop, lens 1 ... IR filter
+PATENT_THICKNESSES = (
+    0.160,
+    -0.160,
+    0.479,
+    0.030,
+    0.195,
+    0.295,
+    0.290,
+    0.491,
+    0.586,
+    0.205,
+    0.330,
+    0.380,
+    0.210,
+    0.425,
+)  # dummy plane, stop, lens 1 ... IR filter
 STOP_SURFACE = 1
 MAX_FIELD_DEG = 36.0
 IMAGE_HEIGHT_MM = 2.4906  # lensim's real chief ray at 36 deg (optiland: the same to 1e-6)
@@ -84,7 +99,9 @@ def test_image_height_at_the_full_field(lens):
     # 2.2 % more than f tan(36 deg): a few per cent of distortion, as phone lenses have
     assert s["image_height_mm"] / (s["efl_mm"] * math.tan(math.radians(MAX_FIELD_DEG))) == pytest.approx(1.0, abs=0.03)
     # the stop is in object space, so real and paraxial aiming are the same rays
-    assert first_order_summary(lens, aiming="paraxial")["image_height_mm"] == pytest.approx(s["image_height_mm"], abs=1e-9)
+    assert first_order_summary(lens, aiming="paraxial")["image_height_mm"] == pytest.approx(
+        s["image_height_mm"], abs=1e-9
+    )
 
 
 def test_the_stated_84_degree_field_does_not_trace(lens):
@@ -138,8 +155,9 @@ def test_phone_sensor_fits_the_image_circle(lens):
     # a small bank at the phone's pitch covers the whole sensor (the check simulate runs)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        bank = compute_bank(lens, sensor.pixel_pitch_um, 31, fields=[0.0, 1.0], wavelengths_nm=[480.0, 550.0, 650.0],
-                            pupil_samples=32)
+        bank = compute_bank(
+            lens, sensor.pixel_pitch_um, 31, fields=[0.0, 1.0], wavelengths_nm=[480.0, 550.0, 650.0], pupil_samples=32
+        )
     assert float(bank.radii_mm[-1]) == pytest.approx(IMAGE_HEIGHT_MM, abs=2e-4)
     check_bank_fits(bank, map_to_sensor(sensor.height, sensor.width, sensor))
     assert bank.fields[0].strehl > 0.8  # 0.83 on axis at 587.6 nm; 0.27 at 36 deg

@@ -18,8 +18,12 @@ WL = 0.55
 
 def _paraboloid(f=100.0, epd=10.0) -> Lens:
     """A perfect imager on axis: a paraboloidal mirror (F/10 by default)."""
-    return Lens([Surface(0.0, f, is_stop=True), Surface(-1 / (2 * f), -f, conic=-1.0, is_mirror=True)],
-                aperture_value=epd, fields=[0.0, 0.1], wavelengths_um=[WL])
+    return Lens(
+        [Surface(0.0, f, is_stop=True), Surface(-1 / (2 * f), -f, conic=-1.0, is_mirror=True)],
+        aperture_value=epd,
+        fields=[0.0, 0.1],
+        wavelengths_um=[WL],
+    )
 
 
 def _ncc(a, b) -> float:
@@ -61,7 +65,7 @@ def test_airy_energy_inside_first_ring(airy):
     # 83.8 % of the energy lies inside the first dark ring (tolerance 1 % absolute)
     _, pf, psf, spacing = airy
     c = psf.shape[0] // 2
-    y, x = np.mgrid[0:psf.shape[0], 0:psf.shape[1]]
+    y, x = np.mgrid[0 : psf.shape[0], 0 : psf.shape[1]]
     r = np.hypot(x - c, y - c) * spacing
     inside = psf[r <= 1.22 * WL * 10.0].sum()
     assert inside == pytest.approx(0.838, abs=0.01)

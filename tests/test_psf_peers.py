@@ -66,6 +66,7 @@ optiland takes about 4 s per PSF with paraxial aiming and 8-15 s with iterative 
 a quiet machine (plus about 4 s of numba compilation once; 2-5x more under load), so the default run holds the paraxial cases
 and the full-field real-aiming case; the other real-aiming cases are marked slow.
 """
+
 from __future__ import annotations
 
 import math
@@ -95,6 +96,7 @@ NCC_MIN = 0.99  # the brief's tolerance; measured >= 0.9992 (table above)
 STREHL_REL_TOL = 0.05  # the brief's tolerance; measured <= 2.3 % (table above)
 CHIEF_TOL_MM = 1e-9  # same aiming -> same chief ray; measured 1e-14 mm
 STOP_SEMI_DIAMETER_TOL_MM = 1e-12  # optiland must keep the stop radius it was given
+
 
 @pytest.fixture(autouse=True, scope="module")
 def _numpy_backend() -> Iterator[None]:
@@ -145,8 +147,7 @@ def test_huygens_psf_matches_optiland(lens: Lens, aiming: str, field: float) -> 
     para = paraxial_data(lens)
     o = optiland_cooke(aiming, para.stop_semi_diameter_mm)
     pixel_pitch_mm = SPACING_UM * 1e-3 * (GRID - 1) / GRID  # optiland's spacing is p N/(N-1)
-    op = HuygensPSF(o, (0.0, field), WAVELENGTH_UM, num_rays=PUPIL_SAMPLES, image_size=GRID,
-                    pixel_pitch=pixel_pitch_mm)
+    op = HuygensPSF(o, (0.0, field), WAVELENGTH_UM, num_rays=PUPIL_SAMPLES, image_size=GRID, pixel_pitch=pixel_pitch_mm)
     assert isinstance(op, ScalarHuygensPSF)
     if aiming == "real":
         r_stop = get_stop_radius_strategy(o, "iterative").calculate_stop_radius()
@@ -163,9 +164,17 @@ def test_huygens_psf_matches_optiland(lens: Lens, aiming: str, field: float) -> 
     amp = np.sqrt(intensity)
     xc, yc, zc = (float(v) for v in data.reference_center)
     ideal = NumbaSummation().compute(
-        np.full((1, 1), xc), np.full((1, 1), yc), np.full((1, 1), zc),
-        be.to_numpy(data.pupil_x), be.to_numpy(data.pupil_y), be.to_numpy(data.pupil_z),
-        amp, np.zeros_like(amp), WAVELENGTH_UM * 1e-3, data.radius, data.reference_center,
+        np.full((1, 1), xc),
+        np.full((1, 1), yc),
+        np.full((1, 1), zc),
+        be.to_numpy(data.pupil_x),
+        be.to_numpy(data.pupil_y),
+        be.to_numpy(data.pupil_z),
+        amp,
+        np.zeros_like(amp),
+        WAVELENGTH_UM * 1e-3,
+        data.radius,
+        data.reference_center,
     )[0, 0]
     raw_peak = psf_opt.max() * op.normalization / 100.0  # undo optiland's scaling to 100
     strehl_opt = raw_peak / ideal
@@ -182,19 +191,31 @@ def test_huygens_psf_matches_optiland(lens: Lens, aiming: str, field: float) -> 
     # lensim on optiland's sample points: optiland sample i sits at c + (i - N/2 + 1/2) s,
     # lensim's at chief + offset + (i - N/2) s
     value = field * lens.max_field
-    chief_y = chief_ray_image_height(lens, object_field(lens, value, aiming, para), aiming, para,
-                                     wavelength_um=WAVELENGTH_UM)
+    chief_y = chief_ray_image_height(
+        lens, object_field(lens, value, aiming, para), aiming, para, wavelength_um=WAVELENGTH_UM
+    )
     assert abs(chief_y - yc) < CHIEF_TOL_MM and abs(xc) < CHIEF_TOL_MM
     half = 0.5 * SPACING_UM * 1e-3
     chief_x = 0.0  # fields along +y: the chief ray stays in the y-z plane
     offset = (float(op.cx) - chief_x + half, float(op.cy) - chief_y + half)
-    psf = compute_psf(lens, field, WAVELENGTH_UM, method="huygens", pupil_samples=PUPIL_SAMPLES, grid=GRID,
-                      spacing_um=SPACING_UM, aiming=aiming, offset_mm=offset)
+    psf = compute_psf(
+        lens,
+        field,
+        WAVELENGTH_UM,
+        method="huygens",
+        pupil_samples=PUPIL_SAMPLES,
+        grid=GRID,
+        spacing_um=SPACING_UM,
+        aiming=aiming,
+        offset_mm=offset,
+    )
     assert abs(psf.chief_xy_mm[1] - chief_y) < 1e-12 and psf.chief_xy_mm[0] == chief_x
 
     corr = ncc(psf.data, psf_opt)
     strehl = psf.figures["strehl"]
-    msg = (f"{aiming} aiming, field {field}: NCC {corr:.5f}, Strehl lensim {strehl:.5f}, optiland same-pupil "
-           f"{strehl_opt:.5f} (optiland default {strehl_opt_default:.5f})")
+    msg = (
+        f"{aiming} aiming, field {field}: NCC {corr:.5f}, Strehl lensim {strehl:.5f}, optiland same-pupil "
+        f"{strehl_opt:.5f} (optiland default {strehl_opt_default:.5f})"
+    )
     assert corr >= NCC_MIN, msg
     assert abs(strehl / strehl_opt - 1.0) <= STREHL_REL_TOL, msg

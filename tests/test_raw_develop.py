@@ -4,6 +4,7 @@ Truths: (1) a mosaic made by the simulator (unprocess + mosaic + ADC, no noise) 
 written as a DNG develops to exactly the simulator's own developed output; (2) a DNG made
 from a known sRGB photo develops back to the photo, as closely as LibRaw's own AHD
 (rawpy.postprocess) develops the same file; (3) orientation as Pillow's EXIF transpose."""
+
 from __future__ import annotations
 
 import io
@@ -27,11 +28,12 @@ SENSOR = "apsc_mirrorless"  # Sony ILCE-7 colour: raw_fixtures.SONY_ILCE7_MATRIX
 def _photo(name: str = "kodim23", h: int = 64, w: int = 96) -> torch.Tensor:
     img = read_sample_image(name)
     y, x = img.shape[1] // 2 - h // 2, img.shape[2] // 2 - w // 2
-    return img[:, y:y + h, x:x + w].contiguous()
+    return img[:, y : y + h, x : x + w].contiguous()
 
 
-def _simulated_dng(path: Path, photo: torch.Tensor, pattern: str = "RGGB", kelvin: float = 4500.0,
-                   orientation: int = 1) -> tuple[torch.Tensor, isp.CaptureParams]:
+def _simulated_dng(
+    path: Path, photo: torch.Tensor, pattern: str = "RGGB", kelvin: float = 4500.0, orientation: int = 1
+) -> tuple[torch.Tensor, isp.CaptureParams]:
     """The simulator's noiseless capture of ``photo`` (normalized mosaic after the ADC)
     written as a DNG with the profile's levels and the capture's white balance."""
     d = load_sensor(SENSOR).to_dict()
@@ -40,8 +42,15 @@ def _simulated_dng(path: Path, photo: torch.Tensor, pattern: str = "RGGB", kelvi
     cam, params = isp.unprocess(photo, prof, kelvin=kelvin)
     mosaic = isp.mosaic(cam, pattern)
     raw, dn = isp.quantize_raw(mosaic, prof), isp.digital_numbers(mosaic, prof).numpy().astype(np.uint16)
-    write_dng(path, dn, pattern=pattern, black=(prof.black_level,) * 4, white=int(prof.white_level),
-              wb_gains=(params.r_gain, params.b_gain), orientation=orientation)
+    write_dng(
+        path,
+        dn,
+        pattern=pattern,
+        black=(prof.black_level,) * 4,
+        white=int(prof.white_level),
+        wb_gains=(params.r_gain, params.b_gain),
+        orientation=orientation,
+    )
     return raw, params
 
 
@@ -64,8 +73,11 @@ def test_develop_cli_writes_16_bit_tagged_srgb_equal_to_the_simulator(tmp_path, 
 
     (tmp_path / "in").mkdir()
     raw, params = _simulated_dng(tmp_path / "in" / "sim.dng", _photo(), orientation=6)
-    code, out, err = run_cli(["develop", str(tmp_path / "in"), "-o", str(tmp_path / "out"), "--sensor", SENSOR,
-                              "--json"], capsys, monkeypatch)
+    code, out, err = run_cli(
+        ["develop", str(tmp_path / "in"), "-o", str(tmp_path / "out"), "--sensor", SENSOR, "--json"],
+        capsys,
+        monkeypatch,
+    )
     assert code == 0, err
     assert json.loads(out)[0]["skipped"] is False
     with tifffile.TiffFile(tmp_path / "out" / "sim.tif") as tf:
@@ -76,8 +88,11 @@ def test_develop_cli_writes_16_bit_tagged_srgb_equal_to_the_simulator(tmp_path, 
     want = apply_orientation(isp.quantize(isp.raw_to_srgb(raw, params, bits=None), 16), 6)
     assert np.abs(arr.astype(np.int64) - isp.to_uint(want, 16).astype(np.int64)).max() <= 1
     # a rerun skips the finished output
-    code, out, err = run_cli(["develop", str(tmp_path / "in"), "-o", str(tmp_path / "out"), "--sensor", SENSOR,
-                              "--json", "--quiet"], capsys, monkeypatch)
+    code, out, err = run_cli(
+        ["develop", str(tmp_path / "in"), "-o", str(tmp_path / "out"), "--sensor", SENSOR, "--json", "--quiet"],
+        capsys,
+        monkeypatch,
+    )
     assert code == 0 and json.loads(out)[0]["skipped"] is True
 
 
@@ -91,9 +106,16 @@ def test_known_photo_comes_back_as_well_as_with_libraws_ahd(tmp_path):
     _simulated_dng(path, photo)
     ours, _ = develop_raw(read_raw(path), bits=None)
     with rawpy.imread(str(path)) as rp:
-        linear = rp.postprocess(demosaic_algorithm=rawpy.DemosaicAlgorithm.AHD, use_camera_wb=True,
-                                no_auto_bright=True, adjust_maximum_thr=0.0, output_bps=16, gamma=(1, 1),
-                                output_color=rawpy.ColorSpace.sRGB, user_flip=0)
+        linear = rp.postprocess(
+            demosaic_algorithm=rawpy.DemosaicAlgorithm.AHD,
+            use_camera_wb=True,
+            no_auto_bright=True,
+            adjust_maximum_thr=0.0,
+            output_bps=16,
+            gamma=(1, 1),
+            output_color=rawpy.ColorSpace.sRGB,
+            user_flip=0,
+        )
     peer = isp.linear_to_srgb(torch.from_numpy(linear.astype(np.float32) / 65535.0).permute(2, 0, 1))
     ours_db, peer_db = _psnr(ours, photo), _psnr(peer, photo)
     assert ours_db > 37.0 and peer_db > 34.0, (ours_db, peer_db)

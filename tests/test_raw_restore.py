@@ -1,5 +1,6 @@
 """`lensim restore` on camera raw files: develop + restore equals the in-memory chain,
 camera checks, linear DNG output, batches (resume, validation before output)."""
+
 from __future__ import annotations
 
 import json
@@ -33,9 +34,17 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, FieldAwareUNet]
     torch.manual_seed(0)
     model = FieldAwareUNet(8, 2, zero_init_tail=False).eval()
     run = tmp_path_factory.mktemp("run")
-    atomic_torch_save({"format": CHECKPOINT_FORMAT, "version": 1, "model_config": model.config,
-                       "model_state": model.state_dict(), "sensor": small_sensor().to_dict(), "lens": None},
-                      run / "last.pt")
+    atomic_torch_save(
+        {
+            "format": CHECKPOINT_FORMAT,
+            "version": 1,
+            "model_config": model.config,
+            "model_state": model.state_dict(),
+            "sensor": small_sensor().to_dict(),
+            "lens": None,
+        },
+        run / "last.pt",
+    )
     return run, model
 
 
@@ -57,10 +66,26 @@ def read_tif(path: Path) -> np.ndarray:
 def test_raw_restore_equals_the_in_memory_chain(run, tmp_path: Path, capsys, monkeypatch):
     folder, model = run
     raw, params = capture()
-    write_capture_dng(tmp_path / "in" / "shot.dng", raw, small_sensor(), params, orientation=6,
-                      exif=DngExif(iso=200, exposure_s=0.01))
-    code, _, err = run_cli(["restore", str(folder), str(tmp_path / "in"), "-o", str(tmp_path / "out"), "--dng",
-                            "--quiet", "--tile", "32", "--overlap", "8"], capsys, monkeypatch)
+    write_capture_dng(
+        tmp_path / "in" / "shot.dng", raw, small_sensor(), params, orientation=6, exif=DngExif(iso=200, exposure_s=0.01)
+    )
+    code, _, err = run_cli(
+        [
+            "restore",
+            str(folder),
+            str(tmp_path / "in"),
+            "-o",
+            str(tmp_path / "out"),
+            "--dng",
+            "--quiet",
+            "--tile",
+            "32",
+            "--overlap",
+            "8",
+        ],
+        capsys,
+        monkeypatch,
+    )
     assert code == 0, err
     developed = isp.raw_to_srgb(raw, params, bits=None)
     expected = restore_image(model, developed, (0.0, 0.0), (48.0, 64.0), tile=32, overlap=8).clamp(0, 1)
@@ -84,7 +109,7 @@ def test_developing_in_strips_is_developing_the_frame(tmp_path: Path):
     raw, params = capture(4, size=(70, 64))
     sensor = small_sensor()
     shot = read_raw(write_capture_dng(tmp_path / "s.dng", raw, sensor, params))
-    whole, _ = develop_raw(shot, sensor, orient=False, strip_rows=10 ** 6)  # one strip: the whole frame
+    whole, _ = develop_raw(shot, sensor, orient=False, strip_rows=10**6)  # one strip: the whole frame
     strips, used = develop_raw(shot, sensor, orient=False, strip_rows=20)  # 4 strips, the last one short
     assert float((strips - whole).abs().max()) < 1e-6 and used.r_gain == pytest.approx(params.r_gain)
 
@@ -94,8 +119,15 @@ def test_other_camera_is_refused_then_allowed(run, tmp_path: Path, capsys, monke
     raw, params = capture(1)
     sensor = small_sensor()
     dn = isp.digital_numbers(raw, sensor).to(torch.int32).numpy()
-    write_cfa_dng(tmp_path / "other.dng", dn, "RGGB", sensor.black_level, int(sensor.white_level),
-                  profile_colour(sensor, params.r_gain, params.b_gain), DngCamera("Acme", "Z9"))
+    write_cfa_dng(
+        tmp_path / "other.dng",
+        dn,
+        "RGGB",
+        sensor.black_level,
+        int(sensor.white_level),
+        profile_colour(sensor, params.r_gain, params.b_gain),
+        DngCamera("Acme", "Z9"),
+    )
     args = ["restore", str(folder), str(tmp_path / "other.dng"), "-o", str(tmp_path / "out"), "--quiet"]
     code, _, err = run_cli(args, capsys, monkeypatch)
     assert code == 2 and len(err.strip().splitlines()) == 1
@@ -141,16 +173,19 @@ def test_worker_processes_write_what_one_process_writes(run, tmp_path: Path, cap
         raw, params = capture(k)
         write_capture_dng(Path("raws") / f"s{k}.dng", raw, small_sensor(), params)
     threads = torch.get_num_threads()
-    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False, protocol="tcp://",
-                                  dashboard_address=":0") as c:
+    with distributed.LocalCluster(
+        n_workers=1, threads_per_worker=2, processes=False, protocol="tcp://", dashboard_address=":0"
+    ) as c:
         runs = {"1": ["--workers", "1"], "2": ["--workers", "2"], "cluster": ["--scheduler", c.scheduler_address]}
         for name, where in runs.items():
-            code, stdout, err = run_cli(["restore", str(folder), "raws", "-o", name, "--quiet", "--json", *where],
-                                        capsys, monkeypatch)
+            code, stdout, err = run_cli(
+                ["restore", str(folder), "raws", "-o", name, "--quiet", "--json", *where], capsys, monkeypatch
+            )
             assert code == 0, err
             records = sorted(json.loads(stdout)["images"], key=lambda r: r["input"])
             assert [(r["input"], r["output"], r["skipped"]) for r in records] == [
-                (f"raws/s{k}.dng", f"{name}/s{k}.tif", False) for k in range(3)]
+                (f"raws/s{k}.dng", f"{name}/s{k}.tif", False) for k in range(3)
+            ]
     torch.set_num_threads(threads)  # the cluster's jobs set their threads in this process
     for name in ("2", "cluster"):
         for k in range(3):
@@ -174,8 +209,9 @@ def test_a_worker_loads_the_model_once_and_restores_as_this_process(run, tmp_pat
     real = checkpoint.load_checkpoint
     monkeypatch.setattr(checkpoint, "load_checkpoint", lambda path, **kw: loads.append(path) or real(path, **kw))
     monkeypatch.setattr(raw_restore, "_MODEL", {})
-    settings = raw_restore.RestoreSettings(checkpoint=str(folder / "last.pt"), sensor=small_sensor().to_dict(),
-                                           tile=32, overlap=8)
+    settings = raw_restore.RestoreSettings(
+        checkpoint=str(folder / "last.pt"), sensor=small_sensor().to_dict(), tile=32, overlap=8
+    )
     for k in range(3):
         raw, params = capture(k)
         write_capture_dng(tmp_path / "raws" / f"s{k}.dng", raw, small_sensor(), params)
@@ -210,8 +246,20 @@ def test_a_scheduler_that_does_not_answer_is_one_line_and_writes_nothing(run, tm
         s.bind(("127.0.0.1", 0))
         address = f"tcp://127.0.0.1:{s.getsockname()[1]}"
     with dask.config.set({"distributed.comm.timeouts.connect": "0.5s"}):
-        code, _, err = run_cli(["restore", str(folder), str(tmp_path / "raws"), "-o", str(tmp_path / "out"),
-                                "--quiet", "--scheduler", address], capsys, monkeypatch)
+        code, _, err = run_cli(
+            [
+                "restore",
+                str(folder),
+                str(tmp_path / "raws"),
+                "-o",
+                str(tmp_path / "out"),
+                "--quiet",
+                "--scheduler",
+                address,
+            ],
+            capsys,
+            monkeypatch,
+        )
     assert code == 2 and len(err.strip().splitlines()) == 1, err
     assert address in err and "no Dask scheduler answered" in err
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
@@ -229,25 +277,53 @@ def test_simulated_dng_restores_as_in_memory(tmp_path: Path, capsys, monkeypatch
     from lensim.render.pipeline import simulate
 
     sensor = load_sensor("apsc_mirrorless")
-    bank = compute_bank(load_lens("cooke_triplet"), sensor.pixel_pitch_um, 15, fields=[0.0, 0.6, 1.0],
-                        wavelengths_nm=[500, 600], pupil_samples=32)
+    bank = compute_bank(
+        load_lens("cooke_triplet"),
+        sensor.pixel_pitch_um,
+        15,
+        fields=[0.0, 0.6, 1.0],
+        wavelengths_nm=[500, 600],
+        pupil_samples=32,
+    )
     torch.manual_seed(1)
     model = FieldAwareUNet(8, 2, zero_init_tail=False).eval()
     with torch.no_grad():  # a mild correction, so the PSNRs are those of a photo
         model.tail.weight.mul_(0.05)
-    atomic_torch_save({"format": CHECKPOINT_FORMAT, "version": 1, "model_config": model.config,
-                       "model_state": model.state_dict(), "sensor": sensor.to_dict(), "lens": None},
-                      tmp_path / "run" / "last.pt")
-    photo = torch.nn.functional.interpolate(torch.rand(1, 3, 8, 12, generator=torch.Generator().manual_seed(2)),
-                                            size=(48, 72), mode="bicubic", align_corners=False)[0].clamp(0, 1)
+    atomic_torch_save(
+        {
+            "format": CHECKPOINT_FORMAT,
+            "version": 1,
+            "model_config": model.config,
+            "model_state": model.state_dict(),
+            "sensor": sensor.to_dict(),
+            "lens": None,
+        },
+        tmp_path / "run" / "last.pt",
+    )
+    photo = torch.nn.functional.interpolate(
+        torch.rand(1, 3, 8, 12, generator=torch.Generator().manual_seed(2)),
+        size=(48, 72),
+        mode="bicubic",
+        align_corners=False,
+    )[0].clamp(0, 1)
     top, left = 400, 4600
     mapping = native_mapping(48, 72, sensor, top, left)
-    camera, _ = simulate(photo, bank, sensor, torch.Generator().manual_seed(3), mapping=mapping, bits=None,
-                         raw_path=tmp_path / "shot.dng")
+    camera, _ = simulate(
+        photo,
+        bank,
+        sensor,
+        torch.Generator().manual_seed(3),
+        mapping=mapping,
+        bits=None,
+        raw_path=tmp_path / "shot.dng",
+    )
     place, frame = (float(top), float(left)), (4000.0, 6000.0)
     in_memory = restore_image(model, isp.quantize(camera, 8), place, frame).clamp(0, 1)  # simulate's 8-bit photo
-    code, _, err = run_cli(["restore", str(tmp_path / "run"), str(tmp_path / "shot.dng"), "-o", str(tmp_path / "out"),
-                            "--quiet"], capsys, monkeypatch)
+    code, _, err = run_cli(
+        ["restore", str(tmp_path / "run"), str(tmp_path / "shot.dng"), "-o", str(tmp_path / "out"), "--quiet"],
+        capsys,
+        monkeypatch,
+    )
     assert code == 0, err
     from_dng = torch.from_numpy(read_tif(tmp_path / "out" / "shot.tif").transpose(2, 0, 1)).float()
     a, b = psnr(in_memory.numpy(), photo.numpy()), psnr(from_dng.numpy(), photo.numpy())
@@ -262,8 +338,21 @@ def test_json_record_keeps_an_infinite_focus_distance(run, tmp_path: Path, capsy
     folder, _ = run
     raw, params = capture(0)
     write_capture_dng(tmp_path / "raws" / "s0.dng", raw, small_sensor(), params)
-    code, stdout, err = run_cli(["restore", str(folder), str(tmp_path / "raws"), "-o", str(tmp_path / "out"),
-                                 "--quiet", "--json", "--focus-m", "inf"], capsys, monkeypatch)
+    code, stdout, err = run_cli(
+        [
+            "restore",
+            str(folder),
+            str(tmp_path / "raws"),
+            "-o",
+            str(tmp_path / "out"),
+            "--quiet",
+            "--json",
+            "--focus-m",
+            "inf",
+        ],
+        capsys,
+        monkeypatch,
+    )
     assert code == 0, err
     (record,) = json.loads(stdout)["images"]
     assert record["settings"]["focus_m"] == "inf" and float(record["settings"]["focus_m"]) == math.inf

@@ -2,6 +2,7 @@
 files: `lensim sensor from-raw` -> `lensim dataset make --sensor` -> `lensim train` ->
 `lensim restore` on the raw files, at small sizes. The camera's raw files are written with
 pidng (an independent DNG writer, tests/raw_fixtures.py)."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -22,38 +23,69 @@ raw_fixtures = pytest.importorskip("raw_fixtures")
 PITCH_UM = "40"  # a 192 x 128 sensor at 40 um spans 7.7 x 5.1 mm: inside the Cooke triplet's image circle
 
 
-def camera_raw(path: Path, seed: int, make: str = "Acme", model: str = "Z1", size: tuple[int, int] = (128, 192)) -> Path:
+def camera_raw(
+    path: Path, seed: int, make: str = "Acme", model: str = "Z1", size: tuple[int, int] = (128, 192)
+) -> Path:
     """A raw file as the camera would write it: a smooth scene's mosaic, 14-bit, black 512."""
     g = np.random.default_rng(seed)
     coarse = g.uniform(0.1, 0.8, (size[0] // 16, size[1] // 16))
     scene = np.kron(coarse, np.ones((16, 16)))
     dn = np.round(512 + scene * (16383 - 512)).astype(np.uint16)
     path.parent.mkdir(parents=True, exist_ok=True)
-    return raw_fixtures.write_dng(path, dn, "RGGB", make=make, model=model, wb_gains=(2.1, 1.5),
-                                  exif={"iso": 200, "exposure_s": 0.01, "fno": 4.0, "focal_length_mm": 50.0})
+    return raw_fixtures.write_dng(
+        path,
+        dn,
+        "RGGB",
+        make=make,
+        model=model,
+        wb_gains=(2.1, 1.5),
+        exif={"iso": 200, "exposure_s": 0.01, "fno": 4.0, "focal_length_mm": 50.0},
+    )
 
 
 def test_profile_from_raw_restores_that_cameras_raws(tmp_path: Path, capsys, monkeypatch):
     """The small story: a profile made from the camera's raw is the sensor a checkpoint
     records; that camera's raws restore natively, another camera's are refused."""
     shot = camera_raw(tmp_path / "raws" / "IMG_0001.dng", 0)
-    code, _, err = run_cli(["sensor", "from-raw", str(shot), "--pixel-um", PITCH_UM, "-o", str(tmp_path / "cam.yaml")],
-                           capsys, monkeypatch)
+    code, _, err = run_cli(
+        ["sensor", "from-raw", str(shot), "--pixel-um", PITCH_UM, "-o", str(tmp_path / "cam.yaml")], capsys, monkeypatch
+    )
     assert code == 0, err
     sensor = load_sensor(tmp_path / "cam.yaml")
     torch.manual_seed(0)
     model = FieldAwareUNet(8, 2).eval()
-    atomic_torch_save({"format": CHECKPOINT_FORMAT, "version": 1, "model_config": model.config,
-                       "model_state": model.state_dict(), "sensor": sensor.to_dict(), "lens": None},
-                      tmp_path / "run" / "last.pt")
-    code, out, err = run_cli(["restore", str(tmp_path / "run"), str(tmp_path / "raws"), "-o", str(tmp_path / "out"),
-                              "--dng", "--json", "--quiet"], capsys, monkeypatch)
+    atomic_torch_save(
+        {
+            "format": CHECKPOINT_FORMAT,
+            "version": 1,
+            "model_config": model.config,
+            "model_state": model.state_dict(),
+            "sensor": sensor.to_dict(),
+            "lens": None,
+        },
+        tmp_path / "run" / "last.pt",
+    )
+    code, out, err = run_cli(
+        [
+            "restore",
+            str(tmp_path / "run"),
+            str(tmp_path / "raws"),
+            "-o",
+            str(tmp_path / "out"),
+            "--dng",
+            "--json",
+            "--quiet",
+        ],
+        capsys,
+        monkeypatch,
+    )
     assert code == 0, err
     assert '"native": true' in out
     assert (tmp_path / "out" / "IMG_0001.tif").is_file() and (tmp_path / "out" / "IMG_0001.dng").is_file()
     other = camera_raw(tmp_path / "other" / "DSC_1.dng", 1, make="Other", model="Cam")
-    code, _, err = run_cli(["restore", str(tmp_path / "run"), str(other), "-o", str(tmp_path / "out2")],
-                           capsys, monkeypatch)
+    code, _, err = run_cli(
+        ["restore", str(tmp_path / "run"), str(other), "-o", str(tmp_path / "out2")], capsys, monkeypatch
+    )
     assert code == 2 and "Other Cam 192x128" in err and "Acme Z1 192x128" in err
 
 
@@ -64,15 +96,57 @@ def test_the_whole_story_at_small_sizes(tmp_path: Path, capsys, monkeypatch):
     photos = tmp_path / "photos"
     for k in range(3):  # sharp photos to train on (smooth random scenes)
         coarse = torch.rand(1, 3, 6, 6, generator=torch.Generator().manual_seed(10 + k))
-        write_image(photos / f"p{k}.png", torch.nn.functional.interpolate(coarse, size=(96, 96), mode="bicubic",
-                                                                           align_corners=False)[0].clamp(0, 1))
+        write_image(
+            photos / f"p{k}.png",
+            torch.nn.functional.interpolate(coarse, size=(96, 96), mode="bicubic", align_corners=False)[0].clamp(0, 1),
+        )
     steps = [
         ["sensor", "from-raw", str(shots[0]), "--pixel-um", PITCH_UM, "-o", str(tmp_path / "cam.yaml")],
-        ["dataset", "make", str(photos), "-o", str(tmp_path / "data"), "--sensor", str(tmp_path / "cam.yaml"),
-         "--lens", "cooke_triplet", "--crops", "2", "--size", "48", "--placements", "2", "--fields", "3",
-         "--wavelengths-nm", "500,600", "--pupil-samples", "32", "--cache", str(tmp_path / "cache"), "--quiet"],
-        ["train", str(tmp_path / "data"), "-o", str(tmp_path / "run"), "--epochs", "1", "--width", "8", "--depth", "2",
-         "--crop", "32", "--batch-size", "2", "--steps-per-epoch", "2", "--quiet"],
+        [
+            "dataset",
+            "make",
+            str(photos),
+            "-o",
+            str(tmp_path / "data"),
+            "--sensor",
+            str(tmp_path / "cam.yaml"),
+            "--lens",
+            "cooke_triplet",
+            "--crops",
+            "2",
+            "--size",
+            "48",
+            "--placements",
+            "2",
+            "--fields",
+            "3",
+            "--wavelengths-nm",
+            "500,600",
+            "--pupil-samples",
+            "32",
+            "--cache",
+            str(tmp_path / "cache"),
+            "--quiet",
+        ],
+        [
+            "train",
+            str(tmp_path / "data"),
+            "-o",
+            str(tmp_path / "run"),
+            "--epochs",
+            "1",
+            "--width",
+            "8",
+            "--depth",
+            "2",
+            "--crop",
+            "32",
+            "--batch-size",
+            "2",
+            "--steps-per-epoch",
+            "2",
+            "--quiet",
+        ],
         ["restore", str(tmp_path / "run"), str(tmp_path / "raws"), "-o", str(tmp_path / "out"), "--dng", "--quiet"],
     ]
     for args in steps:

@@ -7,6 +7,7 @@ the Python examples import only names that exist and call the entry point of eve
 every repository file or link it names exists. The slow test runs the Python examples as
 written (the second one trains and runs the quick demo); they read `photo.png` and the
 folder `photos/`, which the test fills with built-in sample photos."""
+
 from __future__ import annotations
 
 import ast
@@ -31,8 +32,16 @@ TEXT = README.read_text(encoding="utf-8")
 # top-level repository folders whose paths the README may name as existing files
 REPO_FOLDERS = ("lensim/", "docs/", "scripts/", "benchmarks/", "tests/", ".ci/")
 # the entry point of every stage, each called in the Python examples
-STAGE_CALLS = ("load_lens", "compute_psf", "simulate", "make_dataset", "train", "restore_image", "evaluate_methods",
-               "run_demo")
+STAGE_CALLS = (
+    "load_lens",
+    "compute_psf",
+    "simulate",
+    "make_dataset",
+    "train",
+    "restore_image",
+    "evaluate_methods",
+    "run_demo",
+)
 
 
 def python_blocks() -> list[str]:
@@ -56,8 +65,8 @@ def _lensim_commands() -> list[list[str]]:
             except ValueError:
                 continue
             for i, tok in enumerate(tokens):
-                if (tok == "lensim" or tok.endswith("/lensim")) and tokens[i - 1:i] != ["import"]:
-                    found.append(tokens[i + 1:])
+                if (tok == "lensim" or tok.endswith("/lensim")) and tokens[i - 1 : i] != ["import"]:
+                    found.append(tokens[i + 1 :])
     return found
 
 
@@ -69,7 +78,7 @@ def _resolve(tokens: list[str]) -> tuple[list[str], Any]:
     cmd = typer.main.get_command(app)
     path: list[str] = []
     while hasattr(cmd, "commands"):
-        assert tokens[len(path):], f"`lensim {' '.join(path)}` in README.md is a group, not a command"
+        assert tokens[len(path) :], f"`lensim {' '.join(path)}` in README.md is a group, not a command"
         name = tokens[len(path)]
         assert name in cmd.commands, f"README.md shows `lensim {' '.join(path + [name])}`: no such command"
         path.append(name)
@@ -86,7 +95,7 @@ def test_readme_shows_commands() -> None:
 def test_every_command_shown_exists_with_its_options(tokens: list[str]) -> None:
     path, cmd = _resolve(tokens)
     opts = {o for p in cmd.params for o in p.opts + p.secondary_opts}
-    shown = {t.strip("[]").split("=")[0] for t in tokens[len(path):] if t.strip("[]").startswith("-")}
+    shown = {t.strip("[]").split("=")[0] for t in tokens[len(path) :] if t.strip("[]").startswith("-")}
     assert shown <= opts, f"`lensim {' '.join(path)}` has no {sorted(shown - opts)}"
 
 
@@ -173,8 +182,9 @@ def test_python_examples_import_what_exists_and_call_every_stage() -> None:
 
 def test_every_file_and_link_named_exists() -> None:
     links = [m for m in re.findall(r"\]\(([^)#\s]+)", TEXT) if "://" not in m]
-    paths = [tok.rstrip(".,") for snippet in _shell_snippets() for tok in snippet.split()
-             if tok.startswith(REPO_FOLDERS)]
+    paths = [
+        tok.rstrip(".,") for snippet in _shell_snippets() for tok in snippet.split() if tok.startswith(REPO_FOLDERS)
+    ]
     assert "scripts/setup.sh" in paths and links
     missing = sorted({p for p in links + paths if not (REPO / p).exists()})
     assert not missing, f"README.md names {missing}, which are not in the repository"

@@ -1,4 +1,5 @@
 """Spatially-variant blur: exactness against a naive reference, energy, seams."""
+
 import math
 
 import torch
@@ -16,6 +17,7 @@ def _kernels_factory(h, w, p=7, base=0.6, slope=1.5, shift_red=0.0):
         k = k / k.sum((1, 2), keepdim=True)
         kr = kr / kr.sum((1, 2), keepdim=True)
         return torch.stack([kr, k, k], 1).double()
+
     return kernel_at
 
 
@@ -24,15 +26,17 @@ def _naive(img, kernel_at, tile):
     c, h, w = img.shape
     hy, hx = _hat(h, tile), _hat(w, tile)
     cy, cx = tile_centres(h, tile), tile_centres(w, tile)
-    ker = kernel_at(cy.repeat_interleave(len(cx)), cx.repeat(len(cy))).reshape(len(cy), len(cx), c, -1, kernel_at(cy[:1], cx[:1]).shape[-1])
+    ker = kernel_at(cy.repeat_interleave(len(cx)), cx.repeat(len(cy))).reshape(
+        len(cy), len(cx), c, -1, kernel_at(cy[:1], cx[:1]).shape[-1]
+    )
     p = ker.shape[-1]
     r = p // 2
     out = torch.zeros(c, h + 2 * r, w + 2 * r, dtype=torch.float64)
     for i in range(h):
         for j in range(w):
             k = torch.einsum("a,b,abcyx->cyx", hy[:, i], hx[:, j], ker)
-            out[:, i:i + p, j:j + p] += img[:, i, j].reshape(c, 1, 1) * k
-    return out[:, r:r + h, r:r + w]
+            out[:, i : i + p, j : j + p] += img[:, i, j].reshape(c, 1, 1) * k
+    return out[:, r : r + h, r : r + w]
 
 
 def test_matches_naive_per_pixel_reference():
@@ -76,4 +80,4 @@ def test_point_source_at_tile_centre_reproduces_its_kernel():
     kat = _kernels_factory(h, w, p=15, shift_red=1.3)
     out = spatially_variant_blur(img, kat, tile=tile)
     k = kat(torch.tensor([64.0], dtype=torch.float64), torch.tensor([96.0], dtype=torch.float64))[0]
-    assert (out[:, 64 - 7:64 + 8, 96 - 7:96 + 8] - k).abs().max().item() < 1e-6
+    assert (out[:, 64 - 7 : 64 + 8, 96 - 7 : 96 + 8] - k).abs().max().item() < 1e-6

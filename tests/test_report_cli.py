@@ -1,4 +1,5 @@
 """`lensim report` rebuilds the page from report.json; bad folders give one line."""
+
 import json
 
 from typer.testing import CliRunner
@@ -9,10 +10,20 @@ from lensim.report import write_report
 
 def _report():
     zone = {"psnr_db": 20.0, "ssim": 0.5}
-    m = {"psnr_db": 20.0, "ssim": 0.5, "zones": {"centre": zone, "middle": zone, "edge": {"psnr_db": None, "ssim": None}}}
-    return {"lens": {"name": "L", "efl_mm": 50.0, "fno": 5.0, "image_height_mm": 18.0}, "sensor": {"name": "S"},
-            "settings": {"quick": True}, "metrics": {"methods": {"input": m, "model": m}},
-            "slanted_edge": [], "lateral_colour": [], "timings_s": {"bank": 1.0}}
+    m = {
+        "psnr_db": 20.0,
+        "ssim": 0.5,
+        "zones": {"centre": zone, "middle": zone, "edge": {"psnr_db": None, "ssim": None}},
+    }
+    return {
+        "lens": {"name": "L", "efl_mm": 50.0, "fno": 5.0, "image_height_mm": 18.0},
+        "sensor": {"name": "S"},
+        "settings": {"quick": True},
+        "metrics": {"methods": {"input": m, "model": m}},
+        "slanted_edge": [],
+        "lateral_colour": [],
+        "timings_s": {"bank": 1.0},
+    }
 
 
 def test_report_rebuilds_html_from_json(tmp_path):
@@ -23,7 +34,10 @@ def test_report_rebuilds_html_from_json(tmp_path):
     assert res.exit_code == 0, res.output
     page = (tmp_path / "report.html").read_text()
     assert "<td>model</td><td>20.00</td>" in page and "<td>-</td>" in page  # null zone shown as a dash
-    assert json.loads((tmp_path / "report.json").read_text())["metrics"]["methods"]["input"]["zones"]["edge"]["psnr_db"] is None
+    assert (
+        json.loads((tmp_path / "report.json").read_text())["metrics"]["methods"]["input"]["zones"]["edge"]["psnr_db"]
+        is None
+    )
 
 
 def test_report_names_the_trained_networks(tmp_path):
@@ -31,9 +45,14 @@ def test_report_names_the_trained_networks(tmp_path):
     training entries name them (a report without them still renders)."""
     (tmp_path / "figures").mkdir()
     m = _report()["metrics"]["methods"]["model"]
-    report = {**_report(), "metrics": {"methods": {"input": m, "model": m, "plain": m}},
-              "training": {"model": {"network": "NAFNet with FOV (stem 2, width 23)"},
-                           "plain": {"network": "plain NAFNet (stem 2, width 23)"}}}
+    report = {
+        **_report(),
+        "metrics": {"methods": {"input": m, "model": m, "plain": m}},
+        "training": {
+            "model": {"network": "NAFNet with FOV (stem 2, width 23)"},
+            "plain": {"network": "plain NAFNet (stem 2, width 23)"},
+        },
+    }
     write_report(tmp_path, report, tmp_path / "figures")
     page = (tmp_path / "report.html").read_text()
     assert "<td>plain</td><td>20.00</td>" in page
@@ -53,8 +72,10 @@ def test_report_with_a_missing_key_is_one_line_and_rewrites_nothing(tmp_path, ca
 
     (tmp_path / "figures").mkdir()
     write_report(tmp_path, _report(), tmp_path / "figures")
-    for broken, what in (({k: v for k, v in _report().items() if k != "metrics"}, "metrics: missing"),
-                         ([1, 2], "expected a JSON object")):
+    for broken, what in (
+        ({k: v for k, v in _report().items() if k != "metrics"}, "metrics: missing"),
+        ([1, 2], "expected a JSON object"),
+    ):
         (tmp_path / "report.json").write_text(json.dumps(broken))
         before = {p.name: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
         code, _, err = run_cli(["report", str(tmp_path)], capsys, monkeypatch)

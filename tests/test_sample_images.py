@@ -4,6 +4,7 @@ resamples it as Pillow does, on an always-installed photo (and on Debian's wallp
 the scaled ones, where they are installed); the unseen test split shares nothing with the
 training photos, covers its scene types, and its dark scenes are 3 stops under in linear
 light."""
+
 from __future__ import annotations
 
 import hashlib
@@ -79,8 +80,9 @@ def test_scaled_photo_is_resampled_as_pillow_does(monkeypatch: pytest.MonkeyPatc
     np.testing.assert_allclose(half.numpy(), _pillow_resized(full, 0.5), atol=1e-5, rtol=0)
 
 
-def test_export_writes_every_installed_photo_at_its_scale(tmp_path: Path, capsys: pytest.CaptureFixture,
-                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+def test_export_writes_every_installed_photo_at_its_scale(
+    tmp_path: Path, capsys: pytest.CaptureFixture, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """`lensim assets --export-photos` writes one 8-bit PNG per installed photo, at its scale
     (to within 8-bit rounding of read_sample_image), and none for a missing one."""
     from cli_runner import run_cli
@@ -96,8 +98,10 @@ def test_export_writes_every_installed_photo_at_its_scale(tmp_path: Path, capsys
         np.testing.assert_allclose(written.numpy(), read_sample_image(name).numpy(), atol=0.5 / 255 + 1e-6, rtol=0)
 
 
-@pytest.mark.skipif(not any(i.package.startswith("debian:") for i in available_sample_images()),
-                    reason="Debian's wallpapers are not installed (scripts/setup.sh installs them where it can)")
+@pytest.mark.skipif(
+    not any(i.package.startswith("debian:") for i in available_sample_images()),
+    reason="Debian's wallpapers are not installed (scripts/setup.sh installs them where it can)",
+)
 def test_debian_photos_are_reduced_at_their_scale() -> None:
     """The Debian wallpapers carry a scale below 1 and read at that scale, as Pillow reduces
     them (1e-5): one installed photo of each package."""
@@ -109,8 +113,9 @@ def test_debian_photos_are_reduced_at_their_scale() -> None:
             continue
         seen.add(img.package)
         full, _ = read_image(sample_image_path(img.name))
-        np.testing.assert_allclose(read_sample_image(img.name).numpy(), _pillow_resized(full, img.scale), atol=1e-5,
-                                   rtol=0)
+        np.testing.assert_allclose(
+            read_sample_image(img.name).numpy(), _pillow_resized(full, img.scale), atol=1e-5, rtol=0
+        )
 
 
 def _digest(path: Path) -> str:
@@ -125,7 +130,9 @@ def test_unseen_split_is_disjoint_from_every_training_source() -> None:
     listing (what the demo and `--export-photos` use) never holds one."""
     train_names = {i.name for i in SAMPLE_IMAGES}
     assert not train_names & {i.name for i in TEST_IMAGES}
-    assert not {(i.package, i.relative_path) for i in SAMPLE_IMAGES} & {(i.package, i.relative_path) for i in TEST_IMAGES}
+    assert not {(i.package, i.relative_path) for i in SAMPLE_IMAGES} & {
+        (i.package, i.relative_path) for i in TEST_IMAGES
+    }
     train_packages = {i.package for i in SAMPLE_IMAGES}
     assert {i.package for i in TEST_IMAGES} - train_packages == {"sklearn", "matplotlib"}
     assert {i.package for i in TEST_IMAGES} & train_packages == {"skimage"}
@@ -156,19 +163,26 @@ def test_dark_test_photos_are_three_stops_under_in_linear_light() -> None:
     assert float(dark.mean()) < 0.45 * float(bright.mean())
 
 
-def test_export_test_photos_keeps_them_apart(tmp_path: Path, capsys: pytest.CaptureFixture,
-                                            monkeypatch: pytest.MonkeyPatch) -> None:
+def test_export_test_photos_keeps_them_apart(
+    tmp_path: Path, capsys: pytest.CaptureFixture, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """`--export-test-photos` writes the test photos only; the same folder as
     `--export-photos` is refused in one line, before anything is written."""
     from cli_runner import run_cli
 
     monkeypatch.setattr(images, "SAMPLE_IMAGES", (COFFEE,))
     monkeypatch.setattr(images, "TEST_IMAGES", tuple(i for i in TEST_IMAGES if i.name in ("test-text", "test-page")))
-    code, out, err = run_cli(["assets", "--export-photos", str(tmp_path / "a"), "--export-test-photos",
-                              str(tmp_path / "b")], capsys, monkeypatch)
+    code, out, err = run_cli(
+        ["assets", "--export-photos", str(tmp_path / "a"), "--export-test-photos", str(tmp_path / "b")],
+        capsys,
+        monkeypatch,
+    )
     assert code == 0, err
     assert sorted(p.name for p in (tmp_path / "a").iterdir()) == ["coffee.png"]
     assert sorted(p.name for p in (tmp_path / "b").iterdir()) == ["test-page.png", "test-text.png"]
-    code, out, err = run_cli(["assets", "--export-photos", str(tmp_path / "c"), "--export-test-photos",
-                              str(tmp_path / "c")], capsys, monkeypatch)
+    code, out, err = run_cli(
+        ["assets", "--export-photos", str(tmp_path / "c"), "--export-test-photos", str(tmp_path / "c")],
+        capsys,
+        monkeypatch,
+    )
     assert code == 2 and "--export-test-photos" in err and not (tmp_path / "c").exists()

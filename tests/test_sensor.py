@@ -1,6 +1,7 @@
 """Sensor profiles: built-ins, validation (one-line errors naming file and field),
 white-balance interpolation in mired, random draws, and the derivation of the built-in
 colour numbers from their stated sources."""
+
 from __future__ import annotations
 
 import copy
@@ -34,7 +35,7 @@ def test_builtins_load_with_stated_geometry_and_sources():
         assert p.bayer_pattern in ("RGGB", "BGGR", "GRBG", "GBRG")
         assert np.allclose(np.sum(p.ccm, axis=1), 1.0, atol=1e-5)
         assert "Brooks" in p.source and "dcraw" in p.source and "NPL" in p.source
-        assert p.white_level < 2 ** p.bit_depth and p.black_level < p.white_level
+        assert p.white_level < 2**p.bit_depth and p.black_level < p.white_level
 
 
 def test_builtin_colour_numbers_reproduce_from_their_sources():
@@ -43,9 +44,11 @@ def test_builtin_colour_numbers_reproduce_from_their_sources():
     pytest.importorskip("colour")
     from lensim.sensor.calibration import ccm_from_dng_color_matrix, wb_table
 
-    dng = {"fullframe_dslr": [5271, -712, -347, -6153, 13653, 2763, -1601, 2366, 7242],  # Sony ILCE-7
-           "apsc_mirrorless": [5271, -712, -347, -6153, 13653, 2763, -1601, 2366, 7242],  # ILCE-7 colour, stated
-           "phone": [6596, -2079, -562, -4782, 13016, 1933, -970, 1581, 5181]}  # Sony DSC-RX100M
+    dng = {
+        "fullframe_dslr": [5271, -712, -347, -6153, 13653, 2763, -1601, 2366, 7242],  # Sony ILCE-7
+        "apsc_mirrorless": [5271, -712, -347, -6153, 13653, 2763, -1601, 2366, 7242],  # ILCE-7 colour, stated
+        "phone": [6596, -2079, -562, -4782, 13016, 1933, -970, 1581, 5181],
+    }  # Sony DSC-RX100M
     for name, m in dng.items():
         p = load_sensor(name)
         xyz2cam = np.array(m) / 10000.0
@@ -60,13 +63,18 @@ def test_builtin_colour_numbers_reproduce_from_their_sources():
 
 def test_wb_interpolates_linearly_in_mired_and_clamps():
     d = _builtin_dict()
-    d["white_balance"] = [{"kelvin": 2500, "r_gain": 1.0, "b_gain": 3.0}, {"kelvin": 10000, "r_gain": 3.0, "b_gain": 1.0}]
+    d["white_balance"] = [
+        {"kelvin": 2500, "r_gain": 1.0, "b_gain": 3.0},
+        {"kelvin": 10000, "r_gain": 3.0, "b_gain": 1.0},
+    ]
     d.pop("kelvin_range")
     p = sensor_from_dict(d, "mem.yaml")
     # 4000 K = 250 mired, halfway between 400 and 100 mired (a linear-in-kelvin rule gives 1.4, 2.6)
     assert p.wb_gains(4000.0) == pytest.approx((2.0, 2.0), abs=1e-12)
     assert p.wb_gains(2500.0) == pytest.approx((1.0, 3.0), abs=1e-12)
-    assert p.wb_gains(5000.0) == pytest.approx((1.0 + 2.0 * (400 - 200) / 300, 3.0 - 2.0 * (400 - 200) / 300), abs=1e-12)
+    assert p.wb_gains(5000.0) == pytest.approx(
+        (1.0 + 2.0 * (400 - 200) / 300, 3.0 - 2.0 * (400 - 200) / 300), abs=1e-12
+    )
     assert p.wb_gains(1000.0) == pytest.approx((1.0, 3.0))  # held at the ends
     assert p.wb_gains(50000.0) == pytest.approx((3.0, 1.0))
     assert p.kelvin_range == (2500.0, 10000.0)
@@ -99,8 +107,8 @@ def test_noise_draws_follow_brooks_relation_and_ranges():
     assert shot.min() >= 1e-4 and shot.max() <= 1.2e-2
     ls = np.log(shot)
     assert abs(ls.mean() - 0.5 * (math.log(1e-4) + math.log(1.2e-2))) < 0.1  # log-uniform mean (sd of mean 0.02)
-    slope, intercept = np.polyfit(ls, np.log(read ** 2), 1)
-    resid = np.log(read ** 2) - (slope * ls + intercept)
+    slope, intercept = np.polyfit(ls, np.log(read**2), 1)
+    resid = np.log(read**2) - (slope * ls + intercept)
     assert abs(slope - 2.18) < 0.05 and abs(intercept - 1.20) < 0.25 and abs(resid.std() - 0.26) < 0.02
     d = _builtin_dict()
     d["noise"] = {"shot": 0.01, "read": [1e-3, 1e-2]}
@@ -119,6 +127,7 @@ def test_to_dict_round_trip_and_json_file(tmp_path: Path):
 
 # ----------------------------------------------------------------- validation errors
 
+
 def _set(path: str, value):
     def mutate(d: dict) -> None:
         keys = path.split(".")
@@ -132,6 +141,7 @@ def _set(path: str, value):
             del obj[last]
         else:
             obj[last] = value
+
     return mutate
 
 
@@ -149,8 +159,12 @@ BAD = [
     ("ccm row sum", _set("ccm.1", [0.0, 1.2, 0.0]), "ccm[1]", "sum to 1"),
     ("ccm singular", _set("ccm", [[1, 0, 0], [1, 0, 0], [0, 0, 1]]), "ccm", "invertible"),
     ("wb not increasing", _set("white_balance.1.kelvin", 2000), "white_balance[1].kelvin", "increasing"),
-    ("wb unknown key", _set("white_balance.0", {"kelvin": 2500, "r_gain": 1.3, "g_gain": 1.0, "b_gain": 2.7}),
-     "white_balance[0].g_gain", "unknown key"),
+    (
+        "wb unknown key",
+        _set("white_balance.0", {"kelvin": 2500, "r_gain": 1.3, "g_gain": 1.0, "b_gain": 2.7}),
+        "white_balance[0].g_gain",
+        "unknown key",
+    ),
     ("wb negative gain", _set("white_balance.2.r_gain", -1.0), "white_balance[2].r_gain", "positive"),
     ("wb empty", _set("white_balance", []), "white_balance", "non-empty"),
     ("kelvin range outside table", _set("kelvin_range", [2000, 7500]), "kelvin_range", "inside"),
@@ -161,8 +175,12 @@ BAD = [
     ("noise read and read_from_shot", _set("noise.read", 0.001), "noise.read", "exactly one"),
     ("noise range order", _set("noise.shot", [0.01, 0.001]), "noise.shot", "min <= max"),
     ("noise unknown key", _set("noise.gain", 2.0), "noise.gain", "unknown key"),
-    ("read_from_shot key missing", _set("noise.read_from_shot", {"slope": 2.18, "intercept": 1.2}),
-     "noise.read_from_shot.sigma", "missing"),
+    (
+        "read_from_shot key missing",
+        _set("noise.read_from_shot", {"slope": 2.18, "intercept": 1.2}),
+        "noise.read_from_shot.sigma",
+        "missing",
+    ),
     ("spectral csv missing", _set("spectral_response", "nowhere.csv"), "spectral_response", "not found"),
 ]
 

@@ -1,6 +1,7 @@
 """One restoration network across shooting settings (issue 16): pairs whose records carry
 settings, training a conditioned network, its checkpoint, evaluation and `lensim restore`
 with --fno/--focus-m/--focal-mm or a raw file's EXIF."""
+
 from __future__ import annotations
 
 import json
@@ -36,8 +37,18 @@ LENS = {"name": "test lens", "surfaces": [{"radius": 10.0, "thickness": 1.0}]}
 GRID = [(2.0, 1.0), (2.0, math.inf), (8.0, 1.0), (8.0, math.inf)]
 OFFSET = {2.0: 0.2, 8.0: 0.0}
 # the UNet without deformable blocks: the learning thresholds below were measured on it
-TINY = dict(arch="unet", width=8, depth=2, crop=32, batch_size=4, lr=1e-2, val_fraction=0.25, val_batch_size=8,
-            seed=1, deformable_scales=0)
+TINY = dict(
+    arch="unet",
+    width=8,
+    depth=2,
+    crop=32,
+    batch_size=4,
+    lr=1e-2,
+    val_fraction=0.25,
+    val_batch_size=8,
+    seed=1,
+    deformable_scales=0,
+)
 
 
 def settings_of(fno: float, focus_m: float) -> dict:
@@ -45,8 +56,9 @@ def settings_of(fno: float, focus_m: float) -> dict:
     return {"fno": fno, "focus_m": focus_m, "object_m": focus_m, "focal_mm": 50.0, "config": None}
 
 
-def make_settings_pairs(root: Path, grid=GRID, photos: int = 4, crops: int = 2, size: int = 40,
-                        with_settings: bool = True) -> Path:
+def make_settings_pairs(
+    root: Path, grid=GRID, photos: int = 4, crops: int = 2, size: int = 40, with_settings: bool = True
+) -> Path:
     """A pairs folder as `dataset make` across a grid writes it: one record per (photo,
     setting) with ``settings``; target = input + OFFSET[fno]."""
     gen = torch.Generator().manual_seed(0)
@@ -56,19 +68,36 @@ def make_settings_pairs(root: Path, grid=GRID, photos: int = 4, crops: int = 2, 
             cs = []
             for k in range(crops):
                 base = torch.rand(3, size // 8, size // 8, generator=gen)
-                inp = 0.1 + 0.6 * torch.nn.functional.interpolate(base[None], size=(size, size), mode="bilinear",
-                                                                 align_corners=False)[0]
+                inp = (
+                    0.1
+                    + 0.6
+                    * torch.nn.functional.interpolate(
+                        base[None], size=(size, size), mode="bilinear", align_corners=False
+                    )[0]
+                )
                 stem = f"pairs/{len(records):06d}_{k:03d}"
                 write_image(root / f"{stem}_input.png", inp, 8)
                 write_image(root / f"{stem}_target.png", inp + OFFSET.get(fno, 0.1), 8)
-                cs.append({"input": f"{stem}_input.png", "target": f"{stem}_target.png", "sensor_top": 20 * i,
-                           "sensor_left": 30 * k})
+                cs.append(
+                    {
+                        "input": f"{stem}_input.png",
+                        "target": f"{stem}_target.png",
+                        "sensor_top": 20 * i,
+                        "sensor_left": 30 * k,
+                    }
+                )
             rec = {"index": len(records), "source": f"/photos/photo{i}.png", "crops": cs}
             if with_settings:
                 rec["settings"] = settings_of(fno, focus)
             records.append(rec)
-    manifest = {"format": "lensim-pairs", "sensor": SENSOR, "sensor_name": "test", "lens": LENS, "size": size,
-                "records": records}
+    manifest = {
+        "format": "lensim-pairs",
+        "sensor": SENSOR,
+        "sensor_name": "test",
+        "lens": LENS,
+        "size": size,
+        "records": records,
+    }
     (root / "manifest.json").write_text(json.dumps(manifest))
     return root
 
@@ -128,8 +157,10 @@ def test_one_setting_trains_exactly_as_no_settings(tmp_path: Path):
     assert la == lb and ra.val_psnr == rb.val_psnr
     _, info = load_checkpoint(tmp_path / "ra")
     assert info["model_config"]["settings_dim"] == 0
-    assert info["conditioning"] == {"keys": [], "ranges": {"fno": [4.0, 4.0], "focus_m": [2.0, 2.0],
-                                                           "focal_mm": [50.0, 50.0]}}
+    assert info["conditioning"] == {
+        "keys": [],
+        "ranges": {"fno": [4.0, 4.0], "focus_m": [2.0, 2.0], "focal_mm": [50.0, 50.0]},
+    }
     _, old = load_checkpoint(tmp_path / "rb")
     assert old["conditioning"] == {"keys": [], "ranges": {}}
 
@@ -172,8 +203,9 @@ def test_evaluation_gives_each_crop_its_settings(pairs: Path, runs: dict[str, Pa
     crop = manifest["records"][2]["crops"][0]
     x, _ = read_image(pairs / crop["input"])
     y, _ = read_image(pairs / crop["target"])
-    out = restore_image(model, x, (crop["sensor_top"], crop["sensor_left"]), (480.0, 640.0),
-                        settings=torch.tensor([1.0, -1.0])).clamp(0, 1)
+    out = restore_image(
+        model, x, (crop["sensor_top"], crop["sensor_left"]), (480.0, 640.0), settings=torch.tensor([1.0, -1.0])
+    ).clamp(0, 1)
     mse = float(((out - y) ** 2).mean())
     assert row["mse"] == pytest.approx(mse, rel=1e-4)
 
@@ -189,8 +221,18 @@ def _photo(tmp_path: Path) -> Path:
 
 def test_restore_takes_the_settings_from_the_options(runs: dict[str, Path], tmp_path: Path, capsys, monkeypatch):
     photo = _photo(tmp_path)
-    base = ["restore", str(runs["cond"]), str(photo), "--sensor-offset", "100,200", "--quiet", "--tile", "32",
-            "--overlap", "8"]
+    base = [
+        "restore",
+        str(runs["cond"]),
+        str(photo),
+        "--sensor-offset",
+        "100,200",
+        "--quiet",
+        "--tile",
+        "32",
+        "--overlap",
+        "8",
+    ]
     code, _, err = run_cli(base + ["-o", str(tmp_path / "none")], capsys, monkeypatch)
     assert code == 2 and len(err.strip().splitlines()) == 1
     assert "--fno" in err and "--focus-m" in err and "f/2 to f/8" in err and "--focal-mm" not in err
@@ -200,12 +242,14 @@ def test_restore_takes_the_settings_from_the_options(runs: dict[str, Path], tmp_
     assert "warning" not in err
     model, _ = load_checkpoint(runs["cond"])
     img, _ = read_image(photo)
-    want = restore_image(model, img, (100.0, 200.0), (480.0, 640.0), tile=32, overlap=8,
-                         settings=torch.tensor([0.0, 0.0])).clamp(0, 1)
+    want = restore_image(
+        model, img, (100.0, 200.0), (480.0, 640.0), tile=32, overlap=8, settings=torch.tensor([0.0, 0.0])
+    ).clamp(0, 1)
     got, _ = read_image(tmp_path / "out" / "shot.png")
     assert float((got - want).abs().max()) <= 0.5 / 255 + 1e-6
-    other = restore_image(model, img, (100.0, 200.0), (480.0, 640.0), tile=32, overlap=8,
-                          settings=torch.tensor([1.0, 0.0])).clamp(0, 1)
+    other = restore_image(
+        model, img, (100.0, 200.0), (480.0, 640.0), tile=32, overlap=8, settings=torch.tensor([1.0, 0.0])
+    ).clamp(0, 1)
     assert float((other - want).abs().max()) > 0.02  # the settings matter to this network
 
 
@@ -220,11 +264,28 @@ def test_restore_warns_outside_and_refuses_far_outside(runs: dict[str, Path], tm
     assert code == 2 and len(err.strip().splitlines()) == 1 and "--fno" in err and "f/22" in err
     assert not (tmp_path / "b").exists()
     # an unconditioned network trained on the same grid does not need the settings, and only warns
-    code, _, err = run_cli(["restore", str(runs["plain"]), str(photo), "--sensor-offset", "100,200", "--quiet",
-                            "-o", str(tmp_path / "c"), "--fno", "22"], capsys, monkeypatch)
+    code, _, err = run_cli(
+        [
+            "restore",
+            str(runs["plain"]),
+            str(photo),
+            "--sensor-offset",
+            "100,200",
+            "--quiet",
+            "-o",
+            str(tmp_path / "c"),
+            "--fno",
+            "22",
+        ],
+        capsys,
+        monkeypatch,
+    )
     assert code == 0 and "warning" in err and "f/22" in err
-    code, _, err = run_cli(["restore", str(runs["plain"]), str(photo), "--sensor-offset", "100,200", "--quiet",
-                            "-o", str(tmp_path / "d")], capsys, monkeypatch)
+    code, _, err = run_cli(
+        ["restore", str(runs["plain"]), str(photo), "--sensor-offset", "100,200", "--quiet", "-o", str(tmp_path / "d")],
+        capsys,
+        monkeypatch,
+    )
     assert code == 0 and not err.strip()
 
 
@@ -262,8 +323,9 @@ def test_restore_reads_a_raws_settings_from_exif(runs: dict[str, Path], tmp_path
     base = ["restore", str(runs["cond"]), "--quiet", "--allow-other-camera", "--tile", "32", "--overlap", "8"]
     code, _, err = run_cli(base + [str(raws), "-o", str(tmp_path / "exif")], capsys, monkeypatch)
     assert code == 0, err
-    code, _, err = run_cli(base + [str(raws), "-o", str(tmp_path / "opts"), "--fno", "4", "--focus-m", "2"], capsys,
-                           monkeypatch)
+    code, _, err = run_cli(
+        base + [str(raws), "-o", str(tmp_path / "opts"), "--fno", "4", "--focus-m", "2"], capsys, monkeypatch
+    )
     assert code == 0, err
     exif, _ = read_image(tmp_path / "exif" / "shot.tif")
     opts, _ = read_image(tmp_path / "opts" / "shot.tif")
@@ -303,19 +365,38 @@ def test_developed_photos_take_their_settings_from_exif(runs: dict[str, Path], t
     base = ["restore", str(runs["cond"]), "--sensor-offset", "100,200", "--quiet", "--tile", "32", "--overlap", "8"]
     code, _, err = run_cli(base + [str(tmp_path / "exif.png"), "-o", str(tmp_path / "a")], capsys, monkeypatch)
     assert code == 0, err
-    code, _, err = run_cli(base + [str(tmp_path / "shot.png"), "-o", str(tmp_path / "b"), "--fno", "4",
-                                   "--focus-m", "2"], capsys, monkeypatch)
+    code, _, err = run_cli(
+        base + [str(tmp_path / "shot.png"), "-o", str(tmp_path / "b"), "--fno", "4", "--focus-m", "2"],
+        capsys,
+        monkeypatch,
+    )
     assert code == 0, err
     assert torch.equal(read_image(tmp_path / "a" / "exif.png")[0], read_image(tmp_path / "b" / "shot.png")[0])
-    code, _, err = run_cli(base + [str(tmp_path / "exif.png"), "-o", str(tmp_path / "c"), "--fno", "8"], capsys,
-                           monkeypatch)
-    assert code == 0 and not torch.equal(read_image(tmp_path / "c" / "exif.png")[0],
-                                         read_image(tmp_path / "a" / "exif.png")[0])  # the option wins
+    code, _, err = run_cli(
+        base + [str(tmp_path / "exif.png"), "-o", str(tmp_path / "c"), "--fno", "8"], capsys, monkeypatch
+    )
+    assert code == 0 and not torch.equal(
+        read_image(tmp_path / "c" / "exif.png")[0], read_image(tmp_path / "a" / "exif.png")[0]
+    )  # the option wins
 
 
 def test_train_command_says_what_it_is_conditioned_on(pairs: Path, tmp_path: Path, capsys, monkeypatch):
-    args = ["train", str(pairs), "--epochs", "1", "--steps-per-epoch", "1", "--width", "4", "--depth", "2",
-            "--crop", "32", "--deformable-scales", "0"]
+    args = [
+        "train",
+        str(pairs),
+        "--epochs",
+        "1",
+        "--steps-per-epoch",
+        "1",
+        "--width",
+        "4",
+        "--depth",
+        "2",
+        "--crop",
+        "32",
+        "--deformable-scales",
+        "0",
+    ]
     code, out, err = run_cli(args + ["-o", str(tmp_path / "a"), "--quiet"], capsys, monkeypatch)
     assert code == 0, err
     code, out, err = run_cli(args + ["-o", str(tmp_path / "b"), "--json"], capsys, monkeypatch)

@@ -1,6 +1,7 @@
 """Shooting settings (issue 16): stopping down, focusing, object distance, against
 independent truth: the Airy pattern of the new F-number, Newton's equation, optiland's
 paraxial image solve, the geometric defocus blur Delta z / N_w; and the refusals."""
+
 from __future__ import annotations
 
 import math
@@ -47,11 +48,16 @@ def _first_zero_um(psf: np.ndarray, spacing_um: float, expected_um: float) -> fl
 
 def paraboloid(f: float = 100.0, epd: float = 10.0) -> Lens:
     """A perfect imager on axis: a paraboloidal mirror, its stop plane f in front (F/10)."""
-    return Lens([Surface(0.0, f, is_stop=True), Surface(-1 / (2 * f), -f, conic=-1.0, is_mirror=True)],
-                aperture_value=epd, fields=[0.0, 0.1], wavelengths_um=[WL])
+    return Lens(
+        [Surface(0.0, f, is_stop=True), Surface(-1 / (2 * f), -f, conic=-1.0, is_mirror=True)],
+        aperture_value=epd,
+        fields=[0.0, 0.1],
+        wavelengths_um=[WL],
+    )
 
 
 # ---------------------------------------------------------------- stopping down
+
 
 def test_stopped_down_perfect_imager_has_the_airy_ring_of_the_new_f_number() -> None:
     # F/10 paraboloid stopped to F/20: the first dark ring moves to 1.22 lambda 20 (1 %)
@@ -122,6 +128,7 @@ def test_the_stop_clear_aperture_limits_the_maximum_aperture() -> None:
 
 # ---------------------------------------------------------------- focusing
 
+
 def _system_matrix(lens: Lens) -> tuple[float, float, float, float]:
     """(A, B, C, D): [y', nu'] = [[A, B], [C, D]] [y, nu] from the first to the last vertex
     plane, from two paraxial rays (primary wavelength)."""
@@ -142,7 +149,7 @@ def test_unit_focusing_obeys_newtons_equation(focus_m: float) -> None:
     f = -1.0 / c
     ffd, bfd = d * f, -a / c
     z_last = float(lens.vertex_z()[-2])
-    x = at.object_distance - ffd                       # object beyond the front focal point
+    x = at.object_distance - ffd  # object beyond the front focal point
     x_image = paraxial_data(at).paraxial_image_z_mm - (z_last + bfd)  # image beyond the rear one
     assert x * x_image == pytest.approx(f * f, rel=1e-9)
     # the image plane keeps the designer's offset from the paraxial image
@@ -229,6 +236,7 @@ def test_front_cell_focusing_extends_the_lens() -> None:
 
 # ---------------------------------------------------------------- values and refusals
 
+
 def test_settings_round_trip_through_a_dict() -> None:
     s = ShootingSettings(fno=5.6, object_m=math.inf, focus_m=2.0, config="tele")
     assert s.to_dict() == {"fno": 5.6, "object_m": "inf", "focus_m": 2.0, "config": "tele"}
@@ -237,18 +245,21 @@ def test_settings_round_trip_through_a_dict() -> None:
     assert ShootingSettings(config=2).config == "2"  # type: ignore[arg-type]
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    ({"fno": 0}, "--fno: expected a positive, finite F-number"),
-    ({"fno": -2.8}, "--fno: expected a positive"),
-    ({"fno": math.nan}, "--fno: expected a positive"),
-    ({"fno": math.inf}, "--fno: expected a positive, finite"),
-    ({"fno": "f8"}, "--fno: expected a number"),
-    ({"object_m": -1}, "--object-m: expected a positive distance in metres or inf"),
-    ({"object_m": math.nan}, "--object-m: expected a positive distance"),
-    ({"focus_m": 0}, "--focus-m: expected a positive distance"),
-    ({"focus_m": 1e9}, "--focus-m: expected a distance up to"),
-    ({"config": "  "}, "--config: expected a configuration name or number"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"fno": 0}, "--fno: expected a positive, finite F-number"),
+        ({"fno": -2.8}, "--fno: expected a positive"),
+        ({"fno": math.nan}, "--fno: expected a positive"),
+        ({"fno": math.inf}, "--fno: expected a positive, finite"),
+        ({"fno": "f8"}, "--fno: expected a number"),
+        ({"object_m": -1}, "--object-m: expected a positive distance in metres or inf"),
+        ({"object_m": math.nan}, "--object-m: expected a positive distance"),
+        ({"focus_m": 0}, "--focus-m: expected a positive distance"),
+        ({"focus_m": 1e9}, "--focus-m: expected a distance up to"),
+        ({"config": "  "}, "--config: expected a configuration name or number"),
+    ],
+)
 def test_bad_values_are_refused_naming_the_option(kwargs: dict, match: str) -> None:
     with pytest.raises(InputError, match=match):
         ShootingSettings(**kwargs)
@@ -299,13 +310,30 @@ def test_zoom_positions_take_shooting_settings(reference_lenses) -> None:
 
 # ---------------------------------------------------------------- the commands
 
+
 def test_psf_compute_takes_the_settings_and_records_them(capsys, monkeypatch) -> None:
     import json
 
     from cli_runner import run_cli
 
-    code, out, _ = run_cli(["psf", "compute", "cooke_triplet", "--fno", "8", "--focus-m", "1", "--grid", "48",
-                            "--pupil-samples", "48", "--json"], capsys, monkeypatch)
+    code, out, _ = run_cli(
+        [
+            "psf",
+            "compute",
+            "cooke_triplet",
+            "--fno",
+            "8",
+            "--focus-m",
+            "1",
+            "--grid",
+            "48",
+            "--pupil-samples",
+            "48",
+            "--json",
+        ],
+        capsys,
+        monkeypatch,
+    )
     assert code == 0
     got = json.loads(out)["settings"]
     want = describe(load_lens("cooke_triplet"), ShootingSettings(fno=8, focus_m=1.0))
@@ -324,9 +352,28 @@ def test_banks_simulate_and_pairs_record_the_settings(tmp_path, capsys, monkeypa
     from cli_runner import run_cli
 
     options = ["--fno", "8", "--focus-m", "2", "--object-m", "inf"]
-    code, _, err = run_cli(["psf", "bank", "--lens", "cooke_triplet", "--sensor", "apsc_mirrorless", "--fields", "2",
-                            "--wavelengths-nm", "550", "--pupil-samples", "32", "-o", str(tmp_path / "bank"),
-                            "--json", *options], capsys, monkeypatch)
+    code, _, err = run_cli(
+        [
+            "psf",
+            "bank",
+            "--lens",
+            "cooke_triplet",
+            "--sensor",
+            "apsc_mirrorless",
+            "--fields",
+            "2",
+            "--wavelengths-nm",
+            "550",
+            "--pupil-samples",
+            "32",
+            "-o",
+            str(tmp_path / "bank"),
+            "--json",
+            *options,
+        ],
+        capsys,
+        monkeypatch,
+    )
     assert code == 0, err
     manifest = json.loads((tmp_path / "bank" / "manifest.json").read_text())
     settings = ShootingSettings(fno=8, focus_m=2.0, object_m=math.inf)
@@ -337,17 +384,60 @@ def test_banks_simulate_and_pairs_record_the_settings(tmp_path, capsys, monkeypa
     photos.mkdir()
     for i in range(2):
         Image.fromarray((np.random.default_rng(i).random((64, 80, 3)) * 255).astype(np.uint8)).save(photos / f"{i}.png")
-    code, _, err = run_cli(["simulate", str(photos / "0.png"), "-o", str(tmp_path / "sim"), "--bank",
-                            str(tmp_path / "bank"), "--lens", "cooke_triplet", *options, "--no-blur", "--quiet"],
-                           capsys, monkeypatch)
+    code, _, err = run_cli(
+        [
+            "simulate",
+            str(photos / "0.png"),
+            "-o",
+            str(tmp_path / "sim"),
+            "--bank",
+            str(tmp_path / "bank"),
+            "--lens",
+            "cooke_triplet",
+            *options,
+            "--no-blur",
+            "--quiet",
+        ],
+        capsys,
+        monkeypatch,
+    )
     assert code == 0, err
     assert json.loads((tmp_path / "sim" / "0.json").read_text())["settings"] == want
-    code, _, err = run_cli(["simulate", str(photos / "1.png"), "-o", str(tmp_path / "sim2"), "--lens",
-                            "cooke_triplet", *options, "--no-blur", "--quiet"], capsys, monkeypatch)
+    code, _, err = run_cli(
+        [
+            "simulate",
+            str(photos / "1.png"),
+            "-o",
+            str(tmp_path / "sim2"),
+            "--lens",
+            "cooke_triplet",
+            *options,
+            "--no-blur",
+            "--quiet",
+        ],
+        capsys,
+        monkeypatch,
+    )
     assert code == 0, err
     assert json.loads((tmp_path / "sim2" / "1.json").read_text())["settings"] == want
-    code, _, err = run_cli(["dataset", "make", str(photos), "-o", str(tmp_path / "data"), "--bank", str(tmp_path / "bank"),
-                            "--crops", "1", "--size", "32", "--quiet"], capsys, monkeypatch)
+    code, _, err = run_cli(
+        [
+            "dataset",
+            "make",
+            str(photos),
+            "-o",
+            str(tmp_path / "data"),
+            "--bank",
+            str(tmp_path / "bank"),
+            "--crops",
+            "1",
+            "--size",
+            "32",
+            "--quiet",
+        ],
+        capsys,
+        monkeypatch,
+    )
     assert code == 0, err
     records = json.loads((tmp_path / "data" / "manifest.json").read_text())["records"]
     assert [r["settings"] for r in records] == [want] * 2
@@ -355,16 +445,20 @@ def test_banks_simulate_and_pairs_record_the_settings(tmp_path, capsys, monkeypa
 
 # ---------------------------------------------------------------- the native focus block and fields
 
-@pytest.mark.parametrize("focus, match", [
-    ({"thickness": 9}, r"focus.thickness: expected a surface index 0..5"),
-    ({"thickness": 0}, r"focus.thickness: expected an air gap, but surfaces\[0\] is followed by"),
-    ({"thickness": 1, "compensator": 1}, "focus.compensator: expected another gap than focus.thickness"),
-    ({"thickness": "1"}, "focus.thickness: expected a 0-based surface index"),
-    ({"thickness": True}, "focus.thickness: expected a 0-based surface index"),
-    ({"compensator": 3}, "focus.thickness: missing"),
-    ({"thickness": 1, "group": 3}, r"focus: unknown key\(s\) group"),
-    ([1, 3], "focus: expected a mapping"),
-])
+
+@pytest.mark.parametrize(
+    "focus, match",
+    [
+        ({"thickness": 9}, r"focus.thickness: expected a surface index 0..5"),
+        ({"thickness": 0}, r"focus.thickness: expected an air gap, but surfaces\[0\] is followed by"),
+        ({"thickness": 1, "compensator": 1}, "focus.compensator: expected another gap than focus.thickness"),
+        ({"thickness": "1"}, "focus.thickness: expected a 0-based surface index"),
+        ({"thickness": True}, "focus.thickness: expected a 0-based surface index"),
+        ({"compensator": 3}, "focus.thickness: missing"),
+        ({"thickness": 1, "group": 3}, r"focus: unknown key\(s\) group"),
+        ([1, 3], "focus: expected a mapping"),
+    ],
+)
 def test_bad_focus_blocks_are_named(focus, match: str) -> None:
     data = lens_to_dict(load_lens("cooke_triplet"))
     data["focus"] = focus
@@ -391,8 +485,11 @@ def test_lens_info_shows_the_lens_at_a_zoom_position(reference_lenses, capsys, m
 
     from cli_runner import run_cli
 
-    code, out, err = run_cli(["lens", "info", str(reference_lenses / "nikon_80-200_zoom.zmx"), "--config", "3",
-                              "--fno", "4", "--json"], capsys, monkeypatch)
+    code, out, err = run_cli(
+        ["lens", "info", str(reference_lenses / "nikon_80-200_zoom.zmx"), "--config", "3", "--fno", "4", "--json"],
+        capsys,
+        monkeypatch,
+    )
     assert code == 0, err
     info = json.loads(out)
     assert info["efl_mm"] == pytest.approx(143.0764, abs=1e-3)

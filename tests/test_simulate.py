@@ -1,4 +1,5 @@
 """Imaging simulation against the PSF bank (the issue's acceptance checks)."""
+
 import math
 
 import numpy as np
@@ -23,8 +24,9 @@ def bank():
     """Cooke triplet at the APS-C pitch: 7 fields, 3 wavelengths (a few seconds)."""
     lens = load_lens("cooke_triplet")
     p = suggest_kernel_pixels(lens, PITCH, limit=31)
-    return compute_bank(lens, PITCH, p, fields=[0.0, 0.2, 0.4, 0.6, 0.8, 0.9, 1.0], wavelengths_nm=[500, 550, 600],
-                        pupil_samples=128)
+    return compute_bank(
+        lens, PITCH, p, fields=[0.0, 0.2, 0.4, 0.6, 0.8, 0.9, 1.0], wavelengths_nm=[500, 550, 600], pupil_samples=128
+    )
 
 
 def _ncc(a, b):
@@ -53,7 +55,7 @@ def test_point_source_reproduces_the_bank_psf(bank, field, azimuth):
     cx, cy = m.pixel_to_mm(torch.tensor(float(size // 2)), torch.tensor(float(size // 2)))
     k = bank.psf_at(float(cx), float(cy))
     p = k.shape[-1]
-    win = out[:, size // 2 - p // 2:size // 2 + p // 2 + 1, size // 2 - p // 2:size // 2 + p // 2 + 1]
+    win = out[:, size // 2 - p // 2 : size // 2 + p // 2 + 1, size // 2 - p // 2 : size // 2 + p // 2 + 1]
     for c in range(3):
         assert _ncc(win[c], k[c]) >= 0.99
         assert out[c].sum() == pytest.approx(k[c].sum(), rel=0.01)
@@ -71,8 +73,12 @@ def test_uniform_field_has_no_seams(bank):
     rows = torch.arange(h, dtype=torch.float64)
     cols = torch.arange(w, dtype=torch.float64)
     # kernel sums along the image diagonal to normalize lens shading
-    sums = np.array([[bank.psf_at(*(float(v) for v in m.pixel_to_mm(r, c))).sum(axis=(-2, -1))
-                      for c in cols[::50]] for r in rows[::50]])
+    sums = np.array(
+        [
+            [bank.psf_at(*(float(v) for v in m.pixel_to_mm(r, c))).sum(axis=(-2, -1)) for c in cols[::50]]
+            for r in rows[::50]
+        ]
+    )
     inner = out[:, 30:-30, 30:-30]
     assert inner.diff(dim=1).abs().max().item() < 1e-3
     assert inner.diff(dim=2).abs().max().item() < 1e-3
@@ -129,7 +135,9 @@ def test_distortion_moves_points_from_paraxial_to_real_chief_ray_positions(bank)
     r_par, r_real = float(np.hypot(*f.paraxial_xy_mm)), float(np.hypot(*f.reference_xy_mm))
     size = 64
     m = _crop_at(r_par, 0.0, size)
-    yy, xx = torch.meshgrid(torch.arange(size, dtype=torch.float64), torch.arange(size, dtype=torch.float64), indexing="ij")
+    yy, xx = torch.meshgrid(
+        torch.arange(size, dtype=torch.float64), torch.arange(size, dtype=torch.float64), indexing="ij"
+    )
     x, y = m.pixel_to_mm(yy, xx)
     blob = torch.exp(-((x - r_par) ** 2 + y**2) / (2 * (2 * PITCH * 1e-3) ** 2))
     out = apply_distortion(blob.unsqueeze(0), bank, m)[0]

@@ -5,6 +5,7 @@ has the MTF exp(-2 pi^2 sigma^2 f^2) x sinc(f) along its normal (f in cycles/pix
 is the pixel aperture, exact to 0.0013 at 8 degrees, where the projected pixel is
 sinc(f cos t) sinc(f sin t)).
 """
+
 from __future__ import annotations
 
 import math
@@ -28,8 +29,9 @@ from lensim.evaluate import (
 K = 8  # fine-grid samples per pixel for the PSFs
 
 
-def gaussian_psf(sigma_x: float, sigma_y: float | None = None, k: int = K, half_px: float = 5.0,
-                 rot_deg: float = 0.0) -> np.ndarray:
+def gaussian_psf(
+    sigma_x: float, sigma_y: float | None = None, k: int = K, half_px: float = 5.0, rot_deg: float = 0.0
+) -> np.ndarray:
     """Point-sampled (rotated, elliptical) Gaussian on a grid of 1/k pixel, odd size, centred."""
     sigma_y = sigma_x if sigma_y is None else sigma_y
     n = int(round(half_px * k))
@@ -106,12 +108,15 @@ def test_corrections_matter() -> None:
     assert np.sinc(NYQ) - m_plain == pytest.approx(np.sinc(NYQ) * (1 - np.sinc(NYQ / 4)), abs=0.005)
 
 
-@pytest.mark.parametrize("orientation,angle,low,high", [
-    ("horizontal", 5.0, 0.1, 0.9),
-    ("vertical", -5.0, 0.1, 0.9),
-    ("horizontal", -7.0, 0.9, 0.1),
-    ("vertical", 6.0, 0.9, 0.1),
-])
+@pytest.mark.parametrize(
+    "orientation,angle,low,high",
+    [
+        ("horizontal", 5.0, 0.1, 0.9),
+        ("vertical", -5.0, 0.1, 0.9),
+        ("horizontal", -7.0, 0.9, 0.1),
+        ("vertical", 6.0, 0.9, 0.1),
+    ],
+)
 def test_orientation_sign_and_polarity(orientation: str, angle: float, low: float, high: float) -> None:
     sigma = 0.6
     img = make_slanted_edge((90, 110), angle, low, high, psf=gaussian_psf(sigma), orientation=orientation)  # type: ignore[arg-type]

@@ -6,6 +6,7 @@ options' defaults come from plain-Python modules (lensim.psf.defaults,
 lensim.optics.aiming_modes, lensim.assets). Checked in a fresh interpreter through
 sys.modules, not by timing: `import lensim.cli`, `lensim --help`, `lensim CMD --help` for
 every command of the app, and `lensim lens info`."""
+
 import json
 import os
 import subprocess
@@ -16,12 +17,36 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 # what only training, restoring, evaluating, grids on Dask or plotting need
-HEAVY = ("lensim.restore.network", "lensim.restore.models", "lensim.restore.train", "lensim.restore.deform",
-         "lensim.evaluate", "lensim.demo", "lensim.report", "scipy.signal", "scipy.stats", "dask", "distributed",
-         "matplotlib", "onnx", "onnxruntime")
+HEAVY = (
+    "lensim.restore.network",
+    "lensim.restore.models",
+    "lensim.restore.train",
+    "lensim.restore.deform",
+    "lensim.evaluate",
+    "lensim.demo",
+    "lensim.report",
+    "scipy.signal",
+    "scipy.stats",
+    "dask",
+    "distributed",
+    "matplotlib",
+    "onnx",
+    "onnxruntime",
+)
 # what computing needs (tensors, arrays, ray tracing, PSFs, rendering): never for building options or help
-COMPUTE = ("torch", "numpy", "lensim.optics.lens", "lensim.optics.trace", "lensim.optics.aiming", "lensim.psf.compute",
-           "lensim.psf.bank", "lensim.render", "lensim.sensor.profile", "lensim.images", "lensim.data.pairs")
+COMPUTE = (
+    "torch",
+    "numpy",
+    "lensim.optics.lens",
+    "lensim.optics.trace",
+    "lensim.optics.aiming",
+    "lensim.psf.compute",
+    "lensim.psf.bank",
+    "lensim.render",
+    "lensim.sensor.profile",
+    "lensim.images",
+    "lensim.data.pairs",
+)
 STARTUP = HEAVY + COMPUTE
 
 PROBE = """
@@ -39,8 +64,15 @@ print(json.dumps({"import": after_import, "command": sorted(sys.modules),
 
 def _modules_after(args: list[str]) -> dict:
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
-    out = subprocess.run([sys.executable, "-c", PROBE, json.dumps(args)], capture_output=True, text=True, env=env,
-                         cwd=ROOT, timeout=120, check=True)
+    out = subprocess.run(
+        [sys.executable, "-c", PROBE, json.dumps(args)],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=ROOT,
+        timeout=120,
+        check=True,
+    )
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
@@ -105,8 +137,15 @@ def helps() -> dict:
     control, what `lens info` added)."""
     runs = [[*path, "--help"] for path in COMMANDS] + [["lens", "info", "cooke_triplet"]]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
-    out = subprocess.run([sys.executable, "-c", HELP_PROBE, json.dumps(runs)], capture_output=True, text=True, env=env,
-                         cwd=ROOT, timeout=300, check=True)
+    out = subprocess.run(
+        [sys.executable, "-c", HELP_PROBE, json.dumps(runs)],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=ROOT,
+        timeout=300,
+        check=True,
+    )
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 

@@ -1,4 +1,5 @@
 """Tracer checks against analytic truth (tolerances stated per test)."""
+
 import math
 
 import pytest
@@ -15,8 +16,13 @@ from lensim.optics.trace import MISSED, TIR, VIGNETTED, trace
 
 
 def _singlet(n=1.5, r1=50.0, thickness=5.0, **kw):
-    return Lens([Surface(1 / r1, thickness, ConstantIndex(n), is_stop=True), Surface(0.0, 90.0)],
-                aperture_value=10.0, fields=[0.0, 5.0], wavelengths_um=[0.55], **kw)
+    return Lens(
+        [Surface(1 / r1, thickness, ConstantIndex(n), is_stop=True), Surface(0.0, 90.0)],
+        aperture_value=10.0,
+        fields=[0.0, 5.0],
+        wavelengths_um=[0.55],
+        **kw,
+    )
 
 
 def test_plano_convex_efl_matches_lensmaker():
@@ -41,8 +47,11 @@ def test_paraxial_limit_of_real_trace():
 def test_sphere_intersection_exact():
     # a ray parallel to the axis at height h hits a sphere of radius R at sag R - sqrt(R^2 - h^2)
     R, h = 20.0, 7.0
-    lens = Lens([Surface(1 / R, 5.0, ConstantIndex(1.5), is_stop=True), Surface(0.0, 50.0)], aperture_value=15.0,
-                wavelengths_um=[0.55])
+    lens = Lens(
+        [Surface(1 / R, 5.0, ConstantIndex(1.5), is_stop=True), Surface(0.0, 50.0)],
+        aperture_value=15.0,
+        wavelengths_um=[0.55],
+    )
     rays, wl = generate_rays(lens, [0.0], torch.tensor([[0.0, h / 7.5]], dtype=torch.float64), [0.55])
     res = trace(lens, rays, wl, end=1, to_image=False)
     assert res.rays.position[0, 0, 0, 2].item() == pytest.approx(R - math.sqrt(R * R - h * h), abs=1e-12)
@@ -73,8 +82,12 @@ def test_snell_law_holds_at_each_refraction():
 
 def test_total_internal_reflection_is_flagged_not_nan():
     # a steep ray leaving glass through a strongly curved surface
-    lens = Lens([Surface(0.0, 5.0, ConstantIndex(1.9), is_stop=True), Surface(-1 / 6.0, 20.0)],
-                aperture_value=10.0, fields=[0.0, 40.0], wavelengths_um=[0.55])
+    lens = Lens(
+        [Surface(0.0, 5.0, ConstantIndex(1.9), is_stop=True), Surface(-1 / 6.0, 20.0)],
+        aperture_value=10.0,
+        fields=[0.0, 40.0],
+        wavelengths_um=[0.55],
+    )
     rays, wl = generate_rays(lens, [40.0], square_grid(21), [0.55])
     res = trace(lens, rays, wl)
     assert (res.status == TIR).any()
@@ -83,8 +96,11 @@ def test_total_internal_reflection_is_flagged_not_nan():
 
 
 def test_ray_missing_a_surface_is_flagged():
-    lens = Lens([Surface(1 / 5.0, 2.0, ConstantIndex(1.5), is_stop=True), Surface(0.0, 20.0)], aperture_value=20.0,
-                wavelengths_um=[0.55])
+    lens = Lens(
+        [Surface(1 / 5.0, 2.0, ConstantIndex(1.5), is_stop=True), Surface(0.0, 20.0)],
+        aperture_value=20.0,
+        wavelengths_um=[0.55],
+    )
     rays, wl = generate_rays(lens, [0.0], square_grid(11), [0.55])
     res = trace(lens, rays, wl)
     assert (res.status == MISSED).any()
@@ -92,8 +108,14 @@ def test_ray_missing_a_surface_is_flagged():
 
 
 def test_clear_aperture_and_obscuration_vignette():
-    lens = Lens([Surface(0.0, 5.0, ConstantIndex(1.5), is_stop=True, clear_radius=4.0, obscuration_radius=1.0),
-                 Surface(0.0, 20.0)], aperture_value=10.0, wavelengths_um=[0.55])
+    lens = Lens(
+        [
+            Surface(0.0, 5.0, ConstantIndex(1.5), is_stop=True, clear_radius=4.0, obscuration_radius=1.0),
+            Surface(0.0, 20.0),
+        ],
+        aperture_value=10.0,
+        wavelengths_um=[0.55],
+    )
     pupil = square_grid(41)
     rays, wl = generate_rays(lens, [0.0], pupil, [0.55])
     res = trace(lens, rays, wl)
@@ -105,8 +127,11 @@ def test_clear_aperture_and_obscuration_vignette():
 
 def test_plane_mirror_folds_path():
     # object at infinity, flat mirror 50 mm away, image plane 20 mm back towards the object
-    lens = Lens([Surface(0.0, 50.0, is_stop=True), Surface(0.0, -20.0, is_mirror=True)],
-                aperture_value=10.0, wavelengths_um=[0.55])
+    lens = Lens(
+        [Surface(0.0, 50.0, is_stop=True), Surface(0.0, -20.0, is_mirror=True)],
+        aperture_value=10.0,
+        wavelengths_um=[0.55],
+    )
     rays, wl = generate_rays(lens, [0.0], square_grid(5), [0.55])
     res = trace(lens, rays, wl)
     assert res.rays.valid.all()
@@ -115,8 +140,11 @@ def test_plane_mirror_folds_path():
 
 
 def test_concave_mirror_focal_length():
-    lens = Lens([Surface(0.0, 100.0, is_stop=True), Surface(-1 / 200.0, -100.0, is_mirror=True)],
-                aperture_value=10.0, wavelengths_um=[0.55])
+    lens = Lens(
+        [Surface(0.0, 100.0, is_stop=True), Surface(-1 / 200.0, -100.0, is_mirror=True)],
+        aperture_value=10.0,
+        wavelengths_um=[0.55],
+    )
     p = paraxial_data(lens)
     assert p.efl_mm == pytest.approx(100.0, rel=1e-12)
     assert p.bfl_mm == pytest.approx(-100.0, rel=1e-12)  # focus 100 mm in front of the mirror (towards -z)
@@ -133,8 +161,11 @@ def test_cooke_triplet_paraxial_values():
 def test_opl_is_constant_for_perfect_focus_of_a_paraboloid():
     # a paraboloid mirror focuses an axial plane wave perfectly: all OPLs to the focus equal
     f = 100.0
-    lens = Lens([Surface(0.0, 100.0, is_stop=True), Surface(-1 / (2 * f), -f, conic=-1.0, is_mirror=True)],
-                aperture_value=40.0, wavelengths_um=[0.55])
+    lens = Lens(
+        [Surface(0.0, 100.0, is_stop=True), Surface(-1 / (2 * f), -f, conic=-1.0, is_mirror=True)],
+        aperture_value=40.0,
+        wavelengths_um=[0.55],
+    )
     rays, wl = generate_rays(lens, [0.0], square_grid(21), [0.55])
     res = trace(lens, rays, wl)
     xy = res.rays.position[..., :2]

@@ -1,4 +1,5 @@
 """The chunked tracer (trace) against the surface-by-surface reference (trace_reference)."""
+
 import pytest
 import torch
 
@@ -16,15 +17,35 @@ def _systems():
     return {
         "cooke": load_lens("cooke_triplet", warn=False),
         "asphere_apertures": load_lens(REFERENCE_LENSES / "US08427765-1.zmx", warn=False),
-        "tir": Lens([Surface(0.0, 5.0, ConstantIndex(1.9), is_stop=True), Surface(-1 / 6.0, 20.0)],
-                    aperture_value=10.0, fields=[0.0, 40.0], wavelengths_um=[0.55]),
-        "miss": Lens([Surface(1 / 5.0, 2.0, ConstantIndex(1.5), is_stop=True), Surface(0.0, 20.0)],
-                     aperture_value=20.0, wavelengths_um=[0.55]),
-        "obscured_paraboloid": Lens([Surface(0.0, 100.0, is_stop=True),
-                                     Surface(-1 / 200.0, -100.0, conic=-1.0, is_mirror=True, obscuration_radius=3.0)],
-                                    aperture_value=40.0, fields=[0.0, 1.0], wavelengths_um=[0.55]),
-        "conics": Lens([Surface(1 / 15.0, 4.0, ConstantIndex(1.6), conic=-0.7, is_stop=True, clear_radius=5.5),
-                        Surface(-1 / 30.0, 30.0, conic=2.0)], aperture_value=12.0, fields=[0.0, 10.0], wavelengths_um=[0.55]),
+        "tir": Lens(
+            [Surface(0.0, 5.0, ConstantIndex(1.9), is_stop=True), Surface(-1 / 6.0, 20.0)],
+            aperture_value=10.0,
+            fields=[0.0, 40.0],
+            wavelengths_um=[0.55],
+        ),
+        "miss": Lens(
+            [Surface(1 / 5.0, 2.0, ConstantIndex(1.5), is_stop=True), Surface(0.0, 20.0)],
+            aperture_value=20.0,
+            wavelengths_um=[0.55],
+        ),
+        "obscured_paraboloid": Lens(
+            [
+                Surface(0.0, 100.0, is_stop=True),
+                Surface(-1 / 200.0, -100.0, conic=-1.0, is_mirror=True, obscuration_radius=3.0),
+            ],
+            aperture_value=40.0,
+            fields=[0.0, 1.0],
+            wavelengths_um=[0.55],
+        ),
+        "conics": Lens(
+            [
+                Surface(1 / 15.0, 4.0, ConstantIndex(1.6), conic=-0.7, is_stop=True, clear_radius=5.5),
+                Surface(-1 / 30.0, 30.0, conic=2.0),
+            ],
+            aperture_value=12.0,
+            fields=[0.0, 10.0],
+            wavelengths_um=[0.55],
+        ),
     }
 
 

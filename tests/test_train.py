@@ -1,5 +1,6 @@
 """Training: dataset (split, FOV channels, augmentation), metrics, loss decrease, exact
 resume, atomic checkpoints. Tiny models (width 8) on a synthetic pairs folder."""
+
 from __future__ import annotations
 
 import json
@@ -32,15 +33,26 @@ def make_pairs(root: Path, photos: int = 4, crops: int = 3, size: int = 40, seed
         cs = []
         for k in range(crops):
             base = torch.rand(3, size // 8, size // 8, generator=gen)
-            inp = 0.1 + 0.7 * torch.nn.functional.interpolate(base[None], size=(size, size), mode="bilinear",
-                                                             align_corners=False)[0]
+            inp = (
+                0.1
+                + 0.7
+                * torch.nn.functional.interpolate(base[None], size=(size, size), mode="bilinear", align_corners=False)[
+                    0
+                ]
+            )
             name_in, name_gt = f"pairs/{i:06d}_{k:03d}_input.png", f"pairs/{i:06d}_{k:03d}_target.png"
             write_image(root / name_in, inp, 8)
             write_image(root / name_gt, inp + 0.1, 8)
             cs.append({"input": name_in, "target": name_gt, "sensor_top": 10 * i + 3 * k, "sensor_left": 100 + 7 * k})
         records.append({"index": i, "source": f"/photos/photo{i}.png", "crops": cs})
-    manifest = {"format": "lensim-pairs", "sensor": SENSOR, "sensor_name": "test", "lens": LENS, "size": size,
-                "records": records}
+    manifest = {
+        "format": "lensim-pairs",
+        "sensor": SENSOR,
+        "sensor_name": "test",
+        "lens": LENS,
+        "size": size,
+        "records": records,
+    }
     (root / "manifest.json").write_text(json.dumps(manifest))
     return root
 
@@ -103,8 +115,11 @@ def test_items_carry_absolute_fov_channels(pairs: Path):
                 if not (0 <= top <= 16 and 0 <= left <= 16):
                     continue
                 exp_fov = fov_channels(24, 24, refs[i].sensor_top + top, refs[i].sensor_left + left, 480, 640)
-                if torch.allclose(fov, exp_fov, atol=1e-6) and torch.equal(inp, base[i]["input"][:, top:top + 24, left:left + 24]) \
-                        and torch.equal(tgt, base[i]["target"][:, top:top + 24, left:left + 24]):
+                if (
+                    torch.allclose(fov, exp_fov, atol=1e-6)
+                    and torch.equal(inp, base[i]["input"][:, top : top + 24, left : left + 24])
+                    and torch.equal(tgt, base[i]["target"][:, top : top + 24, left : left + 24])
+                ):
                     found = True
                     ops_seen.add(op)
                     break
@@ -242,14 +257,29 @@ def test_a_resume_keeps_the_stored_epochs_and_budget_unless_told_otherwise(pairs
     assert saved["epochs"] == 3 and saved["time_budget_s"] is None
 
 
-def test_cli_resume_takes_the_run_settings_not_the_option_defaults(pairs: Path, tmp_path: Path, capsys,
-                                                                    monkeypatch: pytest.MonkeyPatch):
+def test_cli_resume_takes_the_run_settings_not_the_option_defaults(
+    pairs: Path, tmp_path: Path, capsys, monkeypatch: pytest.MonkeyPatch
+):
     from cli_runner import run_cli
 
     run = tmp_path / "run"
     args = ["train", str(pairs), "-o", str(run), "--quiet"]
-    tiny = ["--width", "8", "--depth", "2", "--crop", "32", "--batch-size", "2", "--val-fraction", "0.25",
-            "--seed", "3", "--steps-per-epoch", "1"]
+    tiny = [
+        "--width",
+        "8",
+        "--depth",
+        "2",
+        "--crop",
+        "32",
+        "--batch-size",
+        "2",
+        "--val-fraction",
+        "0.25",
+        "--seed",
+        "3",
+        "--steps-per-epoch",
+        "1",
+    ]
     assert run_cli([*args, *tiny, "--epochs", "2"], capsys, monkeypatch)[0] == 0
     code, out, _ = run_cli([*args, "--resume", "--json"], capsys, monkeypatch)
     assert code == 0 and json.loads(out)["steps"] == 2  # nothing left: 2 epochs (not the default 30), 1 step each
@@ -259,16 +289,19 @@ def test_cli_resume_takes_the_run_settings_not_the_option_defaults(pairs: Path, 
     assert code == 2 and "width" in err and err.count("\n") == 1
 
 
-def test_a_truncated_checkpoint_is_named_in_one_line(pairs: Path, tmp_path: Path, capsys,
-                                                    monkeypatch: pytest.MonkeyPatch):
+def test_a_truncated_checkpoint_is_named_in_one_line(
+    pairs: Path, tmp_path: Path, capsys, monkeypatch: pytest.MonkeyPatch
+):
     from cli_runner import run_cli
 
     run = tmp_path / "run"
     train(pairs, run, epochs=1, max_steps_per_epoch=1, **TINY)
     data = (run / "last.pt").read_bytes()
-    (run / "last.pt").write_bytes(data[:len(data) // 2])
-    for args in (["train", str(pairs), "-o", str(run), "--resume"], ["restore", str(run / "last.pt"),
-                                                                       str(tmp_path / "x.png"), "-o", str(tmp_path / "o")]):
+    (run / "last.pt").write_bytes(data[: len(data) // 2])
+    for args in (
+        ["train", str(pairs), "-o", str(run), "--resume"],
+        ["restore", str(run / "last.pt"), str(tmp_path / "x.png"), "-o", str(tmp_path / "o")],
+    ):
         code, _, err = run_cli(args, capsys, monkeypatch)
         assert code == 2 and err.count("\n") == 1, err
         assert f"{run / 'last.pt'}: is corrupt or not a lensim checkpoint" in err
@@ -296,8 +329,14 @@ def test_budget_progress_reports_seconds_against_the_budget(pairs: Path, tmp_pat
 
     assert budget_progress(None, 10.0) is None
     seen: list[tuple[float, float]] = []
-    train(pairs, tmp_path / "run", epochs=1, max_steps_per_epoch=3, progress=budget_progress(
-        lambda done, total: seen.append((done, total)), 1e-9), **TINY)
+    train(
+        pairs,
+        tmp_path / "run",
+        epochs=1,
+        max_steps_per_epoch=3,
+        progress=budget_progress(lambda done, total: seen.append((done, total)), 1e-9),
+        **TINY,
+    )
     assert len(seen) >= 3 and all(total == 1e-9 and 0 <= done <= total for done, total in seen)
 
 
@@ -327,8 +366,9 @@ def test_checkpoint_save_is_atomic(tmp_path: Path, monkeypatch: pytest.MonkeyPat
     assert sorted(os.listdir(tmp_path)) == ["last.pt"]  # no partial new.pt, no temporary files
 
 
-def test_training_interrupted_while_saving_leaves_the_previous_checkpoint(pairs: Path, tmp_path: Path,
-                                                                          monkeypatch: pytest.MonkeyPatch):
+def test_training_interrupted_while_saving_leaves_the_previous_checkpoint(
+    pairs: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+):
     run = tmp_path / "run"
     train(pairs, run, epochs=1, max_steps_per_epoch=1, **TINY)
     before = (run / "last.pt").read_bytes()
@@ -350,8 +390,9 @@ def test_training_interrupted_while_saving_leaves_the_previous_checkpoint(pairs:
 
 
 def _ddp_worker(rank: int, world: int, pairs: str, run: str, port: int, queue) -> None:
-    os.environ.update(MASTER_ADDR="127.0.0.1", MASTER_PORT=str(port), WORLD_SIZE=str(world), RANK=str(rank),
-                      LOCAL_RANK=str(rank))
+    os.environ.update(
+        MASTER_ADDR="127.0.0.1", MASTER_PORT=str(port), WORLD_SIZE=str(world), RANK=str(rank), LOCAL_RANK=str(rank)
+    )
     torch.set_num_threads(1)
     res = train(pairs, run, epochs=1, max_steps_per_epoch=2, **{**TINY, "batch_size": 2})
     queue.put((rank, res.step, res.val_psnr))
@@ -369,8 +410,9 @@ def test_distributed_data_parallel_on_cpu_matches_one_process(pairs: Path, tmp_p
         port = s.getsockname()[1]
     ctx = mp.get_context("spawn")
     queue = ctx.Queue()
-    mp.start_processes(_ddp_worker, args=(2, str(pairs), str(tmp_path / "ddp"), port, queue), nprocs=2,
-                       start_method="spawn")
+    mp.start_processes(
+        _ddp_worker, args=(2, str(pairs), str(tmp_path / "ddp"), port, queue), nprocs=2, start_method="spawn"
+    )
     results = sorted(queue.get(timeout=60) for _ in range(2))
     assert [r[:2] for r in results] == [(0, 2), (1, 2)]
     assert results[0][2] is not None and results[1][2] is None  # rank 0 alone validates
@@ -392,8 +434,9 @@ def test_training_state_resumes_through_the_checkpoint_module(tmp_path: Path):
         torch.manual_seed(seed)
         model = FieldAwareUNet(width=4, depth=2, use_deformable=False)
         opt = torch.optim.Adam(model.parameters(), lr=1e-3)
-        return TrainingState(model, opt, torch.optim.lr_scheduler.StepLR(opt, 1, 0.5), torch.amp.GradScaler("cuda",
-                             enabled=False))
+        return TrainingState(
+            model, opt, torch.optim.lr_scheduler.StepLR(opt, 1, 0.5), torch.amp.GradScaler("cuda", enabled=False)
+        )
 
     def one_step(state: TrainingState) -> float:
         x = torch.rand(1, 3, 16, 16)

@@ -1,4 +1,5 @@
 """The version is written once, in lensim/__init__.py; pyproject.toml reads it."""
+
 from pathlib import Path
 
 import lensim

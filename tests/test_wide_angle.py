@@ -11,6 +11,7 @@ agreement (1.3e-9 mm at 89.9 deg, 4e-14 mm or better up to 70 deg). Fields, tang
 and sagittal pupil rays are aimed up to 89.9 deg. A field beyond a lens's coverage gets
 a one-line error naming the largest field that works (analytic case: a clear aperture).
 """
+
 from __future__ import annotations
 
 import math
@@ -33,9 +34,15 @@ WL = 0.5876
 # optiland 0.6.3, robust aiming, lensim's glasses (optiland_models.optiland_from_lens):
 # chief-ray image height (mm) at 587.6 nm per field (deg)
 OPTILAND_CHIEF_MM = {
-    20.0: 0.07065371038076931, 40.0: 0.13652770115229396, 60.0: 0.19365793158627326,
-    70.0: 0.21773714360025087, 80.0: 0.23792184702268188, 85.0: 0.24628227745242082,
-    88.0: 0.2506849418702891, 89.0: 0.25204629943495904, 89.5: 0.2527067711349521,
+    20.0: 0.07065371038076931,
+    40.0: 0.13652770115229396,
+    60.0: 0.19365793158627326,
+    70.0: 0.21773714360025087,
+    80.0: 0.23792184702268188,
+    85.0: 0.24628227745242082,
+    88.0: 0.2506849418702891,
+    89.0: 0.25204629943495904,
+    89.5: 0.2527067711349521,
     89.9: 0.25322539637871144,
 }
 AGREEMENT_MM = 5e-9
@@ -66,8 +73,9 @@ def test_chief_rays_aimed_to_89_9_deg_agree_with_optiland(laikin):
 def test_tangential_and_sagittal_rays_hit_their_stop_points(laikin, field):
     para = paraxial_data(laikin)
     c = math.sqrt(0.5)
-    pupil = torch.tensor([[0.0, 1.0], [0.0, -1.0], [1.0, 0.0], [-1.0, 0.0], [c, c], [-c, -c], [0.0, 0.5]],
-                         dtype=torch.float64)
+    pupil = torch.tensor(
+        [[0.0, 1.0], [0.0, -1.0], [1.0, 0.0], [-1.0, 0.0], [c, c], [-c, -c], [0.0, 0.5]], dtype=torch.float64
+    )
     rays, wl = generate_rays(laikin, [field], pupil, laikin.wavelengths_um, "real", para)
     assert bool(rays.valid.all())
     at_stop = trace(laikin, rays, wl, end=laikin.stop_index + 1, to_image=False, apertures=False)
@@ -80,9 +88,17 @@ def _clipped_lens() -> Lens:
     """The stop, 20 mm in front of a plano-convex lens whose plane face has a 5 mm clear
     radius: the chief ray (a straight line from the stop centre) meets that face at
     20 tan(a), so it reaches the image up to atan(5/20) = 14.036 deg exactly."""
-    return Lens([Surface(0.0, 20.0, is_stop=True), Surface(0.0, 2.0, ConstantIndex(1.5), clear_radius=5.0),
-                 Surface(-1 / 20.0, 30.0)], aperture_value=2.0, fields=[0.0, 30.0], wavelengths_um=[0.55],
-                source="clipped.yaml")
+    return Lens(
+        [
+            Surface(0.0, 20.0, is_stop=True),
+            Surface(0.0, 2.0, ConstantIndex(1.5), clear_radius=5.0),
+            Surface(-1 / 20.0, 30.0),
+        ],
+        aperture_value=2.0,
+        fields=[0.0, 30.0],
+        wavelengths_um=[0.55],
+        source="clipped.yaml",
+    )
 
 
 def test_beyond_coverage_names_the_largest_field_that_works():
@@ -91,8 +107,9 @@ def test_beyond_coverage_names_the_largest_field_that_works():
         spot_diagram(_clipped_lens(), aiming="real")
     message = str(info.value)
     assert "\n" not in message
-    assert message.startswith("clipped.yaml: fields: the chief ray at field 30 deg is vignetted by the aperture at "
-                              "surfaces[1]")
+    assert message.startswith(
+        "clipped.yaml: fields: the chief ray at field 30 deg is vignetted by the aperture at surfaces[1]"
+    )
     assert message.endswith(f"(its chief ray reaches the image up to {math.floor(limit * 100) / 100:g} deg)")
 
 

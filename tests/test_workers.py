@@ -2,6 +2,7 @@
 or on a Dask cluster given by address with the same results, errors cross as themselves,
 a scheduler that does not answer is one line. (Local clusters and their workers' death
 with the parent: tests/test_kill_resume.py.)"""
+
 from __future__ import annotations
 
 import socket
@@ -71,8 +72,9 @@ def test_bank_on_a_cluster_by_address_is_bitwise_the_bank_computed_here(schedule
         warnings.simplefilter("ignore")
         here = compute_bank(lens, 4.0, 15, **kw)
         calls = []
-        there = compute_bank(lens, 4.0, 15, scheduler=scheduler, out_dir=tmp_path / "b",
-                             progress=lambda d, t: calls.append((d, t)), **kw)
+        there = compute_bank(
+            lens, 4.0, 15, scheduler=scheduler, out_dir=tmp_path / "b", progress=lambda d, t: calls.append((d, t)), **kw
+        )
     assert calls[0] == (0, 3) and calls[-1] == (3, 3)
     for a, b in zip(here.fields, there.fields, strict=True):
         assert np.array_equal(a.rgb, b.rgb) and np.array_equal(a.primary_fine, b.primary_fine)

@@ -1,5 +1,6 @@
 """Zemax .zmx import: the two patent lenses, encodings, glass fallbacks and one-line
 errors naming the file and the field."""
+
 import math
 import warnings
 
@@ -111,7 +112,9 @@ def test_unsupported_surface_type(tmp_path, reference_lenses, surface_type):
 
 def test_malformed_number_names_the_line(tmp_path, reference_lenses):
     p = variant(tmp_path, reference_lenses, ASPHERIC, "CURV 7.230657989877079000E-002", "CURV 7.2306x")
-    lineno = 1 + source_text(reference_lenses, ASPHERIC).split("\r\n").index("  CURV 7.230657989877079000E-002 0 0 0 0 \"\"")
+    lineno = 1 + source_text(reference_lenses, ASPHERIC).split("\r\n").index(
+        '  CURV 7.230657989877079000E-002 0 0 0 0 ""'
+    )
     msg = error_message(p)
     assert f": line {lineno} (SURF 3 CURV): expected a number, got '7.2306x'" in msg
 
@@ -181,7 +184,7 @@ def test_aperture_variants(tmp_path, reference_lenses):
 
 
 def test_clear_aperture_and_obscuration(tmp_path, reference_lenses):
-    stop = "  DIAM 4.215000499256 0 0 0 1 \"\"\r\n"
+    stop = '  DIAM 4.215000499256 0 0 0 1 ""\r\n'
     p = variant(tmp_path, reference_lenses, DOUBLE_GAUSS, stop, stop + "  CLAP 0 4.1 0\r\n  OBSC 0 1.5 0\r\n")
     s = read_zmx(p).surfaces[6]
     assert (s.clear_radius, s.obscuration_radius, s.is_stop) == (4.1, 1.5, True)

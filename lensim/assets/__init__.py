@@ -1,4 +1,5 @@
 """Built-in assets: lenses (native format), and later sensors and sample images."""
+
 from __future__ import annotations
 
 from pathlib import Path

@@ -18,6 +18,7 @@ and `lomiri-wallpapers-16.04` (14 photos of the Ubuntu 18.04 wallpaper contest, 
 CC-BY-SA-4.0 or CC0 per photo)) and are read from there. No image is downloaded at run
 time. A package that is missing only removes its photos.
 """
+
 from __future__ import annotations
 
 import importlib.util
@@ -50,21 +51,38 @@ class SampleImage:
     content: str = ""  # what the photo shows (the test split's categories)
 
 
-DEBIAN_ROOTS = {"mate-backgrounds": Path("/usr/share/backgrounds/mate"),
-                "plasma-workspace-wallpapers": Path("/usr/share/wallpapers"),
-                "lomiri-wallpapers-16.04": Path("/usr/share/backgrounds")}
+DEBIAN_ROOTS = {
+    "mate-backgrounds": Path("/usr/share/backgrounds/mate"),
+    "plasma-workspace-wallpapers": Path("/usr/share/wallpapers"),
+    "lomiri-wallpapers-16.04": Path("/usr/share/backgrounds"),
+}
 _MATE_CREDITS = {
-    "Aqua": "Charles Barbin", "Blinds": "Lennart Poettering, Andrea Cimitan", "Dune": "Marco Cogoni, Hylke Bons",
-    "FreshFlower": "Jens Ansorg", "Garden": "Charles Barbin", "GreenMeadow": "Timothy Schellhase, Lapo Calamandrei",
-    "LadyBird": "Charles Barbin", "RainDrops": "blackcombwhistler07", "Storm": "Sergey Nazarov",
-    "TwoWings": "Charles Barbin, Hylke Bons", "Wood": "Jean-François Fortin Tam", "YellowFlower": "Charles Barbin",
+    "Aqua": "Charles Barbin",
+    "Blinds": "Lennart Poettering, Andrea Cimitan",
+    "Dune": "Marco Cogoni, Hylke Bons",
+    "FreshFlower": "Jens Ansorg",
+    "Garden": "Charles Barbin",
+    "GreenMeadow": "Timothy Schellhase, Lapo Calamandrei",
+    "LadyBird": "Charles Barbin",
+    "RainDrops": "blackcombwhistler07",
+    "Storm": "Sergey Nazarov",
+    "TwoWings": "Charles Barbin, Hylke Bons",
+    "Wood": "Jean-François Fortin Tam",
+    "YellowFlower": "Charles Barbin",
 }
 # KDE Plasma 5.27's photographic wallpapers (the others are renders and drawings); authors and
 # licence from each wallpaper's metadata.json (LGPLv3), the package's debian/copyright says GPL-2+
 _KDE_CREDITS = {
-    "BytheWater": "Maciej Wiklo", "ColdRipple": "Risto Saukonpää", "ColorfulCups": "Dmitri Popov",
-    "DarkestHour": "Risto Saukonpää", "EveningGlow": "Ian Hex", "FallenLeaf": "Martin Klapetek", "Grey": "Sigi Sagi",
-    "Kite": "Risto Saukonpää", "OneStandsOut": "Risto Saukonpää", "Path": "Risto Saukonpää",
+    "BytheWater": "Maciej Wiklo",
+    "ColdRipple": "Risto Saukonpää",
+    "ColorfulCups": "Dmitri Popov",
+    "DarkestHour": "Risto Saukonpää",
+    "EveningGlow": "Ian Hex",
+    "FallenLeaf": "Martin Klapetek",
+    "Grey": "Sigi Sagi",
+    "Kite": "Risto Saukonpää",
+    "OneStandsOut": "Risto Saukonpää",
+    "Path": "Risto Saukonpää",
     "summer_1am": "Risto Saukonpää",
 }
 # Lomiri (Ubuntu Touch) 16.04 wallpapers, all photographs but umang (a render); licence per
@@ -72,8 +90,8 @@ _KDE_CREDITS = {
 _LOMIRI = (
     ("Bridge_by_Sander_Klootwijk", "Sander Klootwijk", "CC-BY-SA-4.0", 0.25),
     ("Dragonfly_by_Bolly", "Bolly", "CC-BY-SA-4.0", 0.25),
-    ("Picture_0B_by_freespace", "Trevor \"Freespace\"", "CC-BY-4.0", 0.5),
-    ("Picture_1A_by_freespace", "Trevor \"Freespace\"", "CC-BY-4.0", 0.75),
+    ("Picture_0B_by_freespace", 'Trevor "Freespace"', "CC-BY-4.0", 0.5),
+    ("Picture_1A_by_freespace", 'Trevor "Freespace"', "CC-BY-4.0", 0.75),
     ("Wine_by_Jakkub_Mede", "Jakub Mede", "CC-BY-4.0", 0.4),
     ("aitzgorri_by_Aitzol_Berasategi", "Aitzol Berasategi", "CC-BY-4.0", 0.4),
     ("analogpattern_by_Peter_Nerlich", "Peter Nerlich", "CC-BY-SA-4.0", 0.4),
@@ -88,32 +106,75 @@ _LOMIRI = (
 
 
 SAMPLE_IMAGES: tuple[SampleImage, ...] = (
-    SampleImage("astronaut", "skimage", "data/astronaut.png", "public domain",
-                "NASA, Eileen Collins (scikit-image data)"),
-    SampleImage("coffee", "skimage", "data/coffee.png", "CC0", "Rachel Michetti (scikit-image data)"),
-    SampleImage("chelsea", "skimage", "data/chelsea.png", "CC0", "Stefan van der Walt (scikit-image data)"),
-    SampleImage("rocket", "skimage", "data/rocket.jpg", "public domain", "SpaceX (scikit-image data)"),
-    SampleImage("kodim23", "sporco", "data/kodim23.png", "unrestricted use (Kodak PhotoCD test set)",
-                "Eastman Kodak (sporco data)"),
-    SampleImage("monarch", "sporco", "data/monarch.png", "free of copyright restrictions (Waterloo BragZone)",
-                "University of Waterloo (sporco data)"),
-    SampleImage("sail", "sporco", "data/sail.png", "free of copyright restrictions (Waterloo BragZone)",
-                "University of Waterloo (sporco data)"),
-    SampleImage("tulips", "sporco", "data/tulips.png", "free of copyright restrictions (Waterloo BragZone)",
-                "University of Waterloo (sporco data)"),
-) + tuple(
-    SampleImage(f"mate-{stem.lower()}", "debian:mate-backgrounds", f"nature/{stem}.jpg", "GPL-2+",
-                f"{who} (Debian mate-backgrounds)", scale=0.5)
-    for stem, who in _MATE_CREDITS.items()
-) + tuple(
-    SampleImage(f"kde-{stem.lower().replace('_', '')}", "debian:plasma-workspace-wallpapers",
-                f"{stem}/contents/images/2560x1600.jpg", "LGPL-3 (wallpaper metadata; Debian: GPL-2+)",
-                f"{who} (Debian plasma-workspace-wallpapers)", scale=0.5)
-    for stem, who in _KDE_CREDITS.items()
-) + tuple(
-    SampleImage(f"lomiri-{stem.split('_by_')[0].lower().replace('_', '')}", "debian:lomiri-wallpapers-16.04",
-                f"{stem}.jpg", licence, f"{who} (Debian lomiri-wallpapers-16.04)", scale=scale)
-    for stem, who, licence, scale in _LOMIRI
+    (
+        SampleImage(
+            "astronaut", "skimage", "data/astronaut.png", "public domain", "NASA, Eileen Collins (scikit-image data)"
+        ),
+        SampleImage("coffee", "skimage", "data/coffee.png", "CC0", "Rachel Michetti (scikit-image data)"),
+        SampleImage("chelsea", "skimage", "data/chelsea.png", "CC0", "Stefan van der Walt (scikit-image data)"),
+        SampleImage("rocket", "skimage", "data/rocket.jpg", "public domain", "SpaceX (scikit-image data)"),
+        SampleImage(
+            "kodim23",
+            "sporco",
+            "data/kodim23.png",
+            "unrestricted use (Kodak PhotoCD test set)",
+            "Eastman Kodak (sporco data)",
+        ),
+        SampleImage(
+            "monarch",
+            "sporco",
+            "data/monarch.png",
+            "free of copyright restrictions (Waterloo BragZone)",
+            "University of Waterloo (sporco data)",
+        ),
+        SampleImage(
+            "sail",
+            "sporco",
+            "data/sail.png",
+            "free of copyright restrictions (Waterloo BragZone)",
+            "University of Waterloo (sporco data)",
+        ),
+        SampleImage(
+            "tulips",
+            "sporco",
+            "data/tulips.png",
+            "free of copyright restrictions (Waterloo BragZone)",
+            "University of Waterloo (sporco data)",
+        ),
+    )
+    + tuple(
+        SampleImage(
+            f"mate-{stem.lower()}",
+            "debian:mate-backgrounds",
+            f"nature/{stem}.jpg",
+            "GPL-2+",
+            f"{who} (Debian mate-backgrounds)",
+            scale=0.5,
+        )
+        for stem, who in _MATE_CREDITS.items()
+    )
+    + tuple(
+        SampleImage(
+            f"kde-{stem.lower().replace('_', '')}",
+            "debian:plasma-workspace-wallpapers",
+            f"{stem}/contents/images/2560x1600.jpg",
+            "LGPL-3 (wallpaper metadata; Debian: GPL-2+)",
+            f"{who} (Debian plasma-workspace-wallpapers)",
+            scale=0.5,
+        )
+        for stem, who in _KDE_CREDITS.items()
+    )
+    + tuple(
+        SampleImage(
+            f"lomiri-{stem.split('_by_')[0].lower().replace('_', '')}",
+            "debian:lomiri-wallpapers-16.04",
+            f"{stem}.jpg",
+            licence,
+            f"{who} (Debian lomiri-wallpapers-16.04)",
+            scale=scale,
+        )
+        for stem, who, licence, scale in _LOMIRI
+    )
 )
 
 _SKIMAGE = "scikit-image data"
@@ -121,28 +182,86 @@ _SKIMAGE = "scikit-image data"
 #: no photo, file or package entry with SAMPLE_IMAGES); two dark scenes are made from
 #: well-exposed photos by lowering their exposure 3 stops in linear light.
 TEST_IMAGES: tuple[SampleImage, ...] = (
-    SampleImage("test-china", "sklearn", "datasets/images/china.jpg", "CC-BY-2.0",
-                "Daniel Buechele (scikit-learn data)", content="architecture, fine detail"),
-    SampleImage("test-flower", "sklearn", "datasets/images/flower.jpg", "CC-BY-2.0",
-                "vultilion (scikit-learn data)", content="close-up flower and foliage"),
-    SampleImage("test-grace-hopper", "matplotlib", "mpl-data/sample_data/grace_hopper.jpg", "public domain (US Navy)",
-                "US Navy (matplotlib sample data)", content="face, portrait"),
-    SampleImage("test-cameraman", "skimage", "data/camera.png", "CC0", f"Lav Varshney ({_SKIMAGE})",
-                content="face, buildings, grey"),
-    SampleImage("test-motorcycle", "skimage", "data/motorcycle_left.png", "Middlebury 2014 stereo data set",
-                f"Middlebury College ({_SKIMAGE})", content="indoor detail, clutter"),
-    SampleImage("test-text", "skimage", "data/text.png", "public domain", f"Wikipedia ({_SKIMAGE})",
-                content="text, grey"),
-    SampleImage("test-page", "skimage", "data/page.png", "BSD-3-Clause (scikit-image)", f"scikit-image ({_SKIMAGE})",
-                content="printed text, grey"),
-    SampleImage("test-grass", "skimage", "data/grass.png", "CC0", f"linolafett ({_SKIMAGE})",
-                content="foliage texture, grey"),
-    SampleImage("test-hubble", "skimage", "data/hubble_deep_field.jpg", "public domain (NASA)",
-                f"NASA, ESA ({_SKIMAGE})", content="dark scene"),
-    SampleImage("test-china-dark", "sklearn", "datasets/images/china.jpg", "CC-BY-2.0",
-                "Daniel Buechele (scikit-learn data)", exposure_ev=-3.0, content="dark, noisy (3 stops under)"),
-    SampleImage("test-motorcycle-dark", "skimage", "data/motorcycle_left.png", "Middlebury 2014 stereo data set",
-                f"Middlebury College ({_SKIMAGE})", exposure_ev=-3.0, content="dark indoor, noisy (3 stops under)"),
+    SampleImage(
+        "test-china",
+        "sklearn",
+        "datasets/images/china.jpg",
+        "CC-BY-2.0",
+        "Daniel Buechele (scikit-learn data)",
+        content="architecture, fine detail",
+    ),
+    SampleImage(
+        "test-flower",
+        "sklearn",
+        "datasets/images/flower.jpg",
+        "CC-BY-2.0",
+        "vultilion (scikit-learn data)",
+        content="close-up flower and foliage",
+    ),
+    SampleImage(
+        "test-grace-hopper",
+        "matplotlib",
+        "mpl-data/sample_data/grace_hopper.jpg",
+        "public domain (US Navy)",
+        "US Navy (matplotlib sample data)",
+        content="face, portrait",
+    ),
+    SampleImage(
+        "test-cameraman",
+        "skimage",
+        "data/camera.png",
+        "CC0",
+        f"Lav Varshney ({_SKIMAGE})",
+        content="face, buildings, grey",
+    ),
+    SampleImage(
+        "test-motorcycle",
+        "skimage",
+        "data/motorcycle_left.png",
+        "Middlebury 2014 stereo data set",
+        f"Middlebury College ({_SKIMAGE})",
+        content="indoor detail, clutter",
+    ),
+    SampleImage(
+        "test-text", "skimage", "data/text.png", "public domain", f"Wikipedia ({_SKIMAGE})", content="text, grey"
+    ),
+    SampleImage(
+        "test-page",
+        "skimage",
+        "data/page.png",
+        "BSD-3-Clause (scikit-image)",
+        f"scikit-image ({_SKIMAGE})",
+        content="printed text, grey",
+    ),
+    SampleImage(
+        "test-grass", "skimage", "data/grass.png", "CC0", f"linolafett ({_SKIMAGE})", content="foliage texture, grey"
+    ),
+    SampleImage(
+        "test-hubble",
+        "skimage",
+        "data/hubble_deep_field.jpg",
+        "public domain (NASA)",
+        f"NASA, ESA ({_SKIMAGE})",
+        content="dark scene",
+    ),
+    SampleImage(
+        "test-china-dark",
+        "sklearn",
+        "datasets/images/china.jpg",
+        "CC-BY-2.0",
+        "Daniel Buechele (scikit-learn data)",
+        exposure_ev=-3.0,
+        content="dark, noisy (3 stops under)",
+    ),
+    SampleImage(
+        "test-motorcycle-dark",
+        "skimage",
+        "data/motorcycle_left.png",
+        "Middlebury 2014 stereo data set",
+        f"Middlebury College ({_SKIMAGE})",
+        exposure_ev=-3.0,
+        content="dark indoor, noisy (3 stops under)",
+    ),
 )
 
 
@@ -161,8 +280,9 @@ def _sample(name: str) -> SampleImage:
     for img in SAMPLE_IMAGES + TEST_IMAGES:
         if img.name == name:
             return img
-    raise InputError(name, "sample image", "unknown; expected one of "
-                     f"{', '.join(i.name for i in SAMPLE_IMAGES + TEST_IMAGES)}")
+    raise InputError(
+        name, "sample image", f"unknown; expected one of {', '.join(i.name for i in SAMPLE_IMAGES + TEST_IMAGES)}"
+    )
 
 
 def sample_image_path(name: str) -> Path:
@@ -171,8 +291,11 @@ def sample_image_path(name: str) -> Path:
     base = _package_dir(img.package)
     path = None if base is None else base / img.relative_path
     if path is None or not path.is_file():
-        raise InputError(name, "sample image", f"not found; it ships with the '{img.package}' package, which "
-                         "scripts/setup.sh installs")
+        raise InputError(
+            name,
+            "sample image",
+            f"not found; it ships with the '{img.package}' package, which scripts/setup.sh installs",
+        )
     return path
 
 
@@ -188,8 +311,9 @@ def read_sample_image(name: str) -> torch.Tensor:
     arr, _ = read_image(sample_image_path(name))
     img = _sample(name)
     if img.scale != 1.0:
-        arr = F.interpolate(arr[None], scale_factor=img.scale, mode="bilinear", antialias=True,
-                            align_corners=False)[0].clamp(0.0, 1.0)
+        arr = F.interpolate(arr[None], scale_factor=img.scale, mode="bilinear", antialias=True, align_corners=False)[
+            0
+        ].clamp(0.0, 1.0)
     return expose(arr, img.exposure_ev)
 
 

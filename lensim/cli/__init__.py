@@ -1,4 +1,5 @@
 """The `lensim` command line. Each subcommand group lives in its own module."""
+
 from __future__ import annotations
 
 import typer

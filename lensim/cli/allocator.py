@@ -12,6 +12,7 @@ freed memory stays with the process until it exits (peak 1.60 against 1.45 GB fo
 frame), which suits a command-line run. Library users who want the same set those variables
 before starting Python.
 """
+
 from __future__ import annotations
 
 import ctypes

@@ -1,4 +1,5 @@
 """`lensim assets`: list the built-in lenses, sensors and sample photos."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -17,11 +18,19 @@ if TYPE_CHECKING:
 
 
 def assets_command(
-    export_photos: Path = typer.Option(None, "--export-photos", help="Write every installed sample photo (at its "
-                                       "scale, 8-bit PNG) into this folder, for `lensim dataset make`."),
-    export_test_photos: Path = typer.Option(None, "--export-test-photos", help="Write every installed unseen test "
-                                            "photo (never trained on) into this folder, for `lensim dataset make` and "
-                                            "`lensim evaluate`."),
+    export_photos: Path = typer.Option(
+        None,
+        "--export-photos",
+        help="Write every installed sample photo (at its "
+        "scale, 8-bit PNG) into this folder, for `lensim dataset make`.",
+    ),
+    export_test_photos: Path = typer.Option(
+        None,
+        "--export-test-photos",
+        help="Write every installed unseen test "
+        "photo (never trained on) into this folder, for `lensim dataset make` and "
+        "`lensim evaluate`.",
+    ),
     json_out: bool = typer.Option(False, "--json", help="Print a JSON object."),
 ) -> None:
     """List built-in lenses, sensor profiles and sample photos (with licences).
@@ -33,10 +42,16 @@ def assets_command(
     for folder, option in ((export_photos, "--export-photos"), (export_test_photos, "--export-test-photos")):
         if folder is not None:
             output_folder(folder, option)
-    if export_photos is not None and export_test_photos is not None \
-            and export_photos.resolve() == export_test_photos.resolve():
-        raise InputError(str(export_test_photos), "--export-test-photos", "is the --export-photos folder; expected "
-                         "another folder, so that no training run sees the test photos")
+    if (
+        export_photos is not None
+        and export_test_photos is not None
+        and export_photos.resolve() == export_test_photos.resolve()
+    ):
+        raise InputError(
+            str(export_test_photos),
+            "--export-test-photos",
+            "is the --export-photos folder; expected another folder, so that no training run sees the test photos",
+        )
     if export_photos is not None:
         _export(available_sample_images(), export_photos)
     if export_test_photos is not None:
@@ -46,8 +61,15 @@ def assets_command(
     images = _listing(SAMPLE_IMAGES, available_sample_images())
     test_images = _listing(TEST_IMAGES, unseen_photos())
     if json_out:
-        print_json({"lenses": lenses, "default_lens": assets.DEFAULT_LENS, "sensors": sensors, "images": images,
-                    "test_images": test_images})
+        print_json(
+            {
+                "lenses": lenses,
+                "default_lens": assets.DEFAULT_LENS,
+                "sensors": sensors,
+                "images": images,
+                "test_images": test_images,
+            }
+        )
         return
     t = Table(title="Built-in assets")
     t.add_column("kind")
@@ -59,8 +81,11 @@ def assets_command(
         t.add_row("sensor", name, "")
     for kind, listing in (("image", images), ("test image", test_images)):
         for img in listing:
-            t.add_row(kind, img["name"], f"{img['licence']}; {img['credit']}"
-                      + ("" if img["installed"] else " (not installed)"))
+            t.add_row(
+                kind,
+                img["name"],
+                f"{img['licence']}; {img['credit']}" + ("" if img["installed"] else " (not installed)"),
+            )
     console.print(t)
 
 

@@ -9,6 +9,7 @@ info/plot/spot/field` (setting_option, shooting_settings).
 
 The options' defaults come from lensim.psf.defaults (plain Python): building the options
 and the help loads no optics or PSF module; the functions that compute load them."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -28,13 +29,19 @@ if TYPE_CHECKING:
 
 
 def fields_option() -> Any:
-    return typer.Option(BANK_FIELDS, "--fields", help="Radial fields 0..1 of the bank (at least 2; "
-                        "sqrt-spaced: denser towards the edge).")
+    return typer.Option(
+        BANK_FIELDS,
+        "--fields",
+        help="Radial fields 0..1 of the bank (at least 2; sqrt-spaced: denser towards the edge).",
+    )
 
 
 def wavelengths_option() -> Any:
-    return typer.Option(DEFAULT_WAVELENGTHS_TEXT, "--wavelengths-nm", help="Bank wavelengths in nm: START:STOP:STEP "
-                        "(STOP included when a step lands on it) or a comma list.")
+    return typer.Option(
+        DEFAULT_WAVELENGTHS_TEXT,
+        "--wavelengths-nm",
+        help="Bank wavelengths in nm: START:STOP:STEP (STOP included when a step lands on it) or a comma list.",
+    )
 
 
 def pupil_samples_option() -> Any:
@@ -46,8 +53,11 @@ def workers_option() -> Any:
 
 
 def scheduler_option() -> Any:
-    return typer.Option(None, "--scheduler", help="Address of an existing Dask scheduler to compute on (e.g. "
-                        "tcp://10.0.0.5:8786) instead of local workers.")
+    return typer.Option(
+        None,
+        "--scheduler",
+        help="Address of an existing Dask scheduler to compute on (e.g. tcp://10.0.0.5:8786) instead of local workers.",
+    )
 
 
 def setting_list_option(key: str) -> Any:
@@ -57,7 +67,7 @@ def setting_list_option(key: str) -> Any:
         "fno": "F-number(s), image space at infinity; a comma list makes a grid of banks (e.g. 1.4,2,2.8).",
         "focus_m": "Focus distance(s) in m from the image plane, inf allowed; a comma list makes a grid (e.g. inf,3,1).",
         "object_m": "Object distance(s) in m from the image plane (default: the focus distance); a comma list makes "
-                    "a grid.",
+        "a grid.",
         "config": "Lens configuration(s) (zoom positions), names or 1-based numbers; a comma list makes a grid.",
     }
     return typer.Option(None, "--" + key.replace("_", "-"), help=helps[key])
@@ -65,9 +75,9 @@ def setting_list_option(key: str) -> Any:
 
 _SINGLE_HELP = {
     "fno": "F-number: the stop is set for image-space F/N at infinity and keeps its size when focusing close "
-           "(default: the lens file's aperture, the widest allowed).",
+    "(default: the lens file's aperture, the widest allowed).",
     "focus_m": "Focus distance in m from the image plane, or inf: the image plane (or the lens file's focus group) "
-               "moves to focus there (default: --object-m, else as the lens file is).",
+    "moves to focus there (default: --object-m, else as the lens file is).",
     "object_m": "Object distance in m from the image plane, or inf (default: --focus-m, else the lens file's).",
     "config": "Lens configuration (zoom position): its name or 1-based number.",
 }
@@ -95,8 +105,9 @@ def config_option() -> Any:
     return setting_option("config")
 
 
-def shooting_settings(fno: str | None, object_m: str | None, focus_m: str | None,
-                      config: str | None) -> ShootingSettings:
+def shooting_settings(
+    fno: str | None, object_m: str | None, focus_m: str | None, config: str | None
+) -> ShootingSettings:
     """The ShootingSettings of the single-value options (checked; one-line errors naming
     the option; a comma list is refused: grids are psf bank's and dataset make's)."""
     from lensim.optics.shooting import OPTIONS as SHOOTING_OPTIONS
@@ -104,8 +115,11 @@ def shooting_settings(fno: str | None, object_m: str | None, focus_m: str | None
 
     for key, text in (("fno", fno), ("object_m", object_m), ("focus_m", focus_m), ("config", config)):
         if text is not None and "," in str(text):
-            raise InputError("<command line>", SHOOTING_OPTIONS[key], f"expected one value, got the list {text!r} "
-                             "(grids of settings are made by psf bank and dataset make)")
+            raise InputError(
+                "<command line>",
+                SHOOTING_OPTIONS[key],
+                f"expected one value, got the list {text!r} (grids of settings are made by psf bank and dataset make)",
+            )
     return ShootingSettings.from_text(fno, object_m, focus_m, config)
 
 
@@ -127,27 +141,39 @@ def cache_option() -> Any:
 
 
 #: the command-line option of each BankSettings field, for error messages
-OPTION_NAMES = {"fields": "--fields", "wavelengths_nm": "--wavelengths-nm", "pupil_samples": "--pupil-samples",
-                "aiming": "--aiming", "kernel_pixels": "--kernel"}
+OPTION_NAMES = {
+    "fields": "--fields",
+    "wavelengths_nm": "--wavelengths-nm",
+    "pupil_samples": "--pupil-samples",
+    "aiming": "--aiming",
+    "kernel_pixels": "--kernel",
+}
 
 
-def bank_settings(fields: int, wavelengths: str, pupil_samples: int, cache: Path | None = None,
-                  **more: Any) -> BankSettings:
+def bank_settings(
+    fields: int, wavelengths: str, pupil_samples: int, cache: Path | None = None, **more: Any
+) -> BankSettings:
     """BankSettings from the command line's bank options (checked before any work; an
     error names the option)."""
     from lensim.psf.bank.settings import BankSettings, parse_wavelengths_nm
 
     try:
-        return BankSettings(fields=fields, wavelengths_nm=parse_wavelengths_nm(wavelengths),
-                            pupil_samples=pupil_samples, cache_dir=cache, **more)
+        return BankSettings(
+            fields=fields,
+            wavelengths_nm=parse_wavelengths_nm(wavelengths),
+            pupil_samples=pupil_samples,
+            cache_dir=cache,
+            **more,
+        )
     except InputError as e:
         if e.source == "<command line>":
             raise
         raise InputError("<command line>", OPTION_NAMES.get(e.field or "", e.field), e.message) from None
 
 
-def check_response(settings: BankSettings, response: str | Path, illuminant: str = "E",
-                   sensor: SensorProfile | None = None) -> None:
+def check_response(
+    settings: BankSettings, response: str | Path, illuminant: str = "E", sensor: SensorProfile | None = None
+) -> None:
     """Refuse, before any work, a spectral response or illuminant the bank could not
     use: an error names the sensor profile that asked for the response (its
     spectral_response field), else the option (--response, --illuminant)."""
@@ -165,8 +191,9 @@ def check_response(settings: BankSettings, response: str | Path, illuminant: str
         raise InputError("--response" if sensor is None else f"sensor {sensor.name!r}", None, e.message) from None
 
 
-def bank_for_lens(bank_dir: Path, lens_file: str | None,
-                  shooting: ShootingSettings | None = None) -> tuple[PSFBank, Lens]:
+def bank_for_lens(
+    bank_dir: Path, lens_file: str | None, shooting: ShootingSettings | None = None
+) -> tuple[PSFBank, Lens]:
     """The bank of ``--bank`` and the lens to simulate: the bank's own lens, or --lens
     (at the shooting settings) when given, which must then be the lens the bank was
     computed for (a bank of another lens would be used silently otherwise). Shooting
@@ -179,8 +206,12 @@ def bank_for_lens(bank_dir: Path, lens_file: str | None,
     if shooting is not None and not shooting.is_default:
         given = ", ".join(SHOOTING_OPTIONS[k] for k, v in shooting.to_dict().items() if v is not None)
         if lens_file is None:
-            raise InputError("<command line>", given, f"the bank {bank_dir} holds its lens at the settings it was "
-                             "computed for; expected --lens with these options, or none of them")
+            raise InputError(
+                "<command line>",
+                given,
+                f"the bank {bank_dir} holds its lens at the settings it was "
+                "computed for; expected --lens with these options, or none of them",
+            )
     return bank, _lens_of(bank.manifest.get("lens"), bank_dir, lens_file, shooting)
 
 
@@ -210,8 +241,12 @@ def _lens_of(stored: Any, bank_dir: Path, lens_file: str | None, shooting: Shoot
     lens, _ = lens_and_record(lens_file, shooting or ShootingSettings())
     if isinstance(stored, dict) and _optics(lens_to_dict(lens)) != _optics(stored):
         at = "" if shooting is None or shooting.is_default else " at these settings"
-        raise InputError("--lens", None, f"{lens_file}{at} is not the lens the bank {bank_dir} was computed for "
-                         f"({stored.get('name') or 'unnamed'}); expected that lens, or no --lens")
+        raise InputError(
+            "--lens",
+            None,
+            f"{lens_file}{at} is not the lens the bank {bank_dir} was computed for "
+            f"({stored.get('name') or 'unnamed'}); expected that lens, or no --lens",
+        )
     return lens
 
 
@@ -223,24 +258,54 @@ def _optics(lens_data: dict) -> Any:
     return json.loads(json.dumps({k: v for k, v in lens_data.items() if k != "name"}))
 
 
-def cached_bank(lens: Lens, pitch_um: float, sensor: SensorProfile, settings: BankSettings, workers: int,
-                quiet: bool, scheduler: str | None = None) -> PSFBank:
+def cached_bank(
+    lens: Lens,
+    pitch_um: float,
+    sensor: SensorProfile,
+    settings: BankSettings,
+    workers: int,
+    quiet: bool,
+    scheduler: str | None = None,
+) -> PSFBank:
     """The lens's bank at this pitch (um) with the sensor's spectral response, from the
     cache or computed into it (with `workers` local processes or on the Dask cluster at
     `scheduler`), with a progress bar unless quiet."""
     from lensim.render.bank_cache import ensure_bank
 
     with progress_bar("PSF bank", "fields", quiet) as cb:
-        return ensure_bank(lens, pitch_um, settings, response=sensor.spectral_response, workers=workers, progress=cb,
-                           scheduler=scheduler)
+        return ensure_bank(
+            lens,
+            pitch_um,
+            settings,
+            response=sensor.spectral_response,
+            workers=workers,
+            progress=cb,
+            scheduler=scheduler,
+        )
 
 
-def cached_grid(lens: Lens, pitch_um: float, sensor: SensorProfile, settings: BankSettings, axes: GridAxes,
-                workers: int, quiet: bool, scheduler: str | None = None) -> GridBank:
+def cached_grid(
+    lens: Lens,
+    pitch_um: float,
+    sensor: SensorProfile,
+    settings: BankSettings,
+    axes: GridAxes,
+    workers: int,
+    quiet: bool,
+    scheduler: str | None = None,
+) -> GridBank:
     """The lens's grid of banks over `axes` at this pitch (um) with the sensor's spectral
     response, from the cache or computed into it, with a progress bar unless quiet."""
     from lensim.render.bank_cache import ensure_grid
 
     with progress_bar("PSF grid", "fields", quiet) as cb:
-        return ensure_grid(lens, pitch_um, axes, settings, response=sensor.spectral_response, workers=workers,
-                           progress=cb, scheduler=scheduler)
+        return ensure_grid(
+            lens,
+            pitch_um,
+            axes,
+            settings,
+            response=sensor.spectral_response,
+            workers=workers,
+            progress=cb,
+            scheduler=scheduler,
+        )

@@ -1,4 +1,5 @@
 """Shared CLI helpers: consoles, one-line error handling, JSON output."""
+
 from __future__ import annotations
 
 import contextlib
@@ -84,8 +85,15 @@ def progress_bar(label: str, unit: str, quiet: bool) -> Iterator[Callable[[float
     from rich.markup import escape
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-    prog = Progress(TextColumn(escape(label)), BarColumn(), TextColumn("{task.completed}/{task.total} " + escape(unit)),
-                    TimeElapsedColumn(), TimeRemainingColumn(), console=console, transient=True)
+    prog = Progress(
+        TextColumn(escape(label)),
+        BarColumn(),
+        TextColumn("{task.completed}/{task.total} " + escape(unit)),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+        console=console,
+        transient=True,
+    )
     task = prog.add_task(label, total=None)
 
     def callback(done: float, total: float) -> None:
@@ -107,8 +115,15 @@ class StageBars:
         if show:
             from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-            self.bars = Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
-                                 TimeElapsedColumn(), TimeRemainingColumn(), console=console, transient=True)
+            self.bars = Progress(
+                TextColumn("{task.description}"),
+                BarColumn(),
+                TextColumn("{task.percentage:>3.0f}%"),
+                TimeElapsedColumn(),
+                TimeRemainingColumn(),
+                console=console,
+                transient=True,
+            )
 
     def __enter__(self) -> "StageBars":
         if self.bars is not None:
@@ -130,4 +145,3 @@ class StageBars:
     def progress(self, done: float, total: float) -> None:
         if self.bars is not None and self.task is not None:
             self.bars.update(self.task, completed=done, total=total)
-

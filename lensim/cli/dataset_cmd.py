@@ -1,4 +1,5 @@
 """`lensim dataset make`: aligned training pairs from a folder of sharp photos."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -32,8 +33,16 @@ if TYPE_CHECKING:
 dataset_app = typer.Typer(help="Training data: aligned (aberrated, sharp) pairs.", no_args_is_help=True)
 
 
-def _check_options(sharp_dir: Path, output: Path, crops: int, size: int, placements: int, workers: int,
-                   demosaic: str, cache: Path | None) -> None:
+def _check_options(
+    sharp_dir: Path,
+    output: Path,
+    crops: int,
+    size: int,
+    placements: int,
+    workers: int,
+    demosaic: str,
+    cache: Path | None,
+) -> None:
     """The command's folders and numbers, before any work (one-line errors naming the option)."""
     from lensim.sensor.isp import DEMOSAIC_METHODS
 
@@ -69,22 +78,37 @@ def exposure_range(text: str) -> tuple[float, float]:
 @dataset_app.command("make")
 def make(
     sharp_dir: Path = typer.Argument(..., help="Folder of sharp photos (PNG, TIFF, JPEG)."),
-    output: Path = typer.Option(..., "-o", "--output", help="Dataset folder (resumes if it exists with the same settings)."),
-    lens_file: str = typer.Option(None, "--lens", help="Lens file or built-in lens name (default: the bank's lens "
-                                  f"with --bank, else {assets.DEFAULT_LENS})."),
+    output: Path = typer.Option(
+        ..., "-o", "--output", help="Dataset folder (resumes if it exists with the same settings)."
+    ),
+    lens_file: str = typer.Option(
+        None,
+        "--lens",
+        help=f"Lens file or built-in lens name (default: the bank's lens with --bank, else {assets.DEFAULT_LENS}).",
+    ),
     sensor_file: str = typer.Option(assets.DEFAULT_SENSOR, "--sensor", help="Sensor profile file or built-in name."),
     crops: int = typer.Option(8, "--crops", help="Crops per photo and placement."),
-    placements: int = typer.Option(1, "--placements", help="Sensor positions per photo, stratified by field radius "
-                                   "(3: centre, middle and edge zones)."),
+    placements: int = typer.Option(
+        1,
+        "--placements",
+        help="Sensor positions per photo, stratified by field radius (3: centre, middle and edge zones).",
+    ),
     size: int = typer.Option(256, "--size", help="Crop size in pixels (even)."),
-    seed: int = typer.Option(0, "--seed", help="Seed of every random draw (placement, colour temperature, noise, crops)."),
+    seed: int = typer.Option(
+        0, "--seed", help="Seed of every random draw (placement, colour temperature, noise, crops)."
+    ),
     noise: bool = typer.Option(True, "--noise/--no-noise", help="Add shot and read noise."),
-    exposure_ev: str = typer.Option("0", "--exposure-ev", help="Exposure change in stops drawn per placement, "
-                                    "uniform in LOW,HIGH (one value: fixed), applied to the photo's linear light "
-                                    "before the camera: e.g. -3,0 adds darker, noisier scenes. 0: off."),
+    exposure_ev: str = typer.Option(
+        "0",
+        "--exposure-ev",
+        help="Exposure change in stops drawn per placement, "
+        "uniform in LOW,HIGH (one value: fixed), applied to the photo's linear light "
+        "before the camera: e.g. -3,0 adds darker, noisier scenes. 0: off.",
+    ),
     demosaic: str = typer.Option("ahd", "--demosaic", help="ahd, malvar, menon or bilinear."),
-    bank_dir: Path = typer.Option(None, "--bank", help="A PSF bank, or a grid of banks, at the sensor's pitch (default: "
-                                  "computed and cached)."),
+    bank_dir: Path = typer.Option(
+        None, "--bank", help="A PSF bank, or a grid of banks, at the sensor's pitch (default: computed and cached)."
+    ),
     fno: str = setting_list_option("fno"),
     focus_m: str = setting_list_option("focus_m"),
     object_m: str = setting_list_option("object_m"),
@@ -122,8 +146,12 @@ def make(
     ev_range = exposure_range(exposure_ev)
     axes = GridAxes.from_options(fno, focus_m, object_m, config)
     if bank_dir is not None and axes.given:
-        raise InputError("--bank", None, "the bank (or grid of banks) fixes the shooting settings; expected --bank or "
-                         "--fno/--focus-m/--object-m/--config, not both")
+        raise InputError(
+            "--bank",
+            None,
+            "the bank (or grid of banks) fixes the shooting settings; expected --bank or "
+            "--fno/--focus-m/--object-m/--config, not both",
+        )
     sensor = load_sensor(sensor_file)
     quiet = quiet or json_out
     bank: PSFBank | GridBank
@@ -132,20 +160,48 @@ def make(
     else:
         bank = _lens_bank(lens_file, sharp_dir, size, sensor, settings, axes, workers, quiet, scheduler)
     with progress_bar("pairs", "photos", quiet) as cb:
-        manifest = make_dataset(sharp_dir, output, bank, sensor_file, sensor, crops=crops, size=size, seed=seed,
-                                placements=placements, noise=noise, demosaic=demosaic, workers=workers, scheduler=scheduler, progress=cb,
-                                exposure_ev=ev_range)
-    summary = {"output": str(output), "photos": len(manifest["records"]), "pairs": manifest["pairs"],
-               "bank": str(bank.directory), "seed": seed,
-               **({"settings": len(bank)} if isinstance(bank, GridBank) else {})}
+        manifest = make_dataset(
+            sharp_dir,
+            output,
+            bank,
+            sensor_file,
+            sensor,
+            crops=crops,
+            size=size,
+            seed=seed,
+            placements=placements,
+            noise=noise,
+            demosaic=demosaic,
+            workers=workers,
+            scheduler=scheduler,
+            progress=cb,
+            exposure_ev=ev_range,
+        )
+    summary = {
+        "output": str(output),
+        "photos": len(manifest["records"]),
+        "pairs": manifest["pairs"],
+        "bank": str(bank.directory),
+        "seed": seed,
+        **({"settings": len(bank)} if isinstance(bank, GridBank) else {}),
+    }
     if json_out:
         print_json(summary)
     elif not quiet:
         console.print(f"wrote {summary['pairs']} pairs from {summary['photos']} photos to {output}", highlight=False)
 
 
-def _lens_bank(lens_file: str | None, sharp_dir: Path, size: int, sensor: SensorProfile, settings: BankSettings,
-               axes: GridAxes, workers: int, quiet: bool, scheduler: str | None) -> PSFBank | GridBank:
+def _lens_bank(
+    lens_file: str | None,
+    sharp_dir: Path,
+    size: int,
+    sensor: SensorProfile,
+    settings: BankSettings,
+    axes: GridAxes,
+    workers: int,
+    quiet: bool,
+    scheduler: str | None,
+) -> PSFBank | GridBank:
     """The lens's bank at the sensor's pitch (a grid of banks over ``axes`` when given),
     cached or computed, once the spectral response and the photos are known to work."""
     from lensim.data.pairs import check_photos, list_images

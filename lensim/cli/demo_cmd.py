@@ -1,4 +1,5 @@
 """`lensim demo`: the whole pipeline on the built-in camera, with an HTML report."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -12,7 +13,9 @@ from lensim.cli.validate import device as check_device
 
 
 def demo_command(
-    output: Path = typer.Option(Path("lensim-demo"), "-o", "--output", help="Output folder (reused: stages are cached)."),
+    output: Path = typer.Option(
+        Path("lensim-demo"), "-o", "--output", help="Output folder (reused: stages are cached)."
+    ),
     quick: bool = typer.Option(False, "--quick", help="A ~3-minute run (CI); the default takes about 15 minutes."),
     seed: int = typer.Option(0, "--seed", help="Seed of every random draw."),
     workers: int = typer.Option(1, "--workers", help="Processes for the PSF bank and the pairs."),
@@ -45,8 +48,16 @@ def demo_command(
         lens_at(load_lens(DEFAULT_LENS), shooting)
     output_folder(output)
     with StageBars(show=not quiet and not json_out) as bars:
-        report = run_demo(output, quick=quick, seed=seed, workers=workers, say=bars.say, device=device,
-                          progress=bars.progress, shooting=shooting)
+        report = run_demo(
+            output,
+            quick=quick,
+            seed=seed,
+            workers=workers,
+            say=bars.say,
+            device=device,
+            progress=bars.progress,
+            shooting=shooting,
+        )
     if json_out:
         print_json({"metrics": report["metrics"], "report": str(output / "report.html")})
     elif not quiet:

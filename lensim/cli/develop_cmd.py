@@ -1,4 +1,5 @@
 """`lensim develop`: camera raw files -> sRGB photos with the simulator's own chain."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -14,10 +15,18 @@ from lensim.io import folder_lock
 def develop_command(
     files: list[Path] = typer.Argument(..., help="Raw files (DNG, CR2/CR3, NEF, ARW, ...) or folders of them."),
     output: Path = typer.Option(..., "-o", "--output", help="Output folder: OUT/<name>.tif (or .png)."),
-    sensor_file: str = typer.Option(None, "--sensor", help="Sensor profile (file or built-in name) for the CCM and "
-                                    "white-balance table (default: derived from each raw's colour matrix)."),
-    wb: str = typer.Option("as-shot", "--wb", help="as-shot, a preset (tungsten, fluorescent, daylight, flash, "
-                           "cloudy, shade, d65) or a colour temperature such as 5000K."),
+    sensor_file: str = typer.Option(
+        None,
+        "--sensor",
+        help="Sensor profile (file or built-in name) for the CCM and "
+        "white-balance table (default: derived from each raw's colour matrix).",
+    ),
+    wb: str = typer.Option(
+        "as-shot",
+        "--wb",
+        help="as-shot, a preset (tungsten, fluorescent, daylight, flash, "
+        "cloudy, shade, d65) or a colour temperature such as 5000K.",
+    ),
     bits: int = typer.Option(16, "--bits", help="Output bit depth: 8 or 16."),
     fmt: str = typer.Option("tif", "--format", help="Output file type: tif or png."),
     quiet: bool = typer.Option(False, "--quiet", help="No progress output."),

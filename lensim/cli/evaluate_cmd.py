@@ -4,6 +4,7 @@ Register in lensim/cli/__init__.py with
     from lensim.cli.evaluate_cmd import evaluate_command
     app.command("evaluate")(evaluate_command)
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -21,24 +22,42 @@ DEFAULT_METHODS = "input,wiener,rl,unsharp"
 
 def evaluate_command(
     pairs: Path = typer.Option(..., "--pairs", help="Pairs folder from `lensim dataset make`."),
-    methods: str = typer.Option(None, "--methods", help="Comma list of input, wiener, rl, unsharp, model, plain "
-                                "(default: input,wiener,rl,unsharp plus model / plain when their runs are given)."),
-    model: Path = typer.Option(None, "--model", help="`lensim train` run folder or checkpoint of the field-aware model."),
-    plain: Path = typer.Option(None, "--plain", help="Run folder or checkpoint of the plain network baseline (no "
-                               "field-aware part)."),
+    methods: str = typer.Option(
+        None,
+        "--methods",
+        help="Comma list of input, wiener, rl, unsharp, model, plain "
+        "(default: input,wiener,rl,unsharp plus model / plain when their runs are given).",
+    ),
+    model: Path = typer.Option(
+        None, "--model", help="`lensim train` run folder or checkpoint of the field-aware model."
+    ),
+    plain: Path = typer.Option(
+        None, "--plain", help="Run folder or checkpoint of the plain network baseline (no field-aware part)."
+    ),
     plain_unet: Path = typer.Option(None, "--plain-unet", hidden=True, help="Old name of --plain."),
-    bank: Path = typer.Option(None, "--bank", help="The dataset's PSF bank folder (default: the one its manifest names)."),
-    held_out: Path = typer.Option(None, "--held-out", help="Evaluate only the validation photos of this training run "
-                                  "(RUN/split.json)."),
+    bank: Path = typer.Option(
+        None, "--bank", help="The dataset's PSF bank folder (default: the one its manifest names)."
+    ),
+    held_out: Path = typer.Option(
+        None, "--held-out", help="Evaluate only the validation photos of this training run (RUN/split.json)."
+    ),
     sources: str = typer.Option(None, "--sources", help="Comma list of source photo file names to evaluate."),
     max_crops: int = typer.Option(None, "--max-crops", help="Evaluate at most this many crops."),
     rl_iterations: int = typer.Option(None, "--rl-iterations", help="Richardson-Lucy iterations (default 3)."),
-    unsharp_sigma: float = typer.Option(None, "--unsharp-sigma", help="Unsharp-mask Gaussian sigma in pixels (default 1)."),
+    unsharp_sigma: float = typer.Option(
+        None, "--unsharp-sigma", help="Unsharp-mask Gaussian sigma in pixels (default 1)."
+    ),
     unsharp_amount: float = typer.Option(None, "--unsharp-amount", help="Unsharp-mask amount (default 0.6)."),
-    arch: str = typer.Option(None, "--arch", help="Architecture the --model and --plain checkpoints must hold "
-                             "(unet or nafnet; default: whatever they hold)."),
+    arch: str = typer.Option(
+        None,
+        "--arch",
+        help="Architecture the --model and --plain checkpoints must hold "
+        "(unet or nafnet; default: whatever they hold).",
+    ),
     device: str = typer.Option("cpu", "--device", help="Device of the trained networks (cpu, cuda, cuda:N)."),
-    output: Path = typer.Option(None, "-o", "--output", help="Folder for metrics.csv (per crop), metrics.md, metrics.json."),
+    output: Path = typer.Option(
+        None, "-o", "--output", help="Folder for metrics.csv (per crop), metrics.md, metrics.json."
+    ),
     quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
     json_out: bool = typer.Option(False, "--json", help="Print the summary JSON instead of a table."),
 ) -> None:
@@ -67,13 +86,17 @@ def evaluate_command(
         asked = [s.strip() for s in sources.split(",") if s.strip()]
         _check_sources(pairs, manifest, asked)
         keep = (keep or []) + asked
-    options: dict[str, dict[str, Any]] = {"rl": {"iterations": rl_iterations}, "unsharp": {"sigma_px": unsharp_sigma, "amount": unsharp_amount}}
+    options: dict[str, dict[str, Any]] = {
+        "rl": {"iterations": rl_iterations},
+        "unsharp": {"sigma_px": unsharp_sigma, "amount": unsharp_amount},
+    }
     table: dict[str, harness.Method] = {}
     for n in names:
         run = runs.get(harness.METHOD_ALIASES.get(n, n))  # a checkpoint method: _method_names checked its run
         if run is not None:
-            table[n] = harness.checkpoint_method(run, manifest.get("lens"), manifest.get("sensor"), device=device,
-                                                 arch=arch)
+            table[n] = harness.checkpoint_method(
+                run, manifest.get("lens"), manifest.get("sensor"), device=device, arch=arch
+            )
         elif n != "input":
             table[n] = harness.builtin_method(n, **{k: v for k, v in options.get(n, {}).items() if v is not None})
     rows: list[dict[str, Any]] = []
@@ -86,12 +109,19 @@ def evaluate_command(
     elif not quiet:
         _print_table(pairs, rows, summary)
         if output is not None:
-            console.print(f"wrote {output / 'metrics.csv'}, {output / 'metrics.md'}, {output / 'metrics.json'}",
-                          highlight=False)
+            console.print(
+                f"wrote {output / 'metrics.csv'}, {output / 'metrics.md'}, {output / 'metrics.json'}", highlight=False
+            )
 
 
-def _check_options(rl_iterations: int | None, unsharp_sigma: float | None, unsharp_amount: float | None,
-                   max_crops: int | None, device: str, output: Path | None) -> None:
+def _check_options(
+    rl_iterations: int | None,
+    unsharp_sigma: float | None,
+    unsharp_amount: float | None,
+    max_crops: int | None,
+    device: str,
+    output: Path | None,
+) -> None:
     """The numbers, the device and the output folder, before any work."""
     if rl_iterations is not None:
         at_least(rl_iterations, 1, "--rl-iterations", what="a number of iterations")
@@ -133,16 +163,20 @@ def _method_names(methods: str | None, runs: dict[str, Path | None], plain_name:
     from lensim.evaluate.harness import BUILTIN_METHODS, CHECKPOINT_METHODS, METHOD_ALIASES
 
     if methods is None:
-        names = DEFAULT_METHODS.split(",") + [plain_name if n == "plain" else n for n in CHECKPOINT_METHODS
-                                              if runs[n] is not None]
+        names = DEFAULT_METHODS.split(",") + [
+            plain_name if n == "plain" else n for n in CHECKPOINT_METHODS if runs[n] is not None
+        ]
     else:
         names = [m.strip() for m in methods.split(",") if m.strip()]
     if not names:
         raise InputError("--methods", None, "expected at least one method")
     for n in names:
         if n not in BUILTIN_METHODS + CHECKPOINT_METHODS + tuple(METHOD_ALIASES):
-            raise InputError("--methods", None, f"unknown method {n!r}; expected some of "
-                             f"{', '.join(BUILTIN_METHODS + CHECKPOINT_METHODS)}")
+            raise InputError(
+                "--methods",
+                None,
+                f"unknown method {n!r}; expected some of {', '.join(BUILTIN_METHODS + CHECKPOINT_METHODS)}",
+            )
         canonical = METHOD_ALIASES.get(n, n)
         if canonical in CHECKPOINT_METHODS and runs[canonical] is None:
             raise InputError("--methods", None, f"method {n!r} needs its run: pass --{canonical} RUN")
@@ -168,8 +202,10 @@ def _print_table(pairs: Path, rows: list[dict[str, Any]], summary: dict[str, Any
     from lensim.evaluate.harness import format_score
     from lensim.evaluate.metrics import ZONES
 
-    t = Table(title=f"{len(rows) // max(len(summary['methods']), 1)} crops from {pairs}",
-              caption="zones: PSNR (dB) / SSIM; normalized sensor radius < 1/3, 1/3..2/3, > 2/3")
+    t = Table(
+        title=f"{len(rows) // max(len(summary['methods']), 1)} crops from {pairs}",
+        caption="zones: PSNR (dB) / SSIM; normalized sensor radius < 1/3, 1/3..2/3, > 2/3",
+    )
     t.add_column("method")
     t.add_column("PSNR (dB)", justify="right")
     t.add_column("gain", justify="right")
@@ -179,6 +215,11 @@ def _print_table(pairs: Path, rows: list[dict[str, Any]], summary: dict[str, Any
     base = summary["methods"]["input"]["psnr_db"]
     f = format_score
     for n, m in summary["methods"].items():
-        t.add_row(n, f(m["psnr_db"], 2), f(m["psnr_db"] - base, 2), f(m["ssim"], 4),
-                  *[f"{f(m['zones'][z]['psnr_db'], 2)} / {f(m['zones'][z]['ssim'], 3)}" for z in ZONES])
+        t.add_row(
+            n,
+            f(m["psnr_db"], 2),
+            f(m["psnr_db"] - base, 2),
+            f(m["ssim"], 4),
+            *[f"{f(m['zones'][z]['psnr_db'], 2)} / {f(m['zones'][z]['ssim'], 3)}" for z in ZONES],
+        )
     console.print(t)

@@ -1,4 +1,5 @@
 """`lensim export`: a trained restoration network as an ONNX model (lensim.restore.export)."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -36,8 +37,11 @@ def export_command(
     if json_out:
         print_json({"output": str(path), "bytes": path.stat().st_size, "metadata": meta})
     elif not quiet:
-        console.print(f"exported {meta['checkpoint']['path']} -> {path} (opset {opset}, {meta['arch']}, "
-                      f"size multiple {meta['size_multiple']})", highlight=False)
+        console.print(
+            f"exported {meta['checkpoint']['path']} -> {path} (opset {opset}, {meta['arch']}, "
+            f"size multiple {meta['size_multiple']})",
+            highlight=False,
+        )
 
 
 __all__ = ["export_command"]

@@ -1,4 +1,5 @@
 """`lensim lens ...`: inspect, plot and convert lens prescriptions."""
+
 from __future__ import annotations
 
 import math
@@ -23,10 +24,13 @@ lens_app = typer.Typer(help="Inspect, plot and convert lens prescriptions.", no_
 LENS_ARG = typer.Argument(..., help="Lens file (.json/.yaml native, .zmx Zemax, .seq CODE V) or a built-in lens name.")
 
 
-MATCH_GLASS_HELP = ("Replace each model glass (nd/Vd) by the nearest catalogue glass (smallest RMS index "
-                    "difference over 400-700 nm); lens info reports each replacement.")
-GLASS_MAKERS_HELP = ("Catalogues --match-glass searches, comma-separated (Schott, Ohara, CDGM, Hikari, Hoya, "
-                     "Sumita). Default: all.")
+MATCH_GLASS_HELP = (
+    "Replace each model glass (nd/Vd) by the nearest catalogue glass (smallest RMS index "
+    "difference over 400-700 nm); lens info reports each replacement."
+)
+GLASS_MAKERS_HELP = (
+    "Catalogues --match-glass searches, comma-separated (Schott, Ohara, CDGM, Hikari, Hoya, Sumita). Default: all."
+)
 
 
 def _glass_makers(makers: Optional[str], match_glass: bool) -> Optional[list[str]]:
@@ -41,13 +45,20 @@ def _glass_makers(makers: Optional[str], match_glass: bool) -> Optional[list[str
     known = {c.lower(): c for c in CATALOGS}
     unknown = [m for m in names if m.lower() not in known]
     if unknown or not names:
-        raise InputError(None, "--glass-makers", f"unknown glass maker(s) {', '.join(unknown) or repr(makers)}; "
-                                                 f"expected some of {', '.join(CATALOGS)}")
+        raise InputError(
+            None,
+            "--glass-makers",
+            f"unknown glass maker(s) {', '.join(unknown) or repr(makers)}; expected some of {', '.join(CATALOGS)}",
+        )
     return [known[m.lower()] for m in names]
 
 
-def _load(lens_file: str, match_glass: bool = False, makers: Optional[list[str]] = None,
-          shooting: tuple[Optional[str], ...] = (None, None, None, None)):
+def _load(
+    lens_file: str,
+    match_glass: bool = False,
+    makers: Optional[list[str]] = None,
+    shooting: tuple[Optional[str], ...] = (None, None, None, None),
+):
     """Load a lens; with match_glass its model glasses become the nearest catalogue glasses;
     then it is set to the shooting options (--fno, --object-m, --focus-m, --config).
     Returns (lens, glass matches)."""
@@ -55,8 +66,12 @@ def _load(lens_file: str, match_glass: bool = False, makers: Optional[list[str]]
     return lens, matches
 
 
-def _load_set(lens_file: str, match_glass: bool = False, makers: Optional[list[str]] = None,
-              shooting: tuple[Optional[str], ...] = (None, None, None, None)):
+def _load_set(
+    lens_file: str,
+    match_glass: bool = False,
+    makers: Optional[list[str]] = None,
+    shooting: tuple[Optional[str], ...] = (None, None, None, None),
+):
     """_load, and the shooting settings resolved as records keep them (None when none is
     given)."""
     from lensim.optics.lens_file import load_lens, match_glasses
@@ -100,8 +115,9 @@ def info(
     from lensim.optics.analysis import first_order_summary
 
     choice(aiming, AIMINGS, "--aiming")
-    lens, matches, described = _load_set(lens_file, match_glass, _glass_makers(glass_makers, match_glass),
-                                         (fno, object_m, focus_m, config))
+    lens, matches, described = _load_set(
+        lens_file, match_glass, _glass_makers(glass_makers, match_glass), (fno, object_m, focus_m, config)
+    )
     summary = first_order_summary(lens, aiming=aiming)
     if described is not None:
         summary["settings"] = described
@@ -113,16 +129,25 @@ def info(
     f.add_column("quantity")
     f.add_column("value", justify="right")
     rows = [
-        ("EFL", f"{summary['efl_mm']:.6g} mm"), ("BFL", f"{summary['bfl_mm']:.6g} mm"),
-        ("F/# (image space)", f"{summary['fno']:.5g}"), ("working F/#", f"{summary['working_fno']:.5g}"),
+        ("EFL", f"{summary['efl_mm']:.6g} mm"),
+        ("BFL", f"{summary['bfl_mm']:.6g} mm"),
+        ("F/# (image space)", f"{summary['fno']:.5g}"),
+        ("working F/#", f"{summary['working_fno']:.5g}"),
         ("entrance pupil diameter", f"{summary['epd_mm']:.6g} mm"),
         ("entrance pupil z", f"{summary['entrance_pupil_z_mm']:.6g} mm"),
         ("exit pupil z", f"{summary['exit_pupil_z_mm']:.6g} mm"),
         ("exit pupil diameter", f"{summary['exit_pupil_diameter_mm']:.6g} mm"),
         ("total track", f"{summary['total_track_mm']:.6g} mm"),
-        ("object distance", "infinity" if summary["object_distance_mm"] is None else f"{summary['object_distance_mm']:.6g} mm"),
+        (
+            "object distance",
+            "infinity" if summary["object_distance_mm"] is None else f"{summary['object_distance_mm']:.6g} mm",
+        ),
         ("fields", f"{', '.join(f'{v:g}' for v in lens.fields)} ({lens.field_type}, {summary['field_unit']})"),
-        ("wavelengths", ", ".join(f"{w * 1000:.1f}{'*' if i == lens.primary else ''}" for i, w in enumerate(lens.wavelengths_um)) + " nm (* primary)"),
+        (
+            "wavelengths",
+            ", ".join(f"{w * 1000:.1f}{'*' if i == lens.primary else ''}" for i, w in enumerate(lens.wavelengths_um))
+            + " nm (* primary)",
+        ),
         ("real image height (max field)", f"{summary['image_height_mm']:.6g} mm"),
     ]
     for k, v in rows:
@@ -145,10 +170,25 @@ def _surface_table(lens: Lens) -> Table:
     for i, s in enumerate(lens.surfaces):
         mat = "MIRROR" if s.is_mirror else ("" if isinstance(s.material, Air) else s.material.name)
         nd = "" if isinstance(s.material, Air) or s.is_mirror else f"{s.material.index(nd_wl).item():.5f}"
-        note = ", ".join(x for x in ("STOP" if s.is_stop else "", s.kind if s.is_aspheric else "",
-                                     f"obsc {s.obscuration_radius:g}" if s.obscuration_radius else "") if x)
-        t.add_row(str(i + 1), _fmt(s.radius), _fmt(s.thickness), mat, nd, _fmt(s.conic) if s.conic else "",
-                  _fmt(s.clear_radius) if s.clear_radius is not None else "", note)
+        note = ", ".join(
+            x
+            for x in (
+                "STOP" if s.is_stop else "",
+                s.kind if s.is_aspheric else "",
+                f"obsc {s.obscuration_radius:g}" if s.obscuration_radius else "",
+            )
+            if x
+        )
+        t.add_row(
+            str(i + 1),
+            _fmt(s.radius),
+            _fmt(s.thickness),
+            mat,
+            nd,
+            _fmt(s.conic) if s.conic else "",
+            _fmt(s.clear_radius) if s.clear_radius is not None else "",
+            note,
+        )
     return t
 
 
@@ -197,8 +237,10 @@ class PlotKind(str, Enum):
     illumination = "illumination"
 
 
-SENSOR_HELP = ("Sensor profile (file or built-in name) whose spectral response weights the lateral colour "
-               "of its R, G, B channels. Default: the default sensor's.")
+SENSOR_HELP = (
+    "Sensor profile (file or built-in name) whose spectral response weights the lateral colour "
+    "of its R, G, B channels. Default: the default sensor's."
+)
 
 
 def _check_figure_name(output: Path) -> None:
@@ -229,29 +271,39 @@ def _field_report(lens: Lens, fields: Optional[list[float]], sensor: Optional[st
     return field_report(lens, fields, wavelengths_nm, weights, aiming=aim)
 
 
-FIELD_HELP = ("Normalized field to show, 0..1 of the lens's maximum field along +y; repeat for several. "
-              "Default: the lens's own fields.")
+FIELD_HELP = (
+    "Normalized field to show, 0..1 of the lens's maximum field along +y; repeat for several. "
+    "Default: the lens's own fields."
+)
 FIELD_DEG_HELP = "Field to show as an object-space angle (deg, below 90); repeat for several."
 IMAGE_HEIGHT_HELP = "Field to show as the real chief ray's image height (mm); repeat for several."
 
 
-def fields_to_show(lens: Lens, field: list[float] | None, field_deg: list[float] | None,
-                   image_height_mm: list[float] | None) -> tuple[Lens, list[float] | None]:
+def fields_to_show(
+    lens: Lens, field: list[float] | None, field_deg: list[float] | None, image_height_mm: list[float] | None
+) -> tuple[Lens, list[float] | None]:
     """The lens to trace and its field values for --field (normalized 0..1, in the lens's
     own unit), --field-deg (an angle, deg) or --image-height-mm (the real chief ray's image
     height, mm; solved for): at most one of them. (lens, None) when none is given: the
     lens's own fields."""
-    given = [name for name, v in (("--field", field), ("--field-deg", field_deg), ("--image-height-mm", image_height_mm))
-             if v]
+    given = [
+        name
+        for name, v in (("--field", field), ("--field-deg", field_deg), ("--image-height-mm", image_height_mm))
+        if v
+    ]
     if len(given) > 1:
-        raise InputError(None, given[1], f"expected one of --field, --field-deg, --image-height-mm, got {' and '.join(given)}")
+        raise InputError(
+            None, given[1], f"expected one of --field, --field-deg, --image-height-mm, got {' and '.join(given)}"
+        )
     if field:
         from lensim.psf.compute import field_in_lens_units
 
         return lens, [field_in_lens_units(lens, f) for f in field]
     if field_deg:
         if any(not (math.isfinite(f) and abs(f) < 90.0) for f in field_deg):
-            raise InputError(None, "--field-deg", f"expected angles below 90 deg, got {', '.join(f'{f:g}' for f in field_deg)}")
+            raise InputError(
+                None, "--field-deg", f"expected angles below 90 deg, got {', '.join(f'{f:g}' for f in field_deg)}"
+            )
         return lens.with_changes(field_type="angle", fields=list(field_deg)), list(field_deg)
     if image_height_mm:
         if any(not math.isfinite(f) for f in image_height_mm):
@@ -269,8 +321,12 @@ def plot(
     field: Optional[list[float]] = typer.Option(None, "--field", help=FIELD_HELP),
     field_deg: Optional[list[float]] = typer.Option(None, "--field-deg", help=FIELD_DEG_HELP),
     image_height_mm: Optional[list[float]] = typer.Option(None, "--image-height-mm", help=IMAGE_HEIGHT_HELP),
-    kind: PlotKind = typer.Option(PlotKind.layout, "--kind", help="layout (ray fans), or against the field: "
-                                  "distortion (%), lateral-colour (um per sensor channel) or illumination."),
+    kind: PlotKind = typer.Option(
+        PlotKind.layout,
+        "--kind",
+        help="layout (ray fans), or against the field: "
+        "distortion (%), lateral-colour (um per sensor channel) or illumination.",
+    ),
     sensor: Optional[str] = typer.Option(None, "--sensor", help=SENSOR_HELP),
     fno: Optional[str] = fno_option(),
     object_m: Optional[str] = object_m_option(),
@@ -305,15 +361,22 @@ def plot(
 @lens_app.command("spot")
 def spot(
     lens_file: str = LENS_ARG,
-    output: Optional[Path] = typer.Option(None, "-o", "--output", help="Spot-diagram image to write (.png, .pdf or .svg)."),
+    output: Optional[Path] = typer.Option(
+        None, "-o", "--output", help="Spot-diagram image to write (.png, .pdf or .svg)."
+    ),
     aiming: AimingChoice = typer.Option(AimingChoice.paraxial, help="Ray aiming."),
-    json_out: bool = typer.Option(False, "--json", help="Print, per field and wavelength, the RMS spot radius (um) "
-                                  "and the chief-ray position on the image plane (mm) as JSON."),
+    json_out: bool = typer.Option(
+        False,
+        "--json",
+        help="Print, per field and wavelength, the RMS spot radius (um) "
+        "and the chief-ray position on the image plane (mm) as JSON.",
+    ),
     field: Optional[list[float]] = typer.Option(None, "--field", help=FIELD_HELP),
     field_deg: Optional[list[float]] = typer.Option(None, "--field-deg", help=FIELD_DEG_HELP),
     image_height_mm: Optional[list[float]] = typer.Option(None, "--image-height-mm", help=IMAGE_HEIGHT_HELP),
-    reference: ReferenceChoice = typer.Option(ReferenceChoice.chief, help="Centre of the spots and of the RMS radius: "
-                                              "the chief ray or the centroid."),
+    reference: ReferenceChoice = typer.Option(
+        ReferenceChoice.chief, help="Centre of the spots and of the RMS radius: the chief ray or the centroid."
+    ),
     fno: Optional[str] = fno_option(),
     object_m: Optional[str] = object_m_option(),
     focus_m: Optional[str] = focus_m_option(),
@@ -339,17 +402,19 @@ def spot(
     if output is not None:
         plot_spots(lens, aiming=aiming.value, path=output, reference=reference.value, spots=spots)
     if json_out:
-        print_json({
-            "name": lens.name,
-            "source": lens.source,
-            "aiming": aiming.value,
-            "reference": reference.value,
-            "airy_radius_um": airy_radius_um(lens),
-            "primary_wavelength_nm": lens.primary_wavelength_um * 1000.0,
-            "image_z_mm": float(lens.vertex_z()[-1]),
-            "output": None if output is None else str(output),
-            "fields": spot_summary(lens, spots, reference.value),
-        })
+        print_json(
+            {
+                "name": lens.name,
+                "source": lens.source,
+                "aiming": aiming.value,
+                "reference": reference.value,
+                "airy_radius_um": airy_radius_um(lens),
+                "primary_wavelength_nm": lens.primary_wavelength_um * 1000.0,
+                "image_z_mm": float(lens.vertex_z()[-1]),
+                "output": None if output is None else str(output),
+                "fields": spot_summary(lens, spots, reference.value),
+            }
+        )
     else:
         console.print(f"wrote {output}", highlight=False)
 
@@ -360,8 +425,11 @@ def field_command(
     json_out: bool = typer.Option(False, "--json", help="Print the per-field records as JSON instead of a table."),
     sensor: Optional[str] = typer.Option(None, "--sensor", help=SENSOR_HELP),
     aiming: AimingChoice = typer.Option(AimingChoice.real, help="Ray aiming of the chief rays."),
-    field: Optional[list[float]] = typer.Option(None, "--field", help=FIELD_HELP.replace("Default: the lens's own "
-                                                "fields.", "Default: 21 fields from the axis to the maximum.")),
+    field: Optional[list[float]] = typer.Option(
+        None,
+        "--field",
+        help=FIELD_HELP.replace("Default: the lens's own fields.", "Default: 21 fields from the axis to the maximum."),
+    ),
     field_deg: Optional[list[float]] = typer.Option(None, "--field-deg", help=FIELD_DEG_HELP),
     image_height_mm: Optional[list[float]] = typer.Option(None, "--image-height-mm", help=IMAGE_HEIGHT_HELP),
     match_glass: bool = typer.Option(False, "--match-glass", help=MATCH_GLASS_HELP),
@@ -378,8 +446,9 @@ def field_command(
 
     Example: lensim lens field cooke_triplet --sensor apsc_mirrorless --json
     """
-    lens, matches = _load(lens_file, match_glass, _glass_makers(glass_makers, match_glass),
-                          (fno, object_m, focus_m, config))
+    lens, matches = _load(
+        lens_file, match_glass, _glass_makers(glass_makers, match_glass), (fno, object_m, focus_m, config)
+    )
     lens, fields = fields_to_show(lens, field, field_deg, image_height_mm)
     report = _field_report(lens, fields, sensor, aiming)
     if json_out:
@@ -390,12 +459,18 @@ def field_command(
     for col in (f"field ({unit})", "real y", "paraxial y", "distortion %", "R - G", "B - G", "rel. illum."):
         t.add_column(col, justify="right")
     for r in report["fields"]:
-        t.add_row(f"{r['field']:.4g}", f"{r['channel_height_mm']['g']:.5f}", f"{r['paraxial_height_mm']:.5f}",
-                  f"{r['distortion_percent']:+.4f}", f"{r['lateral_colour_um']['r']:+.3f}",
-                  f"{r['lateral_colour_um']['b']:+.3f}", f"{r['relative_illumination']:.4f}")
+        t.add_row(
+            f"{r['field']:.4g}",
+            f"{r['channel_height_mm']['g']:.5f}",
+            f"{r['paraxial_height_mm']:.5f}",
+            f"{r['distortion_percent']:+.4f}",
+            f"{r['lateral_colour_um']['r']:+.3f}",
+            f"{r['lateral_colour_um']['b']:+.3f}",
+            f"{r['relative_illumination']:.4f}",
+        )
     console.print(t)
     if matches:  # match_glasses added one note per replaced surface, last
-        for note in lens.notes[-len(matches):]:
+        for note in lens.notes[-len(matches) :]:
             console.print(f"note: {note}", highlight=False)
 
 
@@ -405,13 +480,20 @@ def lensfun_command(
     maker: str = typer.Option(..., "--maker", help="Lens maker as lensfun shows it."),
     model: str = typer.Option(..., "--model", help="Lens model name."),
     mount: str = typer.Option(..., "--mount", help="Lens mount, as lensfun names it (e.g. 'Sony E', 'Generic')."),
-    crop_factor: float = typer.Option(..., "--crop-factor", help="Crop factor of the frame the profile is for "
-                                      "(full frame 1; the lens must cover the 3:2 frame's corner)."),
+    crop_factor: float = typer.Option(
+        ...,
+        "--crop-factor",
+        help="Crop factor of the frame the profile is for (full frame 1; the lens must cover the 3:2 frame's corner).",
+    ),
     focal: float = typer.Option(..., "--focal", help="Focal length (mm) the profile is filed under."),
     aperture: float = typer.Option(..., "--aperture", help="F-number: the lens is evaluated stopped to it."),
-    distance: Optional[float] = typer.Option(None, "--distance", help="Focus distance (m from the image plane, as "
-                                             "cameras report it): the lens is refocused there. "
-                                             "Default: the lens file's object distance."),
+    distance: Optional[float] = typer.Option(
+        None,
+        "--distance",
+        help="Focus distance (m from the image plane, as "
+        "cameras report it): the lens is refocused there. "
+        "Default: the lens file's object distance.",
+    ),
     output: Path = typer.Option(..., "-o", "--output", help="lensfun database file to write (.xml)."),
     sensor: Optional[str] = typer.Option(None, "--sensor", help=SENSOR_HELP),
     aiming: AimingChoice = typer.Option(AimingChoice.real, help="Ray aiming of the chief rays."),
@@ -434,9 +516,23 @@ def lensfun_command(
     output_file(output)
     lens, _ = _load(lens_file, match_glass, _glass_makers(glass_makers, match_glass))
     wavelengths_nm, weights = _channel_weights(sensor)
-    profile = lensfun_profile(lens, maker, model, mount, crop_factor, focal, aperture, wavelengths_nm, weights,
-                              distance_m=distance, aiming=aiming.value)
+    profile = lensfun_profile(
+        lens,
+        maker,
+        model,
+        mount,
+        crop_factor,
+        focal,
+        aperture,
+        wavelengths_nm,
+        weights,
+        distance_m=distance,
+        aiming=aiming.value,
+    )
     write_profile(profile, output)
     fit = profile.fit
-    console.print(f"wrote {output} (largest fit residuals: distortion {fit['distortion_um']:.3g} um, "
-                  f"lateral colour {fit['tca_um']:.3g} um, vignetting {fit['vignetting']:.2g})", highlight=False)
+    console.print(
+        f"wrote {output} (largest fit residuals: distortion {fit['distortion_um']:.3g} um, "
+        f"lateral colour {fit['tca_um']:.3g} um, vignetting {fit['vignetting']:.2g})",
+        highlight=False,
+    )

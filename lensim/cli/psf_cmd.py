@@ -1,4 +1,5 @@
 """`lensim psf ...`: compute single PSFs (and PSF banks)."""
+
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -62,7 +63,9 @@ def compute(
     spacing_um: float = typer.Option(0.5, "--spacing-um", help="PSF sample spacing in um."),
     aiming: str = typer.Option("real", "--aiming", help="Ray aiming: real or paraxial."),
     output: Path = typer.Option(None, "-o", "--output", help="Write the PSF array (.npy, energy per sample)."),
-    json_out: bool = typer.Option(False, "--json", help="Print the figures (Strehl, RMS spot, EE50/EE80, chief-ray position) as JSON."),
+    json_out: bool = typer.Option(
+        False, "--json", help="Print the figures (Strehl, RMS spot, EE50/EE80, chief-ray position) as JSON."
+    ),
     fno: str = fno_option(),
     object_m: str = object_m_option(),
     focus_m: str = focus_m_option(),
@@ -89,9 +92,19 @@ def compute(
     psf = compute_psf(lens, field, wavelength_nm / 1000.0, method, pupil_samples, grid, spacing_um, aiming)
     if output is not None:
         _save_npy(output, psf.data)
-    info = {"lens": lens.source, "field": field, "field_value": psf.field_value, "field_type": lens.field_type,
-            "wavelength_nm": wavelength_nm, "method": method, "grid": grid, "spacing_um": spacing_um,
-            "pupil_samples": pupil_samples, "aiming": aiming, **psf.figures}
+    info = {
+        "lens": lens.source,
+        "field": field,
+        "field_value": psf.field_value,
+        "field_type": lens.field_type,
+        "wavelength_nm": wavelength_nm,
+        "method": method,
+        "grid": grid,
+        "spacing_um": spacing_um,
+        "pupil_samples": pupil_samples,
+        "aiming": aiming,
+        **psf.figures,
+    }
     if described is not None:
         info["settings"] = described
     if json_out:
@@ -118,20 +131,27 @@ def _save_npy(path: Path, data: np.ndarray) -> None:
 def bank(
     lens_file: str = typer.Argument(None, help="Lens file or built-in lens name (or use --lens)."),
     lens_opt: str = typer.Option(None, "--lens", help="Lens file or built-in lens name (same as the argument)."),
-    sensor: str = typer.Option(None, "--sensor", help="Sensor profile (file or built-in name): sets the pixel pitch and "
-                               "the spectral response."),
+    sensor: str = typer.Option(
+        None, "--sensor", help="Sensor profile (file or built-in name): sets the pixel pitch and the spectral response."
+    ),
     pixel_um: float = typer.Option(None, "--pixel-um", help="Sensor pixel pitch in um (instead of --sensor)."),
     kernel: int = typer.Option(0, "--kernel", help="Kernel size in pixels (odd; 0: sized from the lens's spots)."),
     fields: int = fields_option(),
     wavelengths_nm: str = wavelengths_option(),
-    response: str = typer.Option(None, "--response",
-                                 help="Camera spectral sensitivities: a colour-science camera name or a CSV file "
-                                 "(wavelength_nm,r,g,b). Default: the sensor's, else Nikon 5100 (NPL)."),
+    response: str = typer.Option(
+        None,
+        "--response",
+        help="Camera spectral sensitivities: a colour-science camera name or a CSV file "
+        "(wavelength_nm,r,g,b). Default: the sensor's, else Nikon 5100 (NPL).",
+    ),
     illuminant: str = typer.Option("E", "--illuminant", help="E (equal energy), D65, A, ... (colour-science names)."),
     method: str = typer.Option("huygens", "--method", help=f"One of {', '.join(METHODS)}."),
     pupil_samples: int = pupil_samples_option(),
-    max_spacing_um: float = typer.Option(None, "--max-spacing-um",
-                                         help="Largest fine PSF spacing in um (default: half the Airy radius at the shortest wavelength)."),
+    max_spacing_um: float = typer.Option(
+        None,
+        "--max-spacing-um",
+        help="Largest fine PSF spacing in um (default: half the Airy radius at the shortest wavelength).",
+    ),
     aiming: str = typer.Option("real", "--aiming", help="Ray aiming: real or paraxial."),
     fno: str = setting_list_option("fno"),
     focus_m: str = setting_list_option("focus_m"),
@@ -139,7 +159,9 @@ def bank(
     config: str = setting_list_option("config"),
     workers: int = workers_option(),
     scheduler: str = scheduler_option(),
-    output: Path = typer.Option(..., "-o", "--output", help="Bank directory (created; an existing bank with the same settings is resumed)."),
+    output: Path = typer.Option(
+        ..., "-o", "--output", help="Bank directory (created; an existing bank with the same settings is resumed)."
+    ),
     quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
     json_out: bool = typer.Option(False, "--json", help="Print a summary as JSON (no progress output)."),
 ) -> None:
@@ -170,7 +192,9 @@ def bank(
         raise InputError("<command line>", "lens", f"given twice ({lens_file!r} and --lens {lens_opt!r}); expected one")
     name = lens_file or lens_opt
     if not name:
-        raise InputError("<command line>", "lens", "missing; expected a lens file or built-in name (argument or --lens)")
+        raise InputError(
+            "<command line>", "lens", "missing; expected a lens file or built-in name (argument or --lens)"
+        )
     if (sensor is None) == (pixel_um is None):
         raise InputError("<command line>", "--sensor/--pixel-um", "expected exactly one of them")
     _check_bank_options(pixel_um, kernel, method, max_spacing_um, workers, output)
@@ -192,14 +216,26 @@ def bank(
         print_json(info)
     elif not quiet:
         grid = f"{info['settings']} settings x " if "settings" in info else ""
-        console.print(f"wrote {output}: {grid}{info['fields']} fields x {info['wavelengths']} wavelengths, "
-                      f"{info['kernel_pixels']}x{info['kernel_pixels']} px of {info['pixel_pitch_um']:g} um, fine grid "
-                      f"{info['oversampling']}x per pixel ({info['fine_spacing_um']:.4g} um), response {info['response']} "
-                      f"under {info['illuminant']}, {info['seconds']:.1f} s", highlight=False)
+        console.print(
+            f"wrote {output}: {grid}{info['fields']} fields x {info['wavelengths']} wavelengths, "
+            f"{info['kernel_pixels']}x{info['kernel_pixels']} px of {info['pixel_pitch_um']:g} um, fine grid "
+            f"{info['oversampling']}x per pixel ({info['fine_spacing_um']:.4g} um), response {info['response']} "
+            f"under {info['illuminant']}, {info['seconds']:.1f} s",
+            highlight=False,
+        )
 
 
-def _compute_bank(lens: Lens, pitch: float, settings: BankSettings, axes: GridAxes, response: str, output: Path,
-                  where: dict, report: Callable[[float, float], None] | None, options: dict) -> dict:
+def _compute_bank(
+    lens: Lens,
+    pitch: float,
+    settings: BankSettings,
+    axes: GridAxes,
+    response: str,
+    output: Path,
+    where: dict,
+    report: Callable[[float, float], None] | None,
+    options: dict,
+) -> dict:
     """Compute psf bank's bank, one-setting bank or grid; its summary (--json's)."""
     import time
 
@@ -209,27 +245,38 @@ def _compute_bank(lens: Lens, pitch: float, settings: BankSettings, axes: GridAx
     t0 = time.time()
     extra: dict = {}
     if axes.is_grid:
-        grid = compute_grid(lens, pitch, axes, settings, output, response=response, progress=report, **where,
-                            **options)
+        grid = compute_grid(lens, pitch, axes, settings, output, response=response, progress=report, **where, **options)
         m = grid.bank(0).manifest
         extra = {"settings": len(grid), "grid": [jsonable(r) for r in grid.manifest["settings"]]}
     elif axes.given:
-        m = compute_setting_bank(lens, pitch, axes.settings()[0], settings, output, response=response,
-                                 progress=report, **where, **options).manifest
+        m = compute_setting_bank(
+            lens, pitch, axes.settings()[0], settings, output, response=response, progress=report, **where, **options
+        ).manifest
         extra = {"shooting": m["shooting"]["resolved"]}
     else:
-        m = build_bank(lens, pitch, settings, response=response, out_dir=output, progress=report, **where,
-                       **options).manifest
+        m = build_bank(
+            lens, pitch, settings, response=response, out_dir=output, progress=report, **where, **options
+        ).manifest
     oversampling = m["oversampling"]
-    return {"bank": str(output), "lens": lens.source, "fields": len(m["fields"]),
-            "wavelengths": len(m["wavelengths_nm"]), "kernel_pixels": m["kernel_pixels"],
-            "pixel_pitch_um": m["pixel_pitch_um"], "oversampling": oversampling,
-            "fine_spacing_um": m["fine_spacing_um"], "response": m["response"]["name"],
-            "illuminant": m["response"]["illuminant"], **extra, "seconds": time.time() - t0}
+    return {
+        "bank": str(output),
+        "lens": lens.source,
+        "fields": len(m["fields"]),
+        "wavelengths": len(m["wavelengths_nm"]),
+        "kernel_pixels": m["kernel_pixels"],
+        "pixel_pitch_um": m["pixel_pitch_um"],
+        "oversampling": oversampling,
+        "fine_spacing_um": m["fine_spacing_um"],
+        "response": m["response"]["name"],
+        "illuminant": m["response"]["illuminant"],
+        **extra,
+        "seconds": time.time() - t0,
+    }
 
 
-def _check_bank_options(pixel_um: float | None, kernel: int, method: str, max_spacing_um: float | None, workers: int,
-                        output: Path) -> None:
+def _check_bank_options(
+    pixel_um: float | None, kernel: int, method: str, max_spacing_um: float | None, workers: int, output: Path
+) -> None:
     """psf bank's numbers, method and output folder, before any work."""
     if pixel_um is not None:
         positive(pixel_um, "--pixel-um", "um", "a pixel pitch")
@@ -246,9 +293,15 @@ def _check_bank_options(pixel_um: float | None, kernel: int, method: str, max_sp
 def show(
     bank_dir: Path = typer.Argument(..., help="A bank directory written by `lensim psf bank` (or a grid of banks)."),
     output: Path = typer.Option(..., "-o", "--output", help="Folder for the PNG figures."),
-    gamma: float = typer.Option(0.5, "--gamma", help="Display gamma of the kernel pictures (smaller shows fainter tails)."),
-    setting: int = typer.Option(None, "--setting", help="For a grid of banks: the setting to show (0-based, the "
-                                "order of its manifest.json; default: every setting, each in OUTPUT/sNNN)."),
+    gamma: float = typer.Option(
+        0.5, "--gamma", help="Display gamma of the kernel pictures (smaller shows fainter tails)."
+    ),
+    setting: int = typer.Option(
+        None,
+        "--setting",
+        help="For a grid of banks: the setting to show (0-based, the "
+        "order of its manifest.json; default: every setting, each in OUTPUT/sNNN).",
+    ),
 ) -> None:
     """Figures of a PSF bank: psf_map.png (kernels over the sensor), strehl.png,
     mtf.png (sagittal/tangential at four fields) and relative_illumination.png.

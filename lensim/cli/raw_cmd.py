@@ -1,4 +1,5 @@
 """`lensim raw ...`: inspect camera raw files."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -8,8 +9,9 @@ from rich.table import Table
 
 from lensim.cli.common import console, print_json
 
-raw_app = typer.Typer(help="Inspect camera raw files (DNG, CR2/CR3, NEF, ARW, RAF, ORF, RW2, PEF, ...).",
-                      no_args_is_help=True)
+raw_app = typer.Typer(
+    help="Inspect camera raw files (DNG, CR2/CR3, NEF, ARW, RAF, ORF, RW2, PEF, ...).", no_args_is_help=True
+)
 
 
 def _fmt(value: object) -> str:

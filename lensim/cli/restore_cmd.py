@@ -3,6 +3,7 @@
 Register in lensim/cli/__init__.py with
     app.command("restore")(restore_command)
 """
+
 from __future__ import annotations
 
 import warnings
@@ -40,16 +41,18 @@ def _split_inputs(paths: list[Path]) -> tuple[list[Path], list[Path]]:
     return (raw_files(raw_given) if raw_given else []), photos
 
 
-def _restore_raws(files: list[Path], output: Path, model, settings, dng: bool, where: tuple[int, str | None],
-                  quiet: bool) -> list[dict]:
+def _restore_raws(
+    files: list[Path], output: Path, model, settings, dng: bool, where: tuple[int, str | None], quiet: bool
+) -> list[dict]:
     """Restore raw files with a progress bar over the batch (lensim.raw.restore); where:
     (--workers, --scheduler)."""
     from lensim.raw.restore import restore_raw_files
 
     workers, scheduler = where
     with progress_bar("restoring raw files", "files", quiet) as step:
-        records = restore_raw_files(files, output, model, settings, dng=dng, workers=workers, progress=step,
-                                    scheduler=scheduler)
+        records = restore_raw_files(
+            files, output, model, settings, dng=dng, workers=workers, progress=step, scheduler=scheduler
+        )
     if not quiet:
         for r in records:
             what = "skipped (done)" if r["skipped"] else "->"
@@ -58,33 +61,67 @@ def _restore_raws(files: list[Path], output: Path, model, settings, dng: bool, w
 
 
 def restore_command(
-    checkpoint: Path = typer.Argument(..., help="Run folder (best.pt, else last.pt) or checkpoint file; with --engine "
-                                      "onnxruntime also an .onnx file from `lensim export`."),
-    images: list[Path] = typer.Argument(..., help="Photos to restore (8/16-bit PNG, TIFF or JPEG), camera raw files "
-                                        "(DNG, CR2, NEF, ARW, ...) or folders of raw files."),
+    checkpoint: Path = typer.Argument(
+        ...,
+        help="Run folder (best.pt, else last.pt) or checkpoint file; with --engine "
+        "onnxruntime also an .onnx file from `lensim export`.",
+    ),
+    images: list[Path] = typer.Argument(
+        ...,
+        help="Photos to restore (8/16-bit PNG, TIFF or JPEG), camera raw files "
+        "(DNG, CR2, NEF, ARW, ...) or folders of raw files.",
+    ),
     output: Path = typer.Option(..., "-o", "--output", help="Output folder."),
-    sensor_file: str = typer.Option(None, "--sensor", help="Sensor profile of the photos (default: the one trained for)."),
+    sensor_file: str = typer.Option(
+        None, "--sensor", help="Sensor profile of the photos (default: the one trained for)."
+    ),
     lens_file: str = typer.Option(None, "--lens", help="Lens of the photos (only checked against the checkpoint's)."),
-    sensor_offset: str = typer.Option(None, "--sensor-offset", help="TOP,LEFT sensor pixel of the image's top-left "
-                                      "pixel at native scale (default: the image is a full frame)."),
+    sensor_offset: str = typer.Option(
+        None,
+        "--sensor-offset",
+        help="TOP,LEFT sensor pixel of the image's top-left "
+        "pixel at native scale (default: the image is a full frame).",
+    ),
     tile: int = typer.Option(512, "--tile", help="Largest tile side in pixels."),
     overlap: int = typer.Option(192, "--overlap", help="Least overlap of neighbouring tiles in pixels."),
     bits: int = typer.Option(0, "--bits", help="Output bit depth 8 or 16 (0: that of the input)."),
     device: str = typer.Option("cpu", "--device", help="cpu, cuda or cuda:N."),
-    engine: str = typer.Option("torch", "--engine", help="torch (the PyTorch network) or onnxruntime (an .onnx file, "
-                               "or the run exported on the fly); same tiling, same results within 1e-3."),
+    engine: str = typer.Option(
+        "torch",
+        "--engine",
+        help="torch (the PyTorch network) or onnxruntime (an .onnx file, "
+        "or the run exported on the fly); same tiling, same results within 1e-3.",
+    ),
     threads: int = typer.Option(0, "--threads", help="CPU threads for PyTorch / onnxruntime (0: their default)."),
-    dng: bool = typer.Option(False, "--dng", help="Raw inputs: also write OUT/<name>.dng, the restored photo as a "
-                             "LinearRaw DNG with the raw's colour matrices, white balance and EXIF."),
-    allow_other_camera: bool = typer.Option(False, "--allow-other-camera", help="Restore raws from another camera or "
-                                            "of another size than the checkpoint's sensor (as full frames of it)."),
-    workers: int = typer.Option(1, "--workers", help="Raw inputs restored side by side: a local Dask cluster of N "
-                                "worker processes when > 1, sharing the CPU threads, each loading the model once."),
+    dng: bool = typer.Option(
+        False,
+        "--dng",
+        help="Raw inputs: also write OUT/<name>.dng, the restored photo as a "
+        "LinearRaw DNG with the raw's colour matrices, white balance and EXIF.",
+    ),
+    allow_other_camera: bool = typer.Option(
+        False,
+        "--allow-other-camera",
+        help="Restore raws from another camera or of another size than the checkpoint's sensor (as full frames of it).",
+    ),
+    workers: int = typer.Option(
+        1,
+        "--workers",
+        help="Raw inputs restored side by side: a local Dask cluster of N "
+        "worker processes when > 1, sharing the CPU threads, each loading the model once.",
+    ),
     scheduler: str = scheduler_option(),
-    fno: float = typer.Option(None, "--fno", help="F-number the photos were taken at (overrides their EXIF "
-                              "FNumber); needed by a network trained across F-numbers."),
-    focus_m: float = typer.Option(None, "--focus-m", help="Focus distance in metres from the sensor, inf for infinity "
-                                  "(overrides their EXIF SubjectDistance)."),
+    fno: float = typer.Option(
+        None,
+        "--fno",
+        help="F-number the photos were taken at (overrides their EXIF "
+        "FNumber); needed by a network trained across F-numbers.",
+    ),
+    focus_m: float = typer.Option(
+        None,
+        "--focus-m",
+        help="Focus distance in metres from the sensor, inf for infinity (overrides their EXIF SubjectDistance).",
+    ),
     focal_mm: float = typer.Option(None, "--focal-mm", help="Focal length in mm (overrides their EXIF FocalLength)."),
     quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
     json_out: bool = typer.Option(False, "--json", help="Print what was written as JSON."),
@@ -121,16 +158,23 @@ def restore_command(
     if dng and not raws:
         raise InputError("--dng", None, "applies to camera raw inputs; none were given")
     if scheduler is not None and not raws:
-        raise InputError("--scheduler", None, "applies to camera raw inputs (photos are restored here); none were given")
+        raise InputError(
+            "--scheduler", None, "applies to camera raw inputs (photos are restored here); none were given"
+        )
     if offset is not None and raws:
-        raise InputError("--sensor-offset", None, "applies to developed photos; a raw file's place on the sensor is its "
-                         "active area (or the place a simulated DNG records)")
+        raise InputError(
+            "--sensor-offset",
+            None,
+            "applies to developed photos; a raw file's place on the sensor is its "
+            "active area (or the place a simulated DNG records)",
+        )
     if threads > 0:
         import torch
 
         torch.set_num_threads(threads)
-    model, info, sensor_data, (sensor_w, sensor_h) = _load_model(checkpoint, lens_file, sensor_file, device, engine,
-                                                                 threads)
+    model, info, sensor_data, (sensor_w, sensor_h) = _load_model(
+        checkpoint, lens_file, sensor_file, device, engine, threads
+    )
     _check_photos(photos, offset, (sensor_w, sensor_h))
     photo_settings = _photo_settings(photos, shooting, info)
     written = []
@@ -138,19 +182,48 @@ def restore_command(
         if raws:
             from lensim.raw.restore import RestoreSettings
 
-            settings = RestoreSettings(checkpoint=info["path"], sensor=dict(sensor_data), tile=tile, overlap=overlap,
-                                       device=device, allow_other_camera=allow_other_camera, shooting=shooting,
-                                       conditioning=info["conditioning"], engine=engine, onnx=info.get("onnx"))
+            settings = RestoreSettings(
+                checkpoint=info["path"],
+                sensor=dict(sensor_data),
+                tile=tile,
+                overlap=overlap,
+                device=device,
+                allow_other_camera=allow_other_camera,
+                shooting=shooting,
+                conditioning=info["conditioning"],
+                engine=engine,
+                onnx=info.get("onnx"),
+            )
             written += _restore_raws(raws, output, model, settings, dng, (workers, scheduler), quiet or json_out)
         for path in photos:
-            written.append(_restore_photo(path, output, model, (sensor_w, sensor_h), offset, (tile, overlap), bits,
-                                          quiet or json_out, photo_settings[path]))
+            written.append(
+                _restore_photo(
+                    path,
+                    output,
+                    model,
+                    (sensor_w, sensor_h),
+                    offset,
+                    (tile, overlap),
+                    bits,
+                    quiet or json_out,
+                    photo_settings[path],
+                )
+            )
     if json_out:
         print_json({"checkpoint": info["path"], "engine": engine, "images": written})
 
 
-def _check_options(bits: int, tile: int, overlap: int, workers: int, threads: int, device: str, output: Path,
-                   checkpoint: Path, engine: str = "torch") -> None:
+def _check_options(
+    bits: int,
+    tile: int,
+    overlap: int,
+    workers: int,
+    threads: int,
+    device: str,
+    output: Path,
+    checkpoint: Path,
+    engine: str = "torch",
+) -> None:
     """restore's numbers, engine, device, output folder and checkpoint path, before any work."""
     from lensim.restore.engines import ENGINES, is_onnx_path, providers_for
 
@@ -158,8 +231,11 @@ def _check_options(bits: int, tile: int, overlap: int, workers: int, threads: in
     if bits not in (0, 8, 16):
         raise InputError("--bits", None, f"expected 8 or 16, got {bits}")
     if tile < 16 or not 0 <= overlap < tile:
-        raise InputError("--tile/--overlap", None, f"expected a tile of at least 16 pixels and 0 <= overlap < tile, got "
-                         f"tile {tile}, overlap {overlap}")
+        raise InputError(
+            "--tile/--overlap",
+            None,
+            f"expected a tile of at least 16 pixels and 0 <= overlap < tile, got tile {tile}, overlap {overlap}",
+        )
     at_least(workers, 1, "--workers", what="a number of processes")
     at_least(threads, 0, "--threads", what="a number of threads (0: PyTorch's default)")
     if engine == "torch":
@@ -197,9 +273,13 @@ def _photo_settings(photos: list[Path], shooting: dict[str, float], info: dict) 
             warnings.warn(text, UserWarning, stacklevel=2)
         missing = [OPTIONS[k] for k in cond.keys if k not in shot]
         if missing:
-            raise InputError(str(path), ", ".join(missing), f"{info['path']} was trained across shooting settings "
-                             f"({cond.describe()}) and needs the photo's {', '.join(cond.keys)}; its EXIF does not "
-                             f"say; give {' '.join(m + ' ...' for m in missing)}")
+            raise InputError(
+                str(path),
+                ", ".join(missing),
+                f"{info['path']} was trained across shooting settings "
+                f"({cond.describe()}) and needs the photo's {', '.join(cond.keys)}; its EXIF does not "
+                f"say; give {' '.join(m + ' ...' for m in missing)}",
+            )
         vectors[path] = cond.vector(shot) if cond.dim else None
     return vectors
 
@@ -220,17 +300,27 @@ def _check_photos(photos: list[Path], offset: tuple[int, int] | None, sensor_wh:
         _check_offset(path, offset, (w, h), sensor_wh)
 
 
-def _check_offset(path: Path, offset: tuple[int, int] | None, image_wh: tuple[int, int],
-                  sensor_wh: tuple[int, int]) -> None:
+def _check_offset(
+    path: Path, offset: tuple[int, int] | None, image_wh: tuple[int, int], sensor_wh: tuple[int, int]
+) -> None:
     """A native-scale crop at (top, left) = offset must lie on the sensor."""
     (w, h), (sensor_w, sensor_h) = image_wh, sensor_wh
     if offset is not None and not (0 <= offset[0] <= sensor_h - h and 0 <= offset[1] <= sensor_w - w):
-        raise InputError(str(path), "--sensor-offset", f"a {w}x{h} image at (top, left) {offset} does not fit on "
-                         f"the {sensor_w}x{sensor_h} sensor")
+        raise InputError(
+            str(path),
+            "--sensor-offset",
+            f"a {w}x{h} image at (top, left) {offset} does not fit on the {sensor_w}x{sensor_h} sensor",
+        )
 
 
-def _load_model(checkpoint: Path, lens_file: str | None, sensor_file: str | None, device: str, engine: str = "torch",
-                threads: int = 0) -> tuple[Any, dict, dict, tuple[int, int]]:
+def _load_model(
+    checkpoint: Path,
+    lens_file: str | None,
+    sensor_file: str | None,
+    device: str,
+    engine: str = "torch",
+    threads: int = 0,
+) -> tuple[Any, dict, dict, tuple[int, int]]:
     """(model or engine, its info, sensor profile dict, its (width, height) in pixels): the network of a checkpoint
     (or the ONNX model: lensim.restore.engines.load_engine), warned about when the given lens or sensor differs from
     its own; the sensor is --sensor's, else the one trained for, and must record its resolution [width, height]."""
@@ -251,9 +341,17 @@ def _load_model(checkpoint: Path, lens_file: str | None, sensor_file: str | None
     return model, info, sensor_data, (int(res[0]), int(res[1]))
 
 
-def _restore_photo(path: Path, output: Path, model: Any, sensor_wh: tuple[int, int],
-                   offset: tuple[int, int] | None, tiling: tuple[int, int], bits: int, quiet: bool,
-                   settings: torch.Tensor | None) -> dict:
+def _restore_photo(
+    path: Path,
+    output: Path,
+    model: Any,
+    sensor_wh: tuple[int, int],
+    offset: tuple[int, int] | None,
+    tiling: tuple[int, int],
+    bits: int,
+    quiet: bool,
+    settings: torch.Tensor | None,
+) -> dict:
     """Restore one photo (a full frame, or a native-scale crop at ``offset`` = (top, left)
     sensor pixels; tiling: (tile, overlap); settings: its settings vector for a conditioned
     network) into OUTPUT/<stem>.png (.tif for TIFF input); returns what was written."""
@@ -267,15 +365,19 @@ def _restore_photo(path: Path, output: Path, model: Any, sensor_wh: tuple[int, i
     if offset is None:
         scale = min(sensor_w / w, sensor_h / h)
         if abs(scale - 1.0) > 0.01:
-            warnings.warn(f"{path}: {w}x{h} pixels mapped onto the {sensor_w}x{sensor_h} sensor at "
-                          f"{scale:.3g} sensor pixels per image pixel; the network was trained at native scale "
-                          f"(1), so blur sizes differ (give --sensor-offset for a native-scale crop)", UserWarning)
+            warnings.warn(
+                f"{path}: {w}x{h} pixels mapped onto the {sensor_w}x{sensor_h} sensor at "
+                f"{scale:.3g} sensor pixels per image pixel; the network was trained at native scale "
+                f"(1), so blur sizes differ (give --sensor-offset for a native-scale crop)",
+                UserWarning,
+            )
     else:
         _check_offset(path, offset, (w, h), sensor_wh)
     top_left, size = image_sensor_geometry(h, w, (sensor_w, sensor_h), offset)
     with progress_bar(f"restoring {path.name}", "tiles", quiet) as tiles_done:
-        out = restore_image(model, img, top_left, size, tile=tile, overlap=overlap, progress=tiles_done,
-                            settings=settings)
+        out = restore_image(
+            model, img, top_left, size, tile=tile, overlap=overlap, progress=tiles_done, settings=settings
+        )
     del img  # bound peak memory: only the output lives while it is encoded
     out.clamp_(0, 1)
     dest = output / _photo_output_name(path)

@@ -1,4 +1,5 @@
 """`lensim sensor ...`: sensor profiles for real cameras."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -15,11 +16,18 @@ sensor_app = typer.Typer(help="Sensor profiles for real cameras.", no_args_is_he
 def from_raw(
     file: Path = typer.Argument(..., help="A raw file from the camera (DNG, CR2/CR3, NEF, ARW, ...)."),
     output: Path = typer.Option(..., "-o", "--output", help="Profile to write (.yaml, .yml or .json)."),
-    pixel_um: float = typer.Option(None, "--pixel-um", help="Pixel pitch in micrometres (required when the file's "
-                                   "EXIF has no FocalPlaneXResolution; overrides it otherwise)."),
+    pixel_um: float = typer.Option(
+        None,
+        "--pixel-um",
+        help="Pixel pitch in micrometres (required when the file's "
+        "EXIF has no FocalPlaneXResolution; overrides it otherwise).",
+    ),
     dark: Path = typer.Option(None, "--dark", help="A dark frame (lens cap on, same ISO): read noise."),
-    flat: list[Path] = typer.Option(None, "--flat", help="Flat fields (evenly lit, unsaturated; repeat for several "
-                                    "exposures): shot noise by photon transfer."),
+    flat: list[Path] = typer.Option(
+        None,
+        "--flat",
+        help="Flat fields (evenly lit, unsaturated; repeat for several exposures): shot noise by photon transfer.",
+    ),
     name: str = typer.Option(None, "--name", help="Profile name (default: the camera's make and model)."),
     json_out: bool = typer.Option(False, "--json", help="Print the profile as JSON."),
 ) -> None:
@@ -59,5 +67,8 @@ def from_raw(
     if json_out:
         print_json(data)
     else:
-        console.print(f"wrote {output}: {data['name']}, {data['resolution'][0]} x {data['resolution'][1]} px at "
-                      f"{data['pixel_pitch_um']:.4g} um, {data['bayer_pattern']}", highlight=False)
+        console.print(
+            f"wrote {output}: {data['name']}, {data['resolution'][0]} x {data['resolution'][1]} px at "
+            f"{data['pixel_pitch_um']:.4g} um, {data['bayer_pattern']}",
+            highlight=False,
+        )

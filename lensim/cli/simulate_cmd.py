@@ -1,4 +1,5 @@
 """`lensim simulate`: what the camera would photograph."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -41,20 +42,32 @@ def simulate_command(
     ctx: typer.Context,
     images: list[Path] = typer.Argument(..., help="Sharp sRGB photos (8/16-bit PNG, TIFF or JPEG)."),
     output: Path = typer.Option(..., "-o", "--output", help="Output folder."),
-    lens_file: str = typer.Option(None, "--lens", help="Lens file or built-in lens name (default: the bank's lens "
-                                  f"with --bank, else {assets.DEFAULT_LENS})."),
-    sensor_file: str = typer.Option(None, "--sensor", help="Sensor profile file or built-in name (default: the built-in default)."),
-    bank_dir: Path = typer.Option(None, "--bank", help="A PSF bank at the image's effective pitch (default: computed and cached)."),
+    lens_file: str = typer.Option(
+        None,
+        "--lens",
+        help=f"Lens file or built-in lens name (default: the bank's lens with --bank, else {assets.DEFAULT_LENS}).",
+    ),
+    sensor_file: str = typer.Option(
+        None, "--sensor", help="Sensor profile file or built-in name (default: the built-in default)."
+    ),
+    bank_dir: Path = typer.Option(
+        None, "--bank", help="A PSF bank at the image's effective pitch (default: computed and cached)."
+    ),
     seed: int = typer.Option(0, "--seed", help="Seed of the colour temperature and noise draws."),
     noise: bool = typer.Option(True, "--noise/--no-noise", help="Add shot and read noise."),
     blur: bool = typer.Option(True, "--blur/--no-blur", help="Apply the lens's PSFs."),
-    shading: bool = typer.Option(True, "--relative-illumination/--no-relative-illumination", help="Apply lens shading."),
+    shading: bool = typer.Option(
+        True, "--relative-illumination/--no-relative-illumination", help="Apply lens shading."
+    ),
     distortion: bool = typer.Option(False, "--distortion/--no-distortion", help="Also warp by the lens's distortion."),
     demosaic: str = typer.Option("ahd", "--demosaic", help="ahd, malvar, menon or bilinear."),
     bits: int = typer.Option(8, "--bits", help="Output bit depth: 8 or 16."),
     fmt: str = typer.Option("png", "--format", help="Output file type: png or tif."),
-    raw: bool = typer.Option(False, "--raw", help="Also write the noisy Bayer mosaic as a CFA DNG (OUT/<name>.dng) "
-                             "that LibRaw and raw converters open."),
+    raw: bool = typer.Option(
+        False,
+        "--raw",
+        help="Also write the noisy Bayer mosaic as a CFA DNG (OUT/<name>.dng) that LibRaw and raw converters open.",
+    ),
     fields: int = fields_option(),
     wavelengths: str = wavelengths_option(),
     pupil_samples: int = pupil_samples_option(),
@@ -115,17 +128,36 @@ def simulate_command(
             else:
                 if (h, w) not in banks:
                     pupil_given = ctx.get_parameter_source("pupil_samples").name != "DEFAULT"
-                    banks[(h, w)] = _photo_bank(path, (w, h), mapping.pitch_um, lens, sensor, settings, pupil_given,
-                                                workers, quiet or json_out)
+                    banks[(h, w)] = _photo_bank(
+                        path, (w, h), mapping.pitch_um, lens, sensor, settings, pupil_given, workers, quiet or json_out
+                    )
                 bank = banks[(h, w)]
         gen = torch.Generator().manual_seed(seed + i)
         raw_path = output / (path.stem + ".dng") if raw else None
-        out, params = simulate(img, bank, sensor, gen, blur=blur, noise=noise, relative_illumination=shading,
-                               demosaic=demosaic, bits=bits, raw_path=raw_path, distortion=distortion)
+        out, params = simulate(
+            img,
+            bank,
+            sensor,
+            gen,
+            blur=blur,
+            noise=noise,
+            relative_illumination=shading,
+            demosaic=demosaic,
+            bits=bits,
+            raw_path=raw_path,
+            distortion=distortion,
+        )
         target = output / f"{path.stem}.{fmt}"
         write_image(target, out, bits)
-        info = {"input": str(path), "output": str(target), "seed": seed + i, "lens": lens.source, "sensor": sensor.name,
-                "bank": None if bank is None else str(bank.directory), **params.to_dict()}
+        info = {
+            "input": str(path),
+            "output": str(target),
+            "seed": seed + i,
+            "lens": lens.source,
+            "sensor": sensor.name,
+            "bank": None if bank is None else str(bank.directory),
+            **params.to_dict(),
+        }
         if described is not None:
             info["settings"] = described
         atomic_write_text(output / (path.stem + ".json"), json.dumps(info, indent=2, default=str) + "\n")
@@ -136,8 +168,17 @@ def simulate_command(
         print_json(results)
 
 
-def _photo_bank(path: Path, size_wh: tuple[int, int], pitch_um: float, lens: Lens, sensor: SensorProfile,
-                settings: BankSettings, pupil_given: bool, workers: int, quiet: bool) -> PSFBank:
+def _photo_bank(
+    path: Path,
+    size_wh: tuple[int, int],
+    pitch_um: float,
+    lens: Lens,
+    sensor: SensorProfile,
+    settings: BankSettings,
+    pupil_given: bool,
+    workers: int,
+    quiet: bool,
+) -> PSFBank:
     """The cached bank for a photo mapped onto the sensor at ``pitch_um`` (um per photo
     pixel). A small photo has coarse pixels whose kernel window the default pupil grid
     cannot resolve without wrap-around: then the pupil sampling the window needs is
@@ -149,14 +190,25 @@ def _photo_bank(path: Path, size_wh: tuple[int, int], pitch_um: float, lens: Len
             need = -(-int(e.needed * 1.15) // 8) * 8  # a margin, rounded up to a multiple of 8
             where = f"a {size_wh[0]}x{size_wh[1]} photo maps onto the sensor at {pitch_um:.3g} um per pixel"
             if pupil_given:
-                raise InputError(str(path), "--pupil-samples", f"{where}, too coarse for {settings.pupil_samples} "
-                                 f"pupil samples; expected --pupil-samples {need} or more (or leave it out to have it "
-                                 "chosen), or a larger photo") from None
-            warnings.warn(f"{path}: {where}; pupil samples raised from {settings.pupil_samples} to {need} for its "
-                          "PSF bank", UserWarning, stacklevel=2)
+                raise InputError(
+                    str(path),
+                    "--pupil-samples",
+                    f"{where}, too coarse for {settings.pupil_samples} "
+                    f"pupil samples; expected --pupil-samples {need} or more (or leave it out to have it "
+                    "chosen), or a larger photo",
+                ) from None
+            warnings.warn(
+                f"{path}: {where}; pupil samples raised from {settings.pupil_samples} to {need} for its PSF bank",
+                UserWarning,
+                stacklevel=2,
+            )
             settings = dataclasses.replace(settings, pupil_samples=need)
-    raise InputError(str(path), "--pupil-samples", f"no pupil sampling up to {settings.pupil_samples} samples resolves "
-                     "the photo's kernels; expected a larger photo")
+    raise InputError(
+        str(path),
+        "--pupil-samples",
+        f"no pupil sampling up to {settings.pupil_samples} samples resolves "
+        "the photo's kernels; expected a larger photo",
+    )
 
 
 def _check_options(output: Path, fmt: str, bits: int, demosaic: str, workers: int, cache: Path | None) -> None:

@@ -8,6 +8,7 @@ training modules load when the command runs.
 Register in lensim/cli/__init__.py with
     app.command("train")(train_command)
 """
+
 from __future__ import annotations
 
 import math
@@ -37,55 +38,109 @@ def train_command(
     epochs: int = typer.Option(_D.epochs, "--epochs", help="Epochs in total (paper: 30)."),
     batch_size: int = typer.Option(_D.batch_size, "--batch-size", help="Crops per step (per GPU under torchrun)."),
     lr: float = typer.Option(_D.lr, "--lr", help="Initial Adam learning rate (paper: 1e-4)."),
-    lr_halve_every: int = typer.Option(_D.lr_halve_every, "--lr-halve-every",
-                                       help="Halve the learning rate every N epochs (paper: 5)."),
-    lr_schedule: str = typer.Option(_D.lr_schedule, "--lr-schedule", help="step (halve every --lr-halve-every "
-                                    "epochs) or cosine (anneal to 0 over the time budget, else over the epochs)."),
-    loss: str = typer.Option(_D.loss, "--loss", help="mse (the paper's), charbonnier, or charbonnier-edge "
-                             "(Charbonnier plus an edge term that does not reward over-smoothing)."),
+    lr_halve_every: int = typer.Option(
+        _D.lr_halve_every, "--lr-halve-every", help="Halve the learning rate every N epochs (paper: 5)."
+    ),
+    lr_schedule: str = typer.Option(
+        _D.lr_schedule,
+        "--lr-schedule",
+        help="step (halve every --lr-halve-every "
+        "epochs) or cosine (anneal to 0 over the time budget, else over the epochs).",
+    ),
+    loss: str = typer.Option(
+        _D.loss,
+        "--loss",
+        help="mse (the paper's), charbonnier, or charbonnier-edge "
+        "(Charbonnier plus an edge term that does not reward over-smoothing).",
+    ),
     crop: int = typer.Option(_D.crop or 0, "--crop", help="Training sub-crop size in pixels (0: the stored crops)."),
-    arch: str = typer.Option(_D.arch, "--arch", help="Network: nafnet (the default: NAFNet blocks with FOV input "
-                             "channels and a 2x pixel-unshuffle stem, no deformable convolution, no context block) "
-                             "or unet (the paper's field-aware UNet: FOV input, deformable decoder, context block)."),
-    width: int = typer.Option(_D.width, "--width", help="Channels at the first scale, doubled at each further one (0: "
-                              "the architecture's default: unet 32, nafnet the width of about the same parameter "
-                              "count)."),
-    stem: int = typer.Option(_D.stem, "--stem", help="2 for a pixel-unshuffle stem (every layer at half resolution, "
-                             "about 4x faster; nafnet only), 1 for none; 0: the architecture's default (nafnet 2, "
-                             "unet 1)."),
+    arch: str = typer.Option(
+        _D.arch,
+        "--arch",
+        help="Network: nafnet (the default: NAFNet blocks with FOV input "
+        "channels and a 2x pixel-unshuffle stem, no deformable convolution, no context block) "
+        "or unet (the paper's field-aware UNet: FOV input, deformable decoder, context block).",
+    ),
+    width: int = typer.Option(
+        _D.width,
+        "--width",
+        help="Channels at the first scale, doubled at each further one (0: "
+        "the architecture's default: unet 32, nafnet the width of about the same parameter "
+        "count).",
+    ),
+    stem: int = typer.Option(
+        _D.stem,
+        "--stem",
+        help="2 for a pixel-unshuffle stem (every layer at half resolution, "
+        "about 4x faster; nafnet only), 1 for none; 0: the architecture's default (nafnet 2, "
+        "unet 1).",
+    ),
     depth: int = typer.Option(_D.depth, "--depth", help="Number of scales."),
-    deformable_groups: int = typer.Option(_D.deformable_groups, "--deformable-groups",
-                                          help="Offset groups of each deformable conv."),
-    deformable_scales: int = typer.Option(-1 if _D.deformable_scales is None else _D.deformable_scales,
-                                          "--deformable-scales", help="Decoder scales, coarsest first, with "
-                                          "deformable blocks (-1: all, the paper; 1 trains about 2x faster on a CPU)."),
-    field_modulation: bool = typer.Option(_D.field_modulation, "--field-modulation", help="Scale and shift the "
-                                          "features by functions of the sensor position at every decoder scale "
-                                          "(lensim's extension of the paper's FOV input)."),
+    deformable_groups: int = typer.Option(
+        _D.deformable_groups, "--deformable-groups", help="Offset groups of each deformable conv."
+    ),
+    deformable_scales: int = typer.Option(
+        -1 if _D.deformable_scales is None else _D.deformable_scales,
+        "--deformable-scales",
+        help="Decoder scales, coarsest first, with "
+        "deformable blocks (-1: all, the paper; 1 trains about 2x faster on a CPU).",
+    ),
+    field_modulation: bool = typer.Option(
+        _D.field_modulation,
+        "--field-modulation",
+        help="Scale and shift the "
+        "features by functions of the sensor position at every decoder scale "
+        "(lensim's extension of the paper's FOV input).",
+    ),
     no_fov: bool = typer.Option(not _D.use_fov, "--no-fov", help="Ablation: no field-of-view input channels."),
-    deformable: bool | None = typer.Option(_D.use_deformable, "--deformable/--no-deformable", show_default=False,
-                                           help="Deformable decoder blocks, or plain residual ones (default: the "
-                                           "architecture's: on for unet, off for nafnet)."),
-    context: bool | None = typer.Option(_D.use_context, "--context/--no-context", show_default=False,
-                                        help="The context block (default: the architecture's: on for unet, off for "
-                                        "nafnet)."),
-    no_settings: bool = typer.Option(not _D.use_settings, "--no-settings", help="Pairs made across shooting settings: "
-                                     "train without the settings as inputs (an unconditioned network; the ranges are "
-                                     "still recorded and checked when restoring)."),
-    val_fraction: float = typer.Option(_D.val_fraction, "--val-fraction",
-                                       help="Share of source photos held out for validation."),
-    steps_per_epoch: int = typer.Option(_D.max_steps_per_epoch or 0, "--steps-per-epoch",
-                                        help="Cap on steps per epoch (0: whole epochs)."),
-    time_budget_s: float = typer.Option(_D.time_budget_s or 0.0, "--time-budget-s", help="Stop cleanly once the "
-                                        "run has trained this many seconds in all, resumes included (0: none)."),
-    checkpoint_every_s: float = typer.Option(_D.checkpoint_every_s or 0.0, "--checkpoint-every-s", help="Also "
-                                             "write last.pt within an epoch every N seconds of training (0: at "
-                                             "epoch ends only)."),
-    checkpoint_every_steps: int = typer.Option(_D.checkpoint_every_steps or 0, "--checkpoint-every-steps",
-                                               help="Also write last.pt every N optimizer steps (0: off)."),
-    resume: bool = typer.Option(False, "--resume", help="Continue the run in OUTPUT from last.pt with its stored "
-                                "settings; options given change those that may change (--epochs, --time-budget-s, "
-                                "--device, --no-amp, checkpoint intervals), others must match."),
+    deformable: bool | None = typer.Option(
+        _D.use_deformable,
+        "--deformable/--no-deformable",
+        show_default=False,
+        help="Deformable decoder blocks, or plain residual ones (default: the "
+        "architecture's: on for unet, off for nafnet).",
+    ),
+    context: bool | None = typer.Option(
+        _D.use_context,
+        "--context/--no-context",
+        show_default=False,
+        help="The context block (default: the architecture's: on for unet, off for nafnet).",
+    ),
+    no_settings: bool = typer.Option(
+        not _D.use_settings,
+        "--no-settings",
+        help="Pairs made across shooting settings: "
+        "train without the settings as inputs (an unconditioned network; the ranges are "
+        "still recorded and checked when restoring).",
+    ),
+    val_fraction: float = typer.Option(
+        _D.val_fraction, "--val-fraction", help="Share of source photos held out for validation."
+    ),
+    steps_per_epoch: int = typer.Option(
+        _D.max_steps_per_epoch or 0, "--steps-per-epoch", help="Cap on steps per epoch (0: whole epochs)."
+    ),
+    time_budget_s: float = typer.Option(
+        _D.time_budget_s or 0.0,
+        "--time-budget-s",
+        help="Stop cleanly once the run has trained this many seconds in all, resumes included (0: none).",
+    ),
+    checkpoint_every_s: float = typer.Option(
+        _D.checkpoint_every_s or 0.0,
+        "--checkpoint-every-s",
+        help="Also write last.pt within an epoch every N seconds of training (0: at epoch ends only).",
+    ),
+    checkpoint_every_steps: int = typer.Option(
+        _D.checkpoint_every_steps or 0,
+        "--checkpoint-every-steps",
+        help="Also write last.pt every N optimizer steps (0: off).",
+    ),
+    resume: bool = typer.Option(
+        False,
+        "--resume",
+        help="Continue the run in OUTPUT from last.pt with its stored "
+        "settings; options given change those that may change (--epochs, --time-budget-s, "
+        "--device, --no-amp, checkpoint intervals), others must match.",
+    ),
     seed: int = typer.Option(_D.seed, "--seed", help="Seed of initialisation, data order, crops and augmentation."),
     device: str = typer.Option(_D.device, "--device", help="cpu, cuda or cuda:N (mixed precision on CUDA)."),
     no_amp: bool = typer.Option(not _D.amp, "--no-amp", help="Full float32 on CUDA."),
@@ -107,8 +162,17 @@ def train_command(
 
     _check_recipe(epochs, batch_size, lr, lr_halve_every, lr_schedule, val_fraction, steps_per_epoch, time_budget_s)
     # a resumed run has its own architecture: the rules that depend on it are left to the run's (frozen) settings
-    _check_network(arch if not resume or _given(ctx, "arch") else None, width, depth, deformable_groups,
-                   deformable_scales, field_modulation, no_fov, stem, deformable)
+    _check_network(
+        arch if not resume or _given(ctx, "arch") else None,
+        width,
+        depth,
+        deformable_groups,
+        deformable_scales,
+        field_modulation,
+        no_fov,
+        stem,
+        deformable,
+    )
     choice(loss, tuple(LOSSES), "--loss")
     at_least(threads, 0, "--threads", what="a number of threads (0: PyTorch's default)")
     at_least(checkpoint_every_s, 0.0, "--checkpoint-every-s", "s", "an interval (0: at epoch ends only)")
@@ -121,16 +185,32 @@ def train_command(
     if threads > 0:
         torch.set_num_threads(threads)
     overrides: dict[str, Any] = {
-        "epochs": epochs, "batch_size": batch_size, "lr": lr, "lr_halve_every": lr_halve_every,
-        "lr_schedule": lr_schedule, "loss": loss, "crop": crop or None, "arch": arch, "width": width, "depth": depth,
+        "epochs": epochs,
+        "batch_size": batch_size,
+        "lr": lr,
+        "lr_halve_every": lr_halve_every,
+        "lr_schedule": lr_schedule,
+        "loss": loss,
+        "crop": crop or None,
+        "arch": arch,
+        "width": width,
+        "depth": depth,
         "stem": stem,
         "deformable_groups": deformable_groups,
-        "deformable_scales": None if deformable_scales < 0 else deformable_scales, "use_fov": not no_fov,
-        "field_modulation": field_modulation, "use_deformable": deformable, "use_context": context,
-        "val_fraction": val_fraction, "max_steps_per_epoch": steps_per_epoch or None,
-        "time_budget_s": time_budget_s if time_budget_s > 0 else None, "seed": seed, "device": device,
-        "amp": not no_amp, "checkpoint_every_s": checkpoint_every_s if checkpoint_every_s > 0 else None,
-        "checkpoint_every_steps": checkpoint_every_steps or None, "use_settings": not no_settings,
+        "deformable_scales": None if deformable_scales < 0 else deformable_scales,
+        "use_fov": not no_fov,
+        "field_modulation": field_modulation,
+        "use_deformable": deformable,
+        "use_context": context,
+        "val_fraction": val_fraction,
+        "max_steps_per_epoch": steps_per_epoch or None,
+        "time_budget_s": time_budget_s if time_budget_s > 0 else None,
+        "seed": seed,
+        "device": device,
+        "amp": not no_amp,
+        "checkpoint_every_s": checkpoint_every_s if checkpoint_every_s > 0 else None,
+        "checkpoint_every_steps": checkpoint_every_steps or None,
+        "use_settings": not no_settings,
     }
     if resume:  # the checkpoint's settings, changed only where an option is given
         overrides = {k: v for k, v in overrides.items() if _given(ctx, _OPTION_OF.get(k, k))}
@@ -148,8 +228,16 @@ def train_command(
     _report(result, quiet, json_out)
 
 
-def _check_recipe(epochs: int, batch_size: int, lr: float, lr_halve_every: int, lr_schedule: str,
-                  val_fraction: float, steps_per_epoch: int, time_budget_s: float) -> None:
+def _check_recipe(
+    epochs: int,
+    batch_size: int,
+    lr: float,
+    lr_halve_every: int,
+    lr_schedule: str,
+    val_fraction: float,
+    steps_per_epoch: int,
+    time_budget_s: float,
+) -> None:
     """The training recipe's options, before any work (one-line errors naming the option)."""
     from lensim.restore.schedule import LR_SCHEDULES
 
@@ -163,8 +251,17 @@ def _check_recipe(epochs: int, batch_size: int, lr: float, lr_halve_every: int, 
     at_least(time_budget_s, 0.0, "--time-budget-s", "s", "a time budget (0: none)")
 
 
-def _check_network(arch: str | None, width: int, depth: int, groups: int, deformable_scales: int,
-                   field_modulation: bool, no_fov: bool, stem: int, deformable: bool | None = None) -> None:
+def _check_network(
+    arch: str | None,
+    width: int,
+    depth: int,
+    groups: int,
+    deformable_scales: int,
+    field_modulation: bool,
+    no_fov: bool,
+    stem: int,
+    deformable: bool | None = None,
+) -> None:
     """The network's options (the rules of lensim.restore.network.FieldAwareUNet and
     lensim.restore.nafnet.NAFNet), before any work. ``deformable`` None: the architecture's
     default (lensim.restore.config.ARCH_DEFAULTS). ``arch`` None (a resumed run whose
@@ -180,14 +277,22 @@ def _check_network(arch: str | None, width: int, depth: int, groups: int, deform
     in_range(deformable_scales, -1, depth - 1, "--deformable-scales", what="a number of decoder scales (-1: all)")
     choice(stem, (0, 1, 2), "--stem")
     if field_modulation and no_fov:
-        raise InputError("--field-modulation", None, "is computed from the field-of-view input; expected it without "
-                         "--no-fov")
+        raise InputError(
+            "--field-modulation", None, "is computed from the field-of-view input; expected it without --no-fov"
+        )
     if arch is not None:
         _check_arch_rules(arch, width, groups, deformable_scales, field_modulation, stem, deformable)
 
 
-def _check_arch_rules(arch: str, width: int, groups: int, deformable_scales: int, field_modulation: bool, stem: int,
-                      deformable: bool | None) -> None:
+def _check_arch_rules(
+    arch: str,
+    width: int,
+    groups: int,
+    deformable_scales: int,
+    field_modulation: bool,
+    stem: int,
+    deformable: bool | None,
+) -> None:
     """_check_network's rules that depend on the architecture (its defaults resolved)."""
     from lensim.restore.config import ARCH_DEFAULTS
 
@@ -196,13 +301,17 @@ def _check_arch_rules(arch: str, width: int, groups: int, deformable_scales: int
     if deformable and width and width % groups:  # the groups split the deformable blocks' channels
         raise InputError("--deformable-groups", None, f"expected a divisor of --width {width}, got {groups}")
     if arch == "nafnet" and deformable and deformable_scales == 0:
-        raise InputError("--deformable-scales", None, "expected 1 or more (or -1: all) with --arch nafnet and "
-                         "--deformable; use --no-deformable for none")
+        raise InputError(
+            "--deformable-scales",
+            None,
+            "expected 1 or more (or -1: all) with --arch nafnet and --deformable; use --no-deformable for none",
+        )
     if field_modulation and arch != "unet":
         raise InputError("--field-modulation", None, f"is an option of --arch unet; expected it without --arch {arch}")
     if stem == 2 and arch != "nafnet":
-        raise InputError("--stem", None, f"is an option of --arch nafnet; expected 0 or 1 with --arch {arch}, got "
-                         f"{stem}")
+        raise InputError(
+            "--stem", None, f"is an option of --arch nafnet; expected 0 or 1 with --arch {arch}, got {stem}"
+        )
 
 
 def _check_crop(dataset: Path, crop: int) -> None:
@@ -217,9 +326,14 @@ def _check_crop(dataset: Path, crop: int) -> None:
 
 
 # TrainConfig fields whose option's parameter has another name
-_OPTION_OF = {"use_fov": "no_fov",
-              "use_deformable": "deformable", "use_context": "context", "max_steps_per_epoch": "steps_per_epoch",
-              "amp": "no_amp", "use_settings": "no_settings"}
+_OPTION_OF = {
+    "use_fov": "no_fov",
+    "use_deformable": "deformable",
+    "use_context": "context",
+    "max_steps_per_epoch": "steps_per_epoch",
+    "amp": "no_amp",
+    "use_settings": "no_settings",
+}
 
 
 def _given(ctx: typer.Context, parameter: str) -> bool:
@@ -236,44 +350,69 @@ def _progress(epochs: int, show: bool) -> tuple[Any, Callable[[TrainProgress], N
         return None, None
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-    prog = Progress(TextColumn("epoch {task.fields[epoch]}/{task.fields[epochs]}"), BarColumn(),
-                    TextColumn("{task.completed}/{task.total} steps"), TextColumn("loss {task.fields[loss]}"),
-                    TextColumn("{task.fields[val]}"), TimeElapsedColumn(), console=console, transient=False)
+    prog = Progress(
+        TextColumn("epoch {task.fields[epoch]}/{task.fields[epochs]}"),
+        BarColumn(),
+        TextColumn("{task.completed}/{task.total} steps"),
+        TextColumn("loss {task.fields[loss]}"),
+        TextColumn("{task.fields[val]}"),
+        TimeElapsedColumn(),
+        console=console,
+        transient=False,
+    )
     task = prog.add_task("train", total=None, epoch=0, epochs=epochs, loss="-", val="")
 
     def callback(p: TrainProgress) -> None:
         if p.kind == "step":
-            prog.update(task, completed=p.batch, total=p.batches, epoch=p.epoch + 1, epochs=p.epochs,
-                        loss=f"{p.loss:.3e}")
+            prog.update(
+                task, completed=p.batch, total=p.batches, epoch=p.epoch + 1, epochs=p.epochs, loss=f"{p.loss:.3e}"
+            )
             return
-        val = "" if p.val_psnr is None or math.isnan(p.val_psnr) else \
-            f"val {p.val_psnr:.2f} dB / SSIM {p.val_ssim:.4f}"
+        val = "" if p.val_psnr is None or math.isnan(p.val_psnr) else f"val {p.val_psnr:.2f} dB / SSIM {p.val_ssim:.4f}"
         prog.update(task, val=val)
-        console.print(f"epoch {p.epoch + 1}/{p.epochs} step {p.step}: loss {p.loss:.4e}"
-                      + (f", {val}" if val else "") + (" (time budget reached)" if p.kind == "stop" else ""),
-                      highlight=False)
+        console.print(
+            f"epoch {p.epoch + 1}/{p.epochs} step {p.step}: loss {p.loss:.4e}"
+            + (f", {val}" if val else "")
+            + (" (time budget reached)" if p.kind == "stop" else ""),
+            highlight=False,
+        )
+
     prog.start()
     return prog, callback
 
 
 def _report(result: TrainResult, quiet: bool, json_out: bool) -> None:
     """Print the run's summary: JSON, one line, or nothing."""
-    summary = {"run": result.run_dir, "epochs_done": result.epochs_done, "steps": result.step,
-               "stopped_early": result.stopped_early, "seconds": result.seconds, "val_psnr_db": result.val_psnr,
-               "val_ssim": result.val_ssim, "val_input_psnr_db": result.val_input_psnr,
-               "best_val_psnr_db": result.best_val_psnr, "conditioning": result.conditioning}
+    summary = {
+        "run": result.run_dir,
+        "epochs_done": result.epochs_done,
+        "steps": result.step,
+        "stopped_early": result.stopped_early,
+        "seconds": result.seconds,
+        "val_psnr_db": result.val_psnr,
+        "val_ssim": result.val_ssim,
+        "val_input_psnr_db": result.val_input_psnr,
+        "best_val_psnr_db": result.best_val_psnr,
+        "conditioning": result.conditioning,
+    }
     if json_out:
         print_json(summary)
     elif not quiet:
         vp = "n/a" if result.val_psnr is None else f"{result.val_psnr:.2f} dB (input {result.val_input_psnr:.2f} dB)"
-        console.print(f"trained {result.step} steps in {result.seconds:.0f} s; validation PSNR {vp}; "
-                      f"checkpoints in {result.run_dir}", highlight=False)
+        console.print(
+            f"trained {result.step} steps in {result.seconds:.0f} s; validation PSNR {vp}; "
+            f"checkpoints in {result.run_dir}",
+            highlight=False,
+        )
         from lensim.restore.conditioning import Conditioning
 
         cond = Conditioning.from_dict(result.conditioning)
         if cond.dim:
-            console.print(f"conditioned on {', '.join(cond.keys)} ({cond.describe()}): restore needs the photos' "
-                          "settings (a raw's EXIF or --fno/--focus-m/--focal-mm)", highlight=False)
+            console.print(
+                f"conditioned on {', '.join(cond.keys)} ({cond.describe()}): restore needs the photos' "
+                "settings (a raw's EXIF or --fno/--focus-m/--focal-mm)",
+                highlight=False,
+            )
 
 
 __all__ = ["train_command"]

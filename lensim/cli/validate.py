@@ -6,6 +6,7 @@ Each check raises a one-line :class:`lensim.errors.InputError` naming the option
 file) and what was expected, and returns the checked value, so a command reads
 ``pitch = positive(pixel_um, "--pixel-um", "um")``.
 """
+
 from __future__ import annotations
 
 import math
@@ -23,6 +24,7 @@ T = TypeVar("T")
 
 
 # ---------------------------------------------------------------- paths
+
 
 def input_file(path: str | Path, option: str | None = None, what: str = "file") -> Path:
     """An existing, readable file (not a folder)."""
@@ -97,12 +99,16 @@ def distinct_outputs(inputs: Iterable[Path], name: Callable[[Path], str], option
     for p in inputs:
         key = name(p)
         if key in seen and seen[key] != p:
-            raise InputError(str(p), option, f"would write the same output {key} as {seen[key]}; "
-                             "expected inputs with different names")
+            raise InputError(
+                str(p),
+                option,
+                f"would write the same output {key} as {seen[key]}; expected inputs with different names",
+            )
         seen[key] = p
 
 
 # ---------------------------------------------------------------- numbers
+
 
 def _shown(value: float, unit: str) -> str:
     return f"{value:g}{' ' + unit if unit else ''}"
@@ -118,7 +124,9 @@ def positive(value: float, option: str, unit: str = "", what: str = "a value") -
     """A finite value above 0."""
     finite(value, option, unit)
     if not value > 0:
-        raise InputError(option, None, f"expected {what} above 0{' ' + unit if unit else ''}, got {_shown(value, unit)}")
+        raise InputError(
+            option, None, f"expected {what} above 0{' ' + unit if unit else ''}, got {_shown(value, unit)}"
+        )
     return value
 
 
@@ -130,14 +138,18 @@ def at_least(value: float, low: float, option: str, unit: str = "", what: str = 
     return value
 
 
-def in_range(value: float, low: float, high: float, option: str, unit: str = "", what: str = "a value",
-             high_open: bool = False) -> float:
+def in_range(
+    value: float, low: float, high: float, option: str, unit: str = "", what: str = "a value", high_open: bool = False
+) -> float:
     """A finite value in [low, high] ([low, high) with high_open)."""
     finite(value, option, unit)
     if not (low <= value < high if high_open else low <= value <= high):
         end = ")" if high_open else "]"
-        raise InputError(option, None, f"expected {what} in [{low:g}, {high:g}{end}{' ' + unit if unit else ''}, "
-                         f"got {_shown(value, unit)}")
+        raise InputError(
+            option,
+            None,
+            f"expected {what} in [{low:g}, {high:g}{end}{' ' + unit if unit else ''}, got {_shown(value, unit)}",
+        )
     return value
 
 
@@ -157,6 +169,7 @@ def wavelength_nm(value: float, option: str = "--wavelength-nm") -> float:
 
 
 # ---------------------------------------------------------------- names
+
 
 def choice(value: T, choices: Sequence[T], option: str) -> T:
     """One of ``choices`` (names, or numbers such as bit depths)."""
@@ -182,8 +195,9 @@ def device(name: str, option: str = "--device") -> str:
     if count == 0:
         raise InputError(option, None, f"{name!r} requested but CUDA is not available on this machine; expected cpu")
     if index and int(index) >= count:
-        raise InputError(option, None, f"{name!r} requested but this machine has {count} CUDA device(s) "
-                         f"(cuda:0..cuda:{count - 1})")
+        raise InputError(
+            option, None, f"{name!r} requested but this machine has {count} CUDA device(s) (cuda:0..cuda:{count - 1})"
+        )
     return name
 
 
@@ -198,15 +212,38 @@ def scheduler_address(address: str | None, option: str = "--scheduler") -> str |
     if address is None:
         return None
     text = address.strip()
-    m = re.fullmatch(r"(?:(?P<proto>[a-z]+)://)?(?P<host>\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9._-]+)(?::(?P<port>\d{1,5}))?",
-                     text)
-    ok = m is not None and (m["proto"] is None or m["proto"] in DASK_PROTOCOLS) and (
-        m["port"] is None or 1 <= int(m["port"]) <= 65535)
+    m = re.fullmatch(
+        r"(?:(?P<proto>[a-z]+)://)?(?P<host>\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9._-]+)(?::(?P<port>\d{1,5}))?", text
+    )
+    ok = (
+        m is not None
+        and (m["proto"] is None or m["proto"] in DASK_PROTOCOLS)
+        and (m["port"] is None or 1 <= int(m["port"]) <= 65535)
+    )
     if not ok:
-        raise InputError(option, None, f"expected a Dask scheduler address such as tcp://10.0.0.5:8786 "
-                         f"([{'|'.join(DASK_PROTOCOLS)}://]HOST[:PORT]), got {address!r}")
+        raise InputError(
+            option,
+            None,
+            f"expected a Dask scheduler address such as tcp://10.0.0.5:8786 "
+            f"([{'|'.join(DASK_PROTOCOLS)}://]HOST[:PORT]), got {address!r}",
+        )
     return text
 
 
-__all__ = ["AIMINGS", "at_least", "choice", "device", "distinct_outputs", "even", "finite", "in_range", "input_file",
-           "input_folder", "output_file", "output_folder", "positive", "scheduler_address", "wavelength_nm"]
+__all__ = [
+    "AIMINGS",
+    "at_least",
+    "choice",
+    "device",
+    "distinct_outputs",
+    "even",
+    "finite",
+    "in_range",
+    "input_file",
+    "input_folder",
+    "output_file",
+    "output_folder",
+    "positive",
+    "scheduler_address",
+    "wavelength_nm",
+]

@@ -17,6 +17,7 @@ DATASET/manifest.json (written last by lensim.data.pairs.make_dataset):
 RUN/split.json (written by lensim.restore.train): ``train`` and ``val`` lists of source
 photo names, ``val_fraction``, ``seed``.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -44,8 +45,9 @@ def read_pairs_manifest(pairs_dir: str | Path) -> dict[str, Any]:
     if not isinstance(manifest, dict):
         raise InputError(str(path), None, "expected a JSON object")
     if manifest.get("format", FORMAT) != FORMAT:
-        raise InputError(str(path), "format", f"expected {FORMAT!r}, got {manifest['format']!r}; not a pairs "
-                         "dataset manifest")
+        raise InputError(
+            str(path), "format", f"expected {FORMAT!r}, got {manifest['format']!r}; not a pairs dataset manifest"
+        )
     sensor = manifest.get("sensor")
     res = sensor.get("resolution") if isinstance(sensor, dict) else None
     if not (isinstance(res, list) and len(res) == 2 and all(isinstance(v, int) and v > 0 for v in res)):
@@ -71,8 +73,11 @@ def _check_settings(records: list[dict[str, Any]], source: str) -> None:
     have = [i for i, r in enumerate(records) if r.get("settings") is not None]
     if have and len(have) != len(records):
         lacking = next(i for i, r in enumerate(records) if r.get("settings") is None)
-        raise InputError(source, f"records[{lacking}].settings", f"missing, while records[{have[0]}] has shooting "
-                         "settings; expected settings on every record or on none")
+        raise InputError(
+            source,
+            f"records[{lacking}].settings",
+            f"missing, while records[{have[0]}] has shooting settings; expected settings on every record or on none",
+        )
     for i in have:
         record_settings(records[i]["settings"], source, f"records[{i}].settings")
 

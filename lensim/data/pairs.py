@@ -32,6 +32,7 @@ Parallelism (lensim.workers.run_jobs, the engine of `psf bank` too): `workers > 
 a local dask.distributed cluster (one thread per worker process); `scheduler` connects to
 an existing Dask cluster instead.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -104,8 +105,9 @@ def crop_capture(record: Mapping[str, Any], crop: Mapping[str, Any]) -> dict | N
     return record.get("capture")
 
 
-def place_on_sensor(h: int, w: int, sensor: SensorProfile, k: int, placements: int,
-                    gen: torch.Generator, tries: int = 256) -> tuple[int, int]:
+def place_on_sensor(
+    h: int, w: int, sensor: SensorProfile, k: int, placements: int, gen: torch.Generator, tries: int = 256
+) -> tuple[int, int]:
     """Top-left sensor pixel (even, to keep the Bayer phase) of an h x w photo for placement
     k of `placements`: uniformly random among the positions that keep the photo on the
     sensor and put its centre at a normalized radius in [k, k + 1) / placements (the
@@ -140,13 +142,16 @@ def make_pairs_for_image(job: PairJob) -> dict:
     gen = torch.Generator().manual_seed(job.seed)
     _, h, w = img.shape
     if h < job.size or w < job.size:
-        raise InputError(job.path, "size", f"image is {w}x{h}; expected at least {job.size}x{job.size} pixels for "
-                         f"{job.size}-pixel crops")
+        raise InputError(
+            job.path,
+            "size",
+            f"image is {w}x{h}; expected at least {job.size}x{job.size} pixels for {job.size}-pixel crops",
+        )
     # a random crop of the photo if it is larger than the sensor
     h2, w2 = min(h, sensor.height), min(w, sensor.width)
     y = int(torch.randint(0, h - h2 + 1, (1,), generator=gen))
     x = int(torch.randint(0, w - w2 + 1, (1,), generator=gen))
-    img = img[:, y:y + h2, x:x + w2]
+    img = img[:, y : y + h2, x : x + w2]
     crops: list[dict] = []
     placed: list[dict] = []
     stem = f"{job.index:06d}"
@@ -156,19 +161,32 @@ def make_pairs_for_image(job: PairJob) -> dict:
         ev = draw_exposure(job.exposure_ev, gen)
         scene = expose(img, ev)
         sim, params = simulate(scene, bank, sensor, gen, noise=job.noise, demosaic=job.demosaic, mapping=mapping)
-        placed.append({"sensor_top": top, "sensor_left": left, "capture": params.to_dict(),
-                       **({"exposure_ev": ev} if job.exposure_ev != (0.0, 0.0) else {})})
+        placed.append(
+            {
+                "sensor_top": top,
+                "sensor_left": left,
+                "capture": params.to_dict(),
+                **({"exposure_ev": ev} if job.exposure_ev != (0.0, 0.0) else {}),
+            }
+        )
         for _ in range(job.crops):
             cy = int(torch.randint(0, h2 - job.size + 1, (1,), generator=gen))
             cx = int(torch.randint(0, w2 - job.size + 1, (1,), generator=gen))
             name_in = f"pairs/{stem}_{len(crops):03d}_input.png"
             name_gt = f"pairs/{stem}_{len(crops):03d}_target.png"
-            write_image(out / name_in, sim[:, cy:cy + job.size, cx:cx + job.size], 8)
-            write_image(out / name_gt, scene[:, cy:cy + job.size, cx:cx + job.size], 8)
-            crops.append({"input": name_in, "target": name_gt, "sensor_top": top + cy, "sensor_left": left + cx,
-                          "placement": p})
-    record = {"index": job.index, "source": job.path, "seed": job.seed, "source_crop": [y, x, h2, w2],
-              "placements": placed, "crops": crops}
+            write_image(out / name_in, sim[:, cy : cy + job.size, cx : cx + job.size], 8)
+            write_image(out / name_gt, scene[:, cy : cy + job.size, cx : cx + job.size], 8)
+            crops.append(
+                {"input": name_in, "target": name_gt, "sensor_top": top + cy, "sensor_left": left + cx, "placement": p}
+            )
+    record = {
+        "index": job.index,
+        "source": job.path,
+        "seed": job.seed,
+        "source_crop": [y, x, h2, w2],
+        "placements": placed,
+        "crops": crops,
+    }
     if job.settings is not None:
         record["settings"] = job.settings
     if job.grid_setting is not None:
@@ -208,17 +226,31 @@ def _bank_use(bank: PSFBank | GridBank, photos: int, seed: int) -> _BankUse:
     if isinstance(bank, GridBank):
         picks = grid_settings_of_photos(seed, photos, len(bank))
         entries = bank.manifest["settings"]
-        recorded = {"lens": bank.lens, "bank": str(bank.directory),
-                    "grid": [{"bank": e["bank"], "resolved": e["resolved"]} for e in entries]}
-        return _BankUse([str(bank.bank_dir(k)) for k in picks], [entries[k]["resolved"] for k in picks], list(picks),
-                        recorded, float(bank.manifest["bank"]["pixel_pitch_um"]), str(bank.directory))
+        recorded = {
+            "lens": bank.lens,
+            "bank": str(bank.directory),
+            "grid": [{"bank": e["bank"], "resolved": e["resolved"]} for e in entries],
+        }
+        return _BankUse(
+            [str(bank.bank_dir(k)) for k in picks],
+            [entries[k]["resolved"] for k in picks],
+            list(picks),
+            recorded,
+            float(bank.manifest["bank"]["pixel_pitch_um"]),
+            str(bank.directory),
+        )
     if bank.directory is None:
         raise InputError(None, "bank", "expected a bank stored on disk (workers load it)")
     shooting = bank.manifest.get("shooting")
     resolved = shooting.get("resolved") if isinstance(shooting, dict) else None
-    return _BankUse([str(bank.directory)] * photos, [resolved] * photos, [None] * photos,
-                    {"lens": bank.manifest.get("lens"), "bank": str(bank.directory)}, bank.pixel_pitch_um,
-                    str(bank.directory))
+    return _BankUse(
+        [str(bank.directory)] * photos,
+        [resolved] * photos,
+        [None] * photos,
+        {"lens": bank.manifest.get("lens"), "bank": str(bank.directory)},
+        bank.pixel_pitch_um,
+        str(bank.directory),
+    )
 
 
 def make_dataset(
@@ -257,18 +289,48 @@ def make_dataset(
     files = list_images(sharp_dir)
     use = _bank_use(bank, len(files), seed)
     if abs(use.pitch_um / sensor.pixel_pitch_um - 1) > 1e-6:
-        raise InputError(use.where, "pixel_pitch_um", f"the bank is at {use.pitch_um:g} um; expected "
-                         f"the pitch of the sensor {sensor_name} ({sensor.pixel_pitch_um:g} um)")
+        raise InputError(
+            use.where,
+            "pixel_pitch_um",
+            f"the bank is at {use.pitch_um:g} um; expected "
+            f"the pitch of the sensor {sensor_name} ({sensor.pixel_pitch_um:g} um)",
+        )
     check_photos(files, size)
     out = Path(out_dir)
-    settings = {"format": FORMAT, "seed": seed, "crops": crops, "placements": placements, "size": size,
-                "noise": noise, "demosaic": demosaic, "sensor": sensor.to_dict(), "sensor_name": sensor_name,
-                **use.recorded, "sources": [str(p) for p in files]}
+    settings = {
+        "format": FORMAT,
+        "seed": seed,
+        "crops": crops,
+        "placements": placements,
+        "size": size,
+        "noise": noise,
+        "demosaic": demosaic,
+        "sensor": sensor.to_dict(),
+        "sensor_name": sensor_name,
+        **use.recorded,
+        "sources": [str(p) for p in files],
+    }
     if exposure_ev != (0.0, 0.0):
         settings["exposure_ev"] = list(exposure_ev)  # absent when off: folders made before keep resuming
-    jobs = [PairJob(i, str(p), str(out), use.dirs[i], sensor_name, image_seed(seed, i, p.name), crops, size,
-                    noise, demosaic, placements, exposure_ev, use.settings[i], use.grid_settings[i])
-            for i, p in enumerate(files)]
+    jobs = [
+        PairJob(
+            i,
+            str(p),
+            str(out),
+            use.dirs[i],
+            sensor_name,
+            image_seed(seed, i, p.name),
+            crops,
+            size,
+            noise,
+            demosaic,
+            placements,
+            exposure_ev,
+            use.settings[i],
+            use.grid_settings[i],
+        )
+        for i, p in enumerate(files)
+    ]
     with folder_lock(out):
         claimed = _claim_folder(out, settings)
         todo = [j for j in jobs if _read_record(j) is None]
@@ -296,8 +358,12 @@ def _read_record(job: PairJob) -> dict | None:
         record = read_json(path, "photo record")
     except InputError:
         return None
-    ok = isinstance(record, dict) and record.get("index") == job.index and record.get("seed") == job.seed \
+    ok = (
+        isinstance(record, dict)
+        and record.get("index") == job.index
+        and record.get("seed") == job.seed
         and isinstance(record.get("crops"), list)
+    )
     return record if ok else None
 
 
@@ -308,8 +374,11 @@ def check_photos(files: list[Path], size: int) -> None:
         img, _ = read_image(path)
         _, h, w = img.shape
         if h < size or w < size:
-            raise InputError(str(path), "size", f"image is {w}x{h}; expected at least {size}x{size} pixels for "
-                             f"{size}-pixel crops (--size)")
+            raise InputError(
+                str(path),
+                "size",
+                f"image is {w}x{h}; expected at least {size}x{size} pixels for {size}-pixel crops (--size)",
+            )
 
 
 def _claim_folder(out: Path, settings: dict) -> bool:
@@ -322,12 +391,20 @@ def _claim_folder(out: Path, settings: dict) -> bool:
         return True
     prev = read_json(path, "pairs settings record")
     if not isinstance(prev, dict) or prev.get("format") != FORMAT:
-        raise InputError(str(path), "format", f"expected the {FORMAT!r} settings record of `lensim dataset make`; "
-                         "delete the file (or choose a new output folder) to start afresh")
+        raise InputError(
+            str(path),
+            "format",
+            f"expected the {FORMAT!r} settings record of `lensim dataset make`; "
+            "delete the file (or choose a new output folder) to start afresh",
+        )
     diff = sorted(k for k in settings if k != "bank" and prev.get(k) != settings[k])
     if diff:
-        raise InputError(str(out), ", ".join(diff), "differs from the dataset already in this folder; expected the "
-                         "same settings to resume, or a new output folder")
+        raise InputError(
+            str(out),
+            ", ".join(diff),
+            "differs from the dataset already in this folder; expected the "
+            "same settings to resume, or a new output folder",
+        )
     return False
 
 
@@ -340,8 +417,9 @@ def _release_folder(out: Path) -> None:
             folder.rmdir()  # only when empty
 
 
-def _run_jobs(todo: list[PairJob], total: int, workers: int, scheduler: str | None,
-              progress: Callable[[int, int], None] | None) -> None:
+def _run_jobs(
+    todo: list[PairJob], total: int, workers: int, scheduler: str | None, progress: Callable[[int, int], None] | None
+) -> None:
     """Run the unfinished jobs through lensim.workers.run_jobs (here, on a local Dask
     cluster of ``workers`` processes, or on the one at ``scheduler``); progress(done,
     total) counts photos, the ones finished before included."""

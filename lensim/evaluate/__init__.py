@@ -1,4 +1,5 @@
 """Image-quality measurements: slanted-edge MTF (ISO 12233 style) and lateral colour."""
+
 from lensim.evaluate.chromatic import EdgeShiftResult, PointShiftResult, lateral_color_edge, lateral_color_point
 from lensim.evaluate.edge_target import make_slanted_edge
 from lensim.evaluate.slanted_edge import (

@@ -68,6 +68,7 @@ Unsharp mask (a stand-in for in-camera sharpening, done on the sRGB values as an
 does): out = x + amount * (x - G_sigma * x), clipped to [0, 1], G_sigma a Gaussian blur
 of ``sigma_px`` pixels (defaults 1.0 px and 0.6). It uses neither the mapping nor the bank.
 """
+
 from __future__ import annotations
 
 import math
@@ -142,9 +143,16 @@ def _otf(kernels: torch.Tensor, n: int) -> torch.Tensor:
     return torch.fft.rfft2(big)
 
 
-def tiled_deconvolve(cam: torch.Tensor, mapping: SensorMapping, bank: PSFBank, solver: WindowSolver,
-                     tile: int = DEFAULT_TILE, margin: int | None = None, unit_sum: bool = False,
-                     chunk: int = 32) -> torch.Tensor:
+def tiled_deconvolve(
+    cam: torch.Tensor,
+    mapping: SensorMapping,
+    bank: PSFBank,
+    solver: WindowSolver,
+    tile: int = DEFAULT_TILE,
+    margin: int | None = None,
+    unit_sum: bool = False,
+    chunk: int = 32,
+) -> torch.Tensor:
     """Apply a per-window deconvolution over an energy-domain image (3, H, W) with the bank's
     kernel at each tile centre, blended with bilinear hats (see the module docstring).
 
@@ -166,25 +174,26 @@ def tiled_deconvolve(cam: torch.Tensor, mapping: SensorMapping, bank: PSFBank, s
     off = tile + m
     pad_y = (off, (ny - 1) * tile + n - off - h)
     pad_x = (off, (nx - 1) * tile + n - off - w)
-    padded = torch.from_numpy(np.pad(cam.detach().cpu().numpy().astype(np.float64), ((0, 0), pad_y, pad_x),
-                                     mode="symmetric"))
+    padded = torch.from_numpy(
+        np.pad(cam.detach().cpu().numpy().astype(np.float64), ((0, 0), pad_y, pad_x), mode="symmetric")
+    )
     hat = 1.0 - torch.abs(torch.arange(-tile, tile + 1, dtype=torch.float64)) / tile
     hat2 = hat[:, None] * hat[None, :]
     out = torch.zeros(c, (ny - 1) * tile + 2 * tile + 1, (nx - 1) * tile + 2 * tile + 1, dtype=torch.float64)
     centres = [(i, j) for i in range(ny) for j in range(nx)]
     for s in range(0, len(centres), chunk):
-        part = centres[s:s + chunk]
+        part = centres[s : s + chunk]
         rows = torch.stack([cy[i] for i, _ in part])
         cols = torch.stack([cx[j] for _, j in part])
         ks = kernels_at(bank, mapping, rows, cols, unit_sum)
         if ks.shape[1] != c:
             raise ValueError(f"the bank has {ks.shape[1]} channels; the image {c}")
-        win = torch.stack([padded[:, i * tile:i * tile + n, j * tile:j * tile + n] for i, j in part])
+        win = torch.stack([padded[:, i * tile : i * tile + n, j * tile : j * tile + n] for i, j in part])
         res = solver(win, ks)
-        core = res[..., m:m + 2 * tile + 1, m:m + 2 * tile + 1] * hat2
+        core = res[..., m : m + 2 * tile + 1, m : m + 2 * tile + 1] * hat2
         for (i, j), r in zip(part, core):
-            out[:, i * tile:i * tile + 2 * tile + 1, j * tile:j * tile + 2 * tile + 1] += r
-    return out[:, tile:tile + h, tile:tile + w]
+            out[:, i * tile : i * tile + 2 * tile + 1, j * tile : j * tile + 2 * tile + 1] += r
+    return out[:, tile : tile + h, tile : tile + w]
 
 
 # ---------------------------------------------------------------------------------------
@@ -215,9 +224,11 @@ def gradient_power(n: int) -> torch.Tensor:
     return 4 * torch.sin(math.pi * fy)[:, None] ** 2 + 4 * torch.sin(math.pi * fx)[None, :] ** 2
 
 
-def wiener_solver(capture: Mapping[str, Any] | None = None, nsr: float | None = None,
-                  noise_floor: float = DEFAULT_NOISE_FLOOR) -> WindowSolver:
+def wiener_solver(
+    capture: Mapping[str, Any] | None = None, nsr: float | None = None, noise_floor: float = DEFAULT_NOISE_FLOOR
+) -> WindowSolver:
     """The per-window Wiener filter (see the module docstring for its NSR)."""
+
     def solve(win: torch.Tensor, kernels: torch.Tensor) -> torch.Tensor:
         n = win.shape[-1]
         ext = _mirror(win)
@@ -229,22 +240,31 @@ def wiener_solver(capture: Mapping[str, Any] | None = None, nsr: float | None = 
             var_n = noise_variance(mean, capture) + noise_floor
             gx = win[..., :, 1:] - win[..., :, :-1]
             gy = win[..., 1:, :] - win[..., :-1, :]
-            grad = (gx ** 2).mean(dim=(-2, -1), keepdim=True) + (gy ** 2).mean(dim=(-2, -1), keepdim=True)
+            grad = (gx**2).mean(dim=(-2, -1), keepdim=True) + (gy**2).mean(dim=(-2, -1), keepdim=True)
             amp = (grad - 4 * var_n).clamp_min(4 * var_n).clamp_min(1e-8)
             ratio = var_n / amp * gradient_power(2 * n)
         y = torch.fft.rfft2(ext)
-        x = otf2.conj() * y / (otf2.real ** 2 + otf2.imag ** 2 + ratio)
+        x = otf2.conj() * y / (otf2.real**2 + otf2.imag**2 + ratio)
         return torch.fft.irfft2(x, s=ext.shape[-2:])[..., :n, :n]
+
     return solve
 
 
-def wiener(image: torch.Tensor, mapping: SensorMapping, bank: PSFBank, capture: Mapping[str, Any] | None = None,
-           tile: int = DEFAULT_TILE, nsr: float | None = None, noise_floor: float = DEFAULT_NOISE_FLOOR) -> torch.Tensor:
+def wiener(
+    image: torch.Tensor,
+    mapping: SensorMapping,
+    bank: PSFBank,
+    capture: Mapping[str, Any] | None = None,
+    tile: int = DEFAULT_TILE,
+    nsr: float | None = None,
+    noise_floor: float = DEFAULT_NOISE_FLOOR,
+) -> torch.Tensor:
     """Non-blind Wiener deconvolution with the true PSF bank (an oracle), per tile in the
     energy domain; sRGB (3, H, W) in [0, 1] in and out (see the module docstring)."""
     cam = to_energy(image, capture)
-    out = tiled_deconvolve(cam, mapping, bank, wiener_solver(capture, nsr, noise_floor), tile=tile,
-                           unit_sum=_unit_sum_kernels(capture))
+    out = tiled_deconvolve(
+        cam, mapping, bank, wiener_solver(capture, nsr, noise_floor), tile=tile, unit_sum=_unit_sum_kernels(capture)
+    )
     return from_energy(out, capture)
 
 
@@ -269,17 +289,24 @@ def richardson_lucy_solver(iterations: int = DEFAULT_RL_ITERATIONS) -> WindowSol
             corr = torch.fft.irfft2(torch.fft.rfft2(y / est) * otf.conj(), s=s)
             x = (x * corr / ksum).clamp_min(0.0)
         return x[..., :n, :n]
+
     return solve
 
 
-def richardson_lucy(image: torch.Tensor, mapping: SensorMapping, bank: PSFBank,
-                    capture: Mapping[str, Any] | None = None, tile: int = DEFAULT_TILE,
-                    iterations: int = DEFAULT_RL_ITERATIONS) -> torch.Tensor:
+def richardson_lucy(
+    image: torch.Tensor,
+    mapping: SensorMapping,
+    bank: PSFBank,
+    capture: Mapping[str, Any] | None = None,
+    tile: int = DEFAULT_TILE,
+    iterations: int = DEFAULT_RL_ITERATIONS,
+) -> torch.Tensor:
     """Richardson-Lucy deconvolution with the true PSF bank (an oracle), per tile in the
     energy domain, a fixed number of iterations; sRGB (3, H, W) in [0, 1] in and out."""
     cam = to_energy(image, capture)
-    out = tiled_deconvolve(cam, mapping, bank, richardson_lucy_solver(iterations), tile=tile,
-                           unit_sum=_unit_sum_kernels(capture))
+    out = tiled_deconvolve(
+        cam, mapping, bank, richardson_lucy_solver(iterations), tile=tile, unit_sum=_unit_sum_kernels(capture)
+    )
     return from_energy(out, capture)
 
 
@@ -287,9 +314,14 @@ def richardson_lucy(image: torch.Tensor, mapping: SensorMapping, bank: PSFBank,
 # unsharp mask
 
 
-def unsharp_mask(image: torch.Tensor, mapping: SensorMapping | None = None, bank: PSFBank | None = None,
-                 capture: Mapping[str, Any] | None = None, sigma_px: float = DEFAULT_UNSHARP_SIGMA_PX,
-                 amount: float = DEFAULT_UNSHARP_AMOUNT) -> torch.Tensor:
+def unsharp_mask(
+    image: torch.Tensor,
+    mapping: SensorMapping | None = None,
+    bank: PSFBank | None = None,
+    capture: Mapping[str, Any] | None = None,
+    sigma_px: float = DEFAULT_UNSHARP_SIGMA_PX,
+    amount: float = DEFAULT_UNSHARP_AMOUNT,
+) -> torch.Tensor:
     """Unsharp-mask sharpening on the sRGB values: x + amount * (x - G_sigma x), clipped to
     [0, 1]; sigma_px in pixels (mirrored borders). mapping, bank and capture are unused
     (same signature as the other baselines)."""

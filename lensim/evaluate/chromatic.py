@@ -11,6 +11,7 @@ Point: each channel's background-subtracted intensity centroid (pixels), iterate
 circular window; shifts are (dx, dy) vectors in pixels, projectable on any direction
 (e.g. the radial direction from the image centre).
 """
+
 from __future__ import annotations
 
 import math
@@ -68,8 +69,14 @@ class EdgeShiftResult:
         return float(self.positions_px[2] - self.positions_px[1])
 
 
-def lateral_color_edge(region: np.ndarray, reference: int = 1, *, orientation: Orientation | None = None,
-                       min_angle_deg: float = 1.0, max_angle_deg: float = 15.0) -> EdgeShiftResult:
+def lateral_color_edge(
+    region: np.ndarray,
+    reference: int = 1,
+    *,
+    orientation: Orientation | None = None,
+    min_angle_deg: float = 1.0,
+    max_angle_deg: float = 15.0,
+) -> EdgeShiftResult:
     """Lateral colour across one slanted edge in an (H, W, C) region (RGB: C = 3, reference
     green).
 
@@ -81,12 +88,21 @@ def lateral_color_edge(region: np.ndarray, reference: int = 1, *, orientation: O
     a = _as_channels(region, reference)
     if orientation is None:
         orientation = detect_orientation(a)
-    fits = tuple(locate_edge(a[:, :, c], orientation, min_angle_deg, max_angle_deg, name=f"region[..., {c}]")
-                 for c in range(a.shape[2]))
+    fits = tuple(
+        locate_edge(a[:, :, c], orientation, min_angle_deg, max_angle_deg, name=f"region[..., {c}]")
+        for c in range(a.shape[2])
+    )
     pos = np.array([f.position_px() for f in fits])
     ref = fits[reference]
-    return EdgeShiftResult(positions_px=pos, shifts_px=pos - pos[reference], reference=reference % a.shape[2],
-                           normal_xy=ref.normal_xy, angle_deg=ref.angle_deg, orientation=orientation, fits=fits)
+    return EdgeShiftResult(
+        positions_px=pos,
+        shifts_px=pos - pos[reference],
+        reference=reference % a.shape[2],
+        normal_xy=ref.normal_xy,
+        angle_deg=ref.angle_deg,
+        orientation=orientation,
+        fits=fits,
+    )
 
 
 @dataclass(frozen=True)
@@ -142,8 +158,13 @@ def _centroid(img: np.ndarray, radius: float, name: str) -> np.ndarray:
     return np.array([cx, cy])
 
 
-def lateral_color_point(region: np.ndarray, reference: int = 1, *, radius_px: float | None = None,
-                        background: float | np.ndarray | None = None) -> PointShiftResult:
+def lateral_color_point(
+    region: np.ndarray,
+    reference: int = 1,
+    *,
+    radius_px: float | None = None,
+    background: float | np.ndarray | None = None,
+) -> PointShiftResult:
     """Lateral colour from the image of a point source in an (H, W, C) region.
 
     background: per-channel level (image units) subtracted first; None takes the median of
@@ -169,7 +190,9 @@ def lateral_color_point(region: np.ndarray, reference: int = 1, *, radius_px: fl
         img = a[:, :, c] - bg[c]
         peak = float(img.max())
         if not peak > 5.0 * noise[c] or not peak > 0:
-            raise InputError(None, f"region[..., {c}]", f"no point found: peak {peak:.3g} above background, noise {noise[c]:.3g}")
+            raise InputError(
+                None, f"region[..., {c}]", f"no point found: peak {peak:.3g} above background, noise {noise[c]:.3g}"
+            )
         if radius_px is None:
             r0, c0 = np.unravel_index(int(np.argmax(img)), img.shape)
             to_border = float(min(r0, c0, rows - 1 - r0, cols - 1 - c0))

@@ -1,5 +1,6 @@
 """Synthetic slanted-edge targets: an ideal straight edge, exactly area-sampled, optionally
 blurred by a PSF (the geometry and sign conventions of lensim.evaluate.slanted_edge)."""
+
 from __future__ import annotations
 
 import math
@@ -26,9 +27,17 @@ def _box_sum_cdf(t: np.ndarray, a: float, b: float) -> np.ndarray:
     return np.clip((r2(t + hp) - r2(t + hm) - r2(t - hm) + r2(t - hp)) / (a * b), 0.0, 1.0)
 
 
-def make_slanted_edge(size: int | tuple[int, int], angle_deg: float, low: float = 0.2,
-                      high: float = 0.8, psf: np.ndarray | None = None, oversample: int = 8, *,
-                      orientation: Orientation = "vertical", offset_px: float = 0.0) -> np.ndarray:
+def make_slanted_edge(
+    size: int | tuple[int, int],
+    angle_deg: float,
+    low: float = 0.2,
+    high: float = 0.8,
+    psf: np.ndarray | None = None,
+    oversample: int = 8,
+    *,
+    orientation: Orientation = "vertical",
+    offset_px: float = 0.0,
+) -> np.ndarray:
     """A synthetic slanted-edge target: an ideal straight edge, area-sampled, optionally
     blurred by a PSF.
 

@@ -30,6 +30,7 @@ Summary shape (exactly): ``{"methods": {NAME: {"psnr_db": x, "ssim": x, "zones":
 Per-crop rows (:func:`evaluate_rows`, :func:`write_csv`) hold every score and the zone
 pixel counts; :func:`markdown_table` renders the summary.
 """
+
 from __future__ import annotations
 
 import csv
@@ -96,8 +97,11 @@ Method = Callable[[torch.Tensor, CropContext], torch.Tensor]
 
 def _need_bank(ctx: CropContext, name: str) -> PSFBank:
     if ctx.bank is None:
-        raise InputError(None, "bank", f"method {name!r} needs the dataset's PSF bank; it was not found (pass its folder "
-                         "with --bank)")
+        raise InputError(
+            None,
+            "bank",
+            f"method {name!r} needs the dataset's PSF bank; it was not found (pass its folder with --bank)",
+        )
     return ctx.bank
 
 
@@ -109,16 +113,25 @@ def builtin_method(name: str, **options: Any) -> Method:
     if name == "wiener":
         return lambda image, ctx: baselines.wiener(image, ctx.mapping, _need_bank(ctx, name), ctx.capture, **options)
     if name == "rl":
-        return lambda image, ctx: baselines.richardson_lucy(image, ctx.mapping, _need_bank(ctx, name), ctx.capture,
-                                                            **options)
+        return lambda image, ctx: baselines.richardson_lucy(
+            image, ctx.mapping, _need_bank(ctx, name), ctx.capture, **options
+        )
     if name == "unsharp":
         return lambda image, ctx: baselines.unsharp_mask(image, ctx.mapping, ctx.bank, ctx.capture, **options)
-    raise InputError(None, "methods", f"unknown method {name!r}; expected one of "
-                     f"{', '.join(BUILTIN_METHODS + CHECKPOINT_METHODS)}")
+    raise InputError(
+        None, "methods", f"unknown method {name!r}; expected one of {', '.join(BUILTIN_METHODS + CHECKPOINT_METHODS)}"
+    )
 
 
-def checkpoint_method(run: str | Path, lens: Mapping[str, Any] | None = None, sensor: Mapping[str, Any] | None = None,
-                      device: str = "cpu", tile: int = 512, overlap: int = 192, arch: str | None = None) -> Method:
+def checkpoint_method(
+    run: str | Path,
+    lens: Mapping[str, Any] | None = None,
+    sensor: Mapping[str, Any] | None = None,
+    device: str = "cpu",
+    tile: int = 512,
+    overlap: int = 192,
+    arch: str | None = None,
+) -> Method:
     """A trained network (`lensim train` run folder or checkpoint) as a method: each crop is
     restored by lensim.restore.infer.restore_image with its absolute sensor offset (native
     scale) and the sensor's size in pixels. lens / sensor (dataset settings) make
@@ -134,11 +147,15 @@ def checkpoint_method(run: str | Path, lens: Mapping[str, Any] | None = None, se
     from lensim.restore.infer import restore_image
     from lensim.restore.models import arch_of
 
-    model, info = load_checkpoint(run, lens=dict(lens) if lens else None, sensor=dict(sensor) if sensor else None,
-                                  device=device)
+    model, info = load_checkpoint(
+        run, lens=dict(lens) if lens else None, sensor=dict(sensor) if sensor else None, device=device
+    )
     if arch is not None and arch_of(info["model_config"]) != arch:
-        raise InputError(info["path"], "model_config", f"holds a {arch_of(info['model_config'])!r} network; "
-                         f"expected {arch!r} (--arch)")
+        raise InputError(
+            info["path"],
+            "model_config",
+            f"holds a {arch_of(info['model_config'])!r} network; expected {arch!r} (--arch)",
+        )
     cond = Conditioning.from_dict(info["conditioning"], info["path"])
 
     def restore(image: torch.Tensor, ctx: CropContext) -> torch.Tensor:
@@ -148,13 +165,24 @@ def checkpoint_method(run: str | Path, lens: Mapping[str, Any] | None = None, se
                 warnings.warn(text, UserWarning, stacklevel=2)
         if cond.dim:
             if ctx.settings is None:
-                raise InputError(str(run), "conditioning", f"the network is conditioned on {', '.join(cond.keys)}; "
-                                 f"record {ctx.record} of the pairs has no settings; expected pairs made across "
-                                 "shooting settings")
+                raise InputError(
+                    str(run),
+                    "conditioning",
+                    f"the network is conditioned on {', '.join(cond.keys)}; "
+                    f"record {ctx.record} of the pairs has no settings; expected pairs made across "
+                    "shooting settings",
+                )
             vec = cond.vector(ctx.settings, str(run))
-        return restore_image(model, image, (float(ctx.top), float(ctx.left)),
-                             (float(ctx.sensor.height), float(ctx.sensor.width)), tile=tile, overlap=overlap,
-                             settings=vec)
+        return restore_image(
+            model,
+            image,
+            (float(ctx.top), float(ctx.left)),
+            (float(ctx.sensor.height), float(ctx.sensor.width)),
+            tile=tile,
+            overlap=overlap,
+            settings=vec,
+        )
+
     return restore
 
 
@@ -162,8 +190,9 @@ def checkpoint_method(run: str | Path, lens: Mapping[str, Any] | None = None, se
 # dataset
 
 
-def _load_bank(manifest: Mapping[str, Any], pairs_dir: Path,
-               bank: PSFBank | GridBank | str | Path | None) -> PSFBank | GridBank | None:
+def _load_bank(
+    manifest: Mapping[str, Any], pairs_dir: Path, bank: PSFBank | GridBank | str | Path | None
+) -> PSFBank | GridBank | None:
     """The bank (or grid of banks) the pairs were made with: given, or the manifest's."""
     if isinstance(bank, (PSFBank, GridBank)):
         return bank
@@ -187,8 +216,11 @@ def _record_bank(bank: PSFBank | GridBank | None, record: Mapping[str, Any], whe
         return bank
     k = record.get("grid_setting")
     if isinstance(k, bool) or not isinstance(k, int) or not 0 <= k < len(bank):
-        raise InputError(where, "grid_setting", f"expected the index of one of the grid's {len(bank)} settings "
-                         f"({bank.directory}), got {k!r}")
+        raise InputError(
+            where,
+            "grid_setting",
+            f"expected the index of one of the grid's {len(bank)} settings ({bank.directory}), got {k!r}",
+        )
     return bank.bank(k)
 
 
@@ -244,20 +276,41 @@ def evaluate_rows(
         x, _ = read_image(pairs_dir / cr["input"])
         y, _ = read_image(pairs_dir / cr["target"])
         if x.shape != y.shape:
-            raise InputError(str(pairs_dir / cr["input"]), "size", f"is {tuple(x.shape)}; its target is {tuple(y.shape)}")
+            raise InputError(
+                str(pairs_dir / cr["input"]), "size", f"is {tuple(x.shape)}; its target is {tuple(y.shape)}"
+            )
         _, h, w = x.shape
         top, left = int(cr["sensor_top"]), int(cr["sensor_left"])
         rec_bank = _record_bank(the_bank, rec, f"{pairs_dir / MANIFEST}: records[{ri}]")
-        ctx = CropContext(native_mapping(h, w, sensor, top, left), sensor, rec_bank, crop_capture(rec, cr), top, left,
-                          ri, ci, _record_settings(rec, pairs_dir, ri))
+        ctx = CropContext(
+            native_mapping(h, w, sensor, top, left),
+            sensor,
+            rec_bank,
+            crop_capture(rec, cr),
+            top,
+            left,
+            ri,
+            ci,
+            _record_settings(rec, pairs_dir, ri),
+        )
         rho = normalized_radius(h, w, top, left, sensor.height, sensor.width)
         for name, method in all_methods.items():
             out = method(x, ctx)
             if tuple(out.shape) != tuple(x.shape):
                 raise ValueError(f"method {name!r} returned shape {tuple(out.shape)}; expected {tuple(x.shape)}")
             s = image_scores(out.detach().float().cpu().clamp(0.0, 1.0), y, rho)
-            row = {"record": ri, "crop": ci, "source": rec.get("source", ""), "input": cr["input"], "sensor_top": top,
-                   "sensor_left": left, "method": name, "psnr_db": s["psnr_db"], "ssim": s["ssim"], "mse": s["mse"]}
+            row = {
+                "record": ri,
+                "crop": ci,
+                "source": rec.get("source", ""),
+                "input": cr["input"],
+                "sensor_top": top,
+                "sensor_left": left,
+                "method": name,
+                "psnr_db": s["psnr_db"],
+                "ssim": s["ssim"],
+                "mse": s["mse"],
+            }
             for z in ZONES:
                 for k in ("psnr_db", "ssim", "pixels", "ssim_pixels"):
                     row[f"{z}_{k}"] = s["zones"][z][k]
@@ -288,10 +341,15 @@ def summarize(rows: Sequence[Mapping[str, Any]]) -> dict:
         rs = [r for r in rows if r["method"] == name]
         zones = {}
         for z in ZONES:
-            zones[z] = {"psnr_db": _mean([r[f"{z}_psnr_db"] for r in rs], [r[f"{z}_pixels"] for r in rs]),
-                        "ssim": _mean([r[f"{z}_ssim"] for r in rs], [r[f"{z}_ssim_pixels"] for r in rs])}
-        out["methods"][name] = {"psnr_db": _mean([r["psnr_db"] for r in rs]), "ssim": _mean([r["ssim"] for r in rs]),
-                                "zones": zones}
+            zones[z] = {
+                "psnr_db": _mean([r[f"{z}_psnr_db"] for r in rs], [r[f"{z}_pixels"] for r in rs]),
+                "ssim": _mean([r[f"{z}_ssim"] for r in rs], [r[f"{z}_ssim_pixels"] for r in rs]),
+            }
+        out["methods"][name] = {
+            "psnr_db": _mean([r["psnr_db"] for r in rs]),
+            "ssim": _mean([r["ssim"] for r in rs]),
+            "zones": zones,
+        }
     return out
 
 
@@ -327,8 +385,12 @@ def csv_text(rows: Sequence[Mapping[str, Any]]) -> str:
     wr = csv.DictWriter(buf, fieldnames=list(rows[0].keys()), lineterminator="\n")
     wr.writeheader()
     for r in rows:
-        wr.writerow({k: ("" if isinstance(v, float) and not math.isfinite(v) else
-                         f"{v:.6f}" if isinstance(v, float) else v) for k, v in r.items()})
+        wr.writerow(
+            {
+                k: ("" if isinstance(v, float) and not math.isfinite(v) else f"{v:.6f}" if isinstance(v, float) else v)
+                for k, v in r.items()
+            }
+        )
     return buf.getvalue()
 
 

@@ -22,6 +22,7 @@ sensor half-diagonal, both in pixels (the network's FOV channels,
 ``lensim.restore.fov.fov_channels``). Zones: centre rho < 1/3, middle 1/3 <= rho < 2/3,
 edge rho >= 2/3; every pixel lies in exactly one.
 """
+
 from __future__ import annotations
 
 import math
@@ -98,13 +99,12 @@ def _valid_filter(x: np.ndarray, w: np.ndarray) -> np.ndarray:
     """Separable filtering of (C, H, W) with w on rows and columns, keeping only the output
     pixels whose window lies inside the image."""
     r = len(w) // 2
-    y = correlate1d(x, w, axis=-1, mode="reflect")[..., :, r:x.shape[-1] - r]
-    y = correlate1d(y, w, axis=-2, mode="reflect")[..., r:x.shape[-2] - r, :]
+    y = correlate1d(x, w, axis=-1, mode="reflect")[..., :, r : x.shape[-1] - r]
+    y = correlate1d(y, w, axis=-2, mode="reflect")[..., r : x.shape[-2] - r, :]
     return y
 
 
-def ssim_map(test: ArrayLike, reference: ArrayLike, data_range: float = 1.0,
-             sigma: float = SSIM_SIGMA) -> np.ndarray:
+def ssim_map(test: ArrayLike, reference: ArrayLike, data_range: float = 1.0, sigma: float = SSIM_SIGMA) -> np.ndarray:
     """Per-channel SSIM map (C, H - 2p, W - 2p), p = ssim_pad(sigma) (5 px): the map's pixel
     (i, j) belongs to image pixel (i + p, j + p). Dimensionless, <= 1."""
     x, y = _pair(test, reference)
@@ -154,8 +154,9 @@ def psnr_batch(pred: torch.Tensor, target: torch.Tensor, data_range: float = 1.0
     return 10.0 * torch.log10(data_range**2 / mse_per_image)
 
 
-def ssim_batch(pred: torch.Tensor, target: torch.Tensor, data_range: float = 1.0,
-               sigma: float = SSIM_SIGMA) -> torch.Tensor:
+def ssim_batch(
+    pred: torch.Tensor, target: torch.Tensor, data_range: float = 1.0, sigma: float = SSIM_SIGMA
+) -> torch.Tensor:
     """Mean SSIM (B,) of images (B, C, H, W) or (C, H, W) in float64 on the images' device:
     :func:`ssim` per image (the same window, constants and valid pixels). Images must be
     larger than 2 * ssim_pad(sigma) pixels on each side."""
@@ -188,8 +189,9 @@ def ssim_batch(pred: torch.Tensor, target: torch.Tensor, data_range: float = 1.0
 # field zones
 
 
-def normalized_radius(height: int, width: int, top: float, left: float, sensor_height: float,
-                      sensor_width: float) -> np.ndarray:
+def normalized_radius(
+    height: int, width: int, top: float, left: float, sensor_height: float, sensor_width: float
+) -> np.ndarray:
     """(height, width) normalized radius rho of the pixels of a crop whose top-left pixel is
     sensor pixel (top, left), on a sensor of sensor_height x sensor_width pixels (rho = 1 at
     the sensor corners; see the module docstring)."""
@@ -225,7 +227,7 @@ def image_scores(test: ArrayLike, reference: ArrayLike, rho: np.ndarray) -> dict
     se = ((x - y) ** 2).mean(axis=0)  # (H, W) channel-mean squared error
     smap = ssim_map(x, y).mean(axis=0)  # (H-2p, W-2p)
     p = ssim_pad()
-    rho_valid = rho[p:rho.shape[0] - p, p:rho.shape[1] - p]
+    rho_valid = rho[p : rho.shape[0] - p, p : rho.shape[1] - p]
     m = float(se.mean())
     out: dict = {"psnr_db": psnr_from_mse(m), "ssim": float(smap.mean()), "mse": m, "zones": {}}
     masks, masks_v = zone_masks(rho), zone_masks(rho_valid)

@@ -28,6 +28,7 @@ derivative correction). Unlike sfrmat3 the 1/4-pixel bin average, sinc(f / 4), i
 divided out by default (``correct_binning``): it is a 2.6 % loss at Nyquist that is not
 part of the camera.
 """
+
 from __future__ import annotations
 
 import math
@@ -191,16 +192,20 @@ def mtf_area(freq_cy_px: np.ndarray, mtf: np.ndarray, f_max_cy_px: float = 0.5) 
     if freq.ndim != 1 or freq.shape != m.shape or freq.size < 2:
         raise InputError(None, "mtf", f"expected matching 1-D frequency and MTF arrays, got {freq.shape} and {m.shape}")
     if not 0 < f_max_cy_px <= freq[-1] + 1e-12:
-        raise InputError(None, "f_max", f"expected 0 < f_max <= {freq[-1]:.4g} cycles/pixel (the curve's range), got {f_max_cy_px}")
+        raise InputError(
+            None, "f_max", f"expected 0 < f_max <= {freq[-1]:.4g} cycles/pixel (the curve's range), got {f_max_cy_px}"
+        )
     keep = freq < f_max_cy_px
     f = np.append(freq[keep], f_max_cy_px)
     v = np.append(m[keep], np.interp(f_max_cy_px, freq, m))
     return float(np.sum(0.5 * (v[1:] + v[:-1]) * np.diff(f)))
 
 
-def mtf_area_ratio(measured: MTFLike | tuple[np.ndarray, np.ndarray],
-                   reference: MTFLike | tuple[np.ndarray, np.ndarray],
-                   f_max: float = 0.5) -> float:
+def mtf_area_ratio(
+    measured: MTFLike | tuple[np.ndarray, np.ndarray],
+    reference: MTFLike | tuple[np.ndarray, np.ndarray],
+    f_max: float = 0.5,
+) -> float:
     """Ratio of the areas under two MTF curves from 0 to f_max cycles/pixel (the paper's
     Table 1 criterion: simulated MTF area / reference MTF area). Each curve is an object
     with ``freq_cy_px`` and ``mtf`` (SFRResult, MTFCurve) or a (freq_cy_px, mtf) tuple; the
@@ -242,7 +247,9 @@ def _as_region(region: np.ndarray, name: str = "region") -> np.ndarray:
     if not np.all(np.isfinite(a)):
         raise InputError(None, name, "contains NaN or infinite values")
     if min(a.shape) < MIN_REGION_PX:
-        raise InputError(None, name, f"too small: {a.shape[0]}x{a.shape[1]} px, need at least {MIN_REGION_PX} px on each side")
+        raise InputError(
+            None, name, f"too small: {a.shape[0]}x{a.shape[1]} px, need at least {MIN_REGION_PX} px on each side"
+        )
     return a
 
 
@@ -279,9 +286,13 @@ def _row_centroids(deriv: np.ndarray, centres: np.ndarray | None) -> np.ndarray:
 # ----------------------------------------------------------------------------- edge fitting
 
 
-def locate_edge(region: np.ndarray, orientation: Orientation | None = None,
-                min_angle_deg: float = 1.0, max_angle_deg: float = 15.0,
-                name: str = "region") -> EdgeFit:
+def locate_edge(
+    region: np.ndarray,
+    orientation: Orientation | None = None,
+    min_angle_deg: float = 1.0,
+    max_angle_deg: float = 15.0,
+    name: str = "region",
+) -> EdgeFit:
     """Find the straight edge in a 2-D region and fit a line to it.
 
     The edge is located per row (of the edge's frame) by the Hamming-windowed centroid of
@@ -313,7 +324,11 @@ def locate_edge(region: np.ndarray, orientation: Orientation | None = None,
     peak = deriv.max(axis=1)
     ratio = float(np.median(peak / np.maximum(med, 1e-300)))
     if not ratio > 3.0:
-        raise InputError(None, name, f"no edge found: the derivative across the region has no localized peak (peak/median {ratio:.2g}, need > 3)")
+        raise InputError(
+            None,
+            name,
+            f"no edge found: the derivative across the region has no localized peak (peak/median {ratio:.2g}, need > 3)",
+        )
 
     y = np.arange(n_rows, dtype=np.float64)
     loc = _row_centroids(deriv, None)
@@ -321,32 +336,62 @@ def locate_edge(region: np.ndarray, orientation: Orientation | None = None,
     for _ in range(3):
         ok = np.isfinite(loc)
         if ok.sum() < max(3, n_rows // 2):
-            raise InputError(None, name, f"no edge found: the edge could be located in only {int(ok.sum())} of {n_rows} rows")
+            raise InputError(
+                None, name, f"no edge found: the edge could be located in only {int(ok.sum())} of {n_rows} rows"
+            )
         slope, intercept = np.polyfit(y[ok], loc[ok] + 1.0, 1)  # +1: derivative column 0 is pixel 1
         loc = _row_centroids(deriv, intercept + slope * y - 1.0)
     ok = np.isfinite(loc)
     if ok.sum() < max(3, n_rows // 2):
-        raise InputError(None, name, f"no edge found: the edge could be located in only {int(ok.sum())} of {n_rows} rows")
+        raise InputError(
+            None, name, f"no edge found: the edge could be located in only {int(ok.sum())} of {n_rows} rows"
+        )
     slope, intercept = np.polyfit(y[ok], loc[ok] + 1.0, 1)
     resid = loc[ok] + 1.0 - (intercept + slope * y[ok])
     rms = float(np.sqrt(np.mean(resid**2)))
     limit = max(1.0, 0.05 * n_cols)
     if rms > limit:
-        raise InputError(None, name, f"no straight edge found: per-row edge locations scatter {rms:.2g} px RMS about the fitted line (limit {limit:.2g} px)")
+        raise InputError(
+            None,
+            name,
+            f"no straight edge found: per-row edge locations scatter {rms:.2g} px RMS about the fitted line (limit {limit:.2g} px)",
+        )
     angle = abs(math.degrees(math.atan(slope)))
     if angle < min_angle_deg:
-        raise InputError(None, name, f"edge slant too small: {angle:.2f} deg from {orientation}, need {min_angle_deg:g}-{max_angle_deg:g} deg")
+        raise InputError(
+            None,
+            name,
+            f"edge slant too small: {angle:.2f} deg from {orientation}, need {min_angle_deg:g}-{max_angle_deg:g} deg",
+        )
     if angle > max_angle_deg:
-        raise InputError(None, name, f"edge slant too large: {angle:.2f} deg from {orientation}, need {min_angle_deg:g}-{max_angle_deg:g} deg")
+        raise InputError(
+            None,
+            name,
+            f"edge slant too large: {angle:.2f} deg from {orientation}, need {min_angle_deg:g}-{max_angle_deg:g} deg",
+        )
     if math.floor(n_rows * abs(slope)) < 1:
-        raise InputError(None, name, f"edge slant too small for the region: the edge crosses {n_rows * abs(slope):.2f} px over {n_rows} rows, need >= 1 px (more rows or more slant)")
+        raise InputError(
+            None,
+            name,
+            f"edge slant too small for the region: the edge crosses {n_rows * abs(slope):.2f} px over {n_rows} rows, need >= 1 px (more rows or more slant)",
+        )
     x_ends = intercept + slope * np.array([0.0, n_rows - 1.0])
     if x_ends.min() < 0 or x_ends.max() > n_cols - 1:
-        raise InputError(None, name, f"edge leaves the region: it runs from column {x_ends[0]:.1f} to {x_ends[1]:.1f} of 0..{n_cols - 1}")
+        raise InputError(
+            None,
+            name,
+            f"edge leaves the region: it runs from column {x_ends[0]:.1f} to {x_ends[1]:.1f} of 0..{n_cols - 1}",
+        )
     loc_full = np.where(ok, loc + 1.0, np.nan)
-    return EdgeFit(orientation=orientation, intercept_px=float(intercept), slope=float(slope),
-                   row_locations_px=loc_full, residual_rms_px=rms,
-                   polarity=polarity, shape=(int(a.shape[0]), int(a.shape[1])))
+    return EdgeFit(
+        orientation=orientation,
+        intercept_px=float(intercept),
+        slope=float(slope),
+        row_locations_px=loc_full,
+        residual_rms_px=rms,
+        polarity=polarity,
+        shape=(int(a.shape[0]), int(a.shape[1])),
+    )
 
 
 def _phase_rows(n_rows: int, slope: float) -> tuple[int, int]:
@@ -358,8 +403,9 @@ def _phase_rows(n_rows: int, slope: float) -> tuple[int, int]:
     return start, start + used
 
 
-def edge_spread_function(region: np.ndarray, edge: EdgeFit, bins_per_pixel: int = BINS_PER_PIXEL,
-                         name: str = "region") -> tuple[np.ndarray, np.ndarray, int]:
+def edge_spread_function(
+    region: np.ndarray, edge: EdgeFit, bins_per_pixel: int = BINS_PER_PIXEL, name: str = "region"
+) -> tuple[np.ndarray, np.ndarray, int]:
     """Project the pixels of a 2-D region onto the normal of `edge` and bin them.
 
     Returns (distance_px, esf, rows_used): bin centres k / bins_per_pixel (pixels along the
@@ -380,7 +426,11 @@ def edge_spread_function(region: np.ndarray, edge: EdgeFit, bins_per_pixel: int 
     d = (x - x_edge) * cos_t
     half = min(-(d[:, 0].max()), d[:, -1].min())
     if half < MIN_HALF_PROFILE_PX:
-        raise InputError(None, name, f"edge too close to the region border: {max(half, 0.0):.1f} px of profile on one side, need >= {MIN_HALF_PROFILE_PX:g} px")
+        raise InputError(
+            None,
+            name,
+            f"edge too close to the region border: {max(half, 0.0):.1f} px of profile on one side, need >= {MIN_HALF_PROFILE_PX:g} px",
+        )
     fac = int(bins_per_pixel)
     k_max = math.floor(half * fac - 0.5)
     k = np.floor(d * fac + 0.5).astype(np.int64)
@@ -391,7 +441,11 @@ def edge_spread_function(region: np.ndarray, edge: EdgeFit, bins_per_pixel: int 
     sums = np.bincount(idx, weights=v[r0:r1][keep].ravel(), minlength=n_bins)
     filled = counts > 0
     if filled.sum() < 0.9 * n_bins:
-        raise InputError(None, name, f"edge slant too small for the region: {n_bins - int(filled.sum())} of {n_bins} ESF bins are empty")
+        raise InputError(
+            None,
+            name,
+            f"edge slant too small for the region: {n_bins - int(filled.sum())} of {n_bins} ESF bins are empty",
+        )
     centres = np.arange(-k_max, k_max + 1, dtype=np.float64) / fac
     dsum = np.bincount(idx, weights=d[keep].ravel(), minlength=n_bins)
     # Each bin's mean value belongs at its samples' mean distance, which is off the bin
@@ -401,8 +455,14 @@ def edge_spread_function(region: np.ndarray, edge: EdgeFit, bins_per_pixel: int 
     return centres, esf, r1 - r0
 
 
-def _mtf_from_esf(distance_px: np.ndarray, esf: np.ndarray, polarity: int, bins_per_pixel: int,
-                  max_frequency: float, correct_binning: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _mtf_from_esf(
+    distance_px: np.ndarray,
+    esf: np.ndarray,
+    polarity: int,
+    bins_per_pixel: int,
+    max_frequency: float,
+    correct_binning: bool,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(freq_cy_px, mtf, lsf) from a binned ESF: centred difference, Hamming window about
     the LSF centroid, zero-padded FFT, DC normalization, derivative (and bin) correction."""
     fac = bins_per_pixel
@@ -429,11 +489,18 @@ def _mtf_from_esf(distance_px: np.ndarray, esf: np.ndarray, polarity: int, bins_
     return freq, mtf, lsf
 
 
-def slanted_edge_mtf(region: np.ndarray, pixel_pitch_um: float | None = None, *,
-                     orientation: Orientation | None = None,
-                     bins_per_pixel: int = BINS_PER_PIXEL, max_frequency: float = 1.0,
-                     correct_binning: bool = True, min_angle_deg: float = 1.0,
-                     max_angle_deg: float = 15.0, name: str = "region") -> SFRResult:
+def slanted_edge_mtf(
+    region: np.ndarray,
+    pixel_pitch_um: float | None = None,
+    *,
+    orientation: Orientation | None = None,
+    bins_per_pixel: int = BINS_PER_PIXEL,
+    max_frequency: float = 1.0,
+    correct_binning: bool = True,
+    min_angle_deg: float = 1.0,
+    max_angle_deg: float = 15.0,
+    name: str = "region",
+) -> SFRResult:
     """ISO 12233-style slanted-edge SFR of one channel.
 
     region: 2-D float array (any units; linear data gives the optical MTF) holding one
@@ -451,17 +518,30 @@ def slanted_edge_mtf(region: np.ndarray, pixel_pitch_um: float | None = None, *,
     if int(bins_per_pixel) != bins_per_pixel or bins_per_pixel < 2:
         raise InputError(None, "bins_per_pixel", f"expected an integer >= 2, got {bins_per_pixel}")
     if not 0.5 < max_frequency <= bins_per_pixel / 4.0:
-        raise InputError(None, "max_frequency", f"expected above 0.5 cycles/pixel (Nyquist) and at most {bins_per_pixel / 4.0:g} (bins_per_pixel / 4), got {max_frequency}")
+        raise InputError(
+            None,
+            "max_frequency",
+            f"expected above 0.5 cycles/pixel (Nyquist) and at most {bins_per_pixel / 4.0:g} (bins_per_pixel / 4), got {max_frequency}",
+        )
     a = _as_region(region, name)
     edge = locate_edge(a, orientation, min_angle_deg, max_angle_deg, name)
     dist, esf, rows_used = edge_spread_function(a, edge, bins_per_pixel, name)
     freq, mtf, lsf = _mtf_from_esf(dist, esf, edge.polarity, int(bins_per_pixel), max_frequency, correct_binning)
-    return SFRResult(freq_cy_px=freq, mtf=mtf, pixel_pitch_um=pixel_pitch_um,
-                     edge=edge, esf_distance_px=dist, esf=esf, lsf=lsf, rows_used=rows_used)
+    return SFRResult(
+        freq_cy_px=freq,
+        mtf=mtf,
+        pixel_pitch_um=pixel_pitch_um,
+        edge=edge,
+        esf_distance_px=dist,
+        esf=esf,
+        lsf=lsf,
+        rows_used=rows_used,
+    )
 
 
-def slanted_edge_mtf_channels(region: np.ndarray, pixel_pitch_um: float | None = None,
-                              **kwargs: object) -> list[SFRResult]:
+def slanted_edge_mtf_channels(
+    region: np.ndarray, pixel_pitch_um: float | None = None, **kwargs: object
+) -> list[SFRResult]:
     """slanted_edge_mtf for each channel of an (H, W, C) region (e.g. RGB), each channel
     fitted on its own, all in the orientation detected on the channel mean. A 2-D region
     gives a list of one. Keyword arguments as for slanted_edge_mtf."""
@@ -473,8 +553,10 @@ def slanted_edge_mtf_channels(region: np.ndarray, pixel_pitch_um: float | None =
     kw = dict(kwargs)
     if kw.get("orientation") is None:
         kw["orientation"] = detect_orientation(np.asarray(a, dtype=np.float64))
-    return [slanted_edge_mtf(a[:, :, c], pixel_pitch_um, name=f"region[..., {c}]", **kw)  # type: ignore[arg-type]
-            for c in range(a.shape[2])]
+    return [
+        slanted_edge_mtf(a[:, :, c], pixel_pitch_um, name=f"region[..., {c}]", **kw)  # type: ignore[arg-type]
+        for c in range(a.shape[2])
+    ]
 
 
 # ----------------------------------------------------------------------------- from a PSF
@@ -485,10 +567,16 @@ def default_frequencies(max_frequency: float = 1.0, step: float = 1.0 / 256.0) -
     return np.arange(0.0, max_frequency + 1e-12, step)
 
 
-def mtf_from_psf(psf: np.ndarray, spacing_um: float, angle_deg: float, *,
-                 pixel_pitch_um: float | None = None, pixel_integrated: bool = False,
-                 orientation: Orientation = "vertical",
-                 freq_cy_px: np.ndarray | None = None) -> MTFCurve:
+def mtf_from_psf(
+    psf: np.ndarray,
+    spacing_um: float,
+    angle_deg: float,
+    *,
+    pixel_pitch_um: float | None = None,
+    pixel_integrated: bool = False,
+    orientation: Orientation = "vertical",
+    freq_cy_px: np.ndarray | None = None,
+) -> MTFCurve:
     """The MTF a slanted edge at angle_deg should measure through a given PSF.
 
     psf: 2-D samples (energy per sample) spaced spacing_um apart, oriented like the image

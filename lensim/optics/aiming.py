@@ -13,6 +13,7 @@ obscuration (a Cassegrain's secondary, a mirror-backed secondary spot, the shado
 spider hub) never rejects a field, while every real ray is still blocked by it. A field
 whose chief ray fails is named in a one-line error with the largest field that works.
 """
+
 from __future__ import annotations
 
 import math
@@ -117,8 +118,13 @@ def object_field(lens: Lens, value: float, aiming: Aiming = "paraxial", para: Pa
     raise RayTraceError(f"{lens.source}: fields: no real chief ray reaches image height {value} mm")
 
 
-def chief_ray_image_height(lens: Lens, field_value: float, aiming: Aiming = "real", para: ParaxialData | None = None,
-                           wavelength_um: float | None = None) -> float:
+def chief_ray_image_height(
+    lens: Lens,
+    field_value: float,
+    aiming: Aiming = "real",
+    para: ParaxialData | None = None,
+    wavelength_um: float | None = None,
+) -> float:
     """Real chief-ray y (mm) on the image plane for a launch field value (angle or object height)."""
     para = para or paraxial_data(lens)
     wl = lens.primary_wavelength_um if wavelength_um is None else wavelength_um
@@ -135,8 +141,9 @@ def unobscured(lens: Lens) -> Lens:
     return lens.with_changes(surfaces=[replace(s, obscuration_radius=None) for s in lens.surfaces])
 
 
-def trace_chief_rays(lens: Lens, rays: Rays, wavelength_um: torch.Tensor, launch_fields: list[float],
-                     aiming: Aiming, para: ParaxialData) -> TraceResult:
+def trace_chief_rays(
+    lens: Lens, rays: Rays, wavelength_um: torch.Tensor, launch_fields: list[float], aiming: Aiming, para: ParaxialData
+) -> TraceResult:
     """Trace chief rays (W, F, 1) to the image as reference rays (central obscurations do
     not block them). launch_fields: the F launch values (deg or mm) the rays were made
     with. Raises RayTraceError naming the first field whose chief ray fails, and the
@@ -158,8 +165,9 @@ def _chief_reaches_image(lens: Lens, field_value: float, aiming: Aiming, para: P
     return bool(trace(unobscured(lens), rays, wlt).rays.valid.all())
 
 
-def largest_chief_field(lens: Lens, field_value: float, aiming: Aiming, para: ParaxialData, wavelength_um: float,
-                        resolution: float = 0.005) -> float | None:
+def largest_chief_field(
+    lens: Lens, field_value: float, aiming: Aiming, para: ParaxialData, wavelength_um: float, resolution: float = 0.005
+) -> float | None:
     """The largest launch field between 0 and field_value (same sign; deg or mm) whose chief
     ray (aimed as `aiming` says) reaches the image, by bisection to `resolution` (deg or
     mm); None when not even the axial chief ray does."""

@@ -1,5 +1,6 @@
 """The ray-aiming modes, in plain Python (no NumPy or torch): the command line checks and
 names them without loading the ray tracer (lensim.optics.aiming, which re-exports Aiming)."""
+
 from __future__ import annotations
 
 from typing import Literal, get_args

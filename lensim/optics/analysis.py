@@ -1,4 +1,5 @@
 """Lens analyses: first-order summary, spot diagrams, distortion, relative illumination."""
+
 from __future__ import annotations
 
 from lensim.optics.aiming import Aiming, chief_ray_image_height, object_field

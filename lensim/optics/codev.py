@@ -23,6 +23,7 @@ The supported subset is what CODE V writes for plain rotationally symmetric lens
 Several commands may share a line, separated by ';'; '!' starts a comment. Anything
 else raises InputError naming the line and the command. Lengths in mm.
 """
+
 from __future__ import annotations
 
 import math
@@ -156,8 +157,11 @@ class _Reader:
         elif cmd == "DIM":
             unit = args[0].upper() if args else ""
             if unit != "M":
-                raise self.err(lineno, cmd, f"expected DIM M (millimetres), got {' '.join(args) or 'nothing'}; "
-                                            "convert the lens to millimetres")
+                raise self.err(
+                    lineno,
+                    cmd,
+                    f"expected DIM M (millimetres), got {' '.join(args) or 'nothing'}; convert the lens to millimetres",
+                )
         elif cmd == "EPD":
             self.aperture = ("epd", self.nums(lineno, cmd, args)[0])
         elif cmd == "FNO":
@@ -175,14 +179,20 @@ class _Reader:
             self.weights = self.nums(lineno, cmd, args)
         elif cmd in _FIELD_KEYS:
             if self.field_type is not None and self.field_type != _FIELD_KEYS[cmd]:
-                raise self.err(lineno, cmd, f"expected one field type, got both {self.field_type} and {_FIELD_KEYS[cmd]}")
+                raise self.err(
+                    lineno, cmd, f"expected one field type, got both {self.field_type} and {_FIELD_KEYS[cmd]}"
+                )
             self.field_type = _FIELD_KEYS[cmd]
             self.fields = self.nums(lineno, cmd, args)
         elif cmd in _X_FIELD_KEYS:
             xs = self.nums(lineno, cmd, args)
             if any(x != 0.0 for x in xs):
-                raise self.err(lineno, cmd, "expected zero x fields: lensim models rotationally symmetric lenses "
-                                            "with fields along y (give the radial field as Y values)")
+                raise self.err(
+                    lineno,
+                    cmd,
+                    "expected zero x fields: lensim models rotationally symmetric lenses "
+                    "with fields along y (give the radial field as Y values)",
+                )
             self.x_fields = xs
         elif cmd in ("VUX", "VLX", "VUY", "VLY"):
             self.vignetting[cmd] = self.nums(lineno, cmd, args)
@@ -243,11 +253,17 @@ class _Reader:
         s = self.current(lineno, "SPS")
         kind = args[0].upper() if args else ""
         if kind != "ODD":
-            raise self.err(lineno, f"S {s.number} SPS", f"unsupported special surface {kind or 'nothing'}; "
-                                                        "lensim reads SPS ODD (odd polynomial asphere) only")
+            raise self.err(
+                lineno,
+                f"S {s.number} SPS",
+                f"unsupported special surface {kind or 'nothing'}; lensim reads SPS ODD (odd polynomial asphere) only",
+            )
         if len(args) > 1 and self.num(lineno, f"S {s.number} SPS ODD", args[1]) not in (0.0, 1.0):
-            raise self.err(lineno, f"S {s.number} SPS ODD", f"normalization radius {args[1]} is not supported; "
-                                                            "expected 0 or 1 (coefficients of r in mm)")
+            raise self.err(
+                lineno,
+                f"S {s.number} SPS ODD",
+                f"normalization radius {args[1]} is not supported; expected 0 or 1 (coefficients of r in mm)",
+            )
         s.odd = True
 
     def special_coefficient(self, lineno: int, args: list[str]) -> None:
@@ -268,8 +284,12 @@ class _Reader:
         elif power is not None and 1 <= power <= MAX_ASPHERE_POWER:
             s.asphere[power] = value
         else:
-            raise self.err(lineno, what, f"unsupported coefficient {args[0]}; expected K, AR1..AR{MAX_ASPHERE_POWER} "
-                                         f"or C1..C{MAX_ASPHERE_POWER + 1}")
+            raise self.err(
+                lineno,
+                what,
+                f"unsupported coefficient {args[0]}; expected K, AR1..AR{MAX_ASPHERE_POWER} "
+                f"or C1..C{MAX_ASPHERE_POWER + 1}",
+            )
 
     # ---- building ----------------------------------------------------------------
     def curvature(self, value: float) -> float:
@@ -288,7 +308,9 @@ class _Reader:
             if suffix.upper() in _CATALOG_SUFFIX:
                 name, catalogs = base, [_CATALOG_SUFFIX[suffix.upper()]]
             elif suffix.upper() != "MOLD":
-                notes.append(f"glass catalogue {suffix} of {token} is not available in lensim; searching every catalogue")
+                notes.append(
+                    f"glass catalogue {suffix} of {token} is not available in lensim; searching every catalogue"
+                )
                 name = base
         try:
             glass, note = resolve_glass(name, catalogs)
@@ -321,11 +343,16 @@ class _Reader:
             raise InputError(self.src, "REF", f"expected a wavelength number 1..{w}, got {ref}")
         fields = self.fields if self.fields is not None else [0.0]
         field_type = self.field_type or "angle"
-        vig = [f"{key} {' '.join(f'{v:g}' for v in vals)}" for key, vals in self.vignetting.items()
-               if any(v != 0.0 for v in vals)]
+        vig = [
+            f"{key} {' '.join(f'{v:g}' for v in vals)}"
+            for key, vals in self.vignetting.items()
+            if any(v != 0.0 for v in vals)
+        ]
         if vig:
-            notes.append(f"vignetting factors ({'; '.join(vig)}) are not applied; "
-                         "lensim vignettes rays with the real surface apertures")
+            notes.append(
+                f"vignetting factors ({'; '.join(vig)}) are not applied; "
+                "lensim vignettes rays with the real surface apertures"
+            )
         # object
         lineno, obj_c, obj_t, obj_glass = self.object
         object_distance = math.inf if abs(obj_t) >= INFINITE_THICKNESS_MM else obj_t
@@ -349,16 +376,18 @@ class _Reader:
             else:
                 material = self.material(sd.line, f"{what} glass", sd.glass, notes)
             medium = material
-            surfaces.append(Surface(
-                curvature=self.curvature(sd.value),
-                thickness=sd.thickness,
-                material=material,
-                conic=sd.conic,
-                asphere=dict(sd.asphere),
-                clear_radius=sd.clear_radius,
-                is_stop=sd.is_stop,
-                is_mirror=mirror,
-            ))
+            surfaces.append(
+                Surface(
+                    curvature=self.curvature(sd.value),
+                    thickness=sd.thickness,
+                    material=material,
+                    conic=sd.conic,
+                    asphere=dict(sd.asphere),
+                    clear_radius=sd.clear_radius,
+                    is_stop=sd.is_stop,
+                    is_mirror=mirror,
+                )
+            )
         img_line, img_c, img_t = self.image
         if self.curvature(img_c) != 0.0:
             raise self.err(img_line, "SI curvature", "expected a flat image surface")

@@ -16,6 +16,7 @@ lens at that position. Each configuration is validated with the lens (a thicknes
 would put glass backwards or make two lens surfaces overlap is an error when the file is
 loaded, naming the configuration).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -46,14 +47,23 @@ def check_configurations(lens: Lens) -> None:
         if not isinstance(name, str) or not name.strip():
             raise InputError(lens.source, "configurations", f"expected non-empty configuration names, got {name!r}")
         if name.strip().isdigit() and int(name) != position:
-            raise InputError(lens.source, fld, f"a configuration named by a number must be that number in the "
-                                               f"list (it is number {position}); give it a name that is not a number")
+            raise InputError(
+                lens.source,
+                fld,
+                f"a configuration named by a number must be that number in the "
+                f"list (it is number {position}); give it a name that is not a number",
+            )
         for index, thickness in thicknesses.items():
             if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < n:
-                raise InputError(lens.source, f"{fld}.thicknesses", f"expected surface indices 0..{n - 1} (0-based, "
-                                                                    f"as in surfaces[i]), got {index!r}")
+                raise InputError(
+                    lens.source,
+                    f"{fld}.thicknesses",
+                    f"expected surface indices 0..{n - 1} (0-based, as in surfaces[i]), got {index!r}",
+                )
             if not math.isfinite(thickness):
-                raise InputError(lens.source, f"{fld}.thicknesses.{index}", f"expected a finite thickness, got {thickness}")
+                raise InputError(
+                    lens.source, f"{fld}.thicknesses.{index}", f"expected a finite thickness, got {thickness}"
+                )
         try:
             _configured(lens, name)
         except InputError as e:
@@ -63,8 +73,9 @@ def check_configurations(lens: Lens) -> None:
 def _configured(lens: Lens, name: str) -> Lens:
     """The lens at configuration ``name`` (validated), with no configurations of its own."""
     thicknesses = lens.configurations[name]
-    surfaces = [dataclasses.replace(s, thickness=thicknesses[i]) if i in thicknesses else s
-                for i, s in enumerate(lens.surfaces)]
+    surfaces = [
+        dataclasses.replace(s, thickness=thicknesses[i]) if i in thicknesses else s for i, s in enumerate(lens.surfaces)
+    ]
     return lens.with_changes(surfaces=surfaces, configurations={})
 
 
@@ -80,8 +91,11 @@ def resolve_configuration(lens: Lens, key: str) -> str:
     names = configuration_names(lens)
     key = str(key).strip()
     if not names:
-        raise InputError(lens.source, "configuration", f"the lens declares no configurations, so {key!r} cannot be "
-                                                       "chosen; leave the configuration out")
+        raise InputError(
+            lens.source,
+            "configuration",
+            f"the lens declares no configurations, so {key!r} cannot be chosen; leave the configuration out",
+        )
     if key in lens.configurations:
         return key
     folded = [n for n in names if n.casefold() == key.casefold()]
@@ -90,8 +104,11 @@ def resolve_configuration(lens: Lens, key: str) -> str:
     if key.isdigit() and 1 <= int(key) <= len(names):
         return names[int(key) - 1]
     listing = ", ".join(f"{k} ({n})" for k, n in enumerate(names, start=1))
-    raise InputError(lens.source, "configuration", f"unknown configuration {key!r}; expected a name or a number "
-                                                   f"1..{len(names)}: {listing}")
+    raise InputError(
+        lens.source,
+        "configuration",
+        f"unknown configuration {key!r}; expected a name or a number 1..{len(names)}: {listing}",
+    )
 
 
 def apply_configuration(lens: Lens, key: str) -> Lens:

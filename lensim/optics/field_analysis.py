@@ -5,6 +5,7 @@ Fields are given in the lens's field unit (degrees for angle fields, mm for obje
 image heights) and default to 21 equal steps from 0 to the lens's maximum field.
 Lengths in mm, wavelengths in um.
 """
+
 from __future__ import annotations
 
 import math
@@ -122,14 +123,16 @@ class _PupilCells:
         self.disc = _disc_fraction(edges)  # (n, n) fraction of each cell inside the disc
         used = self.disc > 0
         # only the subsample points of cells that touch the disc are traced
-        cell_of_sub = (torch.arange(n * s).reshape(-1, 1) // s * n + torch.arange(n * s).reshape(1, -1) // s).reshape(-1)
+        cell_of_sub = (torch.arange(n * s).reshape(-1, 1) // s * n + torch.arange(n * s).reshape(1, -1) // s).reshape(
+            -1
+        )
         keep = used.reshape(-1)[cell_of_sub]
         self.sub, self.cell_of_sub = sub[keep], cell_of_sub[keep]
         # only the corners of those cells are traced (the far corners of the square need not aim)
         node_used = torch.zeros(n + 1, n + 1, dtype=torch.bool)
         for dy in (0, 1):
             for dx in (0, 1):
-                node_used[dy:dy + n, dx:dx + n] |= used
+                node_used[dy : dy + n, dx : dx + n] |= used
         self.node_idx = torch.nonzero(node_used.reshape(-1))[:, 0]
         self.nodes = all_nodes[self.node_idx]
 
@@ -151,7 +154,11 @@ class _PupilCells:
         L = torch.zeros(F, (n + 1) ** 2, dtype=DTYPE)
         M = torch.zeros(F, (n + 1) ** 2, dtype=DTYPE)
         node_ok = torch.zeros(F, (n + 1) ** 2, dtype=torch.bool)
-        L[:, self.node_idx], M[:, self.node_idx], node_ok[:, self.node_idx] = u[..., 0], u[..., 1], free.rays.valid[0, :, 1:]
+        L[:, self.node_idx], M[:, self.node_idx], node_ok[:, self.node_idx] = (
+            u[..., 0],
+            u[..., 1],
+            free.rays.valid[0, :, 1:],
+        )
         L, M, node_ok = (v.reshape(F, n + 1, n + 1) for v in (L, M, node_ok))
         cell_ok = node_ok[:, :-1, :-1] & node_ok[:, :-1, 1:] & node_ok[:, 1:, 1:] & node_ok[:, 1:, :-1]
         return torch.where(cell_ok, _quad_areas(L, M), torch.zeros((), dtype=DTYPE))
@@ -161,7 +168,8 @@ class _PupilCells:
         n = self.n
         passed = blocked.rays.valid[0].to(DTYPE)  # (F, n_sub)
         counts = torch.zeros(n * n, dtype=DTYPE).index_add_(
-            0, self.cell_of_sub, torch.ones(self.cell_of_sub.shape[0], dtype=DTYPE))
+            0, self.cell_of_sub, torch.ones(self.cell_of_sub.shape[0], dtype=DTYPE)
+        )
         frac = torch.zeros(passed.shape[0], n * n, dtype=DTYPE).index_add_(1, self.cell_of_sub, passed)
         return (frac / counts.clamp_min(1.0)).reshape(-1, n, n)
 
@@ -245,8 +253,13 @@ def relative_illumination(
     }
 
 
-def chief_ray_heights(lens: Lens, launch: list[float], wavelengths_um: list[float] | np.ndarray,
-                      aiming: Aiming = "real", para: ParaxialData | None = None) -> np.ndarray:
+def chief_ray_heights(
+    lens: Lens,
+    launch: list[float],
+    wavelengths_um: list[float] | np.ndarray,
+    aiming: Aiming = "real",
+    para: ParaxialData | None = None,
+) -> np.ndarray:
     """Real chief-ray image heights y (mm), shape (W, F), for launch field values (angle
     deg or object height mm, lens.launch_field_type) at each wavelength (um), each chief
     ray aimed at its own wavelength. Raises RayTraceError naming the first failed ray."""
@@ -314,16 +327,18 @@ def field_report(
     ri = relative_illumination(lens, flds, samples=ri_samples, aiming=aiming)
     records = []
     for i, f in enumerate(flds):
-        records.append({
-            "field": f,
-            "launch": dist["launch"][i],
-            "real_height_mm": {f"{w:g}": h for w, h in zip(colour["wavelengths_nm"], colour["real_height_mm"][i])},
-            "paraxial_height_mm": dist["paraxial_height_mm"][i],
-            "distortion_percent": dist["distortion_percent"][i],
-            "channel_height_mm": dict(zip("rgb", colour["channel_height_mm"][i])),
-            "lateral_colour_um": dict(zip("rgb", colour["lateral_colour_um"][i])),
-            "relative_illumination": ri["relative_illumination"][i],
-        })
+        records.append(
+            {
+                "field": f,
+                "launch": dist["launch"][i],
+                "real_height_mm": {f"{w:g}": h for w, h in zip(colour["wavelengths_nm"], colour["real_height_mm"][i])},
+                "paraxial_height_mm": dist["paraxial_height_mm"][i],
+                "distortion_percent": dist["distortion_percent"][i],
+                "channel_height_mm": dict(zip("rgb", colour["channel_height_mm"][i])),
+                "lateral_colour_um": dict(zip("rgb", colour["lateral_colour_um"][i])),
+                "relative_illumination": ri["relative_illumination"][i],
+            }
+        )
     return {
         "name": lens.name,
         "source": lens.source,

@@ -7,6 +7,7 @@ at the plane wavefront through the origin. Finite object: rays start at the obje
 (0, h, -distance) with OPL 0 (h = -(distance + z_ep) tan a for angle fields).
 Lengths in mm, angles in degrees.
 """
+
 from __future__ import annotations
 
 import torch
@@ -32,7 +33,9 @@ def launch_at(lens: Lens, field: torch.Tensor, ep_xy: torch.Tensor, z_ep: float)
     return src, v / torch.linalg.norm(v, dim=-1, keepdim=True)
 
 
-def launch(lens: Lens, field: torch.Tensor, pupil_xy: torch.Tensor, para: ParaxialData) -> tuple[torch.Tensor, torch.Tensor]:
+def launch(
+    lens: Lens, field: torch.Tensor, pupil_xy: torch.Tensor, para: ParaxialData
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Object-space rays from field values (angle deg or object height mm, shape (F,))
     through entrance-pupil-plane points pupil_xy (P, 2) in mm. Returns (position,
     direction), each (F, P, 3)."""

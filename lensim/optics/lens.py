@@ -3,6 +3,7 @@
 Global frame: z along the optical axis, light leaves the object towards +z, the first
 surface vertex is at z = 0. Lengths in mm, wavelengths in um, field angles in degrees.
 """
+
 from __future__ import annotations
 
 import math
@@ -79,7 +80,9 @@ class Lens:
         if self.field_type not in FIELD_TYPES:
             raise self._err("fields.type", f"expected one of {', '.join(FIELD_TYPES)}, got {self.field_type!r}")
         if self.field_type == "object_height" and self.infinite_object:
-            raise self._err("fields.type", "object_height fields need a finite object distance; use angle for an object at infinity")
+            raise self._err(
+                "fields.type", "object_height fields need a finite object distance; use angle for an object at infinity"
+            )
         if not self.fields:
             raise self._err("fields.values", "expected at least one field")
         if any(not math.isfinite(f) for f in self.fields):
@@ -90,13 +93,19 @@ class Lens:
             raise self._err("wavelengths", "expected at least one wavelength")
         for i, w in enumerate(self.wavelengths_um):
             if not (0.2 <= w <= 15.0):
-                raise self._err(f"wavelengths.nm[{i}]", f"expected a wavelength between 200 and 15000 nm, got {w * 1000:g} nm")
+                raise self._err(
+                    f"wavelengths.nm[{i}]", f"expected a wavelength between 200 and 15000 nm, got {w * 1000:g} nm"
+                )
         if len(self.wavelength_weights) != len(self.wavelengths_um) or any(w < 0 for w in self.wavelength_weights):
             raise self._err("wavelengths.weights", "expected one non-negative weight per wavelength")
         if not (0 <= self.primary < len(self.wavelengths_um)):
-            raise self._err("wavelengths.primary", f"expected an index 0..{len(self.wavelengths_um) - 1}, got {self.primary}")
+            raise self._err(
+                "wavelengths.primary", f"expected an index 0..{len(self.wavelengths_um) - 1}, got {self.primary}"
+            )
         if not (self.object_distance > 0):
-            raise self._err("object.distance", f"expected a positive distance (mm) or infinity, got {self.object_distance}")
+            raise self._err(
+                "object.distance", f"expected a positive distance (mm) or infinity, got {self.object_distance}"
+            )
         stops = [i for i, s in enumerate(self.surfaces) if s.is_stop]
         if len(stops) != 1:
             found = f"{len(stops)} (surfaces {', '.join(f'[{i}]' for i in stops)})" if stops else "0"
@@ -111,18 +120,26 @@ class Lens:
             medium, direction = media[i + 1], dirs[i + 1]
             if not isinstance(medium, Air) and s.thickness * direction < 0:
                 expected = "positive" if direction > 0 else "negative (light travels towards -z after a mirror)"
-                raise self._err(f"surfaces[{i}].thickness",
-                                f"expected a {expected} thickness inside {medium.name}, got {s.thickness:g}: a ray "
-                                f"cannot travel backwards inside glass (negative thicknesses are allowed in air only)")
+                raise self._err(
+                    f"surfaces[{i}].thickness",
+                    f"expected a {expected} thickness inside {medium.name}, got {s.thickness:g}: a ray "
+                    f"cannot travel backwards inside glass (negative thicknesses are allowed in air only)",
+                )
             if s.thickness == 0 and not s.is_mirror and not isinstance(s.material, Air) and i < last:
-                raise self._err(f"surfaces[{i}].thickness", f"expected a non-zero thickness inside {s.material.name}, got 0")
+                raise self._err(
+                    f"surfaces[{i}].thickness", f"expected a non-zero thickness inside {s.material.name}, got 0"
+                )
             if s.clear_radius is not None and s.clear_radius <= 0:
-                raise self._err(f"surfaces[{i}].clear_semi_diameter", f"expected a positive number, got {s.clear_radius}")
+                raise self._err(
+                    f"surfaces[{i}].clear_semi_diameter", f"expected a positive number, got {s.clear_radius}"
+                )
             limit = s.clear_radius if s.clear_radius is not None else math.inf
             if s.obscuration_radius is not None and not (0 <= s.obscuration_radius < limit):
                 within = "" if s.clear_radius is None else f" below the clear semi-diameter {s.clear_radius:g}"
-                raise self._err(f"surfaces[{i}].obscuration",
-                                f"expected a central obscuration radius >= 0 mm{within}, got {s.obscuration_radius:g}")
+                raise self._err(
+                    f"surfaces[{i}].obscuration",
+                    f"expected a central obscuration radius >= 0 mm{within}, got {s.obscuration_radius:g}",
+                )
             for p in s.asphere:
                 if not (1 <= p <= MAX_ASPHERE_POWER):
                     raise self._err(f"surfaces[{i}].asphere", f"expected powers r1..r{MAX_ASPHERE_POWER}, got r{p}")
@@ -145,11 +162,13 @@ class Lens:
             if index is None:
                 continue
             if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < n:
-                raise self._err(f"focus.{key}", f"expected a surface index 0..{n - 1} (0-based, as in surfaces[i]), "
-                                                f"got {index!r}")
+                raise self._err(
+                    f"focus.{key}", f"expected a surface index 0..{n - 1} (0-based, as in surfaces[i]), got {index!r}"
+                )
             if not isinstance(media[index + 1], Air):
-                raise self._err(f"focus.{key}", f"expected an air gap, but surfaces[{index}] is followed by "
-                                                f"{media[index + 1].name}")
+                raise self._err(
+                    f"focus.{key}", f"expected an air gap, but surfaces[{index}] is followed by {media[index + 1].name}"
+                )
         if self.focus_compensator == self.focus_thickness:
             raise self._err("focus.compensator", f"expected another gap than focus.thickness ({self.focus_thickness})")
 
@@ -164,6 +183,7 @@ class Lens:
         virtually, as in Zemax), but the air between two surfaces that bend rays, or between
         one and the object or the image plane, must not add up to less than zero along the
         axis: those would overlap, and a real ray would have to travel backwards."""
+
         def name(k: int | None) -> str:
             return "the object" if k is None else ("the image plane" if k > last else f"surfaces[{k}]")
 
@@ -180,15 +200,22 @@ class Lens:
                     t = self.surfaces[neg].thickness
                     why = "only a stop or dummy surface may (placed by a negative thickness in air, as in Zemax)"
                     if len(gaps) == 1 and start == neg:
-                        expected = ("a positive thickness" if dirs[neg + 1] > 0
-                                    else "a negative thickness (light travels towards -z after a mirror)")
-                        raise self._err(f"surfaces[{neg}].thickness",
-                                        f"expected {expected}, got {t:g}: {name(i)} would lie behind {name(start)} "
-                                        f"along the light's path, which {why}")
-                    raise self._err(f"surfaces[{neg}].thickness",
-                                    f"expected the air from {name(start)} to {name(i)} to add up to >= 0 mm along "
-                                    f"the light's path, got {net:g} mm with this thickness {t:g}: {name(i)} would lie "
-                                    f"behind {name(start)}, which {why}")
+                        expected = (
+                            "a positive thickness"
+                            if dirs[neg + 1] > 0
+                            else "a negative thickness (light travels towards -z after a mirror)"
+                        )
+                        raise self._err(
+                            f"surfaces[{neg}].thickness",
+                            f"expected {expected}, got {t:g}: {name(i)} would lie behind {name(start)} "
+                            f"along the light's path, which {why}",
+                        )
+                    raise self._err(
+                        f"surfaces[{neg}].thickness",
+                        f"expected the air from {name(start)} to {name(i)} to add up to >= 0 mm along "
+                        f"the light's path, got {net:g} mm with this thickness {t:g}: {name(i)} would lie "
+                        f"behind {name(start)}, which {why}",
+                    )
                 if i > last:
                     break
                 start, gaps = i, []

@@ -26,6 +26,7 @@ name@Catalog, air, {nd, vd[, dpgf]} model glass or {n} constant index), conic, a
 asphere), clear_semi_diameter (vignetting), obscuration (central
 obscuration radius), semi_diameter (drawing only), stop, mirror, comment.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -41,12 +42,37 @@ from lensim.optics.lens import Lens
 from lensim.optics.materials import Air, Material, ModelGlass, material_from_spec, nearest_catalog_glass
 from lensim.optics.surfaces import MAX_ASPHERE_POWER, Surface
 
-TOP_KEYS = {"name", "description", "units", "object", "aperture", "fields", "wavelengths", "surfaces", "image", "notes",
-            "source", "configurations", "focus"}
+TOP_KEYS = {
+    "name",
+    "description",
+    "units",
+    "object",
+    "aperture",
+    "fields",
+    "wavelengths",
+    "surfaces",
+    "image",
+    "notes",
+    "source",
+    "configurations",
+    "focus",
+}
 FOCUS_KEYS = {"thickness", "compensator"}
 CONFIGURATION_KEYS = {"thicknesses"}
-SURFACE_KEYS = {"radius", "curvature", "thickness", "material", "conic", "asphere", "clear_semi_diameter",
-                "obscuration", "semi_diameter", "stop", "mirror", "comment"}
+SURFACE_KEYS = {
+    "radius",
+    "curvature",
+    "thickness",
+    "material",
+    "conic",
+    "asphere",
+    "clear_semi_diameter",
+    "obscuration",
+    "semi_diameter",
+    "stop",
+    "mirror",
+    "comment",
+}
 
 
 class LensNoteWarning(UserWarning):
@@ -91,7 +117,9 @@ def _check_keys(src: str, field: str, data: Any, allowed: set[str]) -> dict:
         raise InputError(src, field, f"expected a mapping, got {type(data).__name__}")
     unknown = sorted(set(data) - allowed)
     if unknown:
-        raise InputError(src, field, f"unknown key(s) {', '.join(unknown)}; expected some of {', '.join(sorted(allowed))}")
+        raise InputError(
+            src, field, f"unknown key(s) {', '.join(unknown)}; expected some of {', '.join(sorted(allowed))}"
+        )
     return data
 
 
@@ -146,32 +174,41 @@ def lens_from_dict(data: dict, source: str = "<lens>") -> Lens:
         for k, v in asph_raw.items():
             ks = str(k).lower().lstrip("ra")
             if not ks.isdigit() or not 1 <= int(ks) <= MAX_ASPHERE_POWER:
-                raise InputError(src, f"{f}.asphere.{k}", f"expected a key r1, r2, ... r{MAX_ASPHERE_POWER} "
-                                                          "(even powers: an even asphere; any odd power: an odd asphere)")
+                raise InputError(
+                    src,
+                    f"{f}.asphere.{k}",
+                    f"expected a key r1, r2, ... r{MAX_ASPHERE_POWER} "
+                    "(even powers: an even asphere; any odd power: an odd asphere)",
+                )
             asphere[int(ks)] = _number(src, f"{f}.asphere.{k}", v)
         try:
             material = material_from_spec(sd.get("material", "air"), notes=notes)
         except InputError as e:
             raise InputError(src, f + ".material", e.message) from None
         opt = {}
-        for key, attr in (("clear_semi_diameter", "clear_radius"), ("obscuration", "obscuration_radius"),
-                          ("semi_diameter", "semi_diameter")):
+        for key, attr in (
+            ("clear_semi_diameter", "clear_radius"),
+            ("obscuration", "obscuration_radius"),
+            ("semi_diameter", "semi_diameter"),
+        ):
             if sd.get(key) is not None:
                 opt[attr] = _number(src, f"{f}.{key}", sd[key])
         for key in ("stop", "mirror"):
             if key in sd and not isinstance(sd[key], bool):
                 raise InputError(src, f"{f}.{key}", f"expected true or false, got {sd[key]!r}")
-        surfaces.append(Surface(
-            curvature=curv,
-            thickness=_length(src, f + ".thickness", sd.get("thickness", 0.0)),
-            material=material,
-            conic=_number(src, f + ".conic", sd.get("conic", 0.0)),
-            asphere=asphere,
-            is_stop=bool(sd.get("stop", False)),
-            is_mirror=bool(sd.get("mirror", False)),
-            comment=str(sd.get("comment", "")),
-            **opt,
-        ))
+        surfaces.append(
+            Surface(
+                curvature=curv,
+                thickness=_length(src, f + ".thickness", sd.get("thickness", 0.0)),
+                material=material,
+                conic=_number(src, f + ".conic", sd.get("conic", 0.0)),
+                asphere=asphere,
+                is_stop=bool(sd.get("stop", False)),
+                is_mirror=bool(sd.get("mirror", False)),
+                comment=str(sd.get("comment", "")),
+                **opt,
+            )
+        )
     image = _check_keys(src, "image", data.get("image", {}) or {}, {"defocus", "clear_semi_diameter"})
     lens = Lens(
         surfaces=surfaces,
@@ -185,8 +222,11 @@ def lens_from_dict(data: dict, source: str = "<lens>") -> Lens:
         object_distance=distance,
         object_material=material_from_spec(obj.get("material", "air")),
         image_defocus=_number(src, "image.defocus", image.get("defocus", 0.0)),
-        image_clear_radius=(None if image.get("clear_semi_diameter") is None
-                            else _number(src, "image.clear_semi_diameter", image["clear_semi_diameter"])),
+        image_clear_radius=(
+            None
+            if image.get("clear_semi_diameter") is None
+            else _number(src, "image.clear_semi_diameter", image["clear_semi_diameter"])
+        ),
         name=str(data.get("name", "")),
         source=source,
         notes=notes,
@@ -203,8 +243,11 @@ def _focus_from_data(src: str, data: Any) -> dict[str, int | None]:
         return {}
     data = _check_keys(src, "focus", data, FOCUS_KEYS)
     if "thickness" not in data:
-        raise InputError(src, "focus.thickness", "missing; expected the 0-based index of the surface whose thickness "
-                                                 "(an air gap) the focus group changes")
+        raise InputError(
+            src,
+            "focus.thickness",
+            "missing; expected the 0-based index of the surface whose thickness (an air gap) the focus group changes",
+        )
     out: dict[str, int | None] = {}
     for key, attr in (("thickness", "focus_thickness"), ("compensator", "focus_compensator")):
         value = data.get(key)
@@ -223,22 +266,27 @@ def _configurations_from_data(src: str, data: Any) -> dict[str, dict[int, float]
     if data is None:
         return {}
     if not isinstance(data, dict):
-        raise InputError(src, "configurations", f"expected a mapping of configuration name: {{thicknesses: ...}}, "
-                                                f"got {type(data).__name__}")
+        raise InputError(
+            src,
+            "configurations",
+            f"expected a mapping of configuration name: {{thicknesses: ...}}, got {type(data).__name__}",
+        )
     out: dict[str, dict[int, float]] = {}
     for name, conf in data.items():
         fld = f"configurations.{name}"
         conf = _check_keys(src, fld, conf if conf is not None else {}, CONFIGURATION_KEYS)
         thick = conf.get("thicknesses", {})
         if not isinstance(thick, dict):
-            raise InputError(src, f"{fld}.thicknesses", f"expected a mapping of surface index: thickness (mm), "
-                                                        f"got {thick!r}")
+            raise InputError(
+                src, f"{fld}.thicknesses", f"expected a mapping of surface index: thickness (mm), got {thick!r}"
+            )
         values: dict[int, float] = {}
         for index, value in thick.items():
             text = str(index).strip()
             if isinstance(index, bool) or not text.isdigit():
-                raise InputError(src, f"{fld}.thicknesses", f"expected 0-based surface indices (as in surfaces[i]), "
-                                                            f"got {index!r}")
+                raise InputError(
+                    src, f"{fld}.thicknesses", f"expected 0-based surface indices (as in surfaces[i]), got {index!r}"
+                )
             values[int(text)] = _length(src, f"{fld}.thicknesses.{text}", value)
         out[str(name)] = values
     return out
@@ -280,8 +328,11 @@ def lens_to_dict(lens: Lens) -> dict:
         "object": {"distance": "infinity" if lens.infinite_object else lens.object_distance},
         "aperture": {"type": lens.aperture_type, "value": lens.aperture_value},
         "fields": {"type": lens.field_type, "values": list(lens.fields)},
-        "wavelengths": {"nm": [round(w * 1000.0, 6) for w in lens.wavelengths_um],
-                        "weights": list(lens.wavelength_weights), "primary": lens.primary},
+        "wavelengths": {
+            "nm": [round(w * 1000.0, 6) for w in lens.wavelengths_um],
+            "weights": list(lens.wavelength_weights),
+            "primary": lens.primary,
+        },
         "surfaces": surfaces,
         "image": {"defocus": lens.image_defocus},
     }
@@ -292,8 +343,9 @@ def lens_to_dict(lens: Lens) -> dict:
     if lens.notes:
         out["notes"] = list(lens.notes)
     if lens.configurations:
-        out["configurations"] = {name: {"thicknesses": dict(sorted(t.items()))}
-                                 for name, t in lens.configurations.items()}
+        out["configurations"] = {
+            name: {"thicknesses": dict(sorted(t.items()))} for name, t in lens.configurations.items()
+        }
     if lens.focus_thickness is not None:
         out["focus"] = {"thickness": lens.focus_thickness}
         if lens.focus_compensator is not None:
@@ -320,12 +372,22 @@ def match_glasses(lens: Lens, makers: list[str] | None = None) -> tuple[Lens, li
             found[m] = nearest_catalog_glass(m, makers)
         glass, rms = found[m]
         surfaces.append(dataclasses.replace(s, material=glass))
-        matches.append({"surface": i, "model": {"nd": m.nd_value, "vd": m.vd_value, "dpgf": m.dpgf_value},
-                        "glass": glass.name, "catalog": glass.catalog, "nd": glass.nd, "vd": glass.vd,
-                        "rms_index_difference": rms})
-        notes.append(f"surfaces[{i}]: model glass nd {m.nd_value:.5f}, Vd {m.vd_value:.2f}, dPgF {m.dpgf_value:+.4f} "
-                     f"replaced by the nearest catalogue glass {glass.name} ({glass.catalog}; nd {glass.nd:.5f}, "
-                     f"Vd {glass.vd:.2f}; RMS index difference {rms:.1e} over 400-700 nm)")
+        matches.append(
+            {
+                "surface": i,
+                "model": {"nd": m.nd_value, "vd": m.vd_value, "dpgf": m.dpgf_value},
+                "glass": glass.name,
+                "catalog": glass.catalog,
+                "nd": glass.nd,
+                "vd": glass.vd,
+                "rms_index_difference": rms,
+            }
+        )
+        notes.append(
+            f"surfaces[{i}]: model glass nd {m.nd_value:.5f}, Vd {m.vd_value:.2f}, dPgF {m.dpgf_value:+.4f} "
+            f"replaced by the nearest catalogue glass {glass.name} ({glass.catalog}; nd {glass.nd:.5f}, "
+            f"Vd {glass.vd:.2f}; RMS index difference {rms:.1e} over 400-700 nm)"
+        )
     return lens.with_changes(surfaces=surfaces, notes=notes), matches
 
 
@@ -374,7 +436,9 @@ def load_lens(path: str | Path, warn: bool = True) -> Lens:
     if not p.exists():
         builtin = assets.lens_path(str(path))
         if builtin is None:
-            raise InputError(str(path), None, f"no such file, and not a built-in lens (built-ins: {', '.join(assets.lens_names())})")
+            raise InputError(
+                str(path), None, f"no such file, and not a built-in lens (built-ins: {', '.join(assets.lens_names())})"
+            )
         p = builtin
     suffix = p.suffix.lower()
     if suffix in (".json", ".yaml", ".yml"):

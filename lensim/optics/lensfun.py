@@ -18,6 +18,7 @@ lensfun (darktable, RawTherapee, Hugin; checked here with lensfunpy, which bundl
 All fits use fields from the axis to the frame's corner (the lens must cover it).
 Lengths in mm, wavelengths in nm at the interface.
 """
+
 from __future__ import annotations
 
 import math
@@ -73,8 +74,9 @@ class LensfunProfile:
         return HALF_SHORT_SIDE_FULL_FRAME_MM / self.crop_factor
 
 
-def check_settings(maker: str, model: str, mount: str, crop_factor: float, focal_mm: float, aperture: float,
-                   distance_m: float | None) -> None:
+def check_settings(
+    maker: str, model: str, mount: str, crop_factor: float, focal_mm: float, aperture: float, distance_m: float | None
+) -> None:
     """One-line errors for every bad setting, before any work."""
     for name, text in (("--maker", maker), ("--model", model), ("--mount", mount)):
         if not str(text).strip():
@@ -92,9 +94,13 @@ def _corner_launch(lens: Lens, corner_mm: float, crop_factor: float, aiming: Aim
     try:
         return object_field(probe, corner_mm, aiming, paraxial_data(probe))
     except LensimError as e:
-        raise InputError(lens.source, "--crop-factor", f"the lens does not reach the corner of a 3:2 frame at crop "
-                                                       f"factor {crop_factor:g} ({corner_mm:.3f} mm image height): "
-                                                       f"{str(e).split(': ')[-1]}") from None
+        raise InputError(
+            lens.source,
+            "--crop-factor",
+            f"the lens does not reach the corner of a 3:2 frame at crop "
+            f"factor {crop_factor:g} ({corner_mm:.3f} mm image height): "
+            f"{str(e).split(': ')[-1]}",
+        ) from None
 
 
 def _fit_ptlens(u: np.ndarray, rd: np.ndarray) -> tuple[dict[str, float], float, np.ndarray]:
@@ -168,17 +174,42 @@ def lensfun_profile(
     (vb, cb, bb), blue_fit = _fit_poly3(r_rgb[1], r_rgb[2])
     r_corner = r_rgb[1] / CORNER_IN_SHORT_HALF_SIDES
     vig, ri_fit = _fit_pa(r_corner, np.array(ri["relative_illumination"]))
-    fit = {"distortion_um": float(np.abs(rd_fit - r_rgb[1]).max() * unit * 1000.0),
-           "tca_um": float(max(np.abs(red_fit - r_rgb[0]).max(), np.abs(blue_fit - r_rgb[2]).max()) * unit * 1000.0),
-           "vignetting": float(np.abs(ri_fit - np.array(ri["relative_illumination"])).max())}
-    distance = distance_m if distance_m is not None else (
-        INFINITY_DISTANCE_M if set_lens.infinite_object else (set_lens.object_distance + set_lens.total_track) / 1000.0)
-    samples = {"launch": list(map(float, launch)), "paraxial_height_mm": dist["paraxial_height_mm"],
-               "channel_height_mm": np.array(colour["channel_height_mm"]).T.tolist(),
-               "relative_illumination": ri["relative_illumination"]}
-    return LensfunProfile(maker.strip(), model.strip(), mount.strip(), float(crop_factor), float(focal_mm),
-                          float(aperture), float(distance), coef, float(k),
-                          {"vr": vr, "cr": cr, "br": br, "vb": vb, "cb": cb, "bb": bb}, vig, fit, samples, lens.source)
+    fit = {
+        "distortion_um": float(np.abs(rd_fit - r_rgb[1]).max() * unit * 1000.0),
+        "tca_um": float(max(np.abs(red_fit - r_rgb[0]).max(), np.abs(blue_fit - r_rgb[2]).max()) * unit * 1000.0),
+        "vignetting": float(np.abs(ri_fit - np.array(ri["relative_illumination"])).max()),
+    }
+    distance = (
+        distance_m
+        if distance_m is not None
+        else (
+            INFINITY_DISTANCE_M
+            if set_lens.infinite_object
+            else (set_lens.object_distance + set_lens.total_track) / 1000.0
+        )
+    )
+    samples = {
+        "launch": list(map(float, launch)),
+        "paraxial_height_mm": dist["paraxial_height_mm"],
+        "channel_height_mm": np.array(colour["channel_height_mm"]).T.tolist(),
+        "relative_illumination": ri["relative_illumination"],
+    }
+    return LensfunProfile(
+        maker.strip(),
+        model.strip(),
+        mount.strip(),
+        float(crop_factor),
+        float(focal_mm),
+        float(aperture),
+        float(distance),
+        coef,
+        float(k),
+        {"vr": vr, "cr": cr, "br": br, "vb": vb, "cb": cb, "bb": bb},
+        vig,
+        fit,
+        samples,
+        lens.source,
+    )
 
 
 def _num(x: float) -> str:
@@ -189,17 +220,28 @@ def profile_xml(profile: LensfunProfile) -> str:
     """The profile as a lensfun database file (lensdatabase version 1, one <lens>)."""
     root = ET.Element("lensdatabase", version="1")
     lens = ET.SubElement(root, "lens")
-    for tag, text in (("maker", profile.maker), ("model", profile.model), ("mount", profile.mount),
-                      ("cropfactor", _num(profile.crop_factor))):
+    for tag, text in (
+        ("maker", profile.maker),
+        ("model", profile.model),
+        ("mount", profile.mount),
+        ("cropfactor", _num(profile.crop_factor)),
+    ):
         ET.SubElement(lens, tag).text = text
     cal = ET.SubElement(lens, "calibration")
-    cal.append(ET.Comment(f" lensim: fitted to real chief rays of {Path(profile.source).name}; largest residuals: "
-                          f"distortion {profile.fit['distortion_um']:.3g} um, TCA {profile.fit['tca_um']:.3g} um, "
-                          f"vignetting {profile.fit['vignetting']:.2g} "))
+    cal.append(
+        ET.Comment(
+            f" lensim: fitted to real chief rays of {Path(profile.source).name}; largest residuals: "
+            f"distortion {profile.fit['distortion_um']:.3g} um, TCA {profile.fit['tca_um']:.3g} um, "
+            f"vignetting {profile.fit['vignetting']:.2g} "
+        )
+    )
     focal = {"focal": _num(profile.focal_mm)}
     vignetting_at = focal | {"aperture": _num(profile.aperture), "distance": _num(profile.distance_m)}
-    models = (("distortion", "ptlens", focal, profile.distortion), ("tca", "poly3", focal, profile.tca),
-              ("vignetting", "pa", vignetting_at, profile.vignetting))
+    models = (
+        ("distortion", "ptlens", focal, profile.distortion),
+        ("tca", "poly3", focal, profile.tca),
+        ("vignetting", "pa", vignetting_at, profile.vignetting),
+    )
     for tag, model, at, terms in models:
         ET.SubElement(cal, tag, attrib={"model": model} | at | {k: _num(v) for k, v in terms.items()})
     ET.indent(root, space="    ")

@@ -4,6 +4,7 @@ Indices are relative to air (as in Zemax and CODE V catalogues); wavelengths in
 micrometres. Catalogue data come from the `opticalglass` package (Schott, Ohara,
 CDGM, Hikari, Hoya, Sumita), each glass with its vendor's own dispersion formula.
 """
+
 from __future__ import annotations
 
 import difflib
@@ -254,19 +255,27 @@ def resolve_glass(name: str, catalogs: tuple[str, ...] | list[str] | None = None
     for cat in everywhere:
         if key in _catalog_names(cat):
             glass = catalog_glass(_catalog_names(cat)[key], cat)
-            note = None if cat in listed else f"glass {name} is not in the catalogues {', '.join(listed)}; using {glass.name} from {cat}"
+            note = (
+                None
+                if cat in listed
+                else f"glass {name} is not in the catalogues {', '.join(listed)}; using {glass.name} from {cat}"
+            )
             return glass, note
     fam = _family(re.sub(r"_MOLD$", "", name.strip(), flags=re.I))
     for cat in everywhere:
         matches = sorted(v for v in _catalog_names(cat).values() if _family(v) == fam)
         if len(matches) >= 1:
             glass = catalog_glass(matches[0], cat)
-            return glass, (f"glass {name} is in no catalogue; using the same family's {glass.name} from {cat} "
-                           f"(nd {glass.nd:.5f}, Vd {glass.vd:.2f})")
+            return glass, (
+                f"glass {name} is in no catalogue; using the same family's {glass.name} from {cat} "
+                f"(nd {glass.nd:.5f}, Vd {glass.vd:.2f})"
+            )
     candidates = {k: (v, c) for c in everywhere for k, v in _catalog_names(c).items()}
     close = difflib.get_close_matches(key, list(candidates), n=5, cutoff=0.6)
     hint = ", ".join(f"{candidates[k][0]} ({candidates[k][1]})" for k in close) or "none"
-    raise UnknownGlassError(None, "material", f"unknown glass {name!r} (searched {', '.join(everywhere)}); close names: {hint}")
+    raise UnknownGlassError(
+        None, "material", f"unknown glass {name!r} (searched {', '.join(everywhere)}); close names: {hint}"
+    )
 
 
 # Wavelengths (um) over which glasses are matched: the visible, where model glasses hold.
@@ -293,8 +302,9 @@ def _catalog_index_table(catalog: str) -> tuple[tuple[str, ...], np.ndarray]:
     return tuple(names), np.array(rows)
 
 
-def nearest_catalog_glass(material: Material,
-                          makers: list[str] | tuple[str, ...] | None = None) -> tuple[CatalogGlass, float]:
+def nearest_catalog_glass(
+    material: Material, makers: list[str] | tuple[str, ...] | None = None
+) -> tuple[CatalogGlass, float]:
     """The catalogue glass closest to `material` and the RMS index difference to it.
 
     Closest as in Zemax's "best fit glass": the smallest root-mean-square difference of the
@@ -321,8 +331,9 @@ def _model_glass_from_spec(spec: dict) -> ModelGlass:
     """{nd, vd[, dpgf][, name]} -> ModelGlass, with the ranges checked."""
     unknown = sorted(set(spec) - {"nd", "vd", "dpgf", "name"})
     if unknown:
-        raise InputError(None, "material", f"unknown model-glass key(s) {', '.join(map(str, unknown))}; "
-                                           "expected nd, vd, dpgf, name")
+        raise InputError(
+            None, "material", f"unknown model-glass key(s) {', '.join(map(str, unknown))}; expected nd, vd, dpgf, name"
+        )
     try:
         nd, vd, dpgf = float(spec["nd"]), float(spec["vd"]), float(spec.get("dpgf", 0.0))
     except (TypeError, ValueError):

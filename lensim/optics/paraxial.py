@@ -5,6 +5,7 @@ negative, so reduced thickness t/n stays positive and the y-nu equations hold un
     refraction:  n'u' = n u - y c (n' - n)        transfer:  y' = y + t (n'u') / n'
 All z positions are global (first surface vertex at z = 0), lengths in mm.
 """
+
 from __future__ import annotations
 
 import math

@@ -1,4 +1,5 @@
 """Normalized pupil sampling patterns (points in the unit disc)."""
+
 from __future__ import annotations
 
 import math

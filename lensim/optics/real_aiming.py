@@ -24,6 +24,7 @@ move the ray's aim).
 
 Shapes: fields F, wavelengths W (tensor (W, 1, 1)), pupil points P; lengths in mm.
 """
+
 from __future__ import annotations
 
 import math
@@ -57,8 +58,9 @@ class _Problem:
         and whether they reach it."""
         pos, dirs = launch_at(self.lens, self.field, x, self.para.entrance_pupil_z_mm)
         rays = object_rays(self.lens, pos, dirs, self.n[0])
-        res = trace(self.lens, rays, self.wl, end=self.lens.stop_index + 1, to_image=False, apertures=False,
-                    indices=self.n)
+        res = trace(
+            self.lens, rays, self.wl, end=self.lens.stop_index + 1, to_image=False, apertures=False, indices=self.n
+        )
         return res.rays.position[..., :2], res.rays.valid
 
     def jacobian(self, x: torch.Tensor, s0: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -131,8 +133,15 @@ def _newton(pb: _Problem, x: torch.Tensor, target: torch.Tensor, max_iter: int =
     return x, v0 & (miss < pb.tol)
 
 
-def _backtrack(pb: _Problem, x: torch.Tensor, step: torch.Tensor, lost: torch.Tensor, cand: torch.Tensor,
-               sc: torch.Tensor, vc: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def _backtrack(
+    pb: _Problem,
+    x: torch.Tensor,
+    step: torch.Tensor,
+    lost: torch.Tensor,
+    cand: torch.Tensor,
+    sc: torch.Tensor,
+    vc: torch.Tensor,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Halve the steps of the rays that a full step lost (lost: a mask over x's batch) until
     their rays trace again, at most BACKTRACK_HALVINGS times, tracing only those rays.
     Returns updated copies of (cand, sc, vc)."""
@@ -208,8 +217,9 @@ def _search_meridian(pb: _Problem) -> tuple[torch.Tensor, torch.Tensor]:
     return x, conv & ok.any(-1)
 
 
-def _aim_chief(lens: Lens, field: torch.Tensor, wl: torch.Tensor, n: torch.Tensor,
-               para: ParaxialData) -> tuple[torch.Tensor, torch.Tensor]:
+def _aim_chief(
+    lens: Lens, field: torch.Tensor, wl: torch.Tensor, n: torch.Tensor, para: ParaxialData
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Entrance-plane points (W, F, 1, 2) of the real chief rays and where they converged."""
     W, F = wl.shape[0], field.shape[0]
     pb = _Problem(lens, field.reshape(1, F, 1), wl, n, para)
@@ -232,8 +242,9 @@ def _subset(pb: _Problem, todo: torch.Tensor) -> tuple[_Problem, tuple[torch.Ten
     return _Problem(pb.lens, pb.field.expand(todo.shape)[idx], pb.wl.expand(todo.shape)[idx], n, pb.para), idx
 
 
-def _retry_from(pb: _Problem, x: torch.Tensor, conv: torch.Tensor, todo: torch.Tensor, start: torch.Tensor,
-                target: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+def _retry_from(
+    pb: _Problem, x: torch.Tensor, conv: torch.Tensor, todo: torch.Tensor, start: torch.Tensor, target: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Newton again for the rays where todo (W, F, P) holds, from start (W, F, P, 2); the
     ones that converge replace x. Returns updated copies of (x, conv)."""
     if not bool(todo.any()):
@@ -246,8 +257,15 @@ def _retry_from(pb: _Problem, x: torch.Tensor, conv: torch.Tensor, todo: torch.T
     return x, conv
 
 
-def _continue_from_chief(pb: _Problem, x: torch.Tensor, conv: torch.Tensor, chief: torch.Tensor,
-                         chief_ok: torch.Tensor, jac: torch.Tensor, target: torch.Tensor):
+def _continue_from_chief(
+    pb: _Problem,
+    x: torch.Tensor,
+    conv: torch.Tensor,
+    chief: torch.Tensor,
+    chief_ok: torch.Tensor,
+    jac: torch.Tensor,
+    target: torch.Tensor,
+):
     """Walk the targets of the unconverged rays (whose chief ray converged) out from the
     chief ray in CONTINUATION_STEPS steps, dropping a ray at the first step it fails.
     x, conv: (W, F, P, ...); returns updated copies."""
@@ -273,8 +291,9 @@ def _continue_from_chief(pb: _Problem, x: torch.Tensor, conv: torch.Tensor, chie
     return x, conv
 
 
-def aim_real(lens: Lens, field: torch.Tensor, pupil: torch.Tensor, wl: torch.Tensor, n: torch.Tensor,
-             para: ParaxialData) -> tuple[torch.Tensor, torch.Tensor]:
+def aim_real(
+    lens: Lens, field: torch.Tensor, pupil: torch.Tensor, wl: torch.Tensor, n: torch.Tensor, para: ParaxialData
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Entrance-plane points (W, F, P, 2) of the rays of launch fields field (F,) and
     wavelengths wl (W, 1, 1) (media indices n, (N+1, W, 1, 1)) that cross the real stop at
     pupil (P, 2) x the paraxial stop semi-diameter, and where the aim converged."""

@@ -32,6 +32,7 @@ distance when the object moves (so the same part of the image is covered); angle
 image-height fields are kept. Lengths in mm inside lensim, distances of this module's
 settings in metres.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -74,8 +75,11 @@ def _number(value: Any, key: str, allow_inf: bool) -> float:
     if math.isnan(x) or x <= 0 or (math.isinf(x) and not allow_inf):
         raise InputError("<command line>", option, f"expected a positive distance in metres or inf, got {value!r}")
     if math.isfinite(x) and x > MAX_DISTANCE_M:
-        raise InputError("<command line>", option, f"expected a distance up to {MAX_DISTANCE_M:g} m (give inf for "
-                                                   f"infinity), got {x:g} m")
+        raise InputError(
+            "<command line>",
+            option,
+            f"expected a distance up to {MAX_DISTANCE_M:g} m (give inf for infinity), got {x:g} m",
+        )
     return x
 
 
@@ -99,8 +103,9 @@ class ShootingSettings:
                 object.__setattr__(self, key, _number(value, key, allow_inf=key != "fno"))
         if self.config is not None:
             if isinstance(self.config, bool) or not str(self.config).strip():
-                raise InputError("<command line>", "--config", f"expected a configuration name or number, got "
-                                                               f"{self.config!r}")
+                raise InputError(
+                    "<command line>", "--config", f"expected a configuration name or number, got {self.config!r}"
+                )
             object.__setattr__(self, "config", str(self.config).strip())
 
     @property
@@ -111,8 +116,7 @@ class ShootingSettings:
     def to_dict(self) -> dict[str, Any]:
         """{fno, object_m, focus_m, config}; None where not set, infinite distances as the
         string "inf" (strict JSON)."""
-        return strict_json({"fno": self.fno, "object_m": self.object_m, "focus_m": self.focus_m,
-                            "config": self.config})
+        return strict_json({"fno": self.fno, "object_m": self.object_m, "focus_m": self.focus_m, "config": self.config})
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any] | None) -> ShootingSettings:
@@ -120,20 +124,25 @@ class ShootingSettings:
         if data is None:
             return cls()
         if not isinstance(data, Mapping):
-            raise InputError(None, "settings", f"expected a mapping of fno, object_m, focus_m, config, got "
-                                               f"{type(data).__name__}")
+            raise InputError(
+                None, "settings", f"expected a mapping of fno, object_m, focus_m, config, got {type(data).__name__}"
+            )
         unknown = sorted(set(data) - set(OPTIONS))
         if unknown:
-            raise InputError(None, "settings", f"unknown key(s) {', '.join(unknown)}; expected some of "
-                                               f"{', '.join(OPTIONS)}")
+            raise InputError(
+                None, "settings", f"unknown key(s) {', '.join(unknown)}; expected some of {', '.join(OPTIONS)}"
+            )
         return cls(**{k: data.get(k) for k in OPTIONS})
 
     @classmethod
-    def from_text(cls, fno: str | None = None, object_m: str | None = None, focus_m: str | None = None,
-                  config: str | None = None) -> ShootingSettings:
+    def from_text(
+        cls, fno: str | None = None, object_m: str | None = None, focus_m: str | None = None, config: str | None = None
+    ) -> ShootingSettings:
         """From command-line text: numbers, distances also "inf"; None where not given."""
-        numbers = {k: None if v is None else _number(v, k, allow_inf=k != "fno")
-                   for k, v in (("fno", fno), ("object_m", object_m), ("focus_m", focus_m))}
+        numbers = {
+            k: None if v is None else _number(v, k, allow_inf=k != "fno")
+            for k, v in (("fno", fno), ("object_m", object_m), ("focus_m", focus_m))
+        }
         return cls(**numbers, config=config)
 
     def distances_m(self) -> tuple[float | None, float | None]:
@@ -145,9 +154,11 @@ class ShootingSettings:
 
 # ---------------------------------------------------------------- focusing
 
+
 def _with_thickness(lens: Lens, changes: dict[int, float]) -> Lens:
-    surfaces = [dataclasses.replace(s, thickness=changes[i]) if i in changes else s
-                for i, s in enumerate(lens.surfaces)]
+    surfaces = [
+        dataclasses.replace(s, thickness=changes[i]) if i in changes else s for i, s in enumerate(lens.surfaces)
+    ]
     return lens.with_changes(surfaces=surfaces)
 
 
@@ -172,9 +183,13 @@ def _object_distance_mm(lens: Lens, distance_m: float, option: str) -> float:
         return math.inf
     s = distance_m * 1000.0 - _image_z(lens)
     if not s > 0:
-        raise InputError("<command line>", option, f"{distance_m:g} m from the image plane is inside the lens "
-                                                   f"(its first vertex is {_image_z(lens) / 1000.0:.4g} m in front "
-                                                   "of the image plane); expected a larger distance")
+        raise InputError(
+            "<command line>",
+            option,
+            f"{distance_m:g} m from the image plane is inside the lens "
+            f"(its first vertex is {_image_z(lens) / 1000.0:.4g} m in front "
+            "of the image plane); expected a larger distance",
+        )
     return s
 
 
@@ -228,17 +243,25 @@ def focus_changes(lens: Lens, focus_m: float) -> dict[int, float]:
     t = _newton(residual, work.surfaces[gap].thickness)
     if t is None:
         _object_distance_mm(work, focus_m, "--focus-m")  # an object inside the lens: that message
-        raise InputError("<command line>", "--focus-m", f"the lens cannot focus at {focus_m:g} m by moving {what}; "
-                                                        "expected a longer distance")
+        raise InputError(
+            "<command line>",
+            "--focus-m",
+            f"the lens cannot focus at {focus_m:g} m by moving {what}; expected a longer distance",
+        )
     try:
         _with_thickness(work, changes(t))
     except InputError as e:
-        raise InputError("<command line>", "--focus-m", f"focusing at {focus_m:g} m moves {what} to {t:.4g} mm, "
-                                                        f"which the lens cannot take ({e.field}: {e.message})") from None
+        raise InputError(
+            "<command line>",
+            "--focus-m",
+            f"focusing at {focus_m:g} m moves {what} to {t:.4g} mm, "
+            f"which the lens cannot take ({e.field}: {e.message})",
+        ) from None
     return changes(t)
 
 
 # ---------------------------------------------------------------- aperture
+
 
 def _stop_at_fno(lens_inf: Lens, fno: float) -> float:
     """The stop semi-diameter (mm) giving image-space F/fno (EFL / EPD) to a lens whose
@@ -271,6 +294,7 @@ def _at_infinity(lens: Lens) -> Lens:
 
 # ---------------------------------------------------------------- the lens at settings
 
+
 def _fields_for_object(file_lens: Lens, object_mm: float) -> dict[str, Any]:
     """Field changes for a new object distance: object heights become the angles they
     subtend from the file's entrance pupil (other field types are kept)."""
@@ -290,8 +314,12 @@ def _check_fno(lens_inf: Lens, fno: float, largest_mm: float) -> float:
         fastest = _fno_of_stop(lens_inf, largest_mm)
         if fno >= fastest * (1 - WIDE_OPEN_TOLERANCE):  # a rounded marking of wide open (F/2 for F/2.0001)
             return largest_mm
-        raise InputError("<command line>", "--fno", f"F/{fno:g} is faster than the lens's maximum aperture "
-                                                    f"F/{fastest:.3g}; expected --fno {fastest:.3g} or more")
+        raise InputError(
+            "<command line>",
+            "--fno",
+            f"F/{fno:g} is faster than the lens's maximum aperture "
+            f"F/{fastest:.3g}; expected --fno {fastest:.3g} or more",
+        )
     return stop
 
 
@@ -320,8 +348,12 @@ def lens_at(lens: Lens, settings: ShootingSettings | None) -> Lens:
     else:
         stop = _check_fno(_at_infinity(base), settings.fno, max_stop_mm(base))
     object_mm = base.object_distance if object_m is None else _object_distance_mm(focused, object_m, "--object-m")
-    return focused.with_changes(aperture_type="stop_semi_diameter", aperture_value=stop, object_distance=object_mm,
-                                **_fields_for_object(base, object_mm))
+    return focused.with_changes(
+        aperture_type="stop_semi_diameter",
+        aperture_value=stop,
+        object_distance=object_mm,
+        **_fields_for_object(base, object_mm),
+    )
 
 
 def describe(lens: Lens, settings: ShootingSettings | None) -> dict[str, Any]:
@@ -339,9 +371,14 @@ def describe(lens: Lens, settings: ShootingSettings | None) -> dict[str, Any]:
     object_m = math.inf if at.infinite_object else (at.object_distance + _image_z(at)) / 1000.0
     _, focus_m = settings.distances_m()
     para_inf = paraxial_data(inf)
-    return {"fno": float(abs(para_inf.efl_mm) / para_inf.epd_mm), "working_fno": float(paraxial_data(at).working_fno),
-            "focus_m": float(object_m if focus_m is None else focus_m), "object_m": float(object_m),
-            "focal_mm": float(para_inf.efl_mm), "config": config}
+    return {
+        "fno": float(abs(para_inf.efl_mm) / para_inf.epd_mm),
+        "working_fno": float(paraxial_data(at).working_fno),
+        "focus_m": float(object_m if focus_m is None else focus_m),
+        "object_m": float(object_m),
+        "focal_mm": float(para_inf.efl_mm),
+        "config": config,
+    }
 
 
 def record(described: Mapping[str, Any]) -> dict[str, Any]:

@@ -1,4 +1,5 @@
 """Spot diagrams and RMS spot radius."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -76,12 +77,25 @@ def spot_diagram(
     rays, wl = generate_rays(lens, launch, pts, wls, aiming, para)
     chief = trace_chief_rays(lens, rays.select(0), wl, launch, aiming, para)
     res = trace(lens, rays.select(slice(1, None)), wl)
-    return SpotDiagram(xy=res.rays.position[..., :2], valid=res.rays.valid, chief=chief.rays.position[..., 0, :2],
-                       fields=fields, wavelengths_um=wls, weights=weights, primary=primary)
+    return SpotDiagram(
+        xy=res.rays.position[..., :2],
+        valid=res.rays.valid,
+        chief=chief.rays.position[..., 0, :2],
+        fields=fields,
+        wavelengths_um=wls,
+        weights=weights,
+        primary=primary,
+    )
 
 
-def rms_spot_radius(lens: Lens, field: float, wavelength_um: float | None = None, rings: int = 6,
-                    aiming: Aiming = "paraxial", reference: str = "centroid") -> float:
+def rms_spot_radius(
+    lens: Lens,
+    field: float,
+    wavelength_um: float | None = None,
+    rings: int = 6,
+    aiming: Aiming = "paraxial",
+    reference: str = "centroid",
+) -> float:
     """Monochromatic (or, with wavelength_um None, polychromatic) RMS spot radius in mm."""
     wls = None if wavelength_um is None else [wavelength_um]
     sd = spot_diagram(lens, [field], wls, hexapolar(rings), aiming)

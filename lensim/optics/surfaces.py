@@ -8,6 +8,7 @@ Both are one Surface whose `asphere` maps each power to its coefficient; any odd
 makes it an odd asphere (Surface.kind). Lengths in mm, all coordinates local to the
 surface vertex.
 """
+
 from __future__ import annotations
 
 import math

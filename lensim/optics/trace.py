@@ -10,6 +10,7 @@ distance along the ray; elsewhere a ray that would travel backwards misses the s
 Failures (miss, total internal reflection, vignetting) become per-ray validity masks
 with a status code and the surface where they happened; no NaN reaches the caller.
 """
+
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
@@ -28,7 +29,12 @@ OK = 0
 MISSED = 1  # the ray does not meet the surface (or travels backwards to it where that is not allowed)
 TIR = 2  # total internal reflection
 VIGNETTED = 3  # blocked by a clear aperture or obscuration
-STATUS_TEXT = {OK: "ok", MISSED: "misses the surface", TIR: "is totally internally reflected", VIGNETTED: "is vignetted by the aperture"}
+STATUS_TEXT = {
+    OK: "ok",
+    MISSED: "misses the surface",
+    TIR: "is totally internally reflected",
+    VIGNETTED: "is vignetted by the aperture",
+}
 
 
 @dataclass
@@ -176,7 +182,12 @@ def trace_reference(
     positions = []
     for i in range(start, end):
         rays, st = trace_surface(
-            lens.surfaces[i], float(zv[i]), rays, n[i], n[i + 1], allow_backwards=bool(backwards[i]),
+            lens.surfaces[i],
+            float(zv[i]),
+            rays,
+            n[i],
+            n[i + 1],
+            allow_backwards=bool(backwards[i]),
             apertures=apertures,
         )
         newly = (st != OK) & (status == OK)
@@ -186,8 +197,16 @@ def trace_reference(
             positions.append(rays.position)
     if to_image and end == lens.num_surfaces:
         image = Surface(clear_radius=lens.image_clear_radius)
-        rays, st = trace_surface(image, float(zv[-1]), rays, n[-1], n[-1], allow_backwards=bool(backwards[end]),
-                                 apertures=apertures, interact=False)
+        rays, st = trace_surface(
+            image,
+            float(zv[-1]),
+            rays,
+            n[-1],
+            n[-1],
+            allow_backwards=bool(backwards[end]),
+            apertures=apertures,
+            interact=False,
+        )
         newly = (st != OK) & (status == OK)
         status = torch.where(newly, st.to(status.dtype), status)
         failed_at = torch.where(newly, torch.as_tensor(end, dtype=failed_at.dtype), failed_at)
@@ -325,8 +344,14 @@ def _normal(st: _Step, x, y, z):
     return nx.mul_(inv), ny.mul_(inv), nz.mul_(inv)
 
 
-def _trace_chunk(steps: list[_Step], comps: list[torch.Tensor], n: list, fail: torch.Tensor,
-                 record: list[torch.Tensor] | None, zv: np.ndarray) -> None:
+def _trace_chunk(
+    steps: list[_Step],
+    comps: list[torch.Tensor],
+    n: list,
+    fail: torch.Tensor,
+    record: list[torch.Tensor] | None,
+    zv: np.ndarray,
+) -> None:
     """Trace one chunk in place: comps = [x, y, z (local to steps[0]'s vertex), L, M, N,
     opl, valid]; n: index of every medium (floats or per-ray tensors); fail: int16 codes.
     While every ray of the chunk is valid the masking steps are skipped."""
@@ -354,8 +379,9 @@ def _stop_rays(lost: torch.Tensor, valid: torch.Tensor, fail: torch.Tensor, code
     valid ^= lost
 
 
-def _move_chunk_to_surface(st: _Step, comps: list[torch.Tensor], n1: float | torch.Tensor, fail: torch.Tensor,
-                     code: int, all_valid: bool) -> bool:
+def _move_chunk_to_surface(
+    st: _Step, comps: list[torch.Tensor], n1: float | torch.Tensor, fail: torch.Tensor, code: int, all_valid: bool
+) -> bool:
     """Carry the rays of a chunk to surface st (in place): intersection, optical path in
     medium n1, clear aperture and obscuration. Returns whether every ray is still valid."""
     x, y, z, L, M, N, opl, valid = comps
@@ -408,8 +434,15 @@ def _reflect_chunk(st: _Step, comps: list[torch.Tensor], all_valid: bool) -> Non
     N.addcmul_(dn, nz)
 
 
-def _refract_chunk(st: _Step, comps: list[torch.Tensor], n1: float | torch.Tensor, n2: float | torch.Tensor,
-             fail: torch.Tensor, code: int, all_valid: bool) -> bool:
+def _refract_chunk(
+    st: _Step,
+    comps: list[torch.Tensor],
+    n1: float | torch.Tensor,
+    n2: float | torch.Tensor,
+    fail: torch.Tensor,
+    code: int,
+    all_valid: bool,
+) -> bool:
     """Snell refraction of the chunk's directions at surface st from index n1 to n2 (in
     place); totally internally reflected rays are stopped. Returns whether every ray is
     still valid."""
@@ -460,7 +493,9 @@ def _refract_chunk(st: _Step, comps: list[torch.Tensor], n1: float | torch.Tenso
     return all_valid
 
 
-def _index_groups(n: torch.Tensor, wavelength_um: torch.Tensor, batch: torch.Size) -> list[tuple[int, int, list | torch.Tensor]]:
+def _index_groups(
+    n: torch.Tensor, wavelength_um: torch.Tensor, batch: torch.Size
+) -> list[tuple[int, int, list | torch.Tensor]]:
     """Split the flattened batch into (start, stop, media indices) with one wavelength per
     block where the layout allows it (indices as Python floats), else per-ray tensors."""
     S1 = n.shape[0]
@@ -472,7 +507,7 @@ def _index_groups(n: torch.Tensor, wavelength_um: torch.Tensor, batch: torch.Siz
         ws = (1,) * (len(batch) - len(wl_shape)) + wl_shape
         a = max(i for i, v in enumerate(ws) if v > 1)
         if all(ws[i] == batch[i] for i in range(a + 1)):
-            block = int(np.prod(batch[a + 1:])) if a + 1 < len(batch) else 1
+            block = int(np.prod(batch[a + 1 :])) if a + 1 < len(batch) else 1
             if block >= 256:
                 cols = n.reshape(S1, -1).detach().cpu().numpy()
                 return [(b * block, (b + 1) * block, [float(v) for v in cols[:, b]]) for b in range(B // block)]
@@ -501,7 +536,7 @@ class _ChunkSource:
         if self.rows is None:
             return self.flat[a:b]
         r, off = divmod(a, self.rows)
-        return self.e[tuple(int(i) for i in np.unravel_index(r, self.lead))][off:off + (b - a)]
+        return self.e[tuple(int(i) for i in np.unravel_index(r, self.lead))][off : off + (b - a)]
 
 
 def _executor(workers: int):
@@ -540,8 +575,10 @@ def trace(
     device = rays.opl.device
     B = int(np.prod(batch)) if len(batch) else 1
     P = batch[-1] if batch else 1
-    sources = [_ChunkSource(t, batch, tail) for t, tail in
-               ((rays.position, (3,)), (rays.direction, (3,)), (rays.opl, ()), (rays.valid, ()))]
+    sources = [
+        _ChunkSource(t, batch, tail)
+        for t, tail in ((rays.position, (3,)), (rays.direction, (3,)), (rays.opl, ()), (rays.valid, ()))
+    ]
     by_rows = any(src.rows is not None for src in sources)
     out_pos = torch.empty(B, 3, dtype=DTYPE, device=device)
     out_dir = torch.empty(B, 3, dtype=DTYPE, device=device)
@@ -555,8 +592,16 @@ def trace(
     def run(task) -> None:
         a, b, nv = task
         p, d, o, v = (src.get(a, b) for src in sources)
-        comps = [p[:, 0].clone(), p[:, 1].clone(), p[:, 2] - z0, d[:, 0].clone(), d[:, 1].clone(), d[:, 2].clone(),
-                 o.clone(), v.clone()]
+        comps = [
+            p[:, 0].clone(),
+            p[:, 1].clone(),
+            p[:, 2] - z0,
+            d[:, 0].clone(),
+            d[:, 1].clone(),
+            d[:, 2].clone(),
+            o.clone(),
+            v.clone(),
+        ]
         nn = nv if isinstance(nv, list) else [nv[i, a:b] for i in range(nv.shape[0])]
         chunk_rec = [rec[j, a:b] for j in range(len(steps))] if rec is not None else None
         fail = torch.zeros(b - a, dtype=torch.int16, device=device)
@@ -590,7 +635,11 @@ def trace(
             run(t)
     status = status.reshape(batch)
     failed_at = failed_at.reshape(batch)
-    out = Rays(out_pos.reshape(tuple(batch) + (3,)), out_dir.reshape(tuple(batch) + (3,)), out_opl.reshape(batch),
-               out_valid.reshape(batch))
+    out = Rays(
+        out_pos.reshape(tuple(batch) + (3,)),
+        out_dir.reshape(tuple(batch) + (3,)),
+        out_opl.reshape(batch),
+        out_valid.reshape(batch),
+    )
     surface_positions = rec.reshape((len(steps),) + tuple(batch) + (3,)) if rec is not None else None
     return TraceResult(out, status, failed_at, surface_positions)

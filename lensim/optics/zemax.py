@@ -21,6 +21,7 @@ catalogue, then by glass family (notes record substitutions); a name found nowhe
 back to the line's nd/Vd as a model glass (with a note) when the line carries real
 values, otherwise it is an error listing close names. Lengths in mm, wavelengths in um.
 """
+
 from __future__ import annotations
 
 import math
@@ -40,16 +41,66 @@ FIELD_TYPES = {0: "angle", 1: "object_height", 2: "paraxial_image_height", 3: "r
 # Zemax's default nd/Vd on a catalogue glass's GLAS line: no real model data.
 PLACEHOLDER_ND_VD = (1.5, 40.0)
 _CATALOG_NAMES = {c.upper(): c for c in CATALOGS}
-_NON_CIRCULAR_APERTURES = {"SQAP": "rectangular aperture", "ELAP": "elliptical aperture",
-                           "SQOB": "rectangular obscuration", "ELOB": "elliptical obscuration",
-                           "UDAP": "user-defined aperture", "UDOB": "user-defined obscuration"}
+_NON_CIRCULAR_APERTURES = {
+    "SQAP": "rectangular aperture",
+    "ELAP": "elliptical aperture",
+    "SQOB": "rectangular obscuration",
+    "ELOB": "elliptical obscuration",
+    "UDAP": "user-defined aperture",
+    "UDOB": "user-defined obscuration",
+}
 _RAY_AIMING = {1: "paraxial", 2: "real"}
 # per-field columns (older files: XFLD/YFLD)
 # multi-configuration operands other than THIC (noted as not applied when they are in the file)
-_MCE_OPERANDS = {"CRVT", "CONN", "GLSS", "PRAM", "PAR1", "PAR2", "PAR3", "PAR4", "PAR5", "PAR6", "PAR7", "PAR8",
-                 "APER", "WAVE", "WLWT", "PWAV", "XFIE", "YFIE", "FLWT", "FVDX", "FVDY", "FVCX", "FVCY", "FVAN",
-                 "SDIA", "CADX", "CADY", "CATX", "CATY", "CTIP", "TEMP", "PRES", "STPS", "PUCN", "SATP", "FLTP",
-                 "RAAM", "MOFF", "MIND", "MABB", "MDPG", "NPAR", "COTN", "IGNR", "LTTL", "XDAT", "YDAT"}
+_MCE_OPERANDS = {
+    "CRVT",
+    "CONN",
+    "GLSS",
+    "PRAM",
+    "PAR1",
+    "PAR2",
+    "PAR3",
+    "PAR4",
+    "PAR5",
+    "PAR6",
+    "PAR7",
+    "PAR8",
+    "APER",
+    "WAVE",
+    "WLWT",
+    "PWAV",
+    "XFIE",
+    "YFIE",
+    "FLWT",
+    "FVDX",
+    "FVDY",
+    "FVCX",
+    "FVCY",
+    "FVAN",
+    "SDIA",
+    "CADX",
+    "CADY",
+    "CATX",
+    "CATY",
+    "CTIP",
+    "TEMP",
+    "PRES",
+    "STPS",
+    "PUCN",
+    "SATP",
+    "FLTP",
+    "RAAM",
+    "MOFF",
+    "MIND",
+    "MABB",
+    "MDPG",
+    "NPAR",
+    "COTN",
+    "IGNR",
+    "LTTL",
+    "XDAT",
+    "YDAT",
+}
 _COLUMNS = {k: k for k in ("XFLN", "YFLN", "VDXN", "VDYN", "VCXN", "VCYN", "VANN")} | {"XFLD": "XFLN", "YFLD": "YFLN"}
 
 
@@ -70,8 +121,6 @@ class _Surf:
     obsc_line: int = 0
     flap: bool = False
     comment: str = ""
-
-
 
 
 class _Reader:
@@ -139,8 +188,12 @@ class _Reader:
         elif key == "UNIT":
             unit = tokens[1].upper() if len(tokens) > 1 else ""
             if unit != "MM":
-                raise self.err(lineno, "UNIT", f"expected lens units MM, got {unit or 'nothing'}; "
-                                               "set the lens units to millimetres in OpticStudio and save again")
+                raise self.err(
+                    lineno,
+                    "UNIT",
+                    f"expected lens units MM, got {unit or 'nothing'}; "
+                    "set the lens units to millimetres in OpticStudio and save again",
+                )
         elif key == "NAME":
             self.name = text.strip()[4:].strip()
         elif key in ("ENPD", "FNUM", "OBNA", "FLOA"):
@@ -167,14 +220,17 @@ class _Reader:
         elif key == "RAIM":
             mode = self.integer(lineno, key, tokens, 2) if len(tokens) > 2 else 0
             if mode in _RAY_AIMING:
-                self.notes.append(f"the file sets {_RAY_AIMING[mode]} ray aiming (RAIM); lensim aims rays as the "
-                                  "caller asks (aiming='real' aims at the real stop)")
+                self.notes.append(
+                    f"the file sets {_RAY_AIMING[mode]} ray aiming (RAIM); lensim aims rays as the "
+                    "caller asks (aiming='real' aims at the real stop)"
+                )
         elif key == "MNUM":
             n = self.integer(lineno, key, tokens, 1)
             active = self.integer(lineno, key, tokens, 2) if len(tokens) > 2 else 1
             if n < 1 or not 1 <= active <= n:
-                raise self.err(lineno, key, f"expected a number of configurations >= 1 and the active one 1..n, "
-                                            f"got {n} {active}")
+                raise self.err(
+                    lineno, key, f"expected a number of configurations >= 1 and the active one 1..n, got {n} {active}"
+                )
             self.mnum = (n, active, lineno)
         elif key == "THIC":
             self.thickness_operand(lineno, tokens)
@@ -204,8 +260,10 @@ class _Reader:
         for name in tokens[1:]:
             (cats if name.upper() in _CATALOG_NAMES else unknown).append(name)
         if unknown:
-            self.notes.append(f"glass catalogue(s) {', '.join(unknown)} not available in lensim; ignored "
-                              f"(searching {', '.join(_CATALOG_NAMES[c.upper()] for c in cats) or 'every catalogue'})")
+            self.notes.append(
+                f"glass catalogue(s) {', '.join(unknown)} not available in lensim; ignored "
+                f"(searching {', '.join(_CATALOG_NAMES[c.upper()] for c in cats) or 'every catalogue'})"
+            )
         self.catalogs = [_CATALOG_NAMES[c.upper()] for c in cats] or None
 
     def field_type(self, lineno: int, tokens: list[str]) -> None:
@@ -213,14 +271,25 @@ class _Reader:
         key = "FTYP"
         ftyp = self.integer(lineno, key, tokens, 1)
         if ftyp not in FIELD_TYPES:
-            raise self.err(lineno, key, f"unsupported field type {ftyp}; expected 0 (angle), 1 (object height), "
-                                        "2 (paraxial image height) or 3 (real image height)")
+            raise self.err(
+                lineno,
+                key,
+                f"unsupported field type {ftyp}; expected 0 (angle), 1 (object height), "
+                "2 (paraxial image height) or 3 (real image height)",
+            )
         if len(tokens) > 2 and self.integer(lineno, key, tokens, 2) == 1:
-            raise self.err(lineno, key, "telecentric object space is not supported; expected the stop to "
-                                        "define the entrance pupil (FTYP second value 0)")
+            raise self.err(
+                lineno,
+                key,
+                "telecentric object space is not supported; expected the stop to "
+                "define the entrance pupil (FTYP second value 0)",
+            )
         if len(tokens) > 7 and self.integer(lineno, key, tokens, 7) == 1:
-            raise self.err(lineno, key, "afocal image space is not supported; expected a lens that forms an "
-                                        "image (FTYP seventh value 0)")
+            raise self.err(
+                lineno,
+                key,
+                "afocal image space is not supported; expected a lens that forms an image (FTYP seventh value 0)",
+            )
         nf = self.integer(lineno, key, tokens, 3) if len(tokens) > 3 else None
         nw = self.integer(lineno, key, tokens, 4) if len(tokens) > 4 else None
         self.ftyp = (ftyp, nf, nw, lineno)
@@ -232,9 +301,12 @@ class _Reader:
             cur.type = tokens[1].upper() if len(tokens) > 1 else ""
             cur.type = "ODDASPHE" if cur.type == "ODDASPH" else cur.type
             if cur.type not in SUPPORTED_TYPES:
-                raise InputError(self.src, f"SURF {cur.number} TYPE",
-                                 f"unsupported surface type {cur.type or 'nothing'} (line {lineno}); "
-                                 f"lensim reads {', '.join(SUPPORTED_TYPES)} surfaces only")
+                raise InputError(
+                    self.src,
+                    f"SURF {cur.number} TYPE",
+                    f"unsupported surface type {cur.type or 'nothing'} (line {lineno}); "
+                    f"lensim reads {', '.join(SUPPORTED_TYPES)} surfaces only",
+                )
         elif key == "CURV":
             cur.curv = self.num(lineno, sw, tokens, 1)
         elif key == "CONI":
@@ -265,11 +337,16 @@ class _Reader:
         elif key == "OBDC":
             dx, dy = (self.num(lineno, sw, tokens, i) for i in (1, 2))
             if dx or dy:
-                raise self.err(lineno, sw, f"a decentred aperture ({dx}, {dy}) is not rotationally symmetric; "
-                                           "expected 0 0")
+                raise self.err(
+                    lineno, sw, f"a decentred aperture ({dx}, {dy}) is not rotationally symmetric; expected 0 0"
+                )
         elif key in _NON_CIRCULAR_APERTURES:
-            raise self.err(lineno, sw, f"a {_NON_CIRCULAR_APERTURES[key]} is not rotationally symmetric; "
-                                       "expected a circular aperture (CLAP), obscuration (OBSC) or floating aperture")
+            raise self.err(
+                lineno,
+                sw,
+                f"a {_NON_CIRCULAR_APERTURES[key]} is not rotationally symmetric; "
+                "expected a circular aperture (CLAP), obscuration (OBSC) or floating aperture",
+            )
         elif key == "COMM":
             cur.comment = text.strip()[4:].strip()
 
@@ -296,10 +373,13 @@ class _Reader:
             mat, note = resolve_glass(name, self.catalogs)
         except UnknownGlassError as e:
             if nd is not None and vd is not None and nd > 1.0 and vd >= 0.0 and (nd, vd) != PLACEHOLDER_ND_VD:
-                self.notes.append(f"glass {name} is in no catalogue; using a model glass with the file's "
-                                  f"nd {nd:.5f}, Vd {vd:.2f}")
+                self.notes.append(
+                    f"glass {name} is in no catalogue; using a model glass with the file's nd {nd:.5f}, Vd {vd:.2f}"
+                )
                 return self.model(s, nd, vd, dpgf, name), False
-            model = "" if nd is None or vd is None else f" and the line's nd/Vd ({nd:g}, {vd:g}) are Zemax's placeholders"
+            model = (
+                "" if nd is None or vd is None else f" and the line's nd/Vd ({nd:g}, {vd:g}) are Zemax's placeholders"
+            )
             raise InputError(self.src, what, f"{e.message}{model}") from None
         if note:
             self.notes.append(note)
@@ -314,8 +394,9 @@ class _Reader:
         for k, (v, line) in sorted(s.parms.items()):
             if not 1 <= k <= 8:
                 if v != 0.0:
-                    raise self.err(line, f"SURF {s.number} PARM", f"expected PARM 1..8 (r^{step}..r^{8 * step}), "
-                                                                  f"got PARM {k}")
+                    raise self.err(
+                        line, f"SURF {s.number} PARM", f"expected PARM 1..8 (r^{step}..r^{8 * step}), got PARM {k}"
+                    )
                 continue
             if v != 0.0:
                 asphere[step * k] = v
@@ -324,8 +405,11 @@ class _Reader:
     def model(self, s: _Surf, nd: float, vd: float, dpgf: float, name: str | None = None) -> Material:
         """Zemax's MODEL glass (nd, Vd, dPgF); Vd 0 is a constant index."""
         if not (1.0 < nd < 5.0) or vd < 0 or not abs(dpgf) < 0.2:
-            raise self.err(s.glas_line, f"SURF {s.number} GLAS", f"expected model glass 1 < nd < 5, Vd >= 0 and "
-                                                                 f"|dPgF| < 0.2, got nd {nd}, Vd {vd}, dPgF {dpgf}")
+            raise self.err(
+                s.glas_line,
+                f"SURF {s.number} GLAS",
+                f"expected model glass 1 < nd < 5, Vd >= 0 and |dPgF| < 0.2, got nd {nd}, Vd {vd}, dPgF {dpgf}",
+            )
         if vd == 0:
             return ConstantIndex(nd)
         return ModelGlass(nd, vd, dpgf, name=name or f"model {nd:.5f}/{vd:.2f}")
@@ -344,16 +428,22 @@ class _Reader:
             xs, xline = self.columns["XFLN"]
             bad = [(i + 1, x) for i, x in enumerate(xs[:n]) if x != 0.0]
             if bad:
-                raise self.err(xline, "XFLN", f"field {bad[0][0]} has x = {bad[0][1]:g}; lensim models rotationally "
-                                              "symmetric lenses with fields along y (give the radial field in YFLN)")
+                raise self.err(
+                    xline,
+                    "XFLN",
+                    f"field {bad[0][0]} has x = {bad[0][1]:g}; lensim models rotationally "
+                    "symmetric lenses with fields along y (give the radial field in YFLN)",
+                )
         vig = []
         for key in ("VDXN", "VDYN", "VCXN", "VCYN", "VANN"):
             vals = self.columns.get(key, ([], 0))[0][:n]
             if any(v != 0.0 for v in vals):
                 vig.append(f"{key} {' '.join(f'{v:.4g}' for v in vals)}")
         if vig:
-            self.notes.append(f"vignetting factors ({'; '.join(vig)}) are not applied; lensim vignettes rays "
-                              "with the real surface apertures")
+            self.notes.append(
+                f"vignetting factors ({'; '.join(vig)}) are not applied; lensim vignettes rays "
+                "with the real surface apertures"
+            )
         return FIELD_TYPES[ftyp], ys[:n]
 
     def wavelengths(self) -> tuple[list[float], list[float], int]:
@@ -384,19 +474,26 @@ class _Reader:
 
     def build(self) -> Lens:
         if len(self.surfs) < 3:
-            raise InputError(self.src, "SURF", f"expected an object, at least one lens surface and an image surface, "
-                                               f"found {len(self.surfs)} surface(s)")
+            raise InputError(
+                self.src,
+                "SURF",
+                f"expected an object, at least one lens surface and an image surface, "
+                f"found {len(self.surfs)} surface(s)",
+            )
         obj, img, optical = self.surfs[0], self.surfs[-1], self.surfs[1:-1]
         stops = [s for s in self.surfs if s.stop]
         if not stops:
             raise InputError(self.src, "STOP", "missing the aperture stop: no surface has a STOP line")
         if stops[0] in (obj, img):
-            raise InputError(self.src, f"SURF {stops[0].number} STOP", "expected the stop on a lens surface, "
-                                                                        "not the object or image")
+            raise InputError(
+                self.src, f"SURF {stops[0].number} STOP", "expected the stop on a lens surface, not the object or image"
+            )
         # object
         object_distance = obj.disz if obj.disz < 1e10 else math.inf
         if not object_distance > 0:
-            raise InputError(self.src, "SURF 0 DISZ", f"expected a positive object distance or INFINITY, got {obj.disz}")
+            raise InputError(
+                self.src, "SURF 0 DISZ", f"expected a positive object distance or INFINITY, got {obj.disz}"
+            )
         if math.isfinite(object_distance) and obj.curv != 0.0:
             raise InputError(self.src, "SURF 0 CURV", "expected a flat object surface")
         object_material, mirror = self.glass(obj, Air())
@@ -409,24 +506,28 @@ class _Reader:
         medium = object_material
         for s in optical:
             if not math.isfinite(s.disz):
-                raise InputError(self.src, f"SURF {s.number} DISZ", "expected a finite thickness (INFINITY is for the object)")
+                raise InputError(
+                    self.src, f"SURF {s.number} DISZ", "expected a finite thickness (INFINITY is for the object)"
+                )
             asphere = self.asphere(s)
             material, mirror = self.glass(s, medium)
             medium = material
             clear, obscuration = self.apertures(s)
-            surfaces.append(Surface(
-                curvature=s.curv,
-                thickness=s.disz,
-                material=material,
-                conic=s.conic,
-                asphere=asphere,
-                clear_radius=clear,
-                obscuration_radius=obscuration,
-                semi_diameter=s.diam if s.diam > 0 else None,
-                is_stop=s.stop,
-                is_mirror=mirror,
-                comment=s.comment,
-            ))
+            surfaces.append(
+                Surface(
+                    curvature=s.curv,
+                    thickness=s.disz,
+                    material=material,
+                    conic=s.conic,
+                    asphere=asphere,
+                    clear_radius=clear,
+                    obscuration_radius=obscuration,
+                    semi_diameter=s.diam if s.diam > 0 else None,
+                    is_stop=s.stop,
+                    is_mirror=mirror,
+                    comment=s.comment,
+                )
+            )
         image_clear, _ = self.apertures(img)
         aperture_type, aperture_value = self.system_aperture(stops[0], object_distance)
         field_type, fields = self.fields()
@@ -459,14 +560,20 @@ class _Reader:
         n, active, _ = self.mnum
         optical = {s: per for s, per in self.thic.items() if 1 <= s <= n_optical}
         if 0 in self.thic:
-            self.notes.append("multi-configuration THIC 0 (the object distance per configuration) is not applied; "
-                              "the object distance as saved is used")
+            self.notes.append(
+                "multi-configuration THIC 0 (the object distance per configuration) is not applied; "
+                "the object distance as saved is used"
+            )
         if self.mce_other:
-            self.notes.append(f"multi-configuration operand(s) {', '.join(sorted(self.mce_other))} not applied "
-                              "(lensim's configurations change thicknesses only)")
+            self.notes.append(
+                f"multi-configuration operand(s) {', '.join(sorted(self.mce_other))} not applied "
+                "(lensim's configurations change thicknesses only)"
+            )
         if not optical:
-            self.notes.append(f"the file has {n} configurations but no thickness operands (THIC) lensim applies; "
-                              f"the lens data as saved (configuration {active}) are used")
+            self.notes.append(
+                f"the file has {n} configurations but no thickness operands (THIC) lensim applies; "
+                f"the lens data as saved (configuration {active}) are used"
+            )
             return {}
         out: dict[str, dict[int, float]] = {}
         for k in range(1, n + 1):
@@ -485,17 +592,25 @@ class _Reader:
         if s.clap is not None:
             rmin, rmax = s.clap
             if not 0 <= rmin < rmax:
-                raise InputError(self.src, f"SURF {s.number} CLAP", f"expected 0 <= min radius < max radius, got {rmin}, {rmax}")
+                raise InputError(
+                    self.src, f"SURF {s.number} CLAP", f"expected 0 <= min radius < max radius, got {rmin}, {rmax}"
+                )
             clear = rmax
             obscuration = rmin if rmin > 0 else None
         elif s.flap:
             if s.diam <= 0:
-                raise InputError(self.src, f"SURF {s.number} FLAP", "a floating aperture needs a positive semi-diameter (DIAM)")
+                raise InputError(
+                    self.src, f"SURF {s.number} FLAP", "a floating aperture needs a positive semi-diameter (DIAM)"
+                )
             clear = s.diam
         if s.obsc is not None:
             rmin, rmax = s.obsc
             if rmin != 0 or rmax <= 0:
-                raise self.err(s.obsc_line, f"SURF {s.number} OBSC", f"expected a central obscuration '0 radius', got {rmin}, {rmax}")
+                raise self.err(
+                    s.obsc_line,
+                    f"SURF {s.number} OBSC",
+                    f"expected a central obscuration '0 radius', got {rmin}, {rmax}",
+                )
             obscuration = max(rmax, obscuration or 0.0)
         return clear, obscuration
 
@@ -511,16 +626,25 @@ class _Reader:
             if math.isinf(object_distance):
                 # paraxial working F/# = 1 / (2 n' u') = EFL / EPD exactly for an object at infinity
                 return "fno", value
-            raise self.err(line, "FNUM", "a paraxial working F/# aperture is supported for an object at infinity "
-                                         "only; expected ENPD, an image-space F/# or float by stop size")
+            raise self.err(
+                line,
+                "FNUM",
+                "a paraxial working F/# aperture is supported for an object at infinity "
+                "only; expected ENPD, an image-space F/# or float by stop size",
+            )
         if key == "FLOA":
             if stop.diam <= 0:
-                raise InputError(self.src, f"SURF {stop.number} DIAM", "float by stop size needs the stop's "
-                                                                        "semi-diameter (DIAM > 0)")
+                raise InputError(
+                    self.src, f"SURF {stop.number} DIAM", "float by stop size needs the stop's semi-diameter (DIAM > 0)"
+                )
             return "stop_semi_diameter", stop.diam
         what = {"OBNA": "object-space NA", "OBNA/1": "object cone angle"}.get(key, key)
-        raise self.err(line, key.split("/")[0], f"unsupported system aperture ({what}); expected ENPD, an image-space "
-                                                "F/# (FNUM) or float by stop size (FLOA)")
+        raise self.err(
+            line,
+            key.split("/")[0],
+            f"unsupported system aperture ({what}); expected ENPD, an image-space "
+            "F/# (FNUM) or float by stop size (FLOA)",
+        )
 
 
 def read_zmx(path: str | Path) -> Lens:

@@ -3,6 +3,7 @@ illumination against image height.
 
 Units: image heights mm, kernel windows um, spatial frequencies cycles/mm, wavelengths nm.
 """
+
 from __future__ import annotations
 
 import math
@@ -21,8 +22,10 @@ FIGURE_NAMES = ("psf_map.png", "strehl.png", "mtf.png", "relative_illumination.p
 def _bank_title(bank: PSFBank) -> str:
     lens = bank.manifest.get("lens", {})
     name = lens.get("name") or Path(str(bank.manifest.get("lens_file", "lens"))).stem
-    return (f"{name}: {bank.kernel_pixels}x{bank.kernel_pixels} px kernels, {bank.pixel_pitch_um:g} um pixels, "
-            f"{len(bank.fields)} fields x {len(bank.wavelengths_nm)} wavelengths")
+    return (
+        f"{name}: {bank.kernel_pixels}x{bank.kernel_pixels} px kernels, {bank.pixel_pitch_um:g} um pixels, "
+        f"{len(bank.fields)} fields x {len(bank.wavelengths_nm)} wavelengths"
+    )
 
 
 def _field_unit(bank: PSFBank) -> str:
@@ -45,7 +48,7 @@ def _fine_mtf(fine: np.ndarray, spacing_um: float, pad: int = 4) -> tuple[np.nda
     n = fine.shape[0]
     big = np.zeros((n * pad, n * pad))
     c = n * pad // 2 - n // 2
-    big[c:c + n, c:c + n] = fine
+    big[c : c + n, c : c + n] = fine
     return mtf(big, spacing_um)
 
 
@@ -83,8 +86,12 @@ def _draw_kernel_grid(ax: Axes, bank: PSFBank, gamma: float, title: str) -> None
     for y in ys:
         for x in xs:
             img = kernel_image(bank.psf_at(float(x), float(y)), gamma)
-            ax.imshow(img, origin="lower", extent=(x - tile / 2, x + tile / 2, y - tile / 2, y + tile / 2),
-                      interpolation="nearest")
+            ax.imshow(
+                img,
+                origin="lower",
+                extent=(x - tile / 2, x + tile / 2, y - tile / 2, y + tile / 2),
+                interpolation="nearest",
+            )
     ax.add_patch(Rectangle((-w / 2, -h / 2), w, h, fill=False, edgecolor="0.6", lw=1.0, ls="--"))
     if r_max > 0:
         ax.add_patch(Circle((0, 0), r_max, fill=False, edgecolor="0.45", lw=0.8, ls=":"))
@@ -96,9 +103,11 @@ def _draw_kernel_grid(ax: Axes, bank: PSFBank, gamma: float, title: str) -> None
     ax.set_ylabel("y (mm)")
     window_um = bank.kernel_pixels * bank.pixel_pitch_um
     mag = tile * 1e3 / window_um
-    ax.set_title(f"{title}\nRGB kernels over a 3:2 sensor in the {2 * r_max:.1f} mm image circle "
-                 f"(each tile {window_um:g} um wide, magnified x{mag:.0f}; gamma {gamma:g}, each tile scaled to its peak)",
-                 fontsize=9.5)
+    ax.set_title(
+        f"{title}\nRGB kernels over a 3:2 sensor in the {2 * r_max:.1f} mm image circle "
+        f"(each tile {window_um:g} um wide, magnified x{mag:.0f}; gamma {gamma:g}, each tile scaled to its peak)",
+        fontsize=9.5,
+    )
 
 
 def psf_map_figure(bank: PSFBank, gamma: float = 0.5) -> Figure:
@@ -106,8 +115,18 @@ def psf_map_figure(bank: PSFBank, gamma: float = 0.5) -> Figure:
     from matplotlib.gridspec import GridSpec
 
     fig = new_figure((11.0, 9.6))
-    gs = GridSpec(2, 6, figure=fig, height_ratios=[4.2, 1.3], hspace=0.28, wspace=0.08,
-                  left=0.07, right=0.98, top=0.93, bottom=0.04)
+    gs = GridSpec(
+        2,
+        6,
+        figure=fig,
+        height_ratios=[4.2, 1.3],
+        hspace=0.28,
+        wspace=0.08,
+        left=0.07,
+        right=0.98,
+        top=0.93,
+        bottom=0.04,
+    )
     _draw_kernel_grid(fig.add_subplot(gs[0, :]), bank, gamma, _bank_title(bank))
     radii, unit = bank.radii_mm, _field_unit(bank)
     window_um = bank.kernel_pixels * bank.pixel_pitch_um
@@ -115,8 +134,12 @@ def psf_map_figure(bank: PSFBank, gamma: float = 0.5) -> Figure:
     for j, i in enumerate(picks):
         f = bank.fields[i]
         a = fig.add_subplot(gs[1, j])
-        a.imshow(kernel_image(f.rgb, gamma), origin="lower", interpolation="nearest",
-                 extent=(-window_um / 2, window_um / 2, -window_um / 2, window_um / 2))
+        a.imshow(
+            kernel_image(f.rgb, gamma),
+            origin="lower",
+            interpolation="nearest",
+            extent=(-window_um / 2, window_um / 2, -window_um / 2, window_um / 2),
+        )
         a.set_title(f"field {f.field:.2f} ({f.field_value:.3g} {unit})\nr = {radii[i]:.2f} mm", fontsize=8)
         a.tick_params(labelsize=7)
         tick = float(np.floor(window_um / 3.0 / 5.0) * 5.0) or window_um / 3.0
@@ -142,8 +165,11 @@ def strehl_figure(bank: PSFBank) -> Figure:
     ax.set_xlabel("image height of the chief ray (mm)")
     ax.set_ylabel("Strehl ratio")
     _field_axis(ax, bank, _field_unit(bank))
-    ax.set_title(f"Strehl ratio at {bank.primary_wavelength_nm:g} nm (sampled peak, {bank.fine_spacing_um:.3g} um grid)\n"
-                 f"{_bank_title(bank)}", fontsize=9)
+    ax.set_title(
+        f"Strehl ratio at {bank.primary_wavelength_nm:g} nm (sampled peak, {bank.fine_spacing_um:.3g} um grid)\n"
+        f"{_bank_title(bank)}",
+        fontsize=9,
+    )
     ax.grid(alpha=0.3)
     fig.tight_layout()
     return fig
@@ -176,8 +202,11 @@ def mtf_figure(bank: PSFBank) -> Figure:
     ax.set_ylim(0, 1.02)
     ax.set_xlabel("spatial frequency (cycles/mm); right edge = sensor Nyquist")
     ax.set_ylabel("MTF")
-    ax.set_title(f"MTF at {bank.primary_wavelength_nm:g} nm, tangential (T, solid) and sagittal (S, dashed)\n"
-                 f"{_bank_title(bank)}", fontsize=9)
+    ax.set_title(
+        f"MTF at {bank.primary_wavelength_nm:g} nm, tangential (T, solid) and sagittal (S, dashed)\n"
+        f"{_bank_title(bank)}",
+        fontsize=9,
+    )
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7.5, ncol=2, loc="upper right")
     fig.tight_layout()
@@ -196,8 +225,17 @@ def relative_illumination_figure(bank: PSFBank) -> Figure:
     for c, name, col in zip(range(3), ("R", "G", "B"), ("tab:red", "tab:green", "tab:blue")):
         ax.plot(radii, sums[:, c], "-", lw=3.0, alpha=0.45, color=col, label=f"{name} kernel sum")
     for j, m in zip(sorted({0, len(wl) // 2, len(wl) - 1}), ("v", "o", "^")):
-        ax.plot(radii, ri[:, j], lw=0.8, color="k", marker=m, ms=3.5, mfc="none", label=f"{wl[j]:g} nm",
-                markevery=max(1, len(radii) // 12))
+        ax.plot(
+            radii,
+            ri[:, j],
+            lw=0.8,
+            color="k",
+            marker=m,
+            ms=3.5,
+            mfc="none",
+            label=f"{wl[j]:g} nm",
+            markevery=max(1, len(radii) // 12),
+        )
     lens = bank.manifest.get("lens", {})
     floor = [float(np.nanmin(ri)), float(np.nanmin(sums))]
     if bank.manifest.get("field_type") == "angle" and lens.get("object", {}).get("distance") == "infinity":
@@ -221,6 +259,10 @@ def write_bank_figures(bank: PSFBank, out_dir: str | Path, dpi: int = 150, gamma
     mtf.png and relative_illumination.png."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    makers = (lambda: psf_map_figure(bank, gamma), lambda: strehl_figure(bank), lambda: mtf_figure(bank),
-              lambda: relative_illumination_figure(bank))
+    makers = (
+        lambda: psf_map_figure(bank, gamma),
+        lambda: strehl_figure(bank),
+        lambda: mtf_figure(bank),
+        lambda: relative_illumination_figure(bank),
+    )
     return [save_figure(make(), out / name, dpi) for make, name in zip(makers, FIGURE_NAMES)]

@@ -4,6 +4,7 @@ lateral colour per sensor channel (um) and relative illumination, each against t
 Matplotlib figures on their own Agg canvas (lensim.plots.figure); given a path they are
 saved atomically in the format its extension names.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -39,8 +40,12 @@ def lateral_colour_figure(report: dict) -> Figure:
     """Each channel's chief-ray height minus green's (um), weighted by the sensor's response."""
     fig, ax, x = _axes(report, "lateral colour (channel - green)", "lateral colour (\N{MICRO SIGN}m)")
     for ch in "rb":
-        ax.plot(x, [r["lateral_colour_um"][ch] for r in report["fields"]], color=CHANNEL_COLORS[ch],
-                label={"r": "red - green", "b": "blue - green"}[ch])
+        ax.plot(
+            x,
+            [r["lateral_colour_um"][ch] for r in report["fields"]],
+            color=CHANNEL_COLORS[ch],
+            label={"r": "red - green", "b": "blue - green"}[ch],
+        )
     ax.axhline(0.0, color="gray", lw=0.8)
     ax.legend()
     return fig
@@ -56,8 +61,11 @@ def illumination_figure(report: dict) -> Figure:
 
 def field_figure(report: dict, kind: str, path: str | Path | None = None) -> Figure:
     """The figure of one KINDS entry; saved to path when given."""
-    fig = {"distortion": distortion_figure, "lateral-colour": lateral_colour_figure,
-           "illumination": illumination_figure}[kind](report)
+    fig = {
+        "distortion": distortion_figure,
+        "lateral-colour": lateral_colour_figure,
+        "illumination": illumination_figure,
+    }[kind](report)
     if path is not None:
         save_figure(fig, path)
     return fig

@@ -1,5 +1,6 @@
 """One way to make and save a figure: matplotlib Figures on their own Agg canvas (no
 pyplot: nothing global is touched, nothing is shown), saved atomically."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -26,8 +27,11 @@ def save_figure(fig: Figure, path: str | Path, dpi: int = 150) -> Path:
     fmt = path.suffix[1:].lower()
     supported = fig.canvas.get_supported_filetypes()
     if fmt not in supported:
-        raise InputError(str(path), "output", f"expected a file name ending in one of "
-                         f"{', '.join('.' + k for k in sorted(supported))}")
+        raise InputError(
+            str(path),
+            "output",
+            f"expected a file name ending in one of {', '.join('.' + k for k in sorted(supported))}",
+        )
     with atomic_writer(path, suffix=path.suffix) as fh:
         fig.savefig(fh, format=fmt, dpi=dpi)
     return path

@@ -8,6 +8,7 @@ the file name's extension names (png, pdf, svg, ...).
 Units: lengths in mm on the layout, um on spot diagrams; wavelengths in um in arguments,
 nm on the plots.
 """
+
 from __future__ import annotations
 
 import math
@@ -31,8 +32,18 @@ from lensim.optics.surfaces import Surface
 from lensim.optics.trace import DTYPE, MISSED, OK, Rays, media_indices, trace_surface
 from lensim.plots.figure import new_figure, save_figure
 
-FIELD_COLORS = ("tab:blue", "tab:green", "tab:red", "tab:orange", "tab:purple", "tab:brown", "tab:pink",
-                "tab:olive", "tab:cyan", "tab:gray")
+FIELD_COLORS = (
+    "tab:blue",
+    "tab:green",
+    "tab:red",
+    "tab:orange",
+    "tab:purple",
+    "tab:brown",
+    "tab:pink",
+    "tab:olive",
+    "tab:cyan",
+    "tab:gray",
+)
 SPOT_RINGS = 8  # hexapolar rings in spot diagrams: 217 rays per field and wavelength
 
 
@@ -113,8 +124,14 @@ def _launch_start(lens: Lens, rays: Rays, z_start: float | None) -> torch.Tensor
     return pos + t.unsqueeze(-1) * d
 
 
-def trace_ray_paths(lens: Lens, launch_fields: list[float], pupil_y: np.ndarray, aiming: Aiming,
-                    para: ParaxialData, z_start: float | None) -> tuple[RayPaths, Rays, torch.Tensor, torch.Tensor]:
+def trace_ray_paths(
+    lens: Lens,
+    launch_fields: list[float],
+    pupil_y: np.ndarray,
+    aiming: Aiming,
+    para: ParaxialData,
+    z_start: float | None,
+) -> tuple[RayPaths, Rays, torch.Tensor, torch.Tensor]:
     """Trace meridional rays (pupil points (0, py)) at the primary wavelength surface by
     surface, keeping the point where each failing ray is stopped.
 
@@ -139,10 +156,12 @@ def trace_ray_paths(lens: Lens, launch_fields: list[float], pupil_y: np.ndarray,
         is_image = i == lens.num_surfaces
         n1, n2 = (n[-1], n[-1]) if is_image else (n[i], n[i + 1])
         # where each live ray meets the surface, ignoring apertures and refraction
-        geo, _ = trace_surface(surf, float(zv[i]), rays, n1, n2, allow_backwards=bool(backwards[i]), apertures=False,
-                               interact=False)
-        rays_after, st = trace_surface(surf, float(zv[i]), rays, n1, n2, allow_backwards=bool(backwards[i]),
-                                       interact=not is_image)
+        geo, _ = trace_surface(
+            surf, float(zv[i]), rays, n1, n2, allow_backwards=bool(backwards[i]), apertures=False, interact=False
+        )
+        rays_after, st = trace_surface(
+            surf, float(zv[i]), rays, n1, n2, allow_backwards=bool(backwards[i]), interact=not is_image
+        )
         newly = (st != OK) & (status == OK)
         status = torch.where(newly, st.to(status.dtype), status)
         failed_at = torch.where(newly, torch.as_tensor(i, dtype=failed_at.dtype), failed_at)
@@ -215,8 +234,12 @@ def plot_layout(
         z_start = None  # draw the rays from the object point
     paths, _, _, _ = trace_ray_paths(lens, launch, pupil_y, aiming, para, z_start)
 
-    z_all = [z_lo, z_hi, float(np.nanmin(paths.points[..., 0][paths.reached])),
-             float(np.nanmax(paths.points[..., 0][paths.reached]))]
+    z_all = [
+        z_lo,
+        z_hi,
+        float(np.nanmin(paths.points[..., 0][paths.reached])),
+        float(np.nanmax(paths.points[..., 0][paths.reached])),
+    ]
     width = max(z_all) - min(z_all)
     fig_w = 11.0
     fig_h = float(np.clip(fig_w * 2 * sizes.ymax / max(width, 1e-9) + 1.6, 3.2, 9.0))
@@ -232,12 +255,22 @@ def plot_layout(
     ax.set_xlabel("z (mm)")
     ax.set_ylabel("y (mm)")
     unit = "field angle" if lens.field_type == "angle" else lens.field_type.replace("_", " ")
-    ax.legend(handles=handles, title=unit, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8,
-              title_fontsize=8, frameon=False)
+    ax.legend(
+        handles=handles,
+        title=unit,
+        loc="upper left",
+        bbox_to_anchor=(1.01, 1.0),
+        fontsize=8,
+        title_fontsize=8,
+        frameon=False,
+    )
     efl = para.efl_mm
     efl_text = "afocal" if not math.isfinite(efl) else f"EFL {efl:.4g} mm"
-    ax.set_title(f"{lens_title(lens)}\n{efl_text}, F/{para.fno:.3g}, {aiming} ray aiming, "
-                 f"{lens.primary_wavelength_um * 1000:.1f} nm", fontsize=10)
+    ax.set_title(
+        f"{lens_title(lens)}\n{efl_text}, F/{para.fno:.3g}, {aiming} ray aiming, "
+        f"{lens.primary_wavelength_um * 1000:.1f} nm",
+        fontsize=10,
+    )
     ax.grid(True, color="0.92", lw=0.5, zorder=0)
     if path is not None:
         save_figure(fig, path)
@@ -368,11 +401,11 @@ def _draw_stop_and_image(ax, lens: Lens, sizes: _LayoutSizes) -> None:
     outer = stop_r + max(0.25 * stop_r, 0.08 * ymax)
     for sgn in (1, -1):
         ax.plot([zs, zs], [sgn * stop_r, sgn * outer], color="black", lw=3.0, zorder=5, solid_capstyle="butt")
-    ax.annotate("STOP", (zs, outer), xytext=(0, 3), textcoords="offset points", ha="center", va="bottom",
-                fontsize=8)
+    ax.annotate("STOP", (zs, outer), xytext=(0, 3), textcoords="offset points", ha="center", va="bottom", fontsize=8)
     ax.plot([zv[-1], zv[-1]], [-image_h, image_h], color="black", lw=1.6, zorder=3)
-    ax.annotate("IMAGE", (zv[-1], image_h), xytext=(0, 3), textcoords="offset points", ha="center",
-                va="bottom", fontsize=8)
+    ax.annotate(
+        "IMAGE", (zv[-1], image_h), xytext=(0, 3), textcoords="offset points", ha="center", va="bottom", fontsize=8
+    )
 
 
 # ---- spot diagrams --------------------------------------------------------------------
@@ -398,20 +431,24 @@ def spot_summary(lens: Lens, spots: SpotDiagram, reference: str = "chief") -> li
         per_wl = []
         for wi, w in enumerate(spots.wavelengths_um):
             n_valid = int(spots.valid[wi, fi].sum())
-            per_wl.append({
-                "wavelength_nm": round(w * 1000.0, 6),
-                "rms_radius_um": float(mono[wi, fi]) if n_valid else None,
-                "chief_x_mm": float(spots.chief[wi, fi, 0]),
-                "chief_y_mm": float(spots.chief[wi, fi, 1]),
-                "rays": int(spots.valid.shape[-1]),
-                "rays_reaching_image": n_valid,
-            })
-        out.append({
-            "field": float(f),
-            "field_unit": "deg" if lens.field_type == "angle" else "mm",
-            "rms_radius_um": float(poly[fi]) if bool(spots.valid[:, fi].any()) else None,
-            "wavelengths": per_wl,
-        })
+            per_wl.append(
+                {
+                    "wavelength_nm": round(w * 1000.0, 6),
+                    "rms_radius_um": float(mono[wi, fi]) if n_valid else None,
+                    "chief_x_mm": float(spots.chief[wi, fi, 0]),
+                    "chief_y_mm": float(spots.chief[wi, fi, 1]),
+                    "rays": int(spots.valid.shape[-1]),
+                    "rays_reaching_image": n_valid,
+                }
+            )
+        out.append(
+            {
+                "field": float(f),
+                "field_unit": "deg" if lens.field_type == "angle" else "mm",
+                "rms_radius_um": float(poly[fi]) if bool(spots.valid[:, fi].any()) else None,
+                "wavelengths": per_wl,
+            }
+        )
     return out
 
 
@@ -481,18 +518,47 @@ def plot_spots(
         got = int(valid[:, fi].sum())
         if got < total:
             lines.append(f"vignetted {100.0 * (total - got) / total:.0f}%")
-        ax.text(0.03, 0.97, "\n".join(lines), transform=ax.transAxes, ha="left", va="top", fontsize=8,
-                bbox={"boxstyle": "round,pad=0.25", "fc": "white", "ec": "0.8", "alpha": 0.9}, zorder=5)
+        ax.text(
+            0.03,
+            0.97,
+            "\n".join(lines),
+            transform=ax.transAxes,
+            ha="left",
+            va="top",
+            fontsize=8,
+            bbox={"boxstyle": "round,pad=0.25", "fc": "white", "ec": "0.8", "alpha": 0.9},
+            zorder=5,
+        )
     for k in range(F, nrows * ncols):
         axes[k // ncols][k % ncols].set_visible(False)
-    handles = [Line2D([], [], ls="", marker="o", ms=5, color=colors[wi],
-                      label=f"{w_ * 1000:.1f} nm" + (" (primary)" if wi == spots.primary else ""))
-               for wi, w_ in enumerate(spots.wavelengths_um)]
-    handles.append(Line2D([], [], ls="--", color="black", lw=0.9,
-                          label=f"Airy radius {airy:.3g} um (1.22 \N{GREEK SMALL LETTER LAMDA} N)"))
+    handles = [
+        Line2D(
+            [],
+            [],
+            ls="",
+            marker="o",
+            ms=5,
+            color=colors[wi],
+            label=f"{w_ * 1000:.1f} nm" + (" (primary)" if wi == spots.primary else ""),
+        )
+        for wi, w_ in enumerate(spots.wavelengths_um)
+    ]
+    handles.append(
+        Line2D(
+            [],
+            [],
+            ls="--",
+            color="black",
+            lw=0.9,
+            label=f"Airy radius {airy:.3g} um (1.22 \N{GREEK SMALL LETTER LAMDA} N)",
+        )
+    )
     fig.legend(handles=handles, loc="outside lower center", ncol=min(len(handles), 4), fontsize=8, frameon=False)
-    fig.suptitle(f"{lens_title(lens)}: spot diagrams, {centre_text}\n"
-                 f"{aiming} ray aiming, F/{para.working_fno:.3g}, scale \u00b1{half:g} um", fontsize=10)
+    fig.suptitle(
+        f"{lens_title(lens)}: spot diagrams, {centre_text}\n"
+        f"{aiming} ray aiming, F/{para.working_fno:.3g}, scale \u00b1{half:g} um",
+        fontsize=10,
+    )
     if path is not None:
         save_figure(fig, path)
     return fig

@@ -4,6 +4,7 @@ Framing: a grid x grid window with sample spacing spacing_um, sample (grid//2, g
 on the real chief-ray image point (plus an optional offset); rows are y, columns x.
 Fields are given normalized, 0..1 of the lens's maximum field along +y.
 """
+
 from __future__ import annotations
 
 import math
@@ -46,8 +47,9 @@ class PSF:
     figures: dict = field(default_factory=dict)
 
 
-def check_sampling(lens: Lens, pf: PupilField, grid: int, spacing_um: float, method: str,
-                   offset_mm: tuple[float, float] = (0.0, 0.0)) -> None:
+def check_sampling(
+    lens: Lens, pf: PupilField, grid: int, spacing_um: float, method: str, offset_mm: tuple[float, float] = (0.0, 0.0)
+) -> None:
     """Refuse sampling that would alias; warn, with the figures, when it is marginal.
     The window is centred on the chief-ray point plus offset_mm, as the PSF's."""
     src = lens.source
@@ -59,31 +61,50 @@ def check_sampling(lens: Lens, pf: PupilField, grid: int, spacing_um: float, met
         period_um = lam_um / du
         if window_um > period_um:
             need = math.ceil(pf.samples * window_um / period_um)
-            raise PupilSamplingError(src, "pupil_samples", f"{pf.samples} pupil samples repeat the PSF every "
-                                     f"{period_um:.1f} um but the window is {window_um:.1f} um wide; expected at least "
-                                     f"{need} pupil samples or a smaller window", need)
+            raise PupilSamplingError(
+                src,
+                "pupil_samples",
+                f"{pf.samples} pupil samples repeat the PSF every "
+                f"{period_um:.1f} um but the window is {window_um:.1f} um wide; expected at least "
+                f"{need} pupil samples or a smaller window",
+                need,
+            )
         # wavefront sampling: phase step between neighbouring pupil samples
         airy_um = 1.22 * pf.wavelength_um * pf.working_fno()
         if spacing_um > airy_um:
-            warnings.warn(f"{src}: spacing {spacing_um:g} um exceeds the Airy radius {airy_um:.2f} um: the PSF is "
-                          "undersampled; use a finer spacing (pixel integration bins it to pixels exactly)",
-                          PSFSamplingWarning, stacklevel=3)
+            warnings.warn(
+                f"{src}: spacing {spacing_um:g} um exceeds the Airy radius {airy_um:.2f} um: the PSF is "
+                "undersampled; use a finer spacing (pixel integration bins it to pixels exactly)",
+                PSFSamplingWarning,
+                stacklevel=3,
+            )
     rel = (pf.image_xy - pf.chief[:2] - torch.tensor(offset_mm, dtype=pf.image_xy.dtype)) * 1e3
     half = window_um / 2.0
     inside = ((rel.abs() <= half).all(-1).to(torch.float64) * pf.power).sum().item() / pf.power.sum().item()
     if inside < 0.5:
-        raise InputError(src, "grid", f"the {window_um:.1f} um window holds only {inside:.0%} of the geometric spot "
-                         f"(RMS radius {rms_spot_radius_um(pf):.1f} um); expected a window at least as large as the spot")
+        raise InputError(
+            src,
+            "grid",
+            f"the {window_um:.1f} um window holds only {inside:.0%} of the geometric spot "
+            f"(RMS radius {rms_spot_radius_um(pf):.1f} um); expected a window at least as large as the spot",
+        )
     if inside < 0.95:
-        warnings.warn(f"{src}: the {window_um:.1f} um window holds {inside:.0%} of the geometric spot (RMS radius "
-                      f"{rms_spot_radius_um(pf):.1f} um); enlarge the grid or the spacing", PSFSamplingWarning, stacklevel=3)
+        warnings.warn(
+            f"{src}: the {window_um:.1f} um window holds {inside:.0%} of the geometric spot (RMS radius "
+            f"{rms_spot_radius_um(pf):.1f} um); enlarge the grid or the spacing",
+            PSFSamplingWarning,
+            stacklevel=3,
+        )
 
 
 def field_in_lens_units(lens: Lens, field: float) -> float:
     """Normalized field (0..1 of the maximum field) to the lens's field unit; checks range."""
     if not (0.0 <= field <= 1.0 + 1e-9):
-        raise InputError(lens.source, "field", f"expected a normalized field between 0 and 1 (1 = max field "
-                         f"{lens.max_field:g}), got {field:g}")
+        raise InputError(
+            lens.source,
+            "field",
+            f"expected a normalized field between 0 and 1 (1 = max field {lens.max_field:g}), got {field:g}",
+        )
     return field * lens.max_field
 
 
@@ -123,5 +144,15 @@ def compute_psf(
         "paraxial_xy_mm": [0.0, float(para_y)],
         "working_fno": pf.working_fno(),
     }
-    return PSF(arr, spacing_um, field, value, wavelength_um, method, (float(pf.chief[0]), float(pf.chief[1])),
-               (0.0, float(para_y)), pf.transmission, figures)
+    return PSF(
+        arr,
+        spacing_um,
+        field,
+        value,
+        wavelength_um,
+        method,
+        (float(pf.chief[0]), float(pf.chief[1])),
+        (0.0, float(para_y)),
+        pf.transmission,
+        figures,
+    )

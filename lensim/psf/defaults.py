@@ -4,6 +4,7 @@ and lensim.psf.bank.settings (BankSettings) take them from here.
 
 Units: wavelengths nm.
 """
+
 from __future__ import annotations
 
 #: the PSF models of lensim.psf.compute.compute_psf (and of the banks)

@@ -7,6 +7,7 @@ the off-axis pupil's anamorphism is kept). The transform is evaluated as a matri
 transform (a zero-padded DFT whose output lands exactly on the requested sample spacing,
 Soummer et al. 2007) instead of an FFT followed by interpolation.
 """
+
 from __future__ import annotations
 
 import math
@@ -52,7 +53,9 @@ def fft_psf(pf: PupilField, grid: int, spacing_um: float, offset_mm: tuple[float
     return (e.real**2 + e.imag**2) * s * s * plane_obliquity(pf)
 
 
-def geometric_psf(pf: PupilField, grid: int, spacing_um: float, offset_mm: tuple[float, float] = (0.0, 0.0)) -> torch.Tensor:
+def geometric_psf(
+    pf: PupilField, grid: int, spacing_um: float, offset_mm: tuple[float, float] = (0.0, 0.0)
+) -> torch.Tensor:
     """Ray histogram: each ray's power binned into the sample cell it lands in."""
     s = spacing_um * 1e-3
     rel = pf.image_xy - pf.chief[:2].unsqueeze(0) - torch.tensor(offset_mm, dtype=torch.float64)

@@ -18,6 +18,7 @@ in x and y: one complex matrix product per tile. The tile size is chosen so that
 dropped phase stays below `max_phase_error` radians; tile size 1 is the exact direct sum.
 Memory is bounded by chunking the rays: about 32 * tiles * tile_size * chunk bytes.
 """
+
 from __future__ import annotations
 
 import math
@@ -75,20 +76,27 @@ def huygens_psf(
     nu = (pf.chief.unsqueeze(0) - pf.points) / pf.radius
     cos_d = (nu * pf.directions).sum(-1)
     ty, tx = torch.meshgrid(tile_c, tile_c, indexing="ij")
-    centres = torch.stack([cx + tx.reshape(-1), cy + ty.reshape(-1), torch.full((n_t * n_t,), cz, dtype=torch.float64)], -1)
+    centres = torch.stack(
+        [cx + tx.reshape(-1), cy + ty.reshape(-1), torch.full((n_t * n_t,), cz, dtype=torch.float64)], -1
+    )
     # tile t = (row ty, column tx): its x offsets and y offsets, (T, m)
     ex = eps[torch.arange(n_t).repeat(n_t)]
     ey = eps[torch.arange(n_t).repeat_interleave(n_t)]
     T = n_t * n_t
     out = torch.zeros(T, m, m, dtype=torch.complex128)
     for a in range(0, pf.points.shape[0], CHUNK_RAYS):
-        q = pf.points[a:a + CHUNK_RAYS]
+        q = pf.points[a : a + CHUNK_RAYS]
         v = centres.unsqueeze(1) - q.unsqueeze(0)  # (T, N, 3)
         r = torch.linalg.norm(v, dim=-1)
         u = v / r.unsqueeze(-1)
-        cos_r = (u * nu[a:a + CHUNK_RAYS].unsqueeze(0)).sum(-1)
-        kfac = 0.5 * (cos_r + cos_d[a:a + CHUNK_RAYS].unsqueeze(0))
-        base = amp[a:a + CHUNK_RAYS].unsqueeze(0) * kfac / r * torch.exp(1j * (k_vac * pf.opl[a:a + CHUNK_RAYS].unsqueeze(0) + kn * r))
+        cos_r = (u * nu[a : a + CHUNK_RAYS].unsqueeze(0)).sum(-1)
+        kfac = 0.5 * (cos_r + cos_d[a : a + CHUNK_RAYS].unsqueeze(0))
+        base = (
+            amp[a : a + CHUNK_RAYS].unsqueeze(0)
+            * kfac
+            / r
+            * torch.exp(1j * (k_vac * pf.opl[a : a + CHUNK_RAYS].unsqueeze(0) + kn * r))
+        )
         ux, uy = u[..., 0], u[..., 1]
         inv2r = 0.5 / r
         # (T, m, N) phase factors along x and y

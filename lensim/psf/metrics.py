@@ -1,4 +1,5 @@
 """PSF figures of merit: Strehl ratio, RMS spot radius, encircled energy, MTF."""
+
 from __future__ import annotations
 
 import numpy as np

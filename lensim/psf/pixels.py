@@ -6,6 +6,7 @@ pixel's centre is the centre fine sample (the reference point). Each fine sample
 for the energy of its cell, so summing k x k blocks is the exact area integral of the
 sampled irradiance over the pixel.
 """
+
 from __future__ import annotations
 
 import math
@@ -18,7 +19,9 @@ from lensim.errors import InputError
 def oversampling_factor(pixel_pitch_um: float, max_spacing_um: float) -> int:
     """Smallest odd k with pixel_pitch / k <= max_spacing."""
     if pixel_pitch_um <= 0 or max_spacing_um <= 0:
-        raise InputError(None, "pixel_pitch", f"expected positive pitch and spacing, got {pixel_pitch_um}, {max_spacing_um}")
+        raise InputError(
+            None, "pixel_pitch", f"expected positive pitch and spacing, got {pixel_pitch_um}, {max_spacing_um}"
+        )
     k = max(1, math.ceil(pixel_pitch_um / max_spacing_um))
     return k if k % 2 else k + 1
 

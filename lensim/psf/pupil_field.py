@@ -11,6 +11,7 @@ Central obscurations block their rays (an annular pupil of ratio eps transmits 1
 of the power), never the chief ray, which is a reference ray (aiming.trace_chief_rays):
 the sphere is centred on it whether or not an obscuration covers the stop centre.
 """
+
 from __future__ import annotations
 
 import math
@@ -65,10 +66,13 @@ class PupilField:
         return 1.0 / (2.0 * self.n_image * max(sin_max, 1e-12))
 
 
-def _cell_measure(grid_vals: torch.Tensor, ok: torch.Tensor, h: float, cross_with: torch.Tensor | None = None) -> torch.Tensor:
+def _cell_measure(
+    grid_vals: torch.Tensor, ok: torch.Tensor, h: float, cross_with: torch.Tensor | None = None
+) -> torch.Tensor:
     """|d/dpx x d/dpy| * h^2 on an (n, n, 3) grid by central (or one-sided) differences
     between valid neighbours; cross_with projects onto a direction (étendue) instead.
     Returns NaN where no neighbour pair is valid."""
+
     def deriv(axis: int) -> torch.Tensor:
         v = grid_vals
         okf = ok
@@ -170,10 +174,22 @@ def pupil_field(
     sel = valid
     transmission = float(power[sel].sum())
     if int(sel.sum()) < 16:
-        raise RayTraceError(f"{lens.source}: fields: fewer than 16 rays of field {field:g} reach the image; "
-                            "expected an unvignetted pupil (or raise the pupil samples)")
+        raise RayTraceError(
+            f"{lens.source}: fields: fewer than 16 rays of field {field:g} reach the image; "
+            "expected an unvignetted pupil (or raise the pupil samples)"
+        )
     return PupilField(
-        points=q[sel], directions=dirs[sel], opl=(opl_sphere - opl_ref)[sel], power=power[sel], area=area[sel],
-        pupil_xy=pts[sel], chief=chief.clone(), radius=radius, n_image=n_img, wavelength_um=wavelength_um,
-        transmission=transmission, samples=samples, image_xy=pos[sel][:, :2],
+        points=q[sel],
+        directions=dirs[sel],
+        opl=(opl_sphere - opl_ref)[sel],
+        power=power[sel],
+        area=area[sel],
+        pupil_xy=pts[sel],
+        chief=chief.clone(),
+        radius=radius,
+        n_image=n_img,
+        wavelength_um=wavelength_um,
+        transmission=transmission,
+        samples=samples,
+        image_xy=pos[sel][:, :2],
     )

@@ -27,14 +27,24 @@ own chain.
 - :func:`sensor_from_raw <lensim.raw.profile.sensor_from_raw>`: a sensor profile for the
   camera that wrote a raw file (`lensim sensor from-raw`).
 """
+
 from lensim.raw.develop import (
-           apply_orientation,
-           capture_params,
-           develop_files,
-           develop_raw,
-           normalized_mosaic,
+    apply_orientation,
+    capture_params,
+    develop_files,
+    develop_raw,
+    normalized_mosaic,
 )
 from lensim.raw.read import RAW_SUFFIXES, RawImage, raw_files, read_raw
 
-__all__ = ["RAW_SUFFIXES", "RawImage", "apply_orientation", "capture_params", "develop_files", "develop_raw",
-           "normalized_mosaic", "raw_files", "read_raw"]
+__all__ = [
+    "RAW_SUFFIXES",
+    "RawImage",
+    "apply_orientation",
+    "capture_params",
+    "develop_files",
+    "develop_raw",
+    "normalized_mosaic",
+    "raw_files",
+    "read_raw",
+]

@@ -15,6 +15,7 @@ else from the raw file itself (:func:`lensim.raw.profile.sensor_from_raw`: the C
 the DNG/LibRaw colour matrix, Brooks et al. 2019's construction). White balance is the
 camera's as-shot one, or a preset colour temperature looked up in the profile's table.
 """
+
 from __future__ import annotations
 
 import math
@@ -32,8 +33,16 @@ from lensim.sensor.isp import CaptureParams, quantize, raw_to_srgb
 from lensim.sensor.profile import SensorProfile
 
 # White-balance presets (K): what cameras and raw converters call them.
-WB_PRESETS = {"tungsten": 2856.0, "incandescent": 2856.0, "fluorescent": 4000.0, "daylight": 5500.0,
-              "flash": 5500.0, "cloudy": 6500.0, "d65": 6504.0, "shade": 7500.0}
+WB_PRESETS = {
+    "tungsten": 2856.0,
+    "incandescent": 2856.0,
+    "fluorescent": 4000.0,
+    "daylight": 5500.0,
+    "flash": 5500.0,
+    "cloudy": 6500.0,
+    "d65": 6504.0,
+    "shade": 7500.0,
+}
 AS_SHOT = "as-shot"
 
 
@@ -51,8 +60,12 @@ def parse_wb(text: str | float) -> str | float:
         try:
             kelvin = float(t.removesuffix("k"))
         except ValueError:
-            raise InputError("--wb", None, f"expected as-shot, a preset ({', '.join(WB_PRESETS)}) or a colour "
-                             f"temperature such as 5000K, got {text!r}") from None
+            raise InputError(
+                "--wb",
+                None,
+                f"expected as-shot, a preset ({', '.join(WB_PRESETS)}) or a colour "
+                f"temperature such as 5000K, got {text!r}",
+            ) from None
     if not (math.isfinite(kelvin) and 1000.0 <= kelvin <= 50000.0):
         raise InputError("--wb", None, f"expected a colour temperature between 1000 and 50000 K, got {text!r}")
     return kelvin
@@ -96,8 +109,12 @@ def capture_params(raw: RawImage, sensor: SensorProfile | None = None, wb: str |
     choice = parse_wb(wb)
     if choice == AS_SHOT:
         if raw.as_shot_wb_gains is None:
-            raise InputError(raw.path, "white balance", "the file has no as-shot white balance; give --wb with a "
-                             f"preset ({', '.join(WB_PRESETS)}) or a colour temperature")
+            raise InputError(
+                raw.path,
+                "white balance",
+                "the file has no as-shot white balance; give --wb with a "
+                f"preset ({', '.join(WB_PRESETS)}) or a colour temperature",
+            )
         r_gain, _, b_gain = raw.as_shot_wb_gains
         kelvin = _estimate_kelvin(sensor, r_gain, b_gain) if sensor is not None else math.nan
         ccm = [list(map(float, row)) for row in sensor.ccm] if sensor is not None else ccm_from_raw(raw)
@@ -107,9 +124,14 @@ def capture_params(raw: RawImage, sensor: SensorProfile | None = None, wb: str |
         kelvin = float(choice)
         r_gain, b_gain = table.wb_gains(kelvin)
         ccm = [list(map(float, row)) for row in table.ccm]
-    return CaptureParams(kelvin=kelvin, r_gain=float(r_gain), b_gain=float(b_gain), ccm=ccm,
-                         bayer_pattern=raw.cfa_pattern,
-                         extra={"source": raw.path, "sensor": None if sensor is None else sensor.name, "wb": wb})
+    return CaptureParams(
+        kelvin=kelvin,
+        r_gain=float(r_gain),
+        b_gain=float(b_gain),
+        ccm=ccm,
+        bayer_pattern=raw.cfa_pattern,
+        extra={"source": raw.path, "sensor": None if sensor is None else sensor.name, "wb": wb},
+    )
 
 
 def apply_orientation(img: torch.Tensor, orientation: int) -> torch.Tensor:
@@ -118,9 +140,16 @@ def apply_orientation(img: torch.Tensor, orientation: int) -> torch.Tensor:
     top-bottom, 5 transposed, 6 rotated 90 degrees clockwise, 7 transverse, 8 rotated 90
     degrees counter-clockwise."""
     hw = (-2, -1)
-    ops = {1: lambda x: x, 2: lambda x: x.flip(-1), 3: lambda x: x.flip(hw), 4: lambda x: x.flip(-2),
-           5: lambda x: x.transpose(-2, -1), 6: lambda x: torch.rot90(x, -1, hw),
-           7: lambda x: torch.rot90(x, -1, hw).flip(-2), 8: lambda x: torch.rot90(x, 1, hw)}
+    ops = {
+        1: lambda x: x,
+        2: lambda x: x.flip(-1),
+        3: lambda x: x.flip(hw),
+        4: lambda x: x.flip(-2),
+        5: lambda x: x.transpose(-2, -1),
+        6: lambda x: torch.rot90(x, -1, hw),
+        7: lambda x: torch.rot90(x, -1, hw).flip(-2),
+        8: lambda x: torch.rot90(x, 1, hw),
+    }
     if orientation not in ops:
         raise InputError(None, "orientation", f"expected an EXIF orientation 1..8, got {orientation!r}")
     return ops[orientation](img).contiguous()
@@ -133,9 +162,15 @@ DEVELOP_HALO_ROWS = 16  # even (keeps the CFA phase) and beyond AHD's reach (8 r
 DEVELOP_AHD_BLOCK_ROWS = 64
 
 
-def develop_raw(raw: RawImage, sensor: SensorProfile | None = None, wb: str | float = AS_SHOT, method: str = "ahd",
-                bits: int | None = None, orient: bool = True,
-                strip_rows: int = DEVELOP_STRIP_ROWS) -> tuple[torch.Tensor, CaptureParams]:
+def develop_raw(
+    raw: RawImage,
+    sensor: SensorProfile | None = None,
+    wb: str | float = AS_SHOT,
+    method: str = "ahd",
+    bits: int | None = None,
+    orient: bool = True,
+    strip_rows: int = DEVELOP_STRIP_ROWS,
+) -> tuple[torch.Tensor, CaptureParams]:
     """Develop a raw file with the simulator's chain: :func:`normalized_mosaic`, then
     :func:`lensim.sensor.isp.raw_to_srgb` (white balance on the mosaic, demosaic
     ``method`` (AHD), CCM, sRGB curve, rounding to ``bits``; None: no rounding), then
@@ -167,7 +202,7 @@ def _develop_in_strips(raw: RawImage, params: CaptureParams, rows: int) -> torch
         y1 = min(h, y0 + step)
         a, b = max(0, y0 - DEVELOP_HALO_ROWS), min(h, y1 + DEVELOP_HALO_ROWS)
         strip = normalized_mosaic(replace(raw, mosaic=raw.mosaic[a:b]))
-        out[:, y0:y1] = raw_to_srgb(strip, params, bits=None, block_rows=DEVELOP_AHD_BLOCK_ROWS)[:, y0 - a:y1 - a]
+        out[:, y0:y1] = raw_to_srgb(strip, params, bits=None, block_rows=DEVELOP_AHD_BLOCK_ROWS)[:, y0 - a : y1 - a]
     return out
 
 
@@ -184,14 +219,22 @@ def plan_outputs(files: list[Path], out_dir: Path, fmt: str) -> list[tuple[Path,
     for f in files:
         target = out_dir / f"{f.stem}.{fmt}"
         if target in seen:
-            raise InputError(str(f), None, f"has the same name stem as {seen[target]}; both would be written to {target}")
+            raise InputError(
+                str(f), None, f"has the same name stem as {seen[target]}; both would be written to {target}"
+            )
         seen[target] = f
     return [(f, t) for t, f in seen.items()]
 
 
-def develop_files(files: list[Path], out_dir: Path, sensor: SensorProfile | None = None, wb: str | float = AS_SHOT,
-                  bits: int = 16, fmt: str = "tif", progress: Callable[[int, int], None] | None = None,
-                  ) -> list[dict[str, Any]]:
+def develop_files(
+    files: list[Path],
+    out_dir: Path,
+    sensor: SensorProfile | None = None,
+    wb: str | float = AS_SHOT,
+    bits: int = 16,
+    fmt: str = "tif",
+    progress: Callable[[int, int], None] | None = None,
+) -> list[dict[str, Any]]:
     """Develop raw files into OUT/<stem>.<fmt> (sRGB, tagged as such, ``bits`` 8 or 16).
 
     Every input that still needs developing is read and checked (its develop settings

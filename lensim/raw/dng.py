@@ -21,6 +21,7 @@ focal length, focus distance, lens) goes into an EXIF IFD, where LibRaw reads it
 Files are written through :func:`lensim.io.atomic_writer` (a temporary file renamed
 when complete).
 """
+
 from __future__ import annotations
 
 import json
@@ -55,14 +56,37 @@ _RATIONAL_DENOMINATOR = 1_000_000
 # TIFF tag types and codes used here
 _BYTE, _ASCII, _SHORT, _LONG, _RATIONAL, _SRATIONAL = 1, 2, 3, 4, 5, 10
 _TAG = {
-    "ImageDescription": 270, "Make": 271, "Model": 272, "Orientation": 274, "CFARepeatPatternDim": 33421,
-    "CFAPattern": 33422, "ExifIFD": 34665, "ExifIFDPlaceholder": 34664, "DNGVersion": 50706,
-    "DNGBackwardVersion": 50707, "UniqueCameraModel": 50708, "CFAPlaneColor": 50710, "CFALayout": 50711,
-    "BlackLevelRepeatDim": 50713, "BlackLevel": 50714, "WhiteLevel": 50717, "ColorMatrix1": 50721,
-    "ColorMatrix2": 50722, "AsShotNeutral": 50728, "CalibrationIlluminant1": 50778, "CalibrationIlluminant2": 50779,
+    "ImageDescription": 270,
+    "Make": 271,
+    "Model": 272,
+    "Orientation": 274,
+    "CFARepeatPatternDim": 33421,
+    "CFAPattern": 33422,
+    "ExifIFD": 34665,
+    "ExifIFDPlaceholder": 34664,
+    "DNGVersion": 50706,
+    "DNGBackwardVersion": 50707,
+    "UniqueCameraModel": 50708,
+    "CFAPlaneColor": 50710,
+    "CFALayout": 50711,
+    "BlackLevelRepeatDim": 50713,
+    "BlackLevel": 50714,
+    "WhiteLevel": 50717,
+    "ColorMatrix1": 50721,
+    "ColorMatrix2": 50722,
+    "AsShotNeutral": 50728,
+    "CalibrationIlluminant1": 50778,
+    "CalibrationIlluminant2": 50779,
 }
-_EXIF_TAG = {"exposure_s": 33434, "fno": 33437, "iso": 34855, "exif_version": 36864, "focus_distance_m": 37382,
-             "focal_length_mm": 37386, "lens": 42036}
+_EXIF_TAG = {
+    "exposure_s": 33434,
+    "fno": 33437,
+    "iso": 34855,
+    "exif_version": 36864,
+    "focus_distance_m": 37382,
+    "focal_length_mm": 37386,
+    "lens": 42036,
+}
 
 
 def _matrix_rows(matrix: Any) -> tuple[tuple[float, float, float], ...]:
@@ -90,11 +114,14 @@ class DngColour:
     def with_second_matrix(self, color_matrix: Any, calibration_illuminant: int) -> DngColour:
         """A copy that also carries ColorMatrix2 with CalibrationIlluminant2 (raw
         converters interpolate between the two by the white balance)."""
-        return replace(self, color_matrix2=_matrix_rows(color_matrix), calibration_illuminant2=int(calibration_illuminant))
+        return replace(
+            self, color_matrix2=_matrix_rows(color_matrix), calibration_illuminant2=int(calibration_illuminant)
+        )
 
     @classmethod
-    def from_gains(cls, color_matrix: Any, r_gain: float, b_gain: float,
-                   calibration_illuminant: int = D65_ILLUMINANT) -> DngColour:
+    def from_gains(
+        cls, color_matrix: Any, r_gain: float, b_gain: float, calibration_illuminant: int = D65_ILLUMINANT
+    ) -> DngColour:
         """From a 3x3 XYZ -> camera matrix and the as-shot white-balance gains (green 1)."""
         return cls(_matrix_rows(color_matrix), (1.0 / r_gain, 1.0, 1.0 / b_gain), int(calibration_illuminant))
 
@@ -145,7 +172,7 @@ def _rationals(values: Sequence[float] | np.ndarray, signed: bool = False) -> tu
         if not np.isfinite(x) or (x < 0 and not signed):
             raise InputError(None, "dng", f"expected a finite{'' if signed else ' non-negative'} number, got {v!r}")
         f = Fraction(x).limit_denominator(_RATIONAL_DENOMINATOR)
-        limit = 2 ** 31 - 1 if signed else 2 ** 32 - 1
+        limit = 2**31 - 1 if signed else 2**32 - 1
         while abs(f.numerator) > limit:  # large values: a coarser denominator
             f = Fraction(x).limit_denominator(max(1, f.denominator // 10))
         out += [f.numerator, f.denominator]
@@ -155,7 +182,9 @@ def _rationals(values: Sequence[float] | np.ndarray, signed: bool = False) -> tu
 def _cfa_codes(pattern: str) -> bytes:
     p = str(pattern).upper()
     if len(p) != 4 or set(p) - set(CFA_CODES) or set(p) != set(CFA_CODES):
-        raise InputError(None, "cfa_pattern", f"expected a Bayer pattern such as RGGB, BGGR, GRBG, GBRG, got {pattern!r}")
+        raise InputError(
+            None, "cfa_pattern", f"expected a Bayer pattern such as RGGB, BGGR, GRBG, GBRG, got {pattern!r}"
+        )
     return bytes(CFA_CODES[c] for c in p)
 
 
@@ -181,8 +210,10 @@ def _common_tags(colour: DngColour, camera: DngCamera, orientation: int, descrip
         (t["CalibrationIlluminant1"], _SHORT, 1, int(colour.calibration_illuminant), True),
     ]
     if colour.color_matrix2 is not None and colour.calibration_illuminant2 is not None:
-        tags += [(t["ColorMatrix2"], _SRATIONAL, 9, _rationals(np.ravel(colour.color_matrix2), signed=True), True),
-                 (t["CalibrationIlluminant2"], _SHORT, 1, int(colour.calibration_illuminant2), True)]
+        tags += [
+            (t["ColorMatrix2"], _SRATIONAL, 9, _rationals(np.ravel(colour.color_matrix2), signed=True), True),
+            (t["CalibrationIlluminant2"], _SHORT, 1, int(colour.calibration_illuminant2), True),
+        ]
     if description:
         tags.append((t["ImageDescription"], _ASCII, 0, description, True))
     return tags
@@ -255,9 +286,18 @@ def _write(path: str | Path, data: np.ndarray, photometric: int, tags: list[tupl
     if exif is not None:
         tags = tags + [(_TAG["ExifIFDPlaceholder"], _LONG, 1, 0, True)]
     with atomic_writer(path, suffix=".dng") as fh:
-        tifffile.imwrite(fh, data, photometric=photometric, planarconfig="contig" if data.ndim == 3 else None,
-                         extratags=tags, metadata=None, subfiletype=0, software="lensim", byteorder="<",
-                         bigtiff=False)
+        tifffile.imwrite(
+            fh,
+            data,
+            photometric=photometric,
+            planarconfig="contig" if data.ndim == 3 else None,
+            extratags=tags,
+            metadata=None,
+            subfiletype=0,
+            software="lensim",
+            byteorder="<",
+            bigtiff=False,
+        )
         if exif is not None:
             _link_exif_ifd(fh, exif)
     return path
@@ -273,16 +313,28 @@ def _black_level_tag(black_level: float | Sequence[float], white_level: int) -> 
     if levels.size == 1:
         levels = np.repeat(levels, 4)
     if levels.size != 4 or not np.all(np.isfinite(levels)) or levels.min() < 0 or levels.max() >= white_level:
-        raise InputError(None, "black_level", f"expected 1 or 4 numbers in [0, white_level={white_level}), "
-                         f"got {np.asarray(black_level).tolist()!r}")
+        raise InputError(
+            None,
+            "black_level",
+            f"expected 1 or 4 numbers in [0, white_level={white_level}), got {np.asarray(black_level).tolist()!r}",
+        )
     if np.all(levels == np.round(levels)):
         return (_TAG["BlackLevel"], _LONG, 4, tuple(int(v) for v in levels), True)
     return (_TAG["BlackLevel"], _RATIONAL, 4, _rationals(levels), True)
 
 
-def write_cfa_dng(path: str | Path, mosaic: np.ndarray, cfa_pattern: str, black_level: float | Sequence[float],
-                  white_level: int, colour: DngColour, camera: DngCamera, orientation: int = 1,
-                  exif: DngExif | None = None, description: str = "") -> Path:
+def write_cfa_dng(
+    path: str | Path,
+    mosaic: np.ndarray,
+    cfa_pattern: str,
+    black_level: float | Sequence[float],
+    white_level: int,
+    colour: DngColour,
+    camera: DngCamera,
+    orientation: int = 1,
+    exif: DngExif | None = None,
+    description: str = "",
+) -> Path:
     """Write a Bayer mosaic as a CFA DNG.
 
     Args:
@@ -298,8 +350,11 @@ def write_cfa_dng(path: str | Path, mosaic: np.ndarray, cfa_pattern: str, black_
     """
     arr = np.asarray(mosaic)
     if arr.ndim != 2 or min(arr.shape) < MIN_SIDE:
-        raise InputError(str(path), "mosaic", f"expected an (H, W) mosaic of at least {MIN_SIDE} pixels a side "
-                         f"(LibRaw's least), got shape {arr.shape}")
+        raise InputError(
+            str(path),
+            "mosaic",
+            f"expected an (H, W) mosaic of at least {MIN_SIDE} pixels a side (LibRaw's least), got shape {arr.shape}",
+        )
     if not 0 < int(white_level) < 65536 or int(white_level) != white_level:
         raise InputError(str(path), "white_level", f"expected an integer in [1, 65535], got {white_level!r}")
     if not np.issubdtype(arr.dtype, np.integer) or arr.min() < 0 or arr.max() > white_level:
@@ -321,18 +376,23 @@ def _linear_uint16(image: Any, block_rows: int, to_camera: Callable[[Any], Any] 
     blocks of rows (``to_camera`` converts each block first) to bound memory."""
     c, h, w = tuple(image.shape)
     if c != 3 or min(h, w) < MIN_SIDE:
-        raise InputError(None, "image", f"expected a (3, H, W) image of at least {MIN_SIDE} pixels a side (LibRaw's "
-                         f"least), got shape {tuple(image.shape)}")
+        raise InputError(
+            None,
+            "image",
+            f"expected a (3, H, W) image of at least {MIN_SIDE} pixels a side (LibRaw's "
+            f"least), got shape {tuple(image.shape)}",
+        )
     out = np.empty((h, w, 3), dtype=np.uint16)
     for y0 in range(0, h, block_rows):
-        blk = image[:, y0:y0 + block_rows]
+        blk = image[:, y0 : y0 + block_rows]
         blk = np.asarray(to_camera(blk) if to_camera is not None else blk, dtype=np.float32)
-        out[y0:y0 + block_rows] = np.rint(np.clip(blk, 0.0, 1.0) * 65535.0).astype(np.uint16).transpose(1, 2, 0)
+        out[y0 : y0 + block_rows] = np.rint(np.clip(blk, 0.0, 1.0) * 65535.0).astype(np.uint16).transpose(1, 2, 0)
     return out
 
 
-def _write_linear(path: str | Path, data: np.ndarray, colour: DngColour, camera: DngCamera, orientation: int,
-                  exif: DngExif | None) -> Path:
+def _write_linear(
+    path: str | Path, data: np.ndarray, colour: DngColour, camera: DngCamera, orientation: int, exif: DngExif | None
+) -> Path:
     tags = _common_tags(colour, camera, orientation) + [
         (_TAG["BlackLevel"], _LONG, 1, 0, True),
         (_TAG["WhiteLevel"], _LONG, 1, 65535, True),
@@ -340,8 +400,15 @@ def _write_linear(path: str | Path, data: np.ndarray, colour: DngColour, camera:
     return _write(path, data, 34892, tags, exif)
 
 
-def write_linear_dng(path: str | Path, camera_rgb: Any, colour: DngColour, camera: DngCamera, orientation: int = 1,
-                     exif: DngExif | None = None, block_rows: int = 512) -> Path:
+def write_linear_dng(
+    path: str | Path,
+    camera_rgb: Any,
+    colour: DngColour,
+    camera: DngCamera,
+    orientation: int = 1,
+    exif: DngExif | None = None,
+    block_rows: int = 512,
+) -> Path:
     """Write demosaiced camera RGB as a LinearRaw DNG (16 bits, black 0, white 65535).
 
     Args:
@@ -354,8 +421,16 @@ def write_linear_dng(path: str | Path, camera_rgb: Any, colour: DngColour, camer
     return _write_linear(path, _linear_uint16(camera_rgb, block_rows), colour, camera, orientation, exif)
 
 
-def write_srgb_as_linear_dng(path: str | Path, srgb: Any, ccm: Any, colour: DngColour, camera: DngCamera,
-                             orientation: int = 1, exif: DngExif | None = None, block_rows: int = 512) -> Path:
+def write_srgb_as_linear_dng(
+    path: str | Path,
+    srgb: Any,
+    ccm: Any,
+    colour: DngColour,
+    camera: DngCamera,
+    orientation: int = 1,
+    exif: DngExif | None = None,
+    block_rows: int = 512,
+) -> Path:
     """Write a developed photo back as a LinearRaw DNG in the raw's camera space.
 
     srgb: (3, H, W) torch tensor in [0, 1], developed by lensim's chain with ``ccm`` (3x3
@@ -387,8 +462,15 @@ def profile_colour(profile: SensorProfile, r_gain: float, b_gain: float) -> DngC
     return DngColour.from_gains(dng_color_matrix_from_ccm(np.array(profile.ccm), r65, b65), r_gain, b_gain)
 
 
-def write_capture_dng(path: str | Path, raw: Any, profile: SensorProfile, params: CaptureParams,
-                      mapping: SensorMapping | None = None, orientation: int = 1, exif: DngExif | None = None) -> Path:
+def write_capture_dng(
+    path: str | Path,
+    raw: Any,
+    profile: SensorProfile,
+    params: CaptureParams,
+    mapping: SensorMapping | None = None,
+    orientation: int = 1,
+    exif: DngExif | None = None,
+) -> Path:
     """Write a simulated capture as a CFA DNG: ``raw`` (H, W) normalized mosaic (0 at the
     black level, 1 at the white level; torch or numpy) turned into the profile's digital
     numbers exactly as the simulated ADC does (lensim.sensor.isp.digital_numbers), the
@@ -402,14 +484,26 @@ def write_capture_dng(path: str | Path, raw: Any, profile: SensorProfile, params
 
     dn = digital_numbers(torch.as_tensor(raw), profile).to(torch.int32).cpu().numpy()
     if mapping is None:
-        place = {"pitch_um": profile.pixel_pitch_um, "x0_mm": -profile.sensor_size_mm[0] / 2,
-                 "y0_mm": -profile.sensor_size_mm[1] / 2}
+        place = {
+            "pitch_um": profile.pixel_pitch_um,
+            "x0_mm": -profile.sensor_size_mm[0] / 2,
+            "y0_mm": -profile.sensor_size_mm[1] / 2,
+        }
     else:
         place = {"pitch_um": mapping.pitch_um, "x0_mm": mapping.x0_mm, "y0_mm": mapping.y0_mm}
     record = {SIMULATION_RECORD: {"sensor": profile.name, **place, "capture": params.to_dict()}}
-    return write_cfa_dng(path, dn, params.bayer_pattern, profile.black_level, int(profile.white_level),
-                         profile_colour(profile, params.r_gain, params.b_gain), profile_camera(profile),
-                         orientation, exif, description=json.dumps(record, default=str))
+    return write_cfa_dng(
+        path,
+        dn,
+        params.bayer_pattern,
+        profile.black_level,
+        int(profile.white_level),
+        profile_colour(profile, params.r_gain, params.b_gain),
+        profile_camera(profile),
+        orientation,
+        exif,
+        description=json.dumps(record, default=str),
+    )
 
 
 def read_simulation_record(path: str | Path) -> dict[str, Any] | None:
@@ -426,6 +520,15 @@ def read_simulation_record(path: str | Path) -> dict[str, Any] | None:
     return record if isinstance(record, dict) else None
 
 
-__all__ = ["DngCamera", "DngColour", "DngExif", "profile_camera", "profile_colour", "read_simulation_record",
-           "write_capture_dng",
-           "write_cfa_dng", "write_linear_dng", "write_srgb_as_linear_dng"]
+__all__ = [
+    "DngCamera",
+    "DngColour",
+    "DngExif",
+    "profile_camera",
+    "profile_colour",
+    "read_simulation_record",
+    "write_capture_dng",
+    "write_cfa_dng",
+    "write_linear_dng",
+    "write_srgb_as_linear_dng",
+]

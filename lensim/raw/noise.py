@@ -8,6 +8,7 @@ the variance grows linearly with the mean, slope ``shot``, intercept ``read**2``
 (8x8 same-colour pixels) keep lens shading and the slow illumination gradient out of the
 variance; saturated tiles are left out.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -28,7 +29,9 @@ def _tile_stats(frame: RawImage) -> tuple[np.ndarray, np.ndarray]:
     for dy, dx in ((0, 0), (0, 1), (1, 0), (1, 1)):
         plane = x[dy::2, dx::2]
         th, tw = plane.shape[0] // TILE, plane.shape[1] // TILE
-        tiles = plane[:th * TILE, :tw * TILE].reshape(th, TILE, tw, TILE).transpose(0, 2, 1, 3).reshape(-1, TILE * TILE)
+        tiles = (
+            plane[: th * TILE, : tw * TILE].reshape(th, TILE, tw, TILE).transpose(0, 2, 1, 3).reshape(-1, TILE * TILE)
+        )
         keep = tiles.max(axis=1) < SATURATION
         means.append(tiles[keep].mean(axis=1))
         variances.append(tiles[keep].var(axis=1, ddof=1))
@@ -37,8 +40,12 @@ def _tile_stats(frame: RawImage) -> tuple[np.ndarray, np.ndarray]:
 
 def _check_frame(raw: RawImage, frame: RawImage, what: str) -> None:
     if (frame.width, frame.height, frame.cfa_pattern) != (raw.width, raw.height, raw.cfa_pattern):
-        raise InputError(frame.path, what, f"found a {frame.width}x{frame.height} {frame.cfa_pattern} frame; expected "
-                         f"the camera of {raw.path} ({raw.width}x{raw.height} {raw.cfa_pattern})")
+        raise InputError(
+            frame.path,
+            what,
+            f"found a {frame.width}x{frame.height} {frame.cfa_pattern} frame; expected "
+            f"the camera of {raw.path} ({raw.width}x{raw.height} {raw.cfa_pattern})",
+        )
 
 
 def read_noise(dark: RawImage) -> float:
@@ -60,22 +67,32 @@ def photon_transfer(flats: list[RawImage], read: float | None = None) -> tuple[f
     if means.size < 2 or not means.max() > 0:
         raise InputError(src, "flat field", "has no usable (lit, unsaturated) tiles")
     if read is not None:
-        shot = float(np.sum(means * (variances - read ** 2)) / np.sum(means ** 2))
+        shot = float(np.sum(means * (variances - read**2)) / np.sum(means**2))
     else:
         if not means.max() >= 2.0 * max(means.min(), 1e-12):
-            raise InputError(src, "flat field", "one exposure level cannot separate shot from read noise; give a "
-                             "dark frame (--dark) or flats at two exposures")
+            raise InputError(
+                src,
+                "flat field",
+                "one exposure level cannot separate shot from read noise; give a "
+                "dark frame (--dark) or flats at two exposures",
+            )
         shot, read_sq = np.polyfit(means, variances, 1)
         read = float(np.sqrt(max(read_sq, 0.0)))
         shot = float(shot)
     if not shot > 0:
-        raise InputError(src, "flat field", f"variance does not grow with the signal (slope {shot:.3g}); expected an "
-                         "evenly lit, unsaturated frame")
+        raise InputError(
+            src,
+            "flat field",
+            f"variance does not grow with the signal (slope {shot:.3g}); expected an evenly lit, unsaturated frame",
+        )
     return shot, float(read)
 
 
-def noise_from_frames(raw: RawImage, dark: RawImage | None = None, flats: list[RawImage] | None = None,
-                      ) -> dict[str, float] | None:
+def noise_from_frames(
+    raw: RawImage,
+    dark: RawImage | None = None,
+    flats: list[RawImage] | None = None,
+) -> dict[str, float] | None:
     """The profile's noise mapping {shot, read} from calibration frames of the camera that
     wrote ``raw`` (None without frames; read noise alone needs a flat for the shot noise)."""
     flats = flats or []

@@ -11,6 +11,7 @@ already-demosaiced LinearRaw DNG, CMYG) is refused with one line naming the file
 what was found; so are files that are missing, folders, other image types and
 truncated raws.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -25,26 +26,80 @@ import numpy as np
 
 from lensim.errors import InputError
 
-RAW_SUFFIXES = (".dng", ".cr2", ".cr3", ".crw", ".nef", ".nrw", ".arw", ".srf", ".sr2", ".raf", ".orf", ".rw2",
-                ".rwl", ".pef", ".srw", ".3fr", ".fff", ".iiq", ".erf", ".kdc", ".dcr", ".mos", ".mef", ".mrw",
-                ".x3f", ".raw")
+RAW_SUFFIXES = (
+    ".dng",
+    ".cr2",
+    ".cr3",
+    ".crw",
+    ".nef",
+    ".nrw",
+    ".arw",
+    ".srf",
+    ".sr2",
+    ".raf",
+    ".orf",
+    ".rw2",
+    ".rwl",
+    ".pef",
+    ".srw",
+    ".3fr",
+    ".fff",
+    ".iiq",
+    ".erf",
+    ".kdc",
+    ".dcr",
+    ".mos",
+    ".mef",
+    ".mrw",
+    ".x3f",
+    ".raw",
+)
 
 # EXIF Orientation (1..8) from LibRaw's ``sizes.flip`` (dcraw maps tag 274 through "50132467").
 ORIENTATION_FROM_FLIP = {0: 1, 1: 2, 3: 3, 2: 4, 4: 5, 6: 6, 7: 7, 5: 8}
 
 # DNG CalibrationIlluminant codes (EXIF LightSource) -> correlated colour temperature (K).
-ILLUMINANT_KELVIN = {1: 5500.0, 2: 4200.0, 3: 2856.0, 4: 5500.0, 9: 5500.0, 10: 6500.0, 11: 7500.0, 12: 6430.0,
-                     13: 5000.0, 14: 4150.0, 15: 3450.0, 16: 2940.0, 17: 2856.0, 18: 4874.0, 19: 6774.0, 20: 5503.0,
-                     21: 6504.0, 22: 7504.0, 23: 5003.0, 24: 3200.0}
+ILLUMINANT_KELVIN = {
+    1: 5500.0,
+    2: 4200.0,
+    3: 2856.0,
+    4: 5500.0,
+    9: 5500.0,
+    10: 6500.0,
+    11: 7500.0,
+    12: 6430.0,
+    13: 5000.0,
+    14: 4150.0,
+    15: 3450.0,
+    16: 2940.0,
+    17: 2856.0,
+    18: 4874.0,
+    19: 6774.0,
+    20: 5503.0,
+    21: 6504.0,
+    22: 7504.0,
+    23: 5003.0,
+    24: 3200.0,
+}
 D65 = 21
 
 # file signatures of things that are not raw files
-_NOT_RAW_MAGIC = ((b"\xff\xd8\xff", "a JPEG image"), (b"\x89PNG", "a PNG image"), (b"GIF8", "a GIF image"),
-                  (b"BM", "a BMP image"), (b"%PDF", "a PDF document"), (b"PK\x03\x04", "a ZIP archive"))
+_NOT_RAW_MAGIC = (
+    (b"\xff\xd8\xff", "a JPEG image"),
+    (b"\x89PNG", "a PNG image"),
+    (b"GIF8", "a GIF image"),
+    (b"BM", "a BMP image"),
+    (b"%PDF", "a PDF document"),
+    (b"PK\x03\x04", "a ZIP archive"),
+)
 _FOVEON_MAGIC = b"FOVb"
 _CFA_PHOTOMETRIC, _LINEAR_RAW = 32803, 34892
-_PHOTOMETRIC_NAMES = {0: "monochrome (WhiteIsZero)", 1: "monochrome (BlackIsZero)", 2: "RGB",
-                      _LINEAR_RAW: "already-demosaiced LinearRaw"}
+_PHOTOMETRIC_NAMES = {
+    0: "monochrome (WhiteIsZero)",
+    1: "monochrome (BlackIsZero)",
+    2: "RGB",
+    _LINEAR_RAW: "already-demosaiced LinearRaw",
+}
 
 
 @dataclass
@@ -105,17 +160,27 @@ class RawImage:
     def info(self) -> dict[str, Any]:
         """The metadata as `lensim raw info --json` prints it."""
         return {
-            "make": self.make, "model": self.model, "lens": self.lens,
-            "width": self.width, "height": self.height, "cfa_pattern": self.cfa_pattern,
-            "black_level": list(self.black_level), "white_level": self.white_level,
+            "make": self.make,
+            "model": self.model,
+            "lens": self.lens,
+            "width": self.width,
+            "height": self.height,
+            "cfa_pattern": self.cfa_pattern,
+            "black_level": list(self.black_level),
+            "white_level": self.white_level,
             "as_shot_wb_gains": None if self.as_shot_wb_gains is None else list(self.as_shot_wb_gains),
-            "color_matrix": self.color_matrix, "focal_length_mm": self.focal_length_mm, "fno": self.fno,
-            "focus_distance_m": self.focus_distance_m, "iso": self.iso, "exposure_s": self.exposure_s,
+            "color_matrix": self.color_matrix,
+            "focal_length_mm": self.focal_length_mm,
+            "fno": self.fno,
+            "focus_distance_m": self.focus_distance_m,
+            "iso": self.iso,
+            "exposure_s": self.exposure_s,
             "orientation": self.orientation,
         }
 
 
 # ---------------------------------------------------------------- file checks
+
 
 def _check_file(path: Path) -> None:
     """One-line errors for what LibRaw would report vaguely: missing, a folder, empty,
@@ -158,6 +223,7 @@ def _quiet_c_stderr() -> Iterator[None]:
 
 
 # ---------------------------------------------------------------- TIFF tags (DNG, TIFF-based raws)
+
 
 def _ratio(value: Any) -> float | None:
     """A TIFF RATIONAL (num, den) or number -> float (None for 0/0 or missing)."""
@@ -230,13 +296,21 @@ def _dng_refusal(src: str, tags: dict[str, Any]) -> None:
     photometric = int(tags["raw_photometric"])
     if photometric != _CFA_PHOTOMETRIC:
         what = _PHOTOMETRIC_NAMES.get(photometric, f"PhotometricInterpretation {photometric}")
-        raise InputError(src, "cfa", f"found {what} data with {tags.get('raw_samples', 1)} sample(s) per pixel; "
-                         "expected a Bayer colour filter array mosaic")
+        raise InputError(
+            src,
+            "cfa",
+            f"found {what} data with {tags.get('raw_samples', 1)} sample(s) per pixel; "
+            "expected a Bayer colour filter array mosaic",
+        )
     dims = tags.get("raw_cfa_dims")
     if dims is not None and tuple(dims) != (2, 2):
         kind = "X-Trans-like " if tuple(dims) == (6, 6) else ""
-        raise InputError(src, "cfa", f"found a {dims[0]}x{dims[1]} {kind}colour filter pattern; expected a 2x2 "
-                         "Bayer pattern (RGGB, BGGR, GRBG or GBRG)")
+        raise InputError(
+            src,
+            "cfa",
+            f"found a {dims[0]}x{dims[1]} {kind}colour filter pattern; expected a 2x2 "
+            "Bayer pattern (RGGB, BGGR, GRBG or GBRG)",
+        )
 
 
 def _dng_color_matrices(tags: dict[str, Any]) -> list[tuple[int, list[list[float]]]]:
@@ -250,27 +324,33 @@ def _dng_color_matrices(tags: dict[str, Any]) -> list[tuple[int, list[list[float
         if len(vals) != 9:  # a 4-colour camera's 4x3 matrix: not a Bayer RGB camera
             continue
         illum = int(tags.get(f"CalibrationIlluminant{k}", 0) or 0)
-        out.append((illum, [[float(v) for v in vals[i:i + 3]] for i in (0, 3, 6)]))
+        out.append((illum, [[float(v) for v in vals[i : i + 3]] for i in (0, 3, 6)]))
     return out
 
 
 def _nearest_d65(matrices: list[tuple[int, list[list[float]]]]) -> tuple[int, list[list[float]]]:
     """The matrix whose calibration illuminant is nearest D65 in mired (unknown counts as D65)."""
+
     def distance(item: tuple[int, list[list[float]]]) -> float:
         kelvin = ILLUMINANT_KELVIN.get(item[0], 6504.0)
         return abs(1e6 / kelvin - 1e6 / 6504.0)
+
     return min(matrices, key=distance)
 
 
 # ---------------------------------------------------------------- LibRaw
+
 
 def _libraw_refusal(src: str, rp: Any) -> None:
     """Refuse data LibRaw opened that is not an RGB Bayer mosaic."""
     import rawpy
 
     if rp.raw_type != rawpy.RawType.Flat:
-        raise InputError(src, "cfa", "found already-demosaiced (several samples per pixel) data; expected a Bayer "
-                         "colour filter array mosaic")
+        raise InputError(
+            src,
+            "cfa",
+            "found already-demosaiced (several samples per pixel) data; expected a Bayer colour filter array mosaic",
+        )
     desc = rp.color_desc.decode("ascii", "replace")
     try:
         pattern = rp.raw_pattern
@@ -280,8 +360,12 @@ def _libraw_refusal(src: str, rp: Any) -> None:
         raise InputError(src, "cfa", "found monochrome data (no colour filter array); expected a Bayer mosaic")
     if pattern.shape != (2, 2):
         kind = "X-Trans " if pattern.shape == (6, 6) else ""
-        raise InputError(src, "cfa", f"found a {pattern.shape[0]}x{pattern.shape[1]} {kind}colour filter pattern; "
-                         "expected a 2x2 Bayer pattern (RGGB, BGGR, GRBG or GBRG)")
+        raise InputError(
+            src,
+            "cfa",
+            f"found a {pattern.shape[0]}x{pattern.shape[1]} {kind}colour filter pattern; "
+            "expected a 2x2 Bayer pattern (RGGB, BGGR, GRBG or GBRG)",
+        )
     if desc not in ("RGBG", "RGB"):
         raise InputError(src, "cfa", f"found colour filters {desc!r}; expected red, green and blue (RGBG)")
 
@@ -291,10 +375,14 @@ def _cfa_indices(src: str, rp: Any) -> np.ndarray:
     row-major; the visible area's offset on the sensor is accounted for."""
     colors = np.asarray(rp.raw_colors_visible)
     if colors.shape[0] < 4 or colors.shape[1] < 4:
-        raise InputError(src, "size", f"active area is {colors.shape[1]}x{colors.shape[0]} pixels; expected at least 4x4")
+        raise InputError(
+            src, "size", f"active area is {colors.shape[1]}x{colors.shape[0]} pixels; expected at least 4x4"
+        )
     quad = colors[:2, :2]
     if not (np.array_equal(colors[2:4, :2], quad) and np.array_equal(colors[:2, 2:4], quad)):
-        raise InputError(src, "cfa", "found a colour filter pattern that does not repeat every 2 pixels; expected Bayer")
+        raise InputError(
+            src, "cfa", "found a colour filter pattern that does not repeat every 2 pixels; expected Bayer"
+        )
     return quad.ravel()
 
 
@@ -387,7 +475,8 @@ def _exif(rp: Any, tags: dict[str, Any]) -> dict[str, Any]:
     if isinstance(iso, (tuple, list)):
         iso = iso[0] if iso else None
     return {
-        "make": _text(tags.get("Make")), "model": _text(tags.get("Model")),
+        "make": _text(tags.get("Make")),
+        "model": _text(tags.get("Model")),
         "lens": _text(tags.get("LensModel")) or _text(lens.model),
         "focal_length_mm": _positive(tags.get("FocalLength"), other.focal_length),
         "fno": _positive(tags.get("FNumber"), other.aperture),
@@ -399,6 +488,7 @@ def _exif(rp: Any, tags: dict[str, Any]) -> dict[str, Any]:
 
 
 # ---------------------------------------------------------------- the reader
+
 
 def _colour(rp: Any, tags: dict[str, Any], is_dng: bool) -> dict[str, Any]:
     """The colour matrix fields of RawImage: DNG ColorMatrix1/2, else LibRaw's matrix."""
@@ -434,16 +524,25 @@ def read_raw(path: str | Path) -> RawImage:
         per_colour = [float(b) for b in rp.black_level_per_channel]
         mosaic = np.array(rp.raw_image_visible, dtype=np.uint16, copy=True)
         raw = RawImage(
-            path=src, mosaic=mosaic, cfa_pattern=_pattern_name(src, rp, indices),
+            path=src,
+            mosaic=mosaic,
+            cfa_pattern=_pattern_name(src, rp, indices),
             black_level=tuple(per_colour[int(i)] for i in indices),  # type: ignore[arg-type]
-            white_level=float(rp.white_level), as_shot_wb_gains=_as_shot_gains(rp, tags, desc),
-            orientation=ORIENTATION_FROM_FLIP.get(int(rp.sizes.flip), 1), is_dng=is_dng,
-            **_colour(rp, tags, is_dng), **_exif(rp, tags))
+            white_level=float(rp.white_level),
+            as_shot_wb_gains=_as_shot_gains(rp, tags, desc),
+            orientation=ORIENTATION_FROM_FLIP.get(int(rp.sizes.flip), 1),
+            is_dng=is_dng,
+            **_colour(rp, tags, is_dng),
+            **_exif(rp, tags),
+        )
     finally:
         rp.close()
     if not raw.white_level > max(raw.black_level):
-        raise InputError(src, "white_level", f"found white level {raw.white_level:g} not above the black levels "
-                         f"{list(raw.black_level)}")
+        raise InputError(
+            src,
+            "white_level",
+            f"found white level {raw.white_level:g} not above the black levels {list(raw.black_level)}",
+        )
     return raw
 
 
@@ -473,8 +572,11 @@ def photo_exif_settings(path: str | Path) -> dict[str, float]:
     for name, value in list(tags.items()):  # Pillow gives IFDRational
         if hasattr(value, "numerator") and hasattr(value, "denominator") and not isinstance(value, (int, float)):
             tags[name] = (int(value.numerator), int(value.denominator))
-    found = {"fno": _positive(tags.get("FNumber")), "focus_m": _focus_distance_m(tags),
-             "focal_mm": _positive(tags.get("FocalLength"))}
+    found = {
+        "fno": _positive(tags.get("FNumber")),
+        "focus_m": _focus_distance_m(tags),
+        "focal_mm": _positive(tags.get("FocalLength")),
+    }
     return {k: v for k, v in found.items() if v is not None}
 
 

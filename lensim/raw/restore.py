@@ -28,6 +28,7 @@ bank` and `dataset make`), the CPU threads shared among its processes; ``schedul
 them on an existing cluster, whose workers write the outputs (they must see the same
 files). Each worker process loads the model once, on its first file.
 """
+
 from __future__ import annotations
 
 import os
@@ -92,11 +93,13 @@ def plan_jobs(files: list[Path], out_dir: Path, dng: bool) -> list[RawJob]:
     for f in files:
         job = RawJob(f, out_dir / f"{f.stem}.tif", out_dir / f"{f.stem}.dng" if dng else None)
         if job.tif in seen:
-            raise InputError(str(f), None, f"has the same name stem as {seen[job.tif]}; both would be written to "
-                             f"{job.tif}")
+            raise InputError(
+                str(f), None, f"has the same name stem as {seen[job.tif]}; both would be written to {job.tif}"
+            )
         if job.dng is not None and job.dng.resolve() == f.resolve():
-            raise InputError(str(f), "--output", "the restored DNG would overwrite this input; expected another "
-                             "output folder")
+            raise InputError(
+                str(f), "--output", "the restored DNG would overwrite this input; expected another output folder"
+            )
         seen[job.tif] = f
         jobs.append(job)
     return jobs
@@ -107,8 +110,9 @@ def _names_match(raw: Any, sensor: SensorProfile) -> bool:
     return sensor.name.strip().lower() in names
 
 
-def check_camera(raw: Any, sensor: SensorProfile, placement: dict[str, Any] | None, checkpoint: str,
-                 allow_other: bool) -> bool:
+def check_camera(
+    raw: Any, sensor: SensorProfile, placement: dict[str, Any] | None, checkpoint: str, allow_other: bool
+) -> bool:
     """True when the raw comes from the sensor the network was trained for, at its native
     pixel scale: its camera name matches the profile's name and its active area is the
     sensor's (rounded down to whole Bayer quads), or, for a DNG written by `lensim
@@ -127,9 +131,13 @@ def check_camera(raw: Any, sensor: SensorProfile, placement: dict[str, Any] | No
     what = f"{raw.camera} {raw.width}x{raw.height}"
     if placement is not None and _names_match(raw, sensor):
         what += f" simulated at {float(placement.get('pitch_um', 0.0)):.4g} um per pixel"
-    raise InputError(raw.path, "camera", f"{what}, but {checkpoint} was trained for {sensor.name} "
-                     f"{sensor.width}x{sensor.height} at {sensor.pixel_pitch_um:g} um; give --allow-other-camera "
-                     "to restore it anyway (as a full frame of that sensor)")
+    raise InputError(
+        raw.path,
+        "camera",
+        f"{what}, but {checkpoint} was trained for {sensor.name} "
+        f"{sensor.width}x{sensor.height} at {sensor.pixel_pitch_um:g} um; give --allow-other-camera "
+        "to restore it anyway (as a full frame of that sensor)",
+    )
 
 
 def _native_offset(placement: dict[str, Any], sensor: SensorProfile, height: int, width: int) -> tuple[int, int] | None:
@@ -146,8 +154,9 @@ def _native_offset(placement: dict[str, Any], sensor: SensorProfile, height: int
     return None
 
 
-def raw_geometry(raw: Any, sensor: SensorProfile, placement: dict[str, Any] | None,
-                 native: bool) -> tuple[tuple[float, float], tuple[float, float]]:
+def raw_geometry(
+    raw: Any, sensor: SensorProfile, placement: dict[str, Any] | None, native: bool
+) -> tuple[tuple[float, float], tuple[float, float]]:
     """((top, left), (sensor_height, sensor_width)) in image pixels for fov_channels.
 
     A native raw (``native``: :func:`check_camera` passed) is the whole active area, the
@@ -204,8 +213,12 @@ def settings_vector(raw: Any, settings: RestoreSettings, warn: bool) -> torch.Te
         from lensim.restore.conditioning import OPTIONS
 
         exif = {"fno": "FNumber", "focus_m": "SubjectDistance", "focal_mm": "FocalLength"}
-        raise InputError(raw.path, "settings", f"the network is conditioned on {', '.join(cond.keys)}; the file's EXIF "
-                         f"has no {', '.join(exif[k] for k in missing)}; give {' '.join(OPTIONS[k] for k in missing)}")
+        raise InputError(
+            raw.path,
+            "settings",
+            f"the network is conditioned on {', '.join(cond.keys)}; the file's EXIF "
+            f"has no {', '.join(exif[k] for k in missing)}; give {' '.join(OPTIONS[k] for k in missing)}",
+        )
     return cond.vector(shot, raw.path)
 
 
@@ -225,12 +238,20 @@ def validate(jobs: list[RawJob], sensor: SensorProfile, settings: RestoreSetting
         capture_params(raw, sensor)  # the develop settings exist (as-shot white balance)
         settings_vector(raw, settings, warn=True)
         if job.dng is not None and raw.color_matrix is None:
-            raise InputError(str(job.source), "color_matrix", "the file has no colour matrix to carry into the "
-                             "restored DNG; leave out --dng")
+            raise InputError(
+                str(job.source),
+                "color_matrix",
+                "the file has no colour matrix to carry into the restored DNG; leave out --dng",
+            )
 
 
-def restore_raw(job: RawJob, model: Any, sensor: SensorProfile, settings: RestoreSettings,
-                progress: Callable[[int, int], None] | None = None) -> dict[str, Any]:
+def restore_raw(
+    job: RawJob,
+    model: Any,
+    sensor: SensorProfile,
+    settings: RestoreSettings,
+    progress: Callable[[int, int], None] | None = None,
+) -> dict[str, Any]:
     """Develop, restore and write one raw file (see the module docstring); returns its
     record: input, outputs, size, whether it was native, the develop's capture parameters.
     ``model``: the network or any lensim.restore.infer.Engine."""
@@ -246,18 +267,34 @@ def restore_raw(job: RawJob, model: Any, sensor: SensorProfile, settings: Restor
     vec = settings_vector(raw, settings, warn=False)  # validate() warned
     img, params = develop_raw(raw, sensor, orient=False)
     top_left, size = raw_geometry(raw, sensor, placement, native)
-    out = restore_image(model, img, top_left, size, tile=settings.tile, overlap=settings.overlap, progress=progress,
-                        settings=vec)
+    out = restore_image(
+        model, img, top_left, size, tile=settings.tile, overlap=settings.overlap, progress=progress, settings=vec
+    )
     del img  # bound peak memory
     out.clamp_(0.0, 1.0)
     if job.dng is not None:
-        write_srgb_as_linear_dng(job.dng, out, params.ccm, _dng_colour(raw, params.r_gain, params.b_gain),
-                                 DngCamera(raw.make or "", raw.model or ""), raw.orientation,
-                                 DngExif.from_mapping(raw.info()))
+        write_srgb_as_linear_dng(
+            job.dng,
+            out,
+            params.ccm,
+            _dng_colour(raw, params.r_gain, params.b_gain),
+            DngCamera(raw.make or "", raw.model or ""),
+            raw.orientation,
+            DngExif.from_mapping(raw.info()),
+        )
     write_image(job.tif, apply_orientation(out, raw.orientation), 16, srgb_tag=True)
-    return {"input": str(job.source), "output": str(job.tif), "dng": None if job.dng is None else str(job.dng),
-            "width": raw.width, "height": raw.height, "camera": raw.camera, "native": native, "skipped": False,
-            "capture": params.to_dict(), "settings": strict_json(raw_settings(raw, settings.shooting))}
+    return {
+        "input": str(job.source),
+        "output": str(job.tif),
+        "dng": None if job.dng is None else str(job.dng),
+        "width": raw.width,
+        "height": raw.height,
+        "camera": raw.camera,
+        "native": native,
+        "skipped": False,
+        "capture": params.to_dict(),
+        "settings": strict_json(raw_settings(raw, settings.shooting)),
+    }
 
 
 # ----------------------------------------------------------------------------- batches
@@ -290,8 +327,12 @@ def _model_key(settings: RestoreSettings, threads: int) -> tuple[Any, ...]:
     try:
         st = os.stat(settings.checkpoint)
     except OSError as e:
-        raise InputError(settings.checkpoint, None, f"cannot be read in a worker process ({e.strerror or e}); a "
-                         "cluster's workers must see the same files as this process") from None
+        raise InputError(
+            settings.checkpoint,
+            None,
+            f"cannot be read in a worker process ({e.strerror or e}); a "
+            "cluster's workers must see the same files as this process",
+        ) from None
     return ("torch", settings.checkpoint, st.st_size, st.st_mtime_ns, settings.device, threads)
 
 
@@ -325,8 +366,13 @@ def _absolute(job: RawJob) -> RawJob:
     return RawJob(job.source.absolute(), job.tif.absolute(), None if job.dng is None else job.dng.absolute())
 
 
-def _restore_on_workers(todo: list[RawJob], settings: RestoreSettings, workers: int, scheduler: str | None,
-                        finished: Callable[[dict[str, Any]], None]) -> None:
+def _restore_on_workers(
+    todo: list[RawJob],
+    settings: RestoreSettings,
+    workers: int,
+    scheduler: str | None,
+    finished: Callable[[dict[str, Any]], None],
+) -> None:
     """Restore the jobs through lensim.workers.run_jobs: on a local Dask cluster of
     min(workers, jobs) processes sharing this process's torch threads (each gets
     threads // processes, at least 1, as ``--threads`` or torch's default gives them), or
@@ -340,15 +386,28 @@ def _restore_on_workers(todo: list[RawJob], settings: RestoreSettings, workers: 
 
     def done(task: WorkerJob, record: dict[str, Any]) -> None:
         job = given[task.job]
-        finished({**record, "input": str(job.source), "output": str(job.tif),
-                  "dng": None if job.dng is None else str(job.dng)})
+        finished(
+            {
+                **record,
+                "input": str(job.source),
+                "output": str(job.tif),
+                "dng": None if job.dng is None else str(job.dng),
+            }
+        )
 
     run_jobs(restore_in_worker, [WorkerJob(job, shared, threads) for job in given], workers, scheduler, done)
 
 
-def restore_raw_files(files: list[Path], out_dir: Path, model: Any, settings: RestoreSettings, dng: bool = False,
-                      workers: int = 1, progress: Progress | None = None,
-                      scheduler: str | None = None) -> list[dict[str, Any]]:
+def restore_raw_files(
+    files: list[Path],
+    out_dir: Path,
+    model: Any,
+    settings: RestoreSettings,
+    dng: bool = False,
+    workers: int = 1,
+    progress: Progress | None = None,
+    scheduler: str | None = None,
+) -> list[dict[str, Any]]:
     """Restore raw files into ``out_dir`` (see the module docstring). ``model`` is the
     loaded network or engine, used in this process when ``workers`` is 1 or one file is
     left to do (and no ``scheduler``). Otherwise the files are restored side by side
@@ -378,10 +437,12 @@ def restore_raw_files(files: list[Path], out_dir: Path, model: Any, settings: Re
 
             def tiles(d: int, n: int, before: int = before) -> None:
                 step(before + d / n)
+
             records.append(restore_raw(job, model, sensor, settings, progress=tiles))
             step(len(records))
         return records
     if todo:
+
         def finished(record: dict[str, Any]) -> None:
             records.append(record)
             step(len(records))
@@ -390,5 +451,17 @@ def restore_raw_files(files: list[Path], out_dir: Path, model: Any, settings: Re
     return records
 
 
-__all__ = ["RawJob", "RestoreSettings", "WorkerJob", "check_camera", "plan_jobs", "raw_geometry", "raw_settings",
-           "restore_in_worker", "restore_raw", "restore_raw_files", "settings_vector", "validate"]
+__all__ = [
+    "RawJob",
+    "RestoreSettings",
+    "WorkerJob",
+    "check_camera",
+    "plan_jobs",
+    "raw_geometry",
+    "raw_settings",
+    "restore_in_worker",
+    "restore_raw",
+    "restore_raw_files",
+    "settings_vector",
+    "validate",
+]

@@ -9,6 +9,7 @@ continuously from pixel to pixel and no tile seam can appear. Each term is compu
 hat's support only (2*tile pixels plus the kernel) with batched FFTs, and the results are
 overlap-added. Energy is conserved: each source pixel's energy times its kernels' sum.
 """
+
 from __future__ import annotations
 
 import torch
@@ -81,12 +82,12 @@ def spatially_variant_blur(
         patch = (patch * wgt.unsqueeze(0)).permute(1, 0, 2, 3)
         pf = torch.fft.rfft2(patch, s=(n_fft, n_fft))
         kf = torch.fft.rfft2(kernels[idx].float(), s=(n_fft, n_fft))
-        blocks[a:a + len(idx)] = torch.fft.irfft2(pf * kf, s=(n_fft, n_fft))[..., :block, :block]
+        blocks[a : a + len(idx)] = torch.fft.irfft2(pf * kf, s=(n_fft, n_fft))[..., :block, :block]
     # overlap-add: block of tile (ty, tx) starts at padded coordinate (ty*tile - r, tx*tile - r)
     out_h = (ny - 1) * tile + block
     out_w = (nx - 1) * tile + block
     cols = blocks.reshape(ny * nx, c * block * block).T.unsqueeze(0)  # (1, C*B*B, L)
     out = F.fold(cols, output_size=(out_h, out_w), kernel_size=block, stride=tile)[0]
     # out index 0 = padded coordinate -r; image row 0 = padded coordinate tile
-    res = out[:, tile + r:tile + r + h, tile + r:tile + r + w]
+    res = out[:, tile + r : tile + r + h, tile + r : tile + r + w]
     return res.to(image.dtype)

@@ -1,4 +1,5 @@
 """The lens's distortion applied to an image (a warp; lateral colour stays in the kernels)."""
+
 from __future__ import annotations
 
 from typing import TYPE_CHECKING

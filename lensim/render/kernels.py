@@ -5,6 +5,7 @@ both take one RGB kernel per tile centre, centres on a regular grid of spacing `
 pixels (0, tile, 2 tile, ... in both axes), at the centre's sensor position
 (``bank.psf_at``: radially interpolated and rotated to the azimuth).
 """
+
 from __future__ import annotations
 
 import math
@@ -44,8 +45,10 @@ def kernels_at(bank: PSFBank, mapping: SensorMapping, rows: Any, cols: Any, unit
 def kernel_function(bank: PSFBank, mapping: SensorMapping, relative_illumination: bool = True) -> KernelFn:
     """kernel_at(rows, cols) for lensim.render.blur: :func:`kernels_at` with unit-sum
     kernels when relative_illumination is False."""
+
     def kernel_at(rows: torch.Tensor, cols: torch.Tensor) -> torch.Tensor:
         return kernels_at(bank, mapping, rows, cols, unit_sum=not relative_illumination)
+
     return kernel_at
 
 
@@ -53,9 +56,17 @@ def check_bank_fits(bank: PSFBank, mapping: SensorMapping, source: str = "<bank>
     """The bank must be at the mapping's pitch and cover the image's half-diagonal;
     InputError naming ``source`` otherwise."""
     if abs(bank.pixel_pitch_um / mapping.pitch_um - 1.0) > 1e-6:
-        raise InputError(source, "pixel_pitch_um", f"the bank is at {bank.pixel_pitch_um:.6g} um but the image maps onto "
-                         f"the sensor at {mapping.pitch_um:.6g} um per pixel; expected a bank computed at that pitch")
+        raise InputError(
+            source,
+            "pixel_pitch_um",
+            f"the bank is at {bank.pixel_pitch_um:.6g} um but the image maps onto "
+            f"the sensor at {mapping.pitch_um:.6g} um per pixel; expected a bank computed at that pitch",
+        )
     r_max = float(bank.radii_mm[-1])
     if mapping.half_diagonal_mm > r_max * (1 + 1e-6) + 0.5 * mapping.pitch_um * 1e-3:
-        raise InputError(source, "fields", f"the image's corners lie {mapping.half_diagonal_mm:.4g} mm off axis but the bank "
-                         f"(the lens's field) reaches {r_max:.4g} mm; expected a lens covering the sensor diagonal")
+        raise InputError(
+            source,
+            "fields",
+            f"the image's corners lie {mapping.half_diagonal_mm:.4g} mm off axis but the bank "
+            f"(the lens's field) reaches {r_max:.4g} mm; expected a lens covering the sensor diagonal",
+        )

@@ -8,6 +8,7 @@ run along +y and columns along +x of the image plane, the same orientation as a 
 kernels; a bank used on a mapping must be computed at the mapping's pitch
 (lensim.render.kernels.check_bank_fits).
 """
+
 from __future__ import annotations
 
 import math
@@ -56,7 +57,12 @@ def native_mapping(height: int, width: int, sensor: SensorProfile, top: int, lef
     """An image (or crop) whose pixels are sensor pixels, its top-left pixel at sensor pixel
     (top, left)."""
     if not (0 <= top <= sensor.height - height and 0 <= left <= sensor.width - width):
-        raise InputError(sensor.name, "resolution", f"a {width}x{height} crop at ({left}, {top}) does not fit on the "
-                         f"{sensor.width}x{sensor.height} sensor")
+        raise InputError(
+            sensor.name,
+            "resolution",
+            f"a {width}x{height} crop at ({left}, {top}) does not fit on the {sensor.width}x{sensor.height} sensor",
+        )
     p = sensor.pixel_pitch_um * 1e-3
-    return SensorMapping(height, width, sensor.pixel_pitch_um, (left - sensor.width / 2.0) * p, (top - sensor.height / 2.0) * p)
+    return SensorMapping(
+        height, width, sensor.pixel_pitch_um, (left - sensor.width / 2.0) * p, (top - sensor.height / 2.0) * p
+    )

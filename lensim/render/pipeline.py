@@ -13,6 +13,7 @@ output never repeats the stages.
 Where the image lies on the sensor: lensim.render.mapping; kernels from the bank:
 lensim.render.kernels; the bank itself (cached): lensim.render.bank_cache.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -36,10 +37,18 @@ if TYPE_CHECKING:
 RawHook = Callable[[torch.Tensor, CaptureParams], None]
 
 
-def simulate_capture(img: torch.Tensor, profile: SensorProfile, generator: torch.Generator | None = None,
-                     blur: Callable[[torch.Tensor], torch.Tensor] | None = None, noise: bool = True,
-                     kelvin: float | None = None, method: str = "ahd", bits: int | None = 8,
-                     adc: bool = True, on_raw: RawHook | None = None) -> tuple[torch.Tensor, CaptureParams]:
+def simulate_capture(
+    img: torch.Tensor,
+    profile: SensorProfile,
+    generator: torch.Generator | None = None,
+    blur: Callable[[torch.Tensor], torch.Tensor] | None = None,
+    noise: bool = True,
+    kelvin: float | None = None,
+    method: str = "ahd",
+    bits: int | None = 8,
+    adc: bool = True,
+    on_raw: RawHook | None = None,
+) -> tuple[torch.Tensor, CaptureParams]:
     """sRGB image (3, H, W) -> what the camera delivers (3, H, W) sRGB, with every draw
     recorded: unprocess (random colour temperature unless ``kelvin``), ``blur`` (a function
     of the energy-domain camera RGB image, e.g. the spatially-variant PSF convolution;
@@ -69,11 +78,13 @@ def dng_writer(path: str | Path, sensor: SensorProfile, mapping: SensorMapping |
 
     def write(raw: torch.Tensor, params: CaptureParams) -> None:
         write_capture_dng(path, raw, sensor, params, mapping)
+
     return write
 
 
-def blur_energy_image(cam: torch.Tensor, bank: PSFBank, mapping: SensorMapping, relative_illumination: bool = True,
-                      tile: int = 64) -> torch.Tensor:
+def blur_energy_image(
+    cam: torch.Tensor, bank: PSFBank, mapping: SensorMapping, relative_illumination: bool = True, tile: int = 64
+) -> torch.Tensor:
     """Spatially-variant blur of an energy-domain (3, H, W) image with the bank; tile is the
     spacing of the kernels' grid (pixels)."""
     return spatially_variant_blur(cam, kernel_function(bank, mapping, relative_illumination), tile=tile)
@@ -122,10 +133,26 @@ def simulate(
             cam = apply_distortion(cam, bank, mapping)
         return blur_energy_image(cam, bank, mapping, relative_illumination, tile) if blur else cam
 
-    out, params = simulate_capture(image, sensor, generator, blur=lens if (blur or distortion) else None, noise=noise,
-                                   kelvin=kelvin, method=demosaic, bits=bits, on_raw=on_raw)
-    params.extra.update({"pitch_um": mapping.pitch_um, "x0_mm": mapping.x0_mm, "y0_mm": mapping.y0_mm,
-                         "distortion": distortion,
-                         "relative_illumination": relative_illumination,
-                         "blur": blur, "demosaic": demosaic})
+    out, params = simulate_capture(
+        image,
+        sensor,
+        generator,
+        blur=lens if (blur or distortion) else None,
+        noise=noise,
+        kelvin=kelvin,
+        method=demosaic,
+        bits=bits,
+        on_raw=on_raw,
+    )
+    params.extra.update(
+        {
+            "pitch_um": mapping.pitch_um,
+            "x0_mm": mapping.x0_mm,
+            "y0_mm": mapping.y0_mm,
+            "distortion": distortion,
+            "relative_illumination": relative_illumination,
+            "blur": blur,
+            "demosaic": demosaic,
+        }
+    )
     return out, params

@@ -5,6 +5,7 @@ sees the same kernel turned by the angle between the two directions (a rotationa
 symmetric lens). Kernels are (..., P, P) arrays with rows along +y and columns along +x of
 the image plane; angles are in degrees, counter-clockwise from +x towards +y.
 """
+
 from __future__ import annotations
 
 import math

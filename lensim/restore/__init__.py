@@ -3,6 +3,7 @@ field-of-view (FOV) input channels with consistent dihedral augmentation.
 
 The names below load lazily (module __getattr__), so that importing a light submodule such
 as lensim.restore.config does not import torch."""
+
 from __future__ import annotations
 
 _API = {

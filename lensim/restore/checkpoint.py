@@ -23,6 +23,7 @@ Inference needs only format, model_config and model_state (:data:`REQUIRED_KEYS`
 Saving goes through lensim.io.atomic_writer (temporary file in the run folder, fsync,
 rename): a crash never leaves a partial file, and readers see the old checkpoint or the new.
 """
+
 from __future__ import annotations
 
 import json
@@ -67,8 +68,9 @@ def _load_failure(e: Exception) -> str:
     weights_only=False (running whatever code the file holds) is not passed on."""
     text = str(e).strip().splitlines()[0] if str(e).strip() else ""
     if "weights_only" in text or isinstance(e, pickle.UnpicklingError):
-        return (f"{type(e).__name__}: not data a safe load reads (damaged, or objects other than tensors and "
-                "plain values)")
+        return (
+            f"{type(e).__name__}: not data a safe load reads (damaged, or objects other than tensors and plain values)"
+        )
     return f"{type(e).__name__}: {text[:200]}"
 
 
@@ -120,18 +122,26 @@ def _canonical(d: Any) -> str:
     return json.dumps(d, sort_keys=True, default=str)
 
 
-def warn_other_camera(source: str, trained: dict[str, Any], lens: dict[str, Any] | None,
-                      sensor: dict[str, Any] | None) -> None:
+def warn_other_camera(
+    source: str, trained: dict[str, Any], lens: dict[str, Any] | None, sensor: dict[str, Any] | None
+) -> None:
     """A UserWarning naming ``source`` when the given lens or sensor (dicts, or None: not
     given) differs from the one ``trained`` records (its "lens" and "sensor": a
     checkpoint, or an ONNX export's metadata)."""
     if lens is not None and trained.get("lens") is not None and _canonical(lens) != _canonical(trained["lens"]):
-        warnings.warn(f"{source}: trained for lens {_describe_lens(trained['lens'])!r}, used for lens "
-                      f"{_describe_lens(lens)!r}; the restoration may be wrong", UserWarning, stacklevel=3)
-    if sensor is not None and trained.get("sensor") is not None and \
-            _canonical(sensor) != _canonical(trained["sensor"]):
-        warnings.warn(f"{source}: trained for sensor {_describe_sensor(trained['sensor'])!r}, used for sensor "
-                      f"{_describe_sensor(sensor)!r}; the restoration may be wrong", UserWarning, stacklevel=3)
+        warnings.warn(
+            f"{source}: trained for lens {_describe_lens(trained['lens'])!r}, used for lens "
+            f"{_describe_lens(lens)!r}; the restoration may be wrong",
+            UserWarning,
+            stacklevel=3,
+        )
+    if sensor is not None and trained.get("sensor") is not None and _canonical(sensor) != _canonical(trained["sensor"]):
+        warnings.warn(
+            f"{source}: trained for sensor {_describe_sensor(trained['sensor'])!r}, used for sensor "
+            f"{_describe_sensor(sensor)!r}; the restoration may be wrong",
+            UserWarning,
+            stacklevel=3,
+        )
 
 
 def load_checkpoint(
@@ -236,17 +246,28 @@ class TrainingState:
         model = self.model
         best = self.best_val_psnr
         return {
-            "format": CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION,
-            "model_config": model.config, "model_state": model.state_dict(),
-            "optimizer": self.optimizer.state_dict(), "scheduler": self.scheduler.state_dict(),
+            "format": CHECKPOINT_FORMAT,
+            "version": CHECKPOINT_VERSION,
+            "model_config": model.config,
+            "model_state": model.state_dict(),
+            "optimizer": self.optimizer.state_dict(),
+            "scheduler": self.scheduler.state_dict(),
             "scaler": self.scaler.state_dict() if self.scaler.is_enabled() else None,
-            "epoch": self.epoch, "batch_in_epoch": self.batch_in_epoch, "step": self.step, "rng": rng_state(),
+            "epoch": self.epoch,
+            "batch_in_epoch": self.batch_in_epoch,
+            "step": self.step,
+            "rng": rng_state(),
             "train_seconds": train_seconds,
-            "train_config": context["train_config"], "split": context["split"],
+            "train_config": context["train_config"],
+            "split": context["split"],
             "best_val_psnr": best if math.isfinite(best) else None,
-            "val_psnr": context.get("val_psnr"), "val_ssim": context.get("val_ssim"),
-            "lens": context.get("lens"), "sensor": context.get("sensor"), "sensor_name": context.get("sensor_name"),
-            "dataset": context.get("dataset"), "conditioning": context.get("conditioning"),
+            "val_psnr": context.get("val_psnr"),
+            "val_ssim": context.get("val_ssim"),
+            "lens": context.get("lens"),
+            "sensor": context.get("sensor"),
+            "sensor_name": context.get("sensor_name"),
+            "dataset": context.get("dataset"),
+            "conditioning": context.get("conditioning"),
         }
 
     def save(self, run: Path, train_seconds: float, context: dict[str, Any], best: bool) -> None:
@@ -263,8 +284,9 @@ class TrainingState:
         try:
             self.model.load_state_dict(ckpt["model_state"])
         except RuntimeError as e:
-            raise InputError(source, "model_state", f"does not match its model config ({str(e).splitlines()[0]})") \
-                from None
+            raise InputError(
+                source, "model_state", f"does not match its model config ({str(e).splitlines()[0]})"
+            ) from None
         self.optimizer.load_state_dict(ckpt["optimizer"])
         self.scheduler.load_state_dict(ckpt["scheduler"])
         if ckpt.get("scaler"):
@@ -290,6 +312,21 @@ def refuse_existing_run(run: Path) -> None:
         raise InputError(str(run), None, "already holds a training run (last.pt); expected --resume or a new folder")
 
 
-__all__ = ["BEST", "CHECKPOINT_FORMAT", "CHECKPOINT_VERSION", "LAST", "REQUIRED_KEYS", "TRAINING_STATE_KEYS",
-           "TrainingState", "atomic_torch_save", "load_checkpoint", "read_checkpoint", "read_resume_checkpoint", "refuse_existing_run",
-           "resolve_checkpoint", "rng_state", "set_rng_state", "warn_other_camera"]
+__all__ = [
+    "BEST",
+    "CHECKPOINT_FORMAT",
+    "CHECKPOINT_VERSION",
+    "LAST",
+    "REQUIRED_KEYS",
+    "TRAINING_STATE_KEYS",
+    "TrainingState",
+    "atomic_torch_save",
+    "load_checkpoint",
+    "read_checkpoint",
+    "read_resume_checkpoint",
+    "refuse_existing_run",
+    "resolve_checkpoint",
+    "rng_state",
+    "set_rng_state",
+    "warn_other_camera",
+]

@@ -38,6 +38,7 @@ feature outside the trained range (0 inside):
 :func:`settings_planes` broadcasts settings vectors to constant image channels, the form
 networks take them in at their input.
 """
+
 from __future__ import annotations
 
 import math
@@ -83,8 +84,11 @@ def check_value(key: str, value: Any, source: str | None, where: str | None) -> 
     ok = x > 0 and (math.isfinite(x) or (key == "focus_m" and x == math.inf))
     if not ok or isinstance(value, bool):
         allowed = "inf or " if key == "focus_m" else ""
-        raise InputError(source, where, f"expected the {name}{' in' + unit if unit else ''} as {allowed}a positive "
-                         f"number, got {value!r}")
+        raise InputError(
+            source,
+            where,
+            f"expected the {name}{' in' + unit if unit else ''} as {allowed}a positive number, got {value!r}",
+        )
     return x
 
 
@@ -93,10 +97,14 @@ def record_settings(settings: Any, source: str | None = None, where: str = "sett
     {key: value} for the keys of SETTINGS_KEYS it holds (None values are left out), each
     checked by :func:`check_value`; other keys (object_m, config) are ignored."""
     if not isinstance(settings, Mapping):
-        raise InputError(source, where, f"expected a mapping of shooting settings (fno, focus_m, focal_mm), got "
-                         f"{type(settings).__name__}")
-    return {k: check_value(k, settings[k], source, f"{where}.{k}") for k in SETTINGS_KEYS
-            if settings.get(k) is not None}
+        raise InputError(
+            source,
+            where,
+            f"expected a mapping of shooting settings (fno, focus_m, focal_mm), got {type(settings).__name__}",
+        )
+    return {
+        k: check_value(k, settings[k], source, f"{where}.{k}") for k in SETTINGS_KEYS if settings.get(k) is not None
+    }
 
 
 def _show(key: str, value: float) -> str:
@@ -145,18 +153,25 @@ class Conditioning:
         if not data:
             return cls()
         try:
-            ranges = {str(k): (check_value(k, v[0], source, f"conditioning.ranges.{k}"),
-                               check_value(k, v[1], source, f"conditioning.ranges.{k}"))
-                      for k, v in dict(data.get("ranges") or {}).items() if k in SETTINGS_KEYS}
+            ranges = {
+                str(k): (
+                    check_value(k, v[0], source, f"conditioning.ranges.{k}"),
+                    check_value(k, v[1], source, f"conditioning.ranges.{k}"),
+                )
+                for k, v in dict(data.get("ranges") or {}).items()
+                if k in SETTINGS_KEYS
+            }
             keys = tuple(str(k) for k in data.get("keys") or ())
         except (TypeError, IndexError, AttributeError, ValueError, KeyError) as e:
             if isinstance(e, InputError):
                 raise
-            raise InputError(source, "conditioning", f"expected {{keys, ranges}} as lensim train writes it ({e})") \
-                from None
+            raise InputError(
+                source, "conditioning", f"expected {{keys, ranges}} as lensim train writes it ({e})"
+            ) from None
         if any(k not in ranges for k in keys):
-            raise InputError(source, "conditioning.keys", f"expected keys among the ranges {sorted(ranges)}, got "
-                             f"{list(keys)}")
+            raise InputError(
+                source, "conditioning.keys", f"expected keys among the ranges {sorted(ranges)}, got {list(keys)}"
+            )
         return cls(ranges, keys)
 
     def to_dict(self) -> dict[str, Any]:
@@ -178,8 +193,12 @@ class Conditioning:
         option that gives it."""
         missing = [k for k in self.keys if settings.get(k) is None]
         if missing:
-            raise InputError(source, "settings", f"this network is conditioned on {', '.join(self.keys)} and "
-                             f"needs them; missing {', '.join(missing)} (give {' '.join(OPTIONS[k] for k in missing)})")
+            raise InputError(
+                source,
+                "settings",
+                f"this network is conditioned on {', '.join(self.keys)} and "
+                f"needs them; missing {', '.join(missing)} (give {' '.join(OPTIONS[k] for k in missing)})",
+            )
         out = []
         for k in self.keys:
             lo, hi = (feature(k, v) for v in self.ranges[k])
@@ -208,11 +227,14 @@ class Conditioning:
             if d <= TOLERANCE[k]:
                 continue
             name = LABELS[k][0]
-            what = (f"{name} {_show(k, float(settings[k]))} is outside the trained range "
-                    f"({_show_range(k, low, high)})")
+            what = f"{name} {_show(k, float(settings[k]))} is outside the trained range ({_show_range(k, low, high)})"
             if refuse and d > self.refuse_margin(k):
-                raise InputError(source, OPTIONS[k], f"{what}, too far to extrapolate; expected a photo within the "
-                                 "range (or a network trained across it)")
+                raise InputError(
+                    source,
+                    OPTIONS[k],
+                    f"{what}, too far to extrapolate; expected a photo within the "
+                    "range (or a network trained across it)",
+                )
             warnings.append(f"{source + ': ' if source else ''}{what}; the restoration may be wrong")
         return warnings
 
@@ -226,8 +248,12 @@ def checkpoint_conditioning(info: Mapping[str, Any], settings_dim: int, source: 
         data = (info.get("train_config") or {}).get("conditioning")
     cond = Conditioning.from_dict(data, source)
     if cond.dim != settings_dim:
-        raise InputError(source, "conditioning", f"records {cond.dim} settings inputs ({', '.join(cond.keys)}) for a "
-                         f"network with settings_dim={settings_dim}; expected a checkpoint written by lensim train")
+        raise InputError(
+            source,
+            "conditioning",
+            f"records {cond.dim} settings inputs ({', '.join(cond.keys)}) for a "
+            f"network with settings_dim={settings_dim}; expected a checkpoint written by lensim train",
+        )
     return cond
 
 
@@ -238,8 +264,9 @@ def settings_planes(settings: torch.Tensor, h: int, w: int) -> torch.Tensor:
     return settings[:, :, None, None].expand(-1, -1, h, w)
 
 
-def batch_settings(settings: torch.Tensor | Sequence[float] | None, batch: int, dim: int,
-                   like: torch.Tensor) -> torch.Tensor | None:
+def batch_settings(
+    settings: torch.Tensor | Sequence[float] | None, batch: int, dim: int, like: torch.Tensor
+) -> torch.Tensor | None:
     """A network's settings argument as (B, dim) in ``like``'s dtype and device: (dim,) is
     broadcast over the batch; None only when dim is 0 (else a ValueError naming what to
     pass)."""
@@ -248,8 +275,10 @@ def batch_settings(settings: torch.Tensor | Sequence[float] | None, batch: int, 
             raise ValueError("this model takes no settings (settings_dim=0); pass settings=None")
         return None
     if settings is None:
-        raise ValueError(f"this model was built with settings_dim={dim}: pass the settings vector "
-                         "(lensim.restore.conditioning.Conditioning.vector)")
+        raise ValueError(
+            f"this model was built with settings_dim={dim}: pass the settings vector "
+            "(lensim.restore.conditioning.Conditioning.vector)"
+        )
     s = torch.as_tensor(settings).to(device=like.device, dtype=like.dtype)
     if s.dim() == 1:
         s = s.unsqueeze(0).expand(batch, -1)
@@ -258,5 +287,17 @@ def batch_settings(settings: torch.Tensor | Sequence[float] | None, batch: int, 
     return s
 
 
-__all__ = ["LABELS", "OPTIONS", "REFUSE", "SETTINGS_KEYS", "TOLERANCE", "Conditioning", "batch_settings",
-           "check_value", "checkpoint_conditioning", "feature", "record_settings", "settings_planes"]
+__all__ = [
+    "LABELS",
+    "OPTIONS",
+    "REFUSE",
+    "SETTINGS_KEYS",
+    "TOLERANCE",
+    "Conditioning",
+    "batch_settings",
+    "check_value",
+    "checkpoint_conditioning",
+    "feature",
+    "record_settings",
+    "settings_planes",
+]

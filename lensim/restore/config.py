@@ -1,5 +1,6 @@
 """Training settings (TrainConfig), apart from lensim.restore.train so that the command
 line reads their defaults without importing torch (lensim.restore.train re-exports it)."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -120,10 +121,12 @@ class TrainConfig:
         defaults = ARCH_DEFAULTS.get(self.arch)
         if defaults is None:
             return replace(self)
-        cfg = replace(self, use_deformable=defaults["use_deformable"] if self.use_deformable is None
-                      else self.use_deformable,
-                      use_context=defaults["use_context"] if self.use_context is None else self.use_context,
-                      stem=self.stem or defaults["stem"])
+        cfg = replace(
+            self,
+            use_deformable=defaults["use_deformable"] if self.use_deformable is None else self.use_deformable,
+            use_context=defaults["use_context"] if self.use_context is None else self.use_context,
+            stem=self.stem or defaults["stem"],
+        )
         if cfg.width == 0:
             from lensim.restore.models import default_width
 
@@ -139,18 +142,36 @@ class TrainConfig:
 
     def _model_kwargs(self) -> dict[str, Any]:
         """model_kwargs of a config whose switches are resolved (width may still be 0)."""
-        switches = {"use_fov": self.use_fov, "use_deformable": self.use_deformable, "use_context": self.use_context,
-                    "deformable_groups": self.deformable_groups,
-                    "settings_dim": settings_dim(self.conditioning)}
+        switches = {
+            "use_fov": self.use_fov,
+            "use_deformable": self.use_deformable,
+            "use_context": self.use_context,
+            "deformable_groups": self.deformable_groups,
+            "settings_dim": settings_dim(self.conditioning),
+        }
         if self.arch == "nafnet":
             if self.field_modulation:
-                raise InputError(None, "field_modulation", "is a FieldAwareUNet option; expected it off with "
-                                 "arch 'nafnet'")
+                raise InputError(
+                    None, "field_modulation", "is a FieldAwareUNet option; expected it off with arch 'nafnet'"
+                )
             n = self.depth - 1
-            return {"arch": "nafnet", "width": self.width, "enc_blocks": [1] * n, "middle_blocks": 2,
-                    "dec_blocks": [1] * n, **switches, "stem": self.stem,
-                    "deformable_scales": n if self.deformable_scales is None else self.deformable_scales}
+            return {
+                "arch": "nafnet",
+                "width": self.width,
+                "enc_blocks": [1] * n,
+                "middle_blocks": 2,
+                "dec_blocks": [1] * n,
+                **switches,
+                "stem": self.stem,
+                "deformable_scales": n if self.deformable_scales is None else self.deformable_scales,
+            }
         if self.stem != 1:
             raise InputError(None, "stem", f"is a NAFNet option; expected 1 with arch {self.arch!r}, got {self.stem}")
-        return {"arch": self.arch, "width": self.width, "depth": self.depth, **switches,
-                "deformable_scales": self.deformable_scales, "field_modulation": self.field_modulation}
+        return {
+            "arch": self.arch,
+            "width": self.width,
+            "depth": self.depth,
+            **switches,
+            "deformable_scales": self.deformable_scales,
+            "field_modulation": self.field_modulation,
+        }

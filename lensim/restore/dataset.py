@@ -25,6 +25,7 @@ whatever the worker count, batch order, or a resume in the middle of an epoch. C
 Train/validation split: by source photo (:func:`split_sources`), never by crop, since the
 crops of one photo overlap and share content.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -75,8 +76,11 @@ def crop_refs(dataset_dir: str | Path, manifest: dict[str, Any]) -> list[CropRef
         key = _source_key(r, i)
         settings = None if r.get("settings") is None else record_settings(r["settings"], str(root), f"records[{i}]")
         for c in r["crops"]:
-            out.append(CropRef(root / c["input"], root / c["target"], int(c["sensor_top"]), int(c["sensor_left"]), key,
-                               settings))
+            out.append(
+                CropRef(
+                    root / c["input"], root / c["target"], int(c["sensor_top"]), int(c["sensor_left"]), key, settings
+                )
+            )
     return out
 
 
@@ -175,11 +179,18 @@ class PairDataset(Dataset):
         inp, _ = self._read(ref.input)
         tgt, _ = self._read(ref.target)
         if inp.shape != tgt.shape:
-            raise InputError(str(ref.target), "size", f"is {tuple(tgt.shape)}; expected the shape of its input "
-                             f"{ref.input.name} {tuple(inp.shape)}")
+            raise InputError(
+                str(ref.target),
+                "size",
+                f"is {tuple(tgt.shape)}; expected the shape of its input {ref.input.name} {tuple(inp.shape)}",
+            )
         if self.crop is not None and min(inp.shape[-2:]) < self.crop:
-            raise InputError(str(ref.input), "size", f"is {inp.shape[-1]}x{inp.shape[-2]}; expected at least "
-                             f"{self.crop}x{self.crop} for {self.crop}-pixel training crops")
+            raise InputError(
+                str(ref.input),
+                "size",
+                f"is {inp.shape[-1]}x{inp.shape[-2]}; expected at least "
+                f"{self.crop}x{self.crop} for {self.crop}-pixel training crops",
+            )
         if self.cache:
             self._cache[i] = (inp, tgt)
         return inp, tgt
@@ -199,8 +210,8 @@ class PairDataset(Dataset):
             left = int(torch.randint(0, w - self.crop + 1, (1,), generator=gen))
             h = w = self.crop
         op = int(torch.randint(0, 8, (1,), generator=gen)) if self.augment else 0
-        inp = self._float(inp[:, top:top + h, left:left + w])
-        tgt = self._float(tgt[:, top:top + h, left:left + w])
+        inp = self._float(inp[:, top : top + h, left : left + w])
+        tgt = self._float(tgt[:, top : top + h, left : left + w])
         fov = fov_channels(h, w, ref.sensor_top + top, ref.sensor_left + left, *self.sensor_size)
         if op:
             both, fov = augment(torch.cat((inp, tgt)), fov, op)

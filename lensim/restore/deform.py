@@ -26,6 +26,7 @@ Backends
 * :func:`deform_conv2d_reference`: explicit per-pixel, per-tap bilinear sampling in
   float64 NumPy loops; slow, for tests only.
 """
+
 from __future__ import annotations
 
 import math
@@ -75,8 +76,7 @@ def _check_shapes(
     b, c, h, w = x.shape
     if weight.dim() != 4 or weight.shape[1] != c or weight.shape[2] != weight.shape[3]:
         raise ValueError(
-            f"weight must be (out_ch, {c}, k, k) for an input with {c} channels, "
-            f"got {tuple(weight.shape)}"
+            f"weight must be (out_ch, {c}, k, k) for an input with {c} channels, got {tuple(weight.shape)}"
         )
     k = int(weight.shape[2])
     if k % 2 != 1:
@@ -86,9 +86,7 @@ def _check_shapes(
         raise ValueError(f"deformable_groups={g} must divide the {c} input channels")
     kk = k * k
     if tuple(offset.shape) != (b, 2 * g * kk, h, w):
-        raise ValueError(
-            f"offset must be (B, 2*G*k*k, H, W) = {(b, 2 * g * kk, h, w)}, got {tuple(offset.shape)}"
-        )
+        raise ValueError(f"offset must be (B, 2*G*k*k, H, W) = {(b, 2 * g * kk, h, w)}, got {tuple(offset.shape)}")
     if tuple(mask.shape) != (b, g * kk, h, w):
         raise ValueError(f"mask must be (B, G*k*k, H, W) = {(b, g * kk, h, w)}, got {tuple(mask.shape)}")
     if bias is not None and tuple(bias.shape) != (weight.shape[0],):
@@ -124,12 +122,8 @@ def deform_conv2d_grid_sample(
     # Absolute sampling positions (pixel units), (B, G, k, k, H, W).
     off = offset.reshape(b, g, k, k, 2, h, w)
     taps = torch.arange(k, dtype=x.dtype, device=x.device)
-    base_y = (torch.arange(h, dtype=x.dtype, device=x.device) - p).view(1, 1, 1, 1, h, 1) + taps.view(
-        1, 1, k, 1, 1, 1
-    )
-    base_x = (torch.arange(w, dtype=x.dtype, device=x.device) - p).view(1, 1, 1, 1, 1, w) + taps.view(
-        1, 1, 1, k, 1, 1
-    )
+    base_y = (torch.arange(h, dtype=x.dtype, device=x.device) - p).view(1, 1, 1, 1, h, 1) + taps.view(1, 1, k, 1, 1, 1)
+    base_x = (torch.arange(w, dtype=x.dtype, device=x.device) - p).view(1, 1, 1, 1, 1, w) + taps.view(1, 1, 1, k, 1, 1)
     py = base_y + off[:, :, :, :, 0]
     px = base_x + off[:, :, :, :, 1]
     # grid_sample with align_corners=False maps a normalised u to pixel (u + 1) * W / 2 - 0.5,

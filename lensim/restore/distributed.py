@@ -6,6 +6,7 @@ DistributedDataParallel, each rank takes every N-th item of the epoch's permutat
 batch size is per rank, and rank 0 alone validates and writes files. With one process
 every helper here is a no-op.
 """
+
 from __future__ import annotations
 
 import os
@@ -106,5 +107,13 @@ def amp_dtype(device: torch.device, enabled: bool) -> torch.dtype | None:
     return torch.bfloat16 if torch.cuda.is_bf16_supported() else torch.float16
 
 
-__all__ = ["Ranks", "amp_dtype", "barrier", "init_distributed", "mean_over_ranks", "rank0_decides", "shutdown",
-           "wrap_model"]
+__all__ = [
+    "Ranks",
+    "amp_dtype",
+    "barrier",
+    "init_distributed",
+    "mean_over_ranks",
+    "rank0_decides",
+    "shutdown",
+    "wrap_model",
+]

@@ -13,6 +13,7 @@ the installed onnxruntime has it (the onnxruntime-gpu build), with the CPU provi
 fallback for any op it lacks; otherwise a one-line error. Tiles are passed as NumPy
 arrays on the host (float32).
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -39,8 +40,12 @@ def providers_for(device: str, option: str = "--device") -> list[Any]:
         raise InputError(option, None, f"expected cpu, cuda or cuda:N for --engine onnxruntime, got {device!r}")
     available = ort.get_available_providers()
     if "CUDAExecutionProvider" not in available:
-        raise InputError(option, None, f"{device!r} requested but this onnxruntime has no CUDAExecutionProvider "
-                         f"(it has {', '.join(available)}); expected cpu, or install onnxruntime-gpu")
+        raise InputError(
+            option,
+            None,
+            f"{device!r} requested but this onnxruntime has no CUDAExecutionProvider "
+            f"(it has {', '.join(available)}); expected cpu, or install onnxruntime-gpu",
+        )
     return [("CUDAExecutionProvider", {"device_id": int(index or 0)}), "CPUExecutionProvider"]
 
 
@@ -57,8 +62,9 @@ class OnnxEngine:
     use_fov, settings_dim; device/dtype are CPU float32 (the tiles' host arrays).
     """
 
-    def __init__(self, model: str | Path | bytes, device: str = "cpu", threads: int = 0,
-                 source: str | None = None) -> None:
+    def __init__(
+        self, model: str | Path | bytes, device: str = "cpu", threads: int = 0, source: str | None = None
+    ) -> None:
         import onnxruntime as ort
 
         self.source = source or (str(model) if not isinstance(model, bytes) else "exported model")
@@ -74,12 +80,14 @@ class OnnxEngine:
         if not isinstance(model, bytes) and not Path(model).is_file():
             raise InputError(self.source, None, "no such file; expected an ONNX model from `lensim export`")
         try:
-            self.session = ort.InferenceSession(model if isinstance(model, bytes) else str(model), opts,
-                                                providers=providers)
+            self.session = ort.InferenceSession(
+                model if isinstance(model, bytes) else str(model), opts, providers=providers
+            )
         except Exception as e:  # noqa: BLE001 - onnxruntime raises its own exception types
             first = (str(e).strip().splitlines() or [""])[0][:200]
-            raise InputError(self.source, None, f"is not an ONNX model onnxruntime loads ({type(e).__name__}: "
-                             f"{first})") from None
+            raise InputError(
+                self.source, None, f"is not an ONNX model onnxruntime loads ({type(e).__name__}: {first})"
+            ) from None
         self.metadata = parse_metadata(self.session.get_modelmeta().custom_metadata_map, self.source)
         self.size_multiple = int(self.metadata["size_multiple"])
         self.use_fov = bool(self.metadata["use_fov"])
@@ -91,8 +99,9 @@ class OnnxEngine:
         self.device = torch.device("cpu")
         self.dtype = torch.float32
 
-    def __call__(self, rgb: torch.Tensor, fov: torch.Tensor | None,
-                 settings: torch.Tensor | None = None) -> torch.Tensor:
+    def __call__(
+        self, rgb: torch.Tensor, fov: torch.Tensor | None, settings: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """rgb (N, 3, h, w), fov (N, 2, h, w) or None, settings (N, D) or None ->
         restored (N, 3, h, w) float32 on the CPU."""
         feed = {"rgb": _host(rgb)}
@@ -116,8 +125,14 @@ def is_onnx_path(path: str | Path) -> bool:
     return Path(path).suffix.lower() == ".onnx"
 
 
-def load_engine(model_path: str | Path, engine: str, device: str = "cpu", threads: int = 0,
-                lens: dict[str, Any] | None = None, sensor: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+def load_engine(
+    model_path: str | Path,
+    engine: str,
+    device: str = "cpu",
+    threads: int = 0,
+    lens: dict[str, Any] | None = None,
+    sensor: dict[str, Any] | None = None,
+) -> tuple[Any, dict[str, Any]]:
     """(engine, info) for `lensim restore`: info holds "path", "sensor", "lens" (what the
     network was trained for), "conditioning" (Conditioning.to_dict()), "engine" and, for onnxruntime, "onnx" (the model's bytes, for
     worker processes). ``model_path``: a run folder or checkpoint (torch: loaded;
@@ -131,17 +146,28 @@ def load_engine(model_path: str | Path, engine: str, device: str = "cpu", thread
         raise InputError("--engine", None, f"expected one of {', '.join(ENGINES)}, got {engine!r}")
     if is_onnx_path(model_path):
         if engine != "onnxruntime":
-            raise InputError(str(model_path), None, "is an ONNX model; expected --engine onnxruntime to run it (or a "
-                             "run folder or checkpoint for --engine torch)")
+            raise InputError(
+                str(model_path),
+                None,
+                "is an ONNX model; expected --engine onnxruntime to run it (or a "
+                "run folder or checkpoint for --engine torch)",
+            )
         data = Path(model_path).read_bytes() if Path(model_path).is_file() else b""
         if not data:
-            raise InputError(str(model_path), None, "no such file (or empty); expected an ONNX model from `lensim "
-                             "export`")
+            raise InputError(
+                str(model_path), None, "no such file (or empty); expected an ONNX model from `lensim export`"
+            )
         onnx_engine = OnnxEngine(data, device, threads, source=str(model_path))
         meta = onnx_engine.metadata
         cond = checkpoint_conditioning(meta, onnx_engine.settings_dim, f"{model_path}: metadata")
-        info = {"path": str(model_path), "sensor": meta.get("sensor"), "lens": meta.get("lens"), "engine": engine,
-                "conditioning": cond.to_dict(), "onnx": data}
+        info = {
+            "path": str(model_path),
+            "sensor": meta.get("sensor"),
+            "lens": meta.get("lens"),
+            "engine": engine,
+            "conditioning": cond.to_dict(),
+            "onnx": data,
+        }
         warn_other_camera(str(model_path), info, lens, sensor)
         return onnx_engine, info
     model, info = load_checkpoint(model_path, lens=lens, sensor=sensor, device="cpu" if engine != "torch" else device)

@@ -33,6 +33,7 @@ trained for, the training settings (TrainConfig), the shooting-settings conditio
 and the tiling `lensim restore` uses. Non-finite numbers (a focus range reaching
 infinity) are written as the strings "inf", "-inf", "nan", so the document is strict JSON.
 """
+
 from __future__ import annotations
 
 import io
@@ -156,19 +157,45 @@ def onnx_metadata(model: nn.Module, info: dict[str, Any], opset: int) -> dict[st
     if graph.settings_dim:
         inputs["settings"] = f"(N, {graph.settings_dim}) float32 shooting-settings vector (lensim.restore.conditioning)"
     return {
-        "format": ONNX_FORMAT, "format_version": ONNX_FORMAT_VERSION, "lensim_version": lensim.__version__,
-        "exporter": f"torch.onnx TorchScript exporter, torch {torch.__version__}", "opset": opset,
-        "checkpoint": {k: info.get(k) for k in ("path", "format", "version", "epoch", "step", "best_val_psnr",
-                                                "val_psnr", "val_ssim", "train_seconds")},
-        "arch": config.get("arch", "unet"), "model_config": config,
-        "size_multiple": graph.multiple, "use_fov": graph.use_fov, "settings_dim": graph.settings_dim,
-        "inputs": inputs, "outputs": {"restored": "(N, 3, H, W) float32, not clamped"},
+        "format": ONNX_FORMAT,
+        "format_version": ONNX_FORMAT_VERSION,
+        "lensim_version": lensim.__version__,
+        "exporter": f"torch.onnx TorchScript exporter, torch {torch.__version__}",
+        "opset": opset,
+        "checkpoint": {
+            k: info.get(k)
+            for k in (
+                "path",
+                "format",
+                "version",
+                "epoch",
+                "step",
+                "best_val_psnr",
+                "val_psnr",
+                "val_ssim",
+                "train_seconds",
+            )
+        },
+        "arch": config.get("arch", "unet"),
+        "model_config": config,
+        "size_multiple": graph.multiple,
+        "use_fov": graph.use_fov,
+        "settings_dim": graph.settings_dim,
+        "inputs": inputs,
+        "outputs": {"restored": "(N, 3, H, W) float32, not clamped"},
         "fov_convention": _fov_metadata(sensor),
-        "sensor": sensor, "sensor_name": info.get("sensor_name"), "lens": info.get("lens"),
-        "dataset": info.get("dataset"), "train_config": info.get("train_config"),
+        "sensor": sensor,
+        "sensor_name": info.get("sensor_name"),
+        "lens": info.get("lens"),
+        "dataset": info.get("dataset"),
+        "train_config": info.get("train_config"),
         "conditioning": info.get("conditioning"),
-        "tiling": {"tile": DEFAULT_TILE, "overlap": DEFAULT_OVERLAP, "margin": default_margin(DEFAULT_OVERLAP),
-                   "tile_origin_multiple": graph.multiple},
+        "tiling": {
+            "tile": DEFAULT_TILE,
+            "overlap": DEFAULT_OVERLAP,
+            "margin": default_margin(DEFAULT_OVERLAP),
+            "tile_origin_multiple": graph.multiple,
+        },
     }
 
 
@@ -178,8 +205,12 @@ def onnx_metadata(model: nn.Module, info: dict[str, Any], opset: int) -> dict[st
 def check_opset(opset: int) -> int:
     top = max_opset()
     if not isinstance(opset, int) or not MIN_OPSET <= opset <= top:
-        raise InputError("--opset", None, f"expected an ONNX opset from {MIN_OPSET} to {top} (the newest this "
-                         f"PyTorch's exporter writes), got {opset}")
+        raise InputError(
+            "--opset",
+            None,
+            f"expected an ONNX opset from {MIN_OPSET} to {top} (the newest this "
+            f"PyTorch's exporter writes), got {opset}",
+        )
     return opset
 
 
@@ -188,9 +219,11 @@ def _example_inputs(graph: OnnxGraph) -> tuple[torch.Tensor, ...]:
     of the network's (so the padding is in the traced graph)."""
     h, w = 3 * graph.multiple + 1, 2 * graph.multiple + 3
     gen = torch.Generator().manual_seed(0)
-    make = {"rgb": lambda: torch.rand(2, 3, h, w, generator=gen),
-            "fov": lambda: torch.rand(2, 2, h, w, generator=gen) * 2 - 1,
-            "settings": lambda: torch.rand(2, graph.settings_dim, generator=gen)}
+    make = {
+        "rgb": lambda: torch.rand(2, 3, h, w, generator=gen),
+        "fov": lambda: torch.rand(2, 2, h, w, generator=gen) * 2 - 1,
+        "settings": lambda: torch.rand(2, graph.settings_dim, generator=gen),
+    }
     return tuple(make[n]() for n in graph.input_names)
 
 
@@ -213,8 +246,17 @@ def export_model_bytes(model: nn.Module, info: dict[str, Any], opset: int = DEFA
         # the legacy exporter's deprecation notice and the tracer's notes on the network's shape checks
         warnings.simplefilter("ignore")
         # the TorchScript exporter writes to file objects too (its stub types only paths)
-        torch.onnx.export(graph, example, buf, dynamo=False, opset_version=opset,  # type: ignore[arg-type]
-                          input_names=names, output_names=["restored"], dynamic_axes=axes, do_constant_folding=True)
+        torch.onnx.export(
+            graph,
+            example,
+            buf,
+            dynamo=False,
+            opset_version=opset,  # type: ignore[arg-type]
+            input_names=names,
+            output_names=["restored"],
+            dynamic_axes=axes,
+            do_constant_folding=True,
+        )
     proto = onnx.load_from_string(buf.getvalue())
     entry = proto.metadata_props.add()
     entry.key = METADATA_KEY
@@ -273,18 +315,23 @@ def parse_metadata(props: dict[str, str], source: str) -> dict[str, Any]:
     InputError naming ``source`` when it is missing, not JSON or of another format."""
     text = props.get(METADATA_KEY)
     if text is None:
-        raise InputError(source, "metadata", f"has no {METADATA_KEY!r} entry; expected an ONNX file written by "
-                         "`lensim export`")
+        raise InputError(
+            source, "metadata", f"has no {METADATA_KEY!r} entry; expected an ONNX file written by `lensim export`"
+        )
     try:
         meta = json.loads(text)
     except json.JSONDecodeError as e:
         raise InputError(source, "metadata", f"the {METADATA_KEY!r} entry is not JSON ({e.msg})") from None
     if not isinstance(meta, dict) or meta.get("format") != ONNX_FORMAT:
-        raise InputError(source, "metadata.format", f"expected {ONNX_FORMAT!r} (an ONNX file written by `lensim "
-                         "export`)")
+        raise InputError(
+            source, "metadata.format", f"expected {ONNX_FORMAT!r} (an ONNX file written by `lensim export`)"
+        )
     if meta.get("format_version") != ONNX_FORMAT_VERSION:
-        raise InputError(source, "metadata.format_version", f"expected {ONNX_FORMAT_VERSION}, got "
-                         f"{meta.get('format_version')!r} (written by another lensim version)")
+        raise InputError(
+            source,
+            "metadata.format_version",
+            f"expected {ONNX_FORMAT_VERSION}, got {meta.get('format_version')!r} (written by another lensim version)",
+        )
     for key, kind in (("size_multiple", int), ("use_fov", bool), ("settings_dim", int)):
         if not isinstance(meta.get(key), kind):
             raise InputError(source, f"metadata.{key}", f"expected {kind.__name__}, got {meta.get(key)!r}")
@@ -306,6 +353,19 @@ def read_metadata(path: str | Path) -> dict[str, Any]:
     return parse_metadata({p.key: p.value for p in proto.metadata_props}, str(path))
 
 
-__all__ = ["DEFAULT_OPSET", "FOV_CONVENTION", "METADATA_KEY", "MIN_OPSET", "ONNX_FORMAT", "ONNX_FORMAT_VERSION",
-           "OnnxGraph", "check_opset", "export_model_bytes", "export_onnx", "max_opset", "onnx_metadata",
-           "parse_metadata", "read_metadata"]
+__all__ = [
+    "DEFAULT_OPSET",
+    "FOV_CONVENTION",
+    "METADATA_KEY",
+    "MIN_OPSET",
+    "ONNX_FORMAT",
+    "ONNX_FORMAT_VERSION",
+    "OnnxGraph",
+    "check_opset",
+    "export_model_bytes",
+    "export_onnx",
+    "max_opset",
+    "onnx_metadata",
+    "parse_metadata",
+    "read_metadata",
+]

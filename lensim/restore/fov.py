@@ -26,6 +26,7 @@ the network wrong positions for 6 of the 8 ops.
 Ops are integers 0..7 with bits: 1 = horizontal flip (reverse columns), 2 = vertical flip
 (reverse rows), 4 = transpose (swap rows and columns), applied in that order.
 """
+
 from __future__ import annotations
 
 import math
@@ -77,8 +78,9 @@ def batch_fov(fov: torch.Tensor | None, rgb: torch.Tensor) -> torch.Tensor:
     if fov.dim() == 3:
         fov = fov.unsqueeze(0).expand(b, -1, -1, -1)
     if fov.dim() != 4 or fov.shape[0] != b or fov.shape[1] != 2 or fov.shape[-2:] != rgb.shape[-2:]:
-        raise ValueError(f"fov must be (B, 2, H, W) or (2, H, W) matching rgb {tuple(rgb.shape)}, "
-                         f"got {tuple(fov.shape)}")
+        raise ValueError(
+            f"fov must be (B, 2, H, W) or (2, H, W) matching rgb {tuple(rgb.shape)}, got {tuple(fov.shape)}"
+        )
     return fov.to(rgb.dtype)
 
 

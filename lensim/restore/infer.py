@@ -32,6 +32,7 @@ frame mapped like lensim.render.mapping.map_to_sensor (fitted inside the sensor,
 limiting side spanning it) unless an explicit offset of its top-left pixel on the sensor
 is given (then it is at the sensor's native pixel scale, like lensim.render.mapping.native_mapping).
 """
+
 from __future__ import annotations
 
 from typing import Callable, Protocol, runtime_checkable
@@ -72,8 +73,9 @@ class Engine(Protocol):
     device: torch.device
     dtype: torch.dtype
 
-    def __call__(self, rgb: torch.Tensor, fov: torch.Tensor | None,
-                 settings: torch.Tensor | None = None) -> torch.Tensor: ...
+    def __call__(
+        self, rgb: torch.Tensor, fov: torch.Tensor | None, settings: torch.Tensor | None = None
+    ) -> torch.Tensor: ...
 
 
 class TorchEngine:
@@ -89,8 +91,9 @@ class TorchEngine:
         self.device = param.device
         self.dtype = param.dtype
 
-    def __call__(self, rgb: torch.Tensor, fov: torch.Tensor | None,
-                 settings: torch.Tensor | None = None) -> torch.Tensor:
+    def __call__(
+        self, rgb: torch.Tensor, fov: torch.Tensor | None, settings: torch.Tensor | None = None
+    ) -> torch.Tensor:
         if settings is None:
             return self.model(rgb, fov)
         return self.model(rgb, fov, settings)
@@ -103,6 +106,7 @@ def as_engine(model: torch.nn.Module | Engine) -> Engine:
     if isinstance(model, Engine):
         return model
     raise TypeError(f"expected a torch.nn.Module or an Engine, got {type(model).__name__}")
+
 
 # ----------------------------------------------------------------------------- geometry
 
@@ -162,11 +166,12 @@ def _axis_weights(length: int, starts: list[int], tile: int, overlap: int, margi
         ws.append(w)
     total = torch.zeros(length, dtype=torch.float64)
     for s, w in zip(starts, ws):
-        total[s:s + len(w)] += w
+        total[s : s + len(w)] += w
     if bool((total <= 0).any()):
-        raise ValueError(f"tiles do not cover every pixel with positive weight (tile {tile}, overlap {overlap}, "
-                         f"margin {margin})")
-    return [(w / total[s:s + len(w)]).to(torch.float32) for s, w in zip(starts, ws)]
+        raise ValueError(
+            f"tiles do not cover every pixel with positive weight (tile {tile}, overlap {overlap}, margin {margin})"
+        )
+    return [(w / total[s : s + len(w)]).to(torch.float32) for s, w in zip(starts, ws)]
 
 
 # ----------------------------------------------------------------------------- restore
@@ -233,17 +238,26 @@ def restore_image(
         th = len(wyy)
         for x0, wxx in zip(xs, wx):
             tw = len(wxx)
-            rgb = image[:, y0:y0 + th, x0:x0 + tw].to(device=device, dtype=dtype).unsqueeze(0)
+            rgb = image[:, y0 : y0 + th, x0 : x0 + tw].to(device=device, dtype=dtype).unsqueeze(0)
             fov = None
             if engine.use_fov:
                 fov = fov_channels(th, tw, top + y0, left + x0, sh, sw, dtype=dtype, device=device).unsqueeze(0)
             res = engine(rgb, fov, vec)[0].float().cpu()
-            out[:, y0:y0 + th, x0:x0 + tw] += res * (wyy.view(1, th, 1) * wxx.view(1, 1, tw))
+            out[:, y0 : y0 + th, x0 : x0 + tw] += res * (wyy.view(1, th, 1) * wxx.view(1, 1, tw))
             done += 1
             if progress is not None:
                 progress(done, total)
     return out
 
 
-__all__ = ["DEFAULT_OVERLAP", "DEFAULT_TILE", "Engine", "TorchEngine", "as_engine", "default_margin",
-           "image_sensor_geometry", "restore_image", "tile_starts"]
+__all__ = [
+    "DEFAULT_OVERLAP",
+    "DEFAULT_TILE",
+    "Engine",
+    "TorchEngine",
+    "as_engine",
+    "default_margin",
+    "image_sensor_geometry",
+    "restore_image",
+    "tile_starts",
+]

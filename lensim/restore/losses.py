@@ -17,6 +17,7 @@
 
 Every loss takes (B, 3, H, W) float tensors (sRGB in [0, 1]) and returns a scalar.
 """
+
 from __future__ import annotations
 
 from typing import Callable
@@ -59,5 +60,12 @@ def restoration_loss(name: str, out: torch.Tensor, target: torch.Tensor) -> torc
     return LOSSES[name](out, target)
 
 
-__all__ = ["CHARBONNIER_EPS", "EDGE_WEIGHT", "LOSSES", "charbonnier", "charbonnier_edge", "laplacian",
-           "restoration_loss"]
+__all__ = [
+    "CHARBONNIER_EPS",
+    "EDGE_WEIGHT",
+    "LOSSES",
+    "charbonnier",
+    "charbonnier_edge",
+    "laplacian",
+    "restoration_loss",
+]

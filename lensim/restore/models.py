@@ -10,6 +10,7 @@ Size matching: the reference FieldAwareUNet (width 32, 3 scales, deformable bloc
 coarsest decoder scale) has 821,209 parameters; :func:`default_width` gives each
 architecture's width at that size (NAFNet: :func:`lensim.restore.nafnet.nafnet_width`).
 """
+
 from __future__ import annotations
 
 from functools import lru_cache
@@ -50,8 +51,11 @@ def describe_network(config: dict[str, Any]) -> str:
     FOV, deformable, context (width 32)" (the stem only where it is not 1)."""
     arch = {"unet": "UNet", "nafnet": "NAFNet"}.get(arch_of(config), arch_of(config))
     on = arch_of(config) == "unet"  # a switch the config lacks: the constructor's default
-    parts = [name for name, key in (("FOV", "use_fov"), ("deformable", "use_deformable"), ("context", "use_context"))
-             if config.get(key, on)]
+    parts = [
+        name
+        for name, key in (("FOV", "use_fov"), ("deformable", "use_deformable"), ("context", "use_context"))
+        if config.get(key, on)
+    ]
     stem = int(config.get("stem", 1))
     width = config.get("width", (config.get("widths") or ["?"])[0])  # FieldAwareUNet records its widths
     sizes = ", ".join(([f"stem {stem}"] if stem != 1 else []) + [f"width {width}"])

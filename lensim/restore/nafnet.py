@@ -48,6 +48,7 @@ context block, 46 px with SCA window 5; plus what learned offsets add. They fit 
 default tile margin of `lensim restore` (72 px at overlap 192) except stem 2 with the
 context block (about 126 px).
 """
+
 from __future__ import annotations
 
 from typing import Any, Sequence
@@ -205,7 +206,8 @@ class NAFNet(nn.Module):
         )
         n_deform = self.deformable_scales if use_deformable else 0
         self.deform = nn.ModuleList(
-            DeformResBlock(ws[s], deformable_groups, coarse_offsets=i > 0, backend=dcn_backend) if i < n_deform
+            DeformResBlock(ws[s], deformable_groups, coarse_offsets=i > 0, backend=dcn_backend)
+            if i < n_deform
             else nn.Identity()
             for i, s in enumerate(dec_scales)
         )
@@ -225,12 +227,21 @@ class NAFNet(nn.Module):
     def config(self) -> dict[str, Any]:
         """Constructor arguments that rebuild this network (for checkpoints; build_model)."""
         return {
-            "arch": "nafnet", "width": self.width, "enc_blocks": list(self.enc_blocks),
-            "middle_blocks": self.middle_blocks, "dec_blocks": list(self.dec_blocks), "use_fov": self.use_fov,
-            "use_deformable": self.use_deformable, "use_context": self.use_context,
-            "deformable_groups": self.deformable_groups, "deformable_scales": self.deformable_scales,
-            "stem": self.stem, "sca_window": self.sca_window, "settings_dim": self.settings_dim,
-            "zero_init_tail": self.zero_init_tail, "dcn_backend": self.dcn_backend,
+            "arch": "nafnet",
+            "width": self.width,
+            "enc_blocks": list(self.enc_blocks),
+            "middle_blocks": self.middle_blocks,
+            "dec_blocks": list(self.dec_blocks),
+            "use_fov": self.use_fov,
+            "use_deformable": self.use_deformable,
+            "use_context": self.use_context,
+            "deformable_groups": self.deformable_groups,
+            "deformable_scales": self.deformable_scales,
+            "stem": self.stem,
+            "sca_window": self.sca_window,
+            "settings_dim": self.settings_dim,
+            "zero_init_tail": self.zero_init_tail,
+            "dcn_backend": self.dcn_backend,
         }
 
     def _inputs(self, rgb: torch.Tensor, fov: torch.Tensor | None, settings: torch.Tensor | None) -> torch.Tensor:
@@ -247,8 +258,9 @@ class NAFNet(nn.Module):
         x = torch.cat(planes, dim=1) if len(planes) > 1 else planes[0]
         return F.pixel_unshuffle(x, self.stem) if self.stem > 1 else x
 
-    def forward(self, rgb: torch.Tensor, fov: torch.Tensor | None = None,
-                settings: torch.Tensor | None = None) -> torch.Tensor:
+    def forward(
+        self, rgb: torch.Tensor, fov: torch.Tensor | None = None, settings: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """(B, 3, H, W) [+ FOV (B, 2, H, W)] [+ settings (B, settings_dim)] -> (B, 3, H, W)."""
         if rgb.dim() != 4 or rgb.shape[1] != 3:
             raise ValueError(f"rgb must be (B, 3, H, W), got {tuple(rgb.shape)}")
@@ -278,8 +290,9 @@ class NAFNet(nn.Module):
         return rgb + residual[..., :h, :w]
 
 
-def _check_args(arch: str, width: int, enc: tuple[int, ...], dec: tuple[int, ...], middle: int, stem: int,
-                settings_dim: int) -> None:
+def _check_args(
+    arch: str, width: int, enc: tuple[int, ...], dec: tuple[int, ...], middle: int, stem: int, settings_dim: int
+) -> None:
     """The constructor's structural arguments (ValueError naming the argument)."""
     if arch != "nafnet":
         raise ValueError(f"arch must be 'nafnet' for NAFNet, got {arch!r}")
@@ -321,8 +334,9 @@ def nafnet_width(target_params: int, **arch: Any) -> int:
     cands = {w * groups: _count(w * groups, arch) for w in (lo, hi)}
     best = min(cands, key=lambda w: abs(cands[w] - target_params))
     if abs(cands[best] - target_params) > 0.1 * target_params:
-        raise ValueError(f"no NAFNet width within 10% of {target_params} parameters "
-                         f"(closest: width {best}, {cands[best]})")
+        raise ValueError(
+            f"no NAFNet width within 10% of {target_params} parameters (closest: width {best}, {cands[best]})"
+        )
     return best
 
 
@@ -333,5 +347,13 @@ def nafnet_matching(reference: nn.Module | int, **arch: Any) -> NAFNet:
     return NAFNet(width=nafnet_width(target, **arch), **arch)
 
 
-__all__ = ["LayerNorm2d", "NAFBlock", "NAFNet", "box_mean", "nafblock_parameters", "nafnet_matching", "nafnet_width",
-           "simple_gate"]
+__all__ = [
+    "LayerNorm2d",
+    "NAFBlock",
+    "NAFNet",
+    "box_mean",
+    "nafblock_parameters",
+    "nafnet_matching",
+    "nafnet_width",
+    "simple_gate",
+]

@@ -56,6 +56,7 @@ With ``use_fov=use_deformable=use_context=False`` this is a plain UNet;
 :func:`plain_unet_matching` picks the width giving the same parameter count (within 10%)
 as a given field-aware configuration, for the paper's ablation/baseline.
 """
+
 from __future__ import annotations
 
 from typing import Any, Sequence
@@ -313,16 +314,23 @@ class FieldAwareUNet(nn.Module):
         self.fuse = nn.ModuleList(nn.Conv2d(2 * ws[s], ws[s], 1) for s in dec_scales)
         n_deform = self.deformable_scales if use_deformable else 0
         self.dec = nn.ModuleList(
-            DeformResBlock(ws[s], deformable_groups, coarse_offsets=i > 0, backend=dcn_backend) if i < n_deform
+            DeformResBlock(ws[s], deformable_groups, coarse_offsets=i > 0, backend=dcn_backend)
+            if i < n_deform
             else ResBlock(ws[s])
             for i, s in enumerate(dec_scales)
         )
         # modulations listed coarse to fine: the bottleneck, then the decoder scales
-        self.modulate = nn.ModuleList(FieldModulation(ws[s], self.settings_dim) for s in [len(ws) - 1, *dec_scales]) \
-            if field_modulation else None
+        self.modulate = (
+            nn.ModuleList(FieldModulation(ws[s], self.settings_dim) for s in [len(ws) - 1, *dec_scales])
+            if field_modulation
+            else None
+        )
         # settings FiLM, likewise the bottleneck then the decoder scales (none when settings_dim is 0)
-        self.film = nn.ModuleList(SettingsModulation(ws[s], self.settings_dim) for s in [len(ws) - 1, *dec_scales]) \
-            if self.settings_dim else None
+        self.film = (
+            nn.ModuleList(SettingsModulation(ws[s], self.settings_dim) for s in [len(ws) - 1, *dec_scales])
+            if self.settings_dim
+            else None
+        )
         self.tail = _conv3(ws[0], 3)
         if zero_init_tail:
             nn.init.zeros_(self.tail.weight)
@@ -350,8 +358,9 @@ class FieldAwareUNet(nn.Module):
             "settings_dim": self.settings_dim,
         }
 
-    def _inputs(self, rgb: torch.Tensor, fov: torch.Tensor | None, settings: torch.Tensor | None,
-                ph: int, pw: int) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor | None]:
+    def _inputs(
+        self, rgb: torch.Tensor, fov: torch.Tensor | None, settings: torch.Tensor | None, ph: int, pw: int
+    ) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor | None]:
         """The padded input stack (RGB [+ FOV] [+ settings planes]), the padded FOV channels
         and the (B, k) settings (None where unused)."""
         b = rgb.shape[0]
@@ -369,7 +378,7 @@ class FieldAwareUNet(nn.Module):
         where the network has them."""
         if self.modulate is not None:
             assert fov is not None
-            factor = self.size_multiple // 2 ** i
+            factor = self.size_multiple // 2**i
             pooled = field_features(F.avg_pool2d(fov, factor) if factor > 1 else fov)
             if s is not None:
                 pooled = torch.cat((pooled, settings_planes(s, pooled.shape[-2], pooled.shape[-1])), dim=1)
@@ -379,8 +388,9 @@ class FieldAwareUNet(nn.Module):
             feat = self.film[i](feat, s)
         return feat
 
-    def forward(self, rgb: torch.Tensor, fov: torch.Tensor | None = None,
-                settings: torch.Tensor | None = None) -> torch.Tensor:
+    def forward(
+        self, rgb: torch.Tensor, fov: torch.Tensor | None = None, settings: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """(B, 3, H, W) [+ FOV (B, 2, H, W) or (2, H, W)] [+ settings (B, k) or (k,)] -> (B, 3, H, W)."""
         if rgb.dim() != 4 or rgb.shape[1] != 3:
             raise ValueError(f"rgb must be (B, 3, H, W), got {tuple(rgb.shape)}")
@@ -426,8 +436,7 @@ def plain_unet_width(target_params: int, depth: int = 3) -> int:
     best = min(candidates, key=lambda w: abs(candidates[w] - target_params))
     if abs(candidates[best] - target_params) > 0.1 * target_params:
         raise ValueError(
-            f"no plain UNet width within 10% of {target_params} parameters "
-            f"(closest: width {best}, {candidates[best]})"
+            f"no plain UNet width within 10% of {target_params} parameters (closest: width {best}, {candidates[best]})"
         )
     return best
 

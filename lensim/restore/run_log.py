@@ -10,6 +10,7 @@ On a resume the CSV files keep their rows up to the checkpoint's step and drop n
 (written after the checkpoint by the call that was interrupted), so they hold exactly the
 rows of an uninterrupted run. Floats are written with repr (exact), NaN and None as empty.
 """
+
 from __future__ import annotations
 
 import csv
@@ -43,8 +44,9 @@ class CsvLog:
         rows: list[dict[str, str]] = []
         if keep_until_step is not None and path.exists():
             with open(path, newline="") as fh:
-                rows = [r for r in csv.DictReader(fh)
-                        if r.get("step", "").isdigit() and int(r["step"]) <= keep_until_step]
+                rows = [
+                    r for r in csv.DictReader(fh) if r.get("step", "").isdigit() and int(r["step"]) <= keep_until_step
+                ]
         text = io.StringIO(newline="")
         writer = csv.DictWriter(text, fieldnames=fields)
         writer.writeheader()

@@ -11,6 +11,7 @@ Schedules (``TrainConfig.lr_schedule``):
 The budget clock counts the seconds a run has trained in all: those of the calls before a
 resume (stored in the checkpoint) plus those of this call (time.perf_counter).
 """
+
 from __future__ import annotations
 
 import math
@@ -58,8 +59,9 @@ class LearningRate:
     ``scheduler`` (a StepLR, present for both schedules) is what checkpoints store.
     """
 
-    def __init__(self, optimizer: torch.optim.Optimizer, schedule: str, lr0: float, halve_every: int,
-                 epochs: int) -> None:
+    def __init__(
+        self, optimizer: torch.optim.Optimizer, schedule: str, lr0: float, halve_every: int, epochs: int
+    ) -> None:
         self.optimizer = optimizer
         self.schedule = schedule
         self.lr0 = lr0

@@ -34,6 +34,7 @@ Devices: "cpu" (default), "cuda" (mixed precision: bfloat16 autocast where suppo
 float16 with a gradient scaler). Multi-GPU: launch with ``torchrun --nproc_per_node N``
 (lensim.restore.distributed).
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -76,10 +77,30 @@ from lensim.restore.run_log import RunLog
 from lensim.restore.schedule import LR_SCHEDULES, BudgetClock, LearningRate
 
 # Settings that must not change when resuming (they would change the loss curve's meaning).
-FROZEN_ON_RESUME = ("loss", "batch_size", "lr", "lr_halve_every", "lr_schedule", "crop", "arch", "width", "depth",
-                    "use_fov", "use_deformable", "use_context", "deformable_groups", "deformable_scales",
-                    "field_modulation", "stem", "seed", "augment", "val_fraction", "max_steps_per_epoch",
-                    "use_settings", "conditioning")
+FROZEN_ON_RESUME = (
+    "loss",
+    "batch_size",
+    "lr",
+    "lr_halve_every",
+    "lr_schedule",
+    "crop",
+    "arch",
+    "width",
+    "depth",
+    "use_fov",
+    "use_deformable",
+    "use_context",
+    "deformable_groups",
+    "deformable_scales",
+    "field_modulation",
+    "stem",
+    "seed",
+    "augment",
+    "val_fraction",
+    "max_steps_per_epoch",
+    "use_settings",
+    "conditioning",
+)
 
 
 @dataclass
@@ -118,8 +139,9 @@ class TrainResult:
     conditioning: dict[str, Any] | None = None  # TrainConfig.conditioning of the run
 
 
-def budget_progress(report: Callable[[float, float], None] | None,
-                    budget_s: float) -> Callable[[TrainProgress], None] | None:
+def budget_progress(
+    report: Callable[[float, float], None] | None, budget_s: float
+) -> Callable[[TrainProgress], None] | None:
     """A train() progress callback that passes (seconds trained in this call, capped at
     budget_s; budget_s) to ``report``, for a progress bar over a time budget."""
     if report is None:
@@ -136,8 +158,9 @@ def epoch_order(n: int, seed: int, epoch: int) -> list[int]:
     return torch.randperm(n, generator=gen).tolist()
 
 
-def epoch_batches(n: int, batch_size: int, seed: int, epoch: int, rank: int = 0, world: int = 1,
-                  max_batches: int | None = None) -> list[list[int]]:
+def epoch_batches(
+    n: int, batch_size: int, seed: int, epoch: int, rank: int = 0, world: int = 1, max_batches: int | None = None
+) -> list[list[int]]:
     """Batches of one epoch for one rank: the epoch's permutation, padded (by wrapping) to
     a multiple of world so ranks get equal shares, strided by rank, cut into batches;
     a last partial batch is dropped unless it is the only one."""
@@ -146,28 +169,33 @@ def epoch_batches(n: int, batch_size: int, seed: int, epoch: int, rank: int = 0,
         pad = (-len(order)) % world
         order = (order + order[:pad])[rank::world]
     nb = max(1, len(order) // batch_size)
-    batches = [order[i * batch_size:(i + 1) * batch_size] for i in range(nb)]
+    batches = [order[i * batch_size : (i + 1) * batch_size] for i in range(nb)]
     return batches[:max_batches] if max_batches else batches
 
 
 def model_inputs(batch: dict[str, torch.Tensor], device: torch.device) -> tuple[torch.Tensor, ...]:
     """A batch's network arguments on ``device``: (input, fov) or, when the batch carries
     settings vectors, (input, fov, settings)."""
-    args: tuple[torch.Tensor, ...] = (batch["input"].to(device, non_blocking=True),
-                                      batch["fov"].to(device, non_blocking=True))
+    args: tuple[torch.Tensor, ...] = (
+        batch["input"].to(device, non_blocking=True),
+        batch["fov"].to(device, non_blocking=True),
+    )
     if "settings" in batch:
         args += (batch["settings"].to(device, non_blocking=True),)
     return args
 
 
 def _collate(items: list[dict[str, Any]]) -> dict[str, torch.Tensor]:
-    return {k: torch.stack([it[k] for it in items]) if k != "index" else torch.tensor([it[k] for it in items])
-            for k in items[0]}
+    return {
+        k: torch.stack([it[k] for it in items]) if k != "index" else torch.tensor([it[k] for it in items])
+        for k in items[0]
+    }
 
 
 @torch.no_grad()
-def evaluate_pairs(model: torch.nn.Module, loader: Iterator[dict[str, torch.Tensor]] | DataLoader,
-                   device: torch.device) -> dict[str, float]:
+def evaluate_pairs(
+    model: torch.nn.Module, loader: Iterator[dict[str, torch.Tensor]] | DataLoader, device: torch.device
+) -> dict[str, float]:
     """Mean PSNR (dB) and SSIM over crops of the restored output and of the input itself
     (outputs clamped to [0, 1] as when written to a file)."""
     was_training = model.training
@@ -191,8 +219,9 @@ def evaluate_pairs(model: torch.nn.Module, loader: Iterator[dict[str, torch.Tens
 # ----------------------------------------------------------------------------- set-up
 
 
-def _resolve_config(config: TrainConfig | None, overrides: dict[str, Any], ckpt: dict[str, Any] | None,
-                    source: str) -> TrainConfig:
+def _resolve_config(
+    config: TrainConfig | None, overrides: dict[str, Any], ckpt: dict[str, Any] | None, source: str
+) -> TrainConfig:
     """The run's settings: ``config`` with ``overrides``, resolved (TrainConfig.resolved:
     the architecture's defaults filled in, as RUN/config.json and checkpoints record them).
     When resuming, every setting comes from the checkpoint (``config`` is not used) and
@@ -205,14 +234,22 @@ def _resolve_config(config: TrainConfig | None, overrides: dict[str, Any], ckpt:
         saved = saved_config(ckpt["train_config"])
         diff = _frozen_differences(saved, overrides)
         if diff:
-            raise InputError(source, ", ".join(diff), f"differs from the run being resumed "
-                             f"({', '.join(f'{k}={getattr(saved, k)!r}' for k in diff)}); expected the same value "
-                             "or none")
+            raise InputError(
+                source,
+                ", ".join(diff),
+                f"differs from the run being resumed "
+                f"({', '.join(f'{k}={getattr(saved, k)!r}' for k in diff)}); expected the same value "
+                "or none",
+            )
         cfg = replace(saved, **{k: v for k, v in overrides.items() if k not in FROZEN_ON_RESUME})
     if cfg.epochs < 1 or cfg.batch_size < 1 or cfg.lr <= 0 or cfg.lr_halve_every < 1:
-        raise InputError(None, "config", f"expected epochs, batch_size, lr_halve_every >= 1 and lr > 0, got "
-                         f"epochs={cfg.epochs}, batch_size={cfg.batch_size}, lr={cfg.lr}, "
-                         f"lr_halve_every={cfg.lr_halve_every}")
+        raise InputError(
+            None,
+            "config",
+            f"expected epochs, batch_size, lr_halve_every >= 1 and lr > 0, got "
+            f"epochs={cfg.epochs}, batch_size={cfg.batch_size}, lr={cfg.lr}, "
+            f"lr_halve_every={cfg.lr_halve_every}",
+        )
     if cfg.lr_schedule not in LR_SCHEDULES:
         raise InputError(None, "lr_schedule", f"expected one of {', '.join(LR_SCHEDULES)}, got {cfg.lr_schedule!r}")
     if cfg.loss not in LOSSES:
@@ -228,8 +265,9 @@ def saved_config(train_config: dict[str, Any]) -> TrainConfig:
     there was a choice: lensim.restore.models.arch_of), whose missing switches resolve to
     the UNet's defaults (stem 1)."""
     known = set(asdict(TrainConfig()))
-    return TrainConfig(**{**asdict(TrainConfig()), "arch": "unet",
-                          **{k: v for k, v in train_config.items() if k in known}}).resolved()
+    return TrainConfig(
+        **{**asdict(TrainConfig()), "arch": "unet", **{k: v for k, v in train_config.items() if k in known}}
+    ).resolved()
 
 
 def _frozen_differences(saved: TrainConfig, overrides: dict[str, Any]) -> list[str]:
@@ -270,8 +308,12 @@ def _load_data(dataset_dir: str | Path, cfg: TrainConfig, ckpt: dict[str, Any] |
         train_src, val_src = ckpt["split"]["train"], ckpt["split"]["val"]
         missing = sorted(set(train_src + val_src) - set(sources))
         if missing:
-            raise InputError(str(dataset_dir), "records", f"lacks source photos of the run being resumed "
-                             f"({', '.join(missing[:3])}); expected the dataset it was trained on")
+            raise InputError(
+                str(dataset_dir),
+                "records",
+                f"lacks source photos of the run being resumed "
+                f"({', '.join(missing[:3])}); expected the dataset it was trained on",
+            )
     else:
         train_src, val_src = split_sources(sources, cfg.val_fraction, cfg.seed)
     hw = sensor_hw(manifest)
@@ -280,16 +322,18 @@ def _load_data(dataset_dir: str | Path, cfg: TrainConfig, ckpt: dict[str, Any] |
         cfg.conditioning = Conditioning.from_records((r.settings for r in train_refs), cfg.use_settings).to_dict()
     cond = Conditioning.from_dict(cfg.conditioning, str(dataset_dir))
     train_ds = PairDataset(train_refs, hw, crop=cfg.crop, augment=cfg.augment, seed=cfg.seed, conditioning=cond)
-    val_ds = PairDataset([r for r in refs if r.source in set(val_src)], hw, crop=None, augment=False, seed=cfg.seed,
-                         conditioning=cond)
+    val_ds = PairDataset(
+        [r for r in refs if r.source in set(val_src)], hw, crop=None, augment=False, seed=cfg.seed, conditioning=cond
+    )
     if len(train_ds) < 1:
         raise InputError(str(dataset_dir), "records", "has no training crops; expected at least one")
     split = {"train": list(train_src), "val": list(val_src), "val_fraction": cfg.val_fraction, "seed": cfg.seed}
     return _Data(train_ds, val_ds, split, manifest)
 
 
-def _build_state(cfg: TrainConfig, device: torch.device, ckpt: dict[str, Any] | None,
-                 source: str) -> tuple[TrainingState, LearningRate, torch.dtype | None]:
+def _build_state(
+    cfg: TrainConfig, device: torch.device, ckpt: dict[str, Any] | None, source: str
+) -> tuple[TrainingState, LearningRate, torch.dtype | None]:
     """Model (seeded), Adam, learning-rate schedule, grad scaler and position, restored from
     ``ckpt`` when resuming; the autocast dtype (None: full precision)."""
     torch.manual_seed(cfg.seed)
@@ -339,15 +383,21 @@ def _checkpoint_due(loop: _Loop) -> bool:
     cfg = loop.cfg
     steps = cfg.checkpoint_every_steps
     every_s = cfg.checkpoint_every_s
-    return bool((steps and loop.state.step - loop.checkpoint_step >= steps)
-                or (every_s and loop.clock.call_s() - loop.checkpoint_s >= every_s))
+    return bool(
+        (steps and loop.state.step - loop.checkpoint_step >= steps)
+        or (every_s and loop.clock.call_s() - loop.checkpoint_s >= every_s)
+    )
 
 
 def _save_checkpoint(loop: _Loop, best: bool) -> None:
     """Write RUN/last.pt (and RUN/best.pt when ``best``) with the last validation's figures."""
     metrics = loop.val_metrics
-    loop.state.save(loop.run, loop.clock.run_s(), {**loop.context, "val_psnr": metrics.get("psnr"),
-                                                   "val_ssim": metrics.get("ssim")}, best=best)
+    loop.state.save(
+        loop.run,
+        loop.clock.run_s(),
+        {**loop.context, "val_psnr": metrics.get("psnr"), "val_ssim": metrics.get("ssim")},
+        best=best,
+    )
     loop.checkpoint_s, loop.checkpoint_step = loop.clock.call_s(), loop.state.step
 
 
@@ -374,7 +424,7 @@ def _train_epoch(loop: _Loop, batches: list[list[int]]) -> tuple[bool, float]:
     stopped the epoch, mean loss of its steps in this call)."""
     cfg, state = loop.cfg, loop.state
     loop.data.train.set_epoch(state.epoch)
-    loader = DataLoader(loop.data.train, batch_sampler=batches[state.batch_in_epoch:], collate_fn=_collate)
+    loader = DataLoader(loop.data.train, batch_sampler=batches[state.batch_in_epoch :], collate_fn=_collate)
     losses: list[float] = []
     for batch in loader:
         loop.lr.before_step(loop.clock, state.epoch, state.batch_in_epoch, len(batches))
@@ -386,8 +436,19 @@ def _train_epoch(loop: _Loop, batches: list[list[int]]) -> tuple[bool, float]:
         if loop.log is not None:
             loop.log.step(state.epoch, state.step, loop.last_loss, loop.lr.lr, seconds)
         if loop.progress is not None and loop.ranks.main:
-            loop.progress(TrainProgress("step", state.epoch, cfg.epochs, state.step, state.batch_in_epoch,
-                                        len(batches), loop.last_loss, loop.lr.lr, seconds))
+            loop.progress(
+                TrainProgress(
+                    "step",
+                    state.epoch,
+                    cfg.epochs,
+                    state.step,
+                    state.batch_in_epoch,
+                    len(batches),
+                    loop.last_loss,
+                    loop.lr.lr,
+                    seconds,
+                )
+            )
         if loop.ranks.main and state.batch_in_epoch < len(batches) and _checkpoint_due(loop):
             _save_checkpoint(loop, best=False)  # within the epoch: a kill loses at most the interval
         if rank0_decides(loop.clock.spent(), loop.ranks, loop.device) and state.batch_in_epoch < len(batches):
@@ -402,8 +463,15 @@ def _validate(loop: _Loop, mean_loss: float, epoch_lr: float) -> tuple[dict[str,
     state = loop.state
     metrics = evaluate_pairs(state.model, loop.val_loader, loop.device) if len(loop.data.val) else {}
     vp, vs = metrics.get("psnr", math.nan), metrics.get("ssim", math.nan)
-    row = {"epoch": state.epoch, "step": state.step, "loss": mean_loss, "val_psnr": vp, "val_ssim": vs,
-           "lr": epoch_lr, "seconds": loop.clock.call_s()}
+    row = {
+        "epoch": state.epoch,
+        "step": state.step,
+        "loss": mean_loss,
+        "val_psnr": vp,
+        "val_ssim": vs,
+        "lr": epoch_lr,
+        "seconds": loop.clock.call_s(),
+    }
     assert loop.log is not None
     loop.log.epoch(row)
     improved = math.isfinite(vp) and vp > state.best_val_psnr
@@ -451,8 +519,14 @@ def train(
         return _train(dataset_dir, run, config, resume, progress, overrides)
 
 
-def _train(dataset_dir: str | Path, run: Path, config: TrainConfig | None, resume: bool,
-           progress: Callable[[TrainProgress], None] | None, overrides: dict[str, Any]) -> TrainResult:
+def _train(
+    dataset_dir: str | Path,
+    run: Path,
+    config: TrainConfig | None,
+    resume: bool,
+    progress: Callable[[TrainProgress], None] | None,
+    overrides: dict[str, Any],
+) -> TrainResult:
     """train() with the run folder locked."""
     ckpt = read_resume_checkpoint(run) if resume else None
     if ckpt is None:
@@ -463,25 +537,46 @@ def _train(dataset_dir: str | Path, run: Path, config: TrainConfig | None, resum
     state, lr, autocast = _build_state(cfg, device, ckpt, str(run / LAST))
     net = wrap_model(state.model, ranks, device)
     manifest = data.manifest
-    context = {"train_config": asdict(cfg), "split": data.split, "conditioning": cfg.conditioning,
-               "lens": manifest.get("lens"),
-               "sensor": manifest.get("sensor"), "sensor_name": manifest.get("sensor_name"),
-               "dataset": str(Path(dataset_dir).resolve())}
+    context = {
+        "train_config": asdict(cfg),
+        "split": data.split,
+        "conditioning": cfg.conditioning,
+        "lens": manifest.get("lens"),
+        "sensor": manifest.get("sensor"),
+        "sensor_name": manifest.get("sensor_name"),
+        "dataset": str(Path(dataset_dir).resolve()),
+    }
     log = None
     if ranks.main:
-        log = RunLog(run, {**asdict(cfg), "dataset": context["dataset"]}, data.split,
-                     state.step if ckpt is not None else None)
+        log = RunLog(
+            run, {**asdict(cfg), "dataset": context["dataset"]}, data.split, state.step if ckpt is not None else None
+        )
     val_loader = DataLoader(data.val, batch_size=cfg.val_batch_size, shuffle=False, collate_fn=_collate)
-    loop = _Loop(cfg, state, lr, net, autocast, ranks, device, data, val_loader, log,
-                 BudgetClock(cfg.time_budget_s, state.train_seconds), progress, run, context,
-                 checkpoint_step=state.step)
+    loop = _Loop(
+        cfg,
+        state,
+        lr,
+        net,
+        autocast,
+        ranks,
+        device,
+        data,
+        val_loader,
+        log,
+        BudgetClock(cfg.time_budget_s, state.train_seconds),
+        progress,
+        run,
+        context,
+        checkpoint_step=state.step,
+    )
     history: list[dict[str, Any]] = []
     metrics: dict[str, float] = {}
     stopped = False
     state.model.train()
     while state.epoch < cfg.epochs and not stopped:
-        batches = epoch_batches(len(data.train), cfg.batch_size, cfg.seed, state.epoch, ranks.rank, ranks.world,
-                                cfg.max_steps_per_epoch)
+        batches = epoch_batches(
+            len(data.train), cfg.batch_size, cfg.seed, state.epoch, ranks.rank, ranks.world, cfg.max_steps_per_epoch
+        )
         epoch_lr = lr.lr
         stopped, mean_loss = _train_epoch(loop, batches)
         if not stopped:
@@ -492,19 +587,53 @@ def _train(dataset_dir: str | Path, run: Path, config: TrainConfig | None, resum
             row, metrics = _validate(loop, mean_loss, epoch_lr)
             history.append(row)
             if progress is not None:
-                progress(TrainProgress("stop" if stopped else "epoch", state.epoch - (0 if stopped else 1), cfg.epochs,
-                                       state.step, state.batch_in_epoch, len(batches), mean_loss, epoch_lr,
-                                       loop.clock.call_s(), metrics.get("psnr"), metrics.get("ssim")))
+                progress(
+                    TrainProgress(
+                        "stop" if stopped else "epoch",
+                        state.epoch - (0 if stopped else 1),
+                        cfg.epochs,
+                        state.step,
+                        state.batch_in_epoch,
+                        len(batches),
+                        mean_loss,
+                        epoch_lr,
+                        loop.clock.call_s(),
+                        metrics.get("psnr"),
+                        metrics.get("ssim"),
+                    )
+                )
         barrier(ranks)
         stopped = stopped or (loop.clock.spent() and state.epoch < cfg.epochs)
     if log is not None:
         log.close()
     shutdown(ranks)
     best = state.best_val_psnr
-    return TrainResult(str(run), state.epoch, state.step, stopped, loop.clock.call_s(), loop.last_loss,
-                       metrics.get("psnr"), metrics.get("ssim"), metrics.get("input_psnr"),
-                       best if math.isfinite(best) else None, history, cfg.conditioning)
+    return TrainResult(
+        str(run),
+        state.epoch,
+        state.step,
+        stopped,
+        loop.clock.call_s(),
+        loop.last_loss,
+        metrics.get("psnr"),
+        metrics.get("ssim"),
+        metrics.get("input_psnr"),
+        best if math.isfinite(best) else None,
+        history,
+        cfg.conditioning,
+    )
 
 
-__all__ = ["FROZEN_ON_RESUME", "TrainConfig", "TrainProgress", "TrainResult", "budget_progress", "epoch_batches",
-           "epoch_order", "evaluate_pairs", "model_inputs", "saved_config", "train"]
+__all__ = [
+    "FROZEN_ON_RESUME",
+    "TrainConfig",
+    "TrainProgress",
+    "TrainResult",
+    "budget_progress",
+    "epoch_batches",
+    "epoch_order",
+    "evaluate_pairs",
+    "model_inputs",
+    "saved_config",
+    "train",
+]

@@ -22,14 +22,15 @@ recomputes them from their public sources, so each number can be checked
 
 colour-science is imported lazily (about a second).
 """
+
 from __future__ import annotations
 
 import numpy as np
 
 # Linear sRGB (D65) -> CIE XYZ, IEC 61966-2-1 (the matrix Brooks et al. 2019 use).
-SRGB_TO_XYZ = np.array([[0.4124564, 0.3575761, 0.1804375],
-                        [0.2126729, 0.7151522, 0.0721750],
-                        [0.0193339, 0.1191920, 0.9503041]])
+SRGB_TO_XYZ = np.array(
+    [[0.4124564, 0.3575761, 0.1804375], [0.2126729, 0.7151522, 0.0721750], [0.0193339, 0.1191920, 0.9503041]]
+)
 
 
 def ccm_from_dng_color_matrix(color_matrix: list[float] | np.ndarray) -> tuple[np.ndarray, float, float]:
@@ -54,7 +55,9 @@ def _illuminant_spd(kelvin: float, wavelengths_nm: np.ndarray) -> np.ndarray:
         # CIE D-series at CCT T: the xy formula takes the temperature on the old c2 scale.
         xy = colour.temperature.CCT_to_xy_CIE_D(kelvin * 1.4388 / 1.4380)
         sd = colour.sd_CIE_illuminant_D_series(xy)
-    return np.interp(wavelengths_nm, np.asarray(sd.wavelengths, dtype=np.float64), np.asarray(sd.values, dtype=np.float64))
+    return np.interp(
+        wavelengths_nm, np.asarray(sd.wavelengths, dtype=np.float64), np.asarray(sd.values, dtype=np.float64)
+    )
 
 
 def wb_gains_from_sensitivities(kelvins: list[float], camera: str = "Nikon 5100 (NPL)") -> np.ndarray:
@@ -73,8 +76,9 @@ def wb_gains_from_sensitivities(kelvins: list[float], camera: str = "Nikon 5100 
     return np.asarray(out)
 
 
-def wb_table(kelvins: list[float], color_matrix: list[float] | np.ndarray,
-             camera: str = "Nikon 5100 (NPL)") -> list[dict]:
+def wb_table(
+    kelvins: list[float], color_matrix: list[float] | np.ndarray, camera: str = "Nikon 5100 (NPL)"
+) -> list[dict]:
     """White-balance table for a profile: the spectral gains of ``camera`` at each
     colour temperature, scaled per channel so that 6504 K gives the D65 gains implied by
     the DNG ``color_matrix``. Gains rounded to 4 decimals."""
@@ -82,8 +86,10 @@ def wb_table(kelvins: list[float], color_matrix: list[float] | np.ndarray,
     gains = wb_gains_from_sensitivities(list(kelvins), camera)
     ref = wb_gains_from_sensitivities([6504.0], camera)[0]
     scale = np.array([r65 / ref[0], b65 / ref[1]])
-    return [{"kelvin": float(k), "r_gain": round(float(g[0] * scale[0]), 4), "b_gain": round(float(g[1] * scale[1]), 4)}
-            for k, g in zip(kelvins, gains)]
+    return [
+        {"kelvin": float(k), "r_gain": round(float(g[0] * scale[0]), 4), "b_gain": round(float(g[1] * scale[1]), 4)}
+        for k, g in zip(kelvins, gains)
+    ]
 
 
 def dng_color_matrix_from_ccm(ccm: list[list[float]] | np.ndarray, r_gain_d65: float, b_gain_d65: float) -> np.ndarray:

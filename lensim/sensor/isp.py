@@ -39,6 +39,7 @@ and inverse white balance at a random colour temperature. The demosaicers: AHD
 14(3)) written here in vectorized torch, the default; bilinear (here); Malvar, He &
 Cutler 2004 and Menon, Andriani & Calvagno 2007 from the colour-demosaicing package.
 """
+
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
@@ -63,6 +64,7 @@ D65_XYZ = (0.95047, 1.0, 1.08883)
 
 # ---------------------------------------------------------------- transfer curve, colour
 
+
 def srgb_to_linear(x: torch.Tensor, eps: float = EPS) -> torch.Tensor:
     """Exact inverse sRGB transfer curve (IEC 61966-2-1): sRGB values in [0, 1] -> linear
     values in [0, 1]. The input is clamped to [eps, 1] first (eps = 1e-8 as in the paper,
@@ -85,7 +87,7 @@ def expose(img: torch.Tensor, ev: float) -> torch.Tensor:
     as a photo's highlights do. ev = 0 returns the image itself."""
     if ev == 0.0:
         return img
-    return linear_to_srgb(srgb_to_linear(img) * 2.0 ** ev)
+    return linear_to_srgb(srgb_to_linear(img) * 2.0**ev)
 
 
 def apply_ccm(img: torch.Tensor, ccm: torch.Tensor | Any) -> torch.Tensor:
@@ -110,6 +112,7 @@ def white_balance(img: torch.Tensor, r_gain: float, b_gain: float, inverse: bool
 
 # ---------------------------------------------------------------- 1. unprocess
 
+
 @dataclass
 class CaptureParams:
     """What one simulated capture drew and used: colour temperature (K), the white-balance
@@ -130,8 +133,9 @@ class CaptureParams:
         return asdict(self)
 
 
-def unprocess(img: torch.Tensor, profile: SensorProfile, generator: torch.Generator | None = None,
-              kelvin: float | None = None) -> tuple[torch.Tensor, CaptureParams]:
+def unprocess(
+    img: torch.Tensor, profile: SensorProfile, generator: torch.Generator | None = None, kelvin: float | None = None
+) -> tuple[torch.Tensor, CaptureParams]:
     """sRGB image -> energy domain (linear camera RGB before white balance), after Brooks
     et al. 2019 and the paper's energy-domain transformation.
 
@@ -148,8 +152,13 @@ def unprocess(img: torch.Tensor, profile: SensorProfile, generator: torch.Genera
         kelvin = profile.sample_kelvin(generator)
     r_gain, b_gain = profile.wb_gains(float(kelvin))
     cam = srgb_to_camera(img, profile.ccm, r_gain, b_gain)
-    return cam, CaptureParams(kelvin=float(kelvin), r_gain=r_gain, b_gain=b_gain,
-                              ccm=[list(r) for r in profile.ccm], bayer_pattern=profile.bayer_pattern)
+    return cam, CaptureParams(
+        kelvin=float(kelvin),
+        r_gain=r_gain,
+        b_gain=b_gain,
+        ccm=[list(r) for r in profile.ccm],
+        bayer_pattern=profile.bayer_pattern,
+    )
 
 
 def srgb_to_camera(img: torch.Tensor, ccm: Any, r_gain: float, b_gain: float) -> torch.Tensor:
@@ -163,6 +172,7 @@ def srgb_to_camera(img: torch.Tensor, ccm: Any, r_gain: float, b_gain: float) ->
 
 # ---------------------------------------------------------------- 3. mosaic and noise
 
+
 def _check_pattern(pattern: str) -> str:
     p = str(pattern).upper()
     if p not in BAYER_PATTERNS:
@@ -172,7 +182,9 @@ def _check_pattern(pattern: str) -> str:
 
 def _check_rgb(img: torch.Tensor) -> None:
     if not isinstance(img, torch.Tensor) or img.dim() < 3 or img.shape[-3] != 3:
-        raise InputError(None, "image", f"expected a tensor of shape (..., 3, H, W), got {tuple(getattr(img, 'shape', ()))}")
+        raise InputError(
+            None, "image", f"expected a tensor of shape (..., 3, H, W), got {tuple(getattr(img, 'shape', ()))}"
+        )
 
 
 def _check_size(h: int, w: int) -> None:
@@ -180,8 +192,9 @@ def _check_size(h: int, w: int) -> None:
         raise InputError(None, "image", f"expected an image of at least 3x3 pixels for the Bayer stages, got {h}x{w}")
 
 
-def bayer_masks(pattern: str, height: int, width: int, device: torch.device | str | None = None,
-                dtype: torch.dtype = torch.float32) -> torch.Tensor:
+def bayer_masks(
+    pattern: str, height: int, width: int, device: torch.device | str | None = None, dtype: torch.dtype = torch.float32
+) -> torch.Tensor:
     """(3, H, W) masks, 1 where the pixel has the R, G or B filter, 0 elsewhere."""
     p = _check_pattern(pattern)
     masks = torch.zeros(3, height, width, dtype=dtype, device=device)
@@ -244,6 +257,7 @@ def white_balance_mosaic(raw: torch.Tensor, pattern: str, r_gain: float, b_gain:
 
 # ---------------------------------------------------------------- 4. demosaic
 
+
 def _pad(x: torch.Tensor, p: int) -> torch.Tensor:
     """Mirror-pad the last two dims of (N, C, H, W) by p without repeating the edge
     (keeps the Bayer phase: index -k maps to k)."""
@@ -252,7 +266,7 @@ def _pad(x: torch.Tensor, p: int) -> torch.Tensor:
 
 def _win(xp: torch.Tensor, p: int, dy: int, dx: int, h: int, w: int) -> torch.Tensor:
     """View of the (H, W) window of a tensor padded by p, shifted by (dy, dx)."""
-    return xp[..., p + dy:p + dy + h, p + dx:p + dx + w]
+    return xp[..., p + dy : p + dy + h, p + dx : p + dx + w]
 
 
 def _interp_rb(sparse: torch.Tensor) -> torch.Tensor:
@@ -271,8 +285,9 @@ def _interp_g(sparse: torch.Tensor) -> torch.Tensor:
     neighbours at R and B pixels."""
     h, w = sparse.shape[-2:]
     sp = _pad(sparse, 1)
-    return sparse + 0.25 * (_win(sp, 1, -1, 0, h, w) + _win(sp, 1, 1, 0, h, w) + _win(sp, 1, 0, -1, h, w)
-                            + _win(sp, 1, 0, 1, h, w))
+    return sparse + 0.25 * (
+        _win(sp, 1, -1, 0, h, w) + _win(sp, 1, 1, 0, h, w) + _win(sp, 1, 0, -1, h, w) + _win(sp, 1, 0, 1, h, w)
+    )
 
 
 def demosaic_bilinear(raw: torch.Tensor, pattern: str) -> torch.Tensor:
@@ -307,8 +322,27 @@ def _median3x3(x: torch.Tensor) -> torch.Tensor:
         lo, hi = torch.minimum(p[i], p[j]), torch.maximum(p[i], p[j])
         p[i], p[j] = lo, hi
 
-    for i, j in ((1, 2), (4, 5), (7, 8), (0, 1), (3, 4), (6, 7), (1, 2), (4, 5), (7, 8), (0, 3), (5, 8), (4, 7),
-                 (3, 6), (1, 4), (2, 5), (4, 7), (4, 2), (6, 4), (4, 2)):
+    for i, j in (
+        (1, 2),
+        (4, 5),
+        (7, 8),
+        (0, 1),
+        (3, 4),
+        (6, 7),
+        (1, 2),
+        (4, 5),
+        (7, 8),
+        (0, 3),
+        (5, 8),
+        (4, 7),
+        (3, 6),
+        (1, 4),
+        (2, 5),
+        (4, 7),
+        (4, 2),
+        (6, 4),
+        (4, 2),
+    ):
         srt(i, j)
     return p[4]
 
@@ -322,8 +356,18 @@ def _ahd_block(x: torch.Tensor, m: torch.Tensor, to_xyz: list[list[float]], medi
     # 1. green along rows (gh) and along columns (gv), clamped to the two neighbouring greens
     xp = _pad(x, 2)
     c = _win(xp, 2, 0, 0, h, w)
-    l1, r1, l2, r2 = _win(xp, 2, 0, -1, h, w), _win(xp, 2, 0, 1, h, w), _win(xp, 2, 0, -2, h, w), _win(xp, 2, 0, 2, h, w)
-    u1, d1, u2, d2 = _win(xp, 2, -1, 0, h, w), _win(xp, 2, 1, 0, h, w), _win(xp, 2, -2, 0, h, w), _win(xp, 2, 2, 0, h, w)
+    l1, r1, l2, r2 = (
+        _win(xp, 2, 0, -1, h, w),
+        _win(xp, 2, 0, 1, h, w),
+        _win(xp, 2, 0, -2, h, w),
+        _win(xp, 2, 0, 2, h, w),
+    )
+    u1, d1, u2, d2 = (
+        _win(xp, 2, -1, 0, h, w),
+        _win(xp, 2, 1, 0, h, w),
+        _win(xp, 2, -2, 0, h, w),
+        _win(xp, 2, 2, 0, h, w),
+    )
     gh = 0.5 * (l1 + r1) + 0.25 * (2.0 * c - l2 - r2)
     gh = torch.minimum(torch.maximum(gh, torch.minimum(l1, r1)), torch.maximum(l1, r1))
     gv = 0.5 * (u1 + d1) + 0.25 * (2.0 * c - u2 - d2)
@@ -352,7 +396,7 @@ def _ahd_block(x: torch.Tensor, m: torch.Tensor, to_xyz: list[list[float]], medi
     hp = F.pad(homo.unsqueeze(1), (1, 1, 1, 1), mode="replicate")
     rows = _win(hp, 1, 0, -1, h, w) + _win(hp, 1, 0, 0, h, w) + _win(hp, 1, 0, 1, h, w)
     rp = F.pad(rows, (0, 0, 1, 1), mode="replicate")
-    hm = rp[..., 0:h, :] + rp[..., 1:h + 1, :] + rp[..., 2:h + 2, :]  # (2, 1, h, w)
+    hm = rp[..., 0:h, :] + rp[..., 1 : h + 1, :] + rp[..., 2 : h + 2, :]  # (2, 1, h, w)
     wh = (hm[0:1] > hm[1:2]).to(x.dtype) + 0.5 * (hm[0:1] == hm[1:2]).to(x.dtype)
     out = cand[1:2] + wh * (cand[0:1] - cand[1:2])
 
@@ -368,8 +412,14 @@ def _ahd_block(x: torch.Tensor, m: torch.Tensor, to_xyz: list[list[float]], medi
     return out
 
 
-def demosaic_ahd(raw: torch.Tensor, pattern: str, rgb_to_xyz: torch.Tensor | Any | None = None,
-                 median_passes: int = 1, block_rows: int = 256, workers: int | None = None) -> torch.Tensor:
+def demosaic_ahd(
+    raw: torch.Tensor,
+    pattern: str,
+    rgb_to_xyz: torch.Tensor | Any | None = None,
+    median_passes: int = 1,
+    block_rows: int = 256,
+    workers: int | None = None,
+) -> torch.Tensor:
     """Adaptive homogeneity-directed demosaicing (Hirakawa & Parks 2005): (H, W) -> (3, H, W).
 
     1. Green is interpolated twice, along rows and along columns, with the 5-tap filter
@@ -414,7 +464,7 @@ def demosaic_ahd(raw: torch.Tensor, pattern: str, rgb_to_xyz: torch.Tensor | Any
         a, b = max(0, y0 - halo), min(h, y1 + halo)  # a is even: the block keeps the Bayer phase
         m = bayer_masks(p, b - a, w, raw.device, raw.dtype).unsqueeze(0)
         blk = _ahd_block(raw[a:b].reshape(1, 1, b - a, w), m, to_xyz, passes)
-        out[:, y0:y1] = blk[0, :, y0 - a:y1 - a]
+        out[:, y0:y1] = blk[0, :, y0 - a : y1 - a]
 
     n_workers = min(len(starts), torch.get_num_threads() if workers is None else max(1, int(workers)))
     if n_workers <= 1 or raw.device.type != "cpu":
@@ -442,8 +492,11 @@ def _demosaic_colour(raw: torch.Tensor, pattern: str, method: str) -> torch.Tens
     try:
         import colour_demosaicing as cd
     except ImportError:  # pragma: no cover - depends on the environment
-        raise InputError(None, "method", f"demosaicing method {method!r} needs the colour-demosaicing package "
-                         "(pip install colour-demosaicing)") from None
+        raise InputError(
+            None,
+            "method",
+            f"demosaicing method {method!r} needs the colour-demosaicing package (pip install colour-demosaicing)",
+        ) from None
     fn = cd.demosaicing_CFA_Bayer_Malvar2004 if method == "malvar" else cd.demosaicing_CFA_Bayer_Menon2007
     # colour-demosaicing convolves with scipy's 'reflect' mode, which repeats the edge
     # pixel and so breaks the Bayer phase at the borders (2 px of wrong colours): pad
@@ -465,7 +518,9 @@ def demosaic(raw: torch.Tensor, pattern: str = "RGGB", method: str = "ahd", **kw
     p = _check_pattern(pattern)
     meth = str(method).lower()
     if meth not in DEMOSAIC_METHODS:
-        raise InputError(None, "method", f"expected a demosaicing method among {', '.join(DEMOSAIC_METHODS)}, got {method!r}")
+        raise InputError(
+            None, "method", f"expected a demosaicing method among {', '.join(DEMOSAIC_METHODS)}, got {method!r}"
+        )
     if raw.dim() < 2:
         raise InputError(None, "raw", f"expected a mosaic of shape (..., H, W), got {tuple(raw.shape)}")
     h, w = raw.shape[-2:]
@@ -486,12 +541,13 @@ def demosaic(raw: torch.Tensor, pattern: str = "RGGB", method: str = "ahd", **kw
 
 # ---------------------------------------------------------------- 5. process
 
+
 def quantize(img: torch.Tensor, bits: int) -> torch.Tensor:
     """Round values in [0, 1] to the grid of an unsigned ``bits``-bit image (8 or 16):
     round(clip(x, 0, 1) * (2**bits - 1)) / (2**bits - 1), still float32."""
     if bits not in (8, 16):
         raise InputError(None, "bits", f"expected 8 or 16, got {bits!r}")
-    q = float(2 ** bits - 1)
+    q = float(2**bits - 1)
     return torch.round(img.clamp(0.0, 1.0) * q) / q
 
 
@@ -500,12 +556,14 @@ def to_uint(img: torch.Tensor, bits: int = 8) -> np.ndarray:
     ready for an image writer."""
     if bits not in (8, 16):
         raise InputError(None, "bits", f"expected 8 or 16, got {bits!r}")
-    q = torch.round(img.detach().clamp(0.0, 1.0) * float(2 ** bits - 1)).to(torch.int32)
+    q = torch.round(img.detach().clamp(0.0, 1.0) * float(2**bits - 1)).to(torch.int32)
     arr = q.movedim(-3, -1).cpu().numpy()
     return arr.astype(np.uint8 if bits == 8 else np.uint16)
 
 
-def process(cam: torch.Tensor, params: CaptureParams, bits: int | None = 8, white_balanced: bool = False) -> torch.Tensor:
+def process(
+    cam: torch.Tensor, params: CaptureParams, bits: int | None = 8, white_balanced: bool = False
+) -> torch.Tensor:
     """Camera RGB (..., 3, H, W) -> sRGB (..., 3, H, W) float32 in [0, 1]: white balance
     with params' gains (skipped when ``white_balanced``, e.g. after
     :func:`white_balance_mosaic`), CCM (camera RGB -> linear sRGB), clip to [0, 1], sRGB
@@ -520,8 +578,9 @@ def process(cam: torch.Tensor, params: CaptureParams, bits: int | None = 8, whit
     return x if bits is None else quantize(x, bits)
 
 
-def raw_to_srgb(raw: torch.Tensor, params: CaptureParams, method: str = "ahd", bits: int | None = 8,
-                **demosaic_options: Any) -> torch.Tensor:
+def raw_to_srgb(
+    raw: torch.Tensor, params: CaptureParams, method: str = "ahd", bits: int | None = 8, **demosaic_options: Any
+) -> torch.Tensor:
     """The camera's side of the pipeline on a normalized raw mosaic (..., H, W): white
     balance on the mosaic, demosaic (``method``; AHD measures homogeneity in CIELab through
     sRGB->XYZ @ params.ccm), CCM, sRGB curve, rounding to ``bits``. White balance comes

@@ -40,6 +40,7 @@ N(0, sigma**2) (natural logarithms).
 Every error is a one-line :class:`lensim.errors.InputError` naming the file, the field
 and what was expected; unknown keys are refused.
 """
+
 from __future__ import annotations
 
 import json
@@ -58,11 +59,36 @@ from lensim.io import read_text
 BAYER_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
 SENSOR_DIR = Path(__file__).resolve().parents[1] / "assets" / "sensors"
 
-TOP_KEYS = {"name", "source", "description", "notes", "pixel_pitch_um", "resolution", "bayer_pattern",
-            "spectral_response", "ccm", "white_balance", "kelvin_range", "black_level", "white_level",
-            "bit_depth", "noise"}
-REQUIRED_KEYS = ("name", "pixel_pitch_um", "resolution", "bayer_pattern", "spectral_response", "ccm",
-                 "white_balance", "black_level", "white_level", "bit_depth", "noise")
+TOP_KEYS = {
+    "name",
+    "source",
+    "description",
+    "notes",
+    "pixel_pitch_um",
+    "resolution",
+    "bayer_pattern",
+    "spectral_response",
+    "ccm",
+    "white_balance",
+    "kelvin_range",
+    "black_level",
+    "white_level",
+    "bit_depth",
+    "noise",
+}
+REQUIRED_KEYS = (
+    "name",
+    "pixel_pitch_um",
+    "resolution",
+    "bayer_pattern",
+    "spectral_response",
+    "ccm",
+    "white_balance",
+    "black_level",
+    "white_level",
+    "bit_depth",
+    "noise",
+)
 WB_KEYS = {"kelvin", "r_gain", "b_gain"}
 NOISE_KEYS = {"shot", "read", "read_from_shot"}
 READ_FROM_SHOT_KEYS = {"slope", "intercept", "sigma"}
@@ -218,6 +244,7 @@ class SensorProfile:
 
 # ---------------------------------------------------------------- validation helpers
 
+
 def _number(src: str | None, fld: str, value: Any, positive: bool = False, nonneg: bool = False) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise InputError(src, fld, f"expected a number, got {value!r}")
@@ -232,8 +259,12 @@ def _number(src: str | None, fld: str, value: Any, positive: bool = False, nonne
 
 
 def _integer(src: str | None, fld: str, value: Any, lo: int, hi: int | None = None) -> int:
-    if (isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value)
-            or float(value) != int(value)):
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, float))
+        or not math.isfinite(value)
+        or float(value) != int(value)
+    ):
         raise InputError(src, fld, f"expected an integer, got {value!r}")
     n = int(value)
     if n < lo or (hi is not None and n > hi):
@@ -246,8 +277,11 @@ def _mapping(src: str | None, fld: str, data: Any, allowed: set[str]) -> dict:
         raise InputError(src, fld, f"expected a mapping, got {type(data).__name__}")
     unknown = sorted(str(k) for k in set(data) - allowed)
     if unknown:
-        raise InputError(src, f"{fld}.{unknown[0]}" if fld else unknown[0],
-                         f"unknown key(s) {', '.join(unknown)}; expected some of {', '.join(sorted(allowed))}")
+        raise InputError(
+            src,
+            f"{fld}.{unknown[0]}" if fld else unknown[0],
+            f"unknown key(s) {', '.join(unknown)}; expected some of {', '.join(sorted(allowed))}",
+        )
     return data
 
 
@@ -275,7 +309,9 @@ def _spectral(src: str | None, value: Any) -> str:
         if not p.is_absolute() and src is not None:
             p = Path(src).resolve().parent / p
         if not p.is_file():
-            raise InputError(src, fld, f"CSV file {str(p)!r} not found (a relative path is taken from the profile's folder)")
+            raise InputError(
+                src, fld, f"CSV file {str(p)!r} not found (a relative path is taken from the profile's folder)"
+            )
         from lensim.sensor.spectral import read_response_csv
 
         read_response_csv(p)  # raises InputError naming the CSV file, line and column
@@ -286,14 +322,23 @@ def _spectral(src: str | None, value: Any) -> str:
 def _ccm(src: str | None, ccm_raw: Any) -> tuple[tuple[float, float, float], ...]:
     """The 3x3 colour correction matrix (camera RGB -> linear sRGB): rows summing to 1,
     invertible."""
-    if not isinstance(ccm_raw, (list, tuple)) or len(ccm_raw) != 3 or any(
-            not isinstance(r, (list, tuple)) or len(r) != 3 for r in ccm_raw):
-        raise InputError(src, "ccm", f"expected a 3x3 matrix [[r_r, r_g, r_b], [g_r, ...], [b_r, ...]], got {ccm_raw!r}")
+    if (
+        not isinstance(ccm_raw, (list, tuple))
+        or len(ccm_raw) != 3
+        or any(not isinstance(r, (list, tuple)) or len(r) != 3 for r in ccm_raw)
+    ):
+        raise InputError(
+            src, "ccm", f"expected a 3x3 matrix [[r_r, r_g, r_b], [g_r, ...], [b_r, ...]], got {ccm_raw!r}"
+        )
     ccm = tuple(tuple(_number(src, f"ccm[{i}][{j}]", ccm_raw[i][j]) for j in range(3)) for i in range(3))
     for i, row in enumerate(ccm):
         if abs(sum(row) - 1.0) > CCM_ROW_SUM_TOL:
-            raise InputError(src, f"ccm[{i}]", f"expected the row to sum to 1 (within {CCM_ROW_SUM_TOL:g}) so that white "
-                             f"stays white, got {sum(row):.6g}")
+            raise InputError(
+                src,
+                f"ccm[{i}]",
+                f"expected the row to sum to 1 (within {CCM_ROW_SUM_TOL:g}) so that white "
+                f"stays white, got {sum(row):.6g}",
+            )
     cond = float(np.linalg.cond(np.array(ccm)))
     if not cond < 1e4:
         raise InputError(src, "ccm", f"expected an invertible matrix (condition number < 1e4), got {cond:.3g}")
@@ -313,13 +358,20 @@ def _white_balance(src: str | None, data: dict) -> tuple[list[WhiteBalancePoint]
         for k in sorted(WB_KEYS):
             if k not in e:
                 raise InputError(src, f"{f}.{k}", "missing (required)")
-        wb.append(WhiteBalancePoint(kelvin=_number(src, f"{f}.kelvin", e["kelvin"], positive=True),
-                                    r_gain=_number(src, f"{f}.r_gain", e["r_gain"], positive=True),
-                                    b_gain=_number(src, f"{f}.b_gain", e["b_gain"], positive=True)))
+        wb.append(
+            WhiteBalancePoint(
+                kelvin=_number(src, f"{f}.kelvin", e["kelvin"], positive=True),
+                r_gain=_number(src, f"{f}.r_gain", e["r_gain"], positive=True),
+                b_gain=_number(src, f"{f}.b_gain", e["b_gain"], positive=True),
+            )
+        )
     for i in range(1, len(wb)):
         if not wb[i].kelvin > wb[i - 1].kelvin:
-            raise InputError(src, f"white_balance[{i}].kelvin", f"expected strictly increasing colour temperatures, got "
-                             f"{wb[i].kelvin:g} after {wb[i - 1].kelvin:g}")
+            raise InputError(
+                src,
+                f"white_balance[{i}].kelvin",
+                f"expected strictly increasing colour temperatures, got {wb[i].kelvin:g} after {wb[i - 1].kelvin:g}",
+            )
 
     if "kelvin_range" in data:
         kr = data["kelvin_range"]
@@ -330,8 +382,11 @@ def _white_balance(src: str | None, data: dict) -> tuple[list[WhiteBalancePoint]
         if k_hi < k_lo:
             raise InputError(src, "kelvin_range", f"expected min <= max, got {kr!r}")
         if k_lo < wb[0].kelvin - 1e-9 or k_hi > wb[-1].kelvin + 1e-9:
-            raise InputError(src, "kelvin_range", f"expected a range inside the white_balance table "
-                             f"({wb[0].kelvin:g}-{wb[-1].kelvin:g} K), got {kr!r}")
+            raise InputError(
+                src,
+                "kelvin_range",
+                f"expected a range inside the white_balance table ({wb[0].kelvin:g}-{wb[-1].kelvin:g} K), got {kr!r}",
+            )
     else:
         k_lo, k_hi = wb[0].kelvin, wb[-1].kelvin
 
@@ -343,8 +398,8 @@ def _levels(src: str | None, data: dict) -> tuple[int, float, float]:
     bit_depth = _integer(src, "bit_depth", data["bit_depth"], 8, 16)
     black = _number(src, "black_level", data["black_level"], nonneg=True)
     white = _number(src, "white_level", data["white_level"], positive=True)
-    if white > 2 ** bit_depth - 1:
-        raise InputError(src, "white_level", f"expected at most 2**bit_depth - 1 = {2 ** bit_depth - 1}, got {white:g}")
+    if white > 2**bit_depth - 1:
+        raise InputError(src, "white_level", f"expected at most 2**bit_depth - 1 = {2**bit_depth - 1}, got {white:g}")
     if not white > black:
         raise InputError(src, "white_level", f"expected more than black_level ({black:g}), got {white:g}")
 
@@ -369,10 +424,14 @@ def _noise(src: str | None, noise: Any) -> NoiseModel:
             if k not in r:
                 raise InputError(src, f"noise.read_from_shot.{k}", "missing (required)")
         if not shot[0] > 0:
-            raise InputError(src, "noise.shot", "expected a positive shot noise with read_from_shot (its logarithm is taken)")
-        rfs = (_number(src, "noise.read_from_shot.slope", r["slope"]),
-               _number(src, "noise.read_from_shot.intercept", r["intercept"]),
-               _number(src, "noise.read_from_shot.sigma", r["sigma"], nonneg=True))
+            raise InputError(
+                src, "noise.shot", "expected a positive shot noise with read_from_shot (its logarithm is taken)"
+            )
+        rfs = (
+            _number(src, "noise.read_from_shot.slope", r["slope"]),
+            _number(src, "noise.read_from_shot.intercept", r["intercept"]),
+            _number(src, "noise.read_from_shot.sigma", r["sigma"], nonneg=True),
+        )
 
     return NoiseModel(shot=shot, read=read, read_from_shot=rfs)
 
@@ -416,16 +475,26 @@ def sensor_from_dict(data: Any, source: str | None = None) -> SensorProfile:
         return " ".join(str(x) for x in v) if isinstance(v, list) else str(v or "")
 
     return SensorProfile(
-        name=name.strip(), pixel_pitch_um=pitch, resolution=(w, h), bayer_pattern=pattern,
-        spectral_response=spectral, ccm=ccm, white_balance=tuple(wb), kelvin_range=(k_lo, k_hi),
-        black_level=black, white_level=white, bit_depth=bit_depth,
+        name=name.strip(),
+        pixel_pitch_um=pitch,
+        resolution=(w, h),
+        bayer_pattern=pattern,
+        spectral_response=spectral,
+        ccm=ccm,
+        white_balance=tuple(wb),
+        kelvin_range=(k_lo, k_hi),
+        black_level=black,
+        white_level=white,
+        bit_depth=bit_depth,
         noise=noise,
-        source=_text(data.get("source")).strip(), description=_text(data.get("description")).strip(),
+        source=_text(data.get("source")).strip(),
+        description=_text(data.get("description")).strip(),
         path=src,
     )
 
 
 # ---------------------------------------------------------------- files and built-ins
+
 
 def sensor_names() -> list[str]:
     """Names of the built-in sensor profiles."""
@@ -463,8 +532,11 @@ def load_sensor(name_or_path: str | Path | None = None) -> SensorProfile:
     if not p.exists():
         builtin = sensor_path(str(name_or_path))
         if builtin is None:
-            raise InputError(str(name_or_path), None,
-                             f"no such file, and not a built-in sensor (built-ins: {', '.join(sensor_names())})")
+            raise InputError(
+                str(name_or_path),
+                None,
+                f"no such file, and not a built-in sensor (built-ins: {', '.join(sensor_names())})",
+            )
         p = builtin
     if p.suffix.lower() not in (".json", ".yaml", ".yml"):
         raise InputError(str(p), None, "unknown sensor file type; expected .json, .yaml or .yml")

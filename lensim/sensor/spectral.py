@@ -21,6 +21,7 @@ Illuminants: 'E' (equal energy, the default) or any name in
 colour-science takes about a second to import; it is imported only when a named camera
 or a non-'E' illuminant is used.
 """
+
 from __future__ import annotations
 
 import csv
@@ -72,13 +73,19 @@ def _camera_table(name: str) -> tuple[np.ndarray, np.ndarray, str]:
 
     data = colour.MSDS_CAMERA_SENSITIVITIES
     if name not in data:
-        raise InputError(None, "response", f"unknown camera {name!r}; expected one of {', '.join(data.keys())} "
-                         "or a CSV file with columns wavelength_nm,r,g,b")
+        raise InputError(
+            None,
+            "response",
+            f"unknown camera {name!r}; expected one of {', '.join(data.keys())} "
+            "or a CSV file with columns wavelength_nm,r,g,b",
+        )
     msds = data[name]
     labels = [str(x).lower() for x in msds.labels]
     order = [labels.index(c) for c in ("red", "green", "blue")]
-    src = (f"colour-science {colour.__version__} MSDS_CAMERA_SENSITIVITIES[{name!r}] "
-           "(camera spectral sensitivities measured by the National Physical Laboratory)")
+    src = (
+        f"colour-science {colour.__version__} MSDS_CAMERA_SENSITIVITIES[{name!r}] "
+        "(camera spectral sensitivities measured by the National Physical Laboratory)"
+    )
     return np.asarray(msds.wavelengths, dtype=np.float64), np.asarray(msds.values, dtype=np.float64)[:, order].T, src
 
 
@@ -97,7 +104,11 @@ def read_response_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     header = [c.strip().lower() for c in rows[0]]
     missing = [c for c in CSV_COLUMNS if c not in header]
     if missing:
-        raise InputError(src, "header", f"missing column(s) {', '.join(missing)}; expected the header {','.join(CSV_COLUMNS)}, got {','.join(header)}")
+        raise InputError(
+            src,
+            "header",
+            f"missing column(s) {', '.join(missing)}; expected the header {','.join(CSV_COLUMNS)}, got {','.join(header)}",
+        )
     idx = [header.index(c) for c in CSV_COLUMNS]
     values = np.empty((len(rows) - 1, 4))
     for i, row in enumerate(rows[1:], start=2):
@@ -108,7 +119,11 @@ def read_response_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
             except ValueError:
                 raise InputError(src, f"line {i}, column {col}", f"expected a number, got {cell!r}") from None
             if not math.isfinite(v) or (j > 0 and v < 0):
-                raise InputError(src, f"line {i}, column {col}", f"expected a finite{' non-negative' if j else ''} number, got {cell!r}")
+                raise InputError(
+                    src,
+                    f"line {i}, column {col}",
+                    f"expected a finite{' non-negative' if j else ''} number, got {cell!r}",
+                )
             values[i - 2, j] = v
     if values.shape[0] < 2:
         raise InputError(src, "wavelength_nm", f"expected at least 2 data rows, got {values.shape[0]}")
@@ -126,11 +141,15 @@ def _illuminant(name: str, wavelengths_nm: np.ndarray) -> np.ndarray:
 
     data = colour.SDS_ILLUMINANTS
     if name not in data:
-        raise InputError(None, "illuminant", f"unknown illuminant {name!r}; expected E, D65, A or another colour-science illuminant")
+        raise InputError(
+            None, "illuminant", f"unknown illuminant {name!r}; expected E, D65, A or another colour-science illuminant"
+        )
     sd = data[name]
     wl = np.asarray(sd.wavelengths, dtype=np.float64)
     if wavelengths_nm.min() < wl[0] - 1e-9 or wavelengths_nm.max() > wl[-1] + 1e-9:
-        raise InputError(None, "illuminant", f"{name} is tabulated over {wl[0]:g}-{wl[-1]:g} nm; expected bank wavelengths inside")
+        raise InputError(
+            None, "illuminant", f"{name} is tabulated over {wl[0]:g}-{wl[-1]:g} nm; expected bank wavelengths inside"
+        )
     return np.interp(wavelengths_nm, wl, np.asarray(sd.values, dtype=np.float64))
 
 
@@ -160,13 +179,27 @@ def spectral_response(
         where, column = None, "response"
     lo, hi = float(table_wl[0]), float(table_wl[-1])
     if wl.min() < lo - 1e-9 or wl.max() > hi + 1e-9:
-        raise InputError(where, column, f"{name} covers {lo:g}-{hi:g} nm; expected the bank wavelengths "
-                         f"({wl.min():g}-{wl.max():g} nm) inside that range")
+        raise InputError(
+            where,
+            column,
+            f"{name} covers {lo:g}-{hi:g} nm; expected the bank wavelengths "
+            f"({wl.min():g}-{wl.max():g} nm) inside that range",
+        )
     sens = np.stack([np.interp(wl, table_wl, row) for row in table])
     weighted = sens * _illuminant(illuminant, wl)[None, :]
     sums = weighted.sum(axis=1)
     for c, s in zip(CHANNELS, sums):
         if not s > 0:
-            raise InputError(where, c if where else "response", f"channel {c} has zero response at the bank wavelengths ({wl.min():g}-{wl.max():g} nm)")
-    return SpectralResponse(name=name, source=source, illuminant=illuminant, wavelengths_nm=wl,
-                            sensitivities=sens, weights=weighted / sums[:, None])
+            raise InputError(
+                where,
+                c if where else "response",
+                f"channel {c} has zero response at the bank wavelengths ({wl.min():g}-{wl.max():g} nm)",
+            )
+    return SpectralResponse(
+        name=name,
+        source=source,
+        illuminant=illuminant,
+        wavelengths_nm=wl,
+        sensitivities=sens,
+        weights=weighted / sums[:, None],
+    )

@@ -33,21 +33,38 @@ Kernel rotation lives in lensim.render.rotation, the bank's figures in lensim.pl
 Units: lengths mm, pixel pitch and PSF spacing um, wavelengths nm in the manifest and the
 API of this module (um inside the optics code), angles in degrees.
 """
+
 from lensim.psf.bank.compute import alias_free_pixels, build_bank, compute_bank, embed_centred
 from lensim.psf.bank.grid import GridAxes, GridBank, compute_grid
 from lensim.psf.bank.settings import (
-                                      DEFAULT_FIELDS,
-                                      BankSettings,
-                                      default_fields,
-                                      parse_wavelengths_nm,
-                                      suggest_kernel_pixels,
+    DEFAULT_FIELDS,
+    BankSettings,
+    default_fields,
+    parse_wavelengths_nm,
+    suggest_kernel_pixels,
 )
 from lensim.psf.bank.store import FORMAT, FORMAT_VERSION, MANIFEST, field_file, read_manifest
 from lensim.psf.bank.types import BankField, Progress, PSFBank
 
 __all__ = [
-    "DEFAULT_FIELDS", "FORMAT", "FORMAT_VERSION", "MANIFEST", "BankField", "BankSettings", "GridAxes", "GridBank",
-    "PSFBank", "Progress", "compute_grid",
-    "alias_free_pixels", "build_bank", "compute_bank", "default_fields", "embed_centred", "field_file",
-    "parse_wavelengths_nm", "read_manifest", "suggest_kernel_pixels",
+    "DEFAULT_FIELDS",
+    "FORMAT",
+    "FORMAT_VERSION",
+    "MANIFEST",
+    "BankField",
+    "BankSettings",
+    "GridAxes",
+    "GridBank",
+    "PSFBank",
+    "Progress",
+    "compute_grid",
+    "alias_free_pixels",
+    "build_bank",
+    "compute_bank",
+    "default_fields",
+    "embed_centred",
+    "field_file",
+    "parse_wavelengths_nm",
+    "read_manifest",
+    "suggest_kernel_pixels",
 ]

@@ -2,6 +2,7 @@
 relative illumination, spectral weighting), run through lensim.workers.run_jobs (in this
 process, on a local Dask cluster or on a cluster given by address), each field written as
 it finishes."""
+
 from __future__ import annotations
 
 import math
@@ -89,7 +90,7 @@ def embed_centred(small: np.ndarray, size: int) -> np.ndarray:
         return small
     out = np.zeros(small.shape[:-2] + (size, size), dtype=small.dtype)
     a = (size - n) // 2
-    out[..., a:a + n, a:a + n] = small
+    out[..., a : a + n, a : a + n] = small
     return out
 
 
@@ -108,8 +109,9 @@ class _FieldWork:
         try:
             return pupil_field(self.lens, self.value, wl_um, self.job.pupil_samples, self.job.aiming, self.para)
         except InputError as e:
-            raise InputError(self.lens.source, f"field {self.fld:g} ({self.value:g}) at {wl_um * 1e3:g} nm",
-                             e.message) from None
+            raise InputError(
+                self.lens.source, f"field {self.fld:g} ({self.value:g}) at {wl_um * 1e3:g} nm", e.message
+            ) from None
 
     def _check(self, pf: PupilField, wl_um: float, sub_grid: int, offset: tuple[float, float]) -> None:
         job = self.job
@@ -118,12 +120,18 @@ class _FieldWork:
             try:
                 check_sampling(self.lens, pf, sub_grid, job.spacing_um, job.method, offset)
             except PupilSamplingError as e:
-                raise PupilSamplingError(self.lens.source, f"field {self.fld:g} at {wl_um * 1e3:g} nm",
-                                         f"{e.message} (kernel {job.kernel_pixels} px of {job.pixel_pitch_um:g} um)",
-                                         e.needed) from None
+                raise PupilSamplingError(
+                    self.lens.source,
+                    f"field {self.fld:g} at {wl_um * 1e3:g} nm",
+                    f"{e.message} (kernel {job.kernel_pixels} px of {job.pixel_pitch_um:g} um)",
+                    e.needed,
+                ) from None
             except InputError as e:
-                raise InputError(self.lens.source, f"field {self.fld:g} at {wl_um * 1e3:g} nm",
-                                 f"{e.message} (kernel {job.kernel_pixels} px of {job.pixel_pitch_um:g} um)") from None
+                raise InputError(
+                    self.lens.source,
+                    f"field {self.fld:g} at {wl_um * 1e3:g} nm",
+                    f"{e.message} (kernel {job.kernel_pixels} px of {job.pixel_pitch_um:g} um)",
+                ) from None
         prefix = f"{self.lens.source}: "
         for w in rec:
             if issubclass(w.category, PSFSamplingWarning):
@@ -146,8 +154,9 @@ class _FieldWork:
 
         if self.value == 0:
             return 1.0
-        return relative_illumination(self.lens, [self.value], wl_um, self.job.ri_samples, self.job.aiming,
-                                     para=self.para)["relative_illumination"][0]
+        return relative_illumination(
+            self.lens, [self.value], wl_um, self.job.ri_samples, self.job.aiming, para=self.para
+        )["relative_illumination"][0]
 
 
 def _compute_field(job: _Job, index: int, fld: float, para: ParaxialData | None = None) -> BankField:
@@ -175,8 +184,11 @@ def _compute_field(job: _Job, index: int, fld: float, para: ParaxialData | None 
         pix = integrate_pixels(fine, job.k)
         total = float(pix.sum())
         if not total > 0:
-            raise InputError(lens.source, f"field {fld:g} at {wl * 1e3:g} nm", "no energy inside the kernel window; "
-                             "expected a larger kernel")
+            raise InputError(
+                lens.source,
+                f"field {fld:g} at {wl * 1e3:g} nm",
+                "no energy inside the kernel window; expected a larger kernel",
+            )
         ri[w] = work.relative_illumination(wl)
         rgb += (job.weights[:, w] * ri[w])[:, None, None] * (pix / total)[None]
         offsets[w] = [-off[0], -off[1]]
@@ -189,10 +201,19 @@ def _compute_field(job: _Job, index: int, fld: float, para: ParaxialData | None 
     if job.method != "geometric":
         strehl = strehl_ratio(torch.from_numpy(primary_fine), primary_pf, job.spacing_um)
     return BankField(
-        index=index, field=float(fld), field_value=float(work.value), rgb=rgb.astype(np.float32),
-        reference_xy_mm=ref.numpy().astype(np.float64), paraxial_xy_mm=np.array([0.0, float(para_y)]),
-        chief_offsets_mm=offsets, relative_illumination=ri, transmission=trans, window_energy=window,
-        strehl=float(strehl), working_fno=float(primary_pf.working_fno()), primary_fine=primary_fine.astype(np.float32),
+        index=index,
+        field=float(fld),
+        field_value=float(work.value),
+        rgb=rgb.astype(np.float32),
+        reference_xy_mm=ref.numpy().astype(np.float64),
+        paraxial_xy_mm=np.array([0.0, float(para_y)]),
+        chief_offsets_mm=offsets,
+        relative_illumination=ri,
+        transmission=trans,
+        window_energy=window,
+        strehl=float(strehl),
+        working_fno=float(primary_pf.working_fno()),
+        primary_fine=primary_fine.astype(np.float32),
         warnings=work.caught,
     )
 
@@ -231,14 +252,17 @@ def _check_fields(lens: Lens, fields: list[float] | np.ndarray | None) -> np.nda
     if f.size == 0:
         raise InputError(lens.source, "fields", "expected at least one normalized field")
     if not np.all(np.isfinite(f)) or f.min() < 0 or f.max() > 1 + 1e-9:
-        raise InputError(lens.source, "fields", f"expected normalized fields between 0 and 1, got {f.min():g}..{f.max():g}")
+        raise InputError(
+            lens.source, "fields", f"expected normalized fields between 0 and 1, got {f.min():g}..{f.max():g}"
+        )
     if np.any(np.diff(f) <= 0):
         raise InputError(lens.source, "fields", "expected strictly increasing normalized fields")
     return f
 
 
-def _check_arguments(lens: Lens, pixel_pitch_um: float, kernel_pixels: int, method: str, aiming: str,
-                     workers: int) -> None:
+def _check_arguments(
+    lens: Lens, pixel_pitch_um: float, kernel_pixels: int, method: str, aiming: str, workers: int
+) -> None:
     if not (pixel_pitch_um > 0 and math.isfinite(pixel_pitch_um)):
         raise InputError(lens.source, "pixel_pitch_um", f"expected a positive pitch (um), got {pixel_pitch_um}")
     if kernel_pixels < 1 or kernel_pixels % 2 == 0:
@@ -251,12 +275,18 @@ def _check_arguments(lens: Lens, pixel_pitch_um: float, kernel_pixels: int, meth
         raise InputError(lens.source, "workers", f"expected at least 1 worker, got {workers}")
 
 
-def _response(lens: Lens, wavelengths_nm: list[float] | np.ndarray | None,
-              response: str | Path | SpectralResponse | None, illuminant: str) -> SpectralResponse:
+def _response(
+    lens: Lens,
+    wavelengths_nm: list[float] | np.ndarray | None,
+    response: str | Path | SpectralResponse | None,
+    illuminant: str,
+) -> SpectralResponse:
     """The spectral weights at the bank wavelengths (strictly increasing)."""
     if isinstance(response, SpectralResponse):
         resp = response
-        if wavelengths_nm is not None and not np.allclose(np.asarray(wavelengths_nm, dtype=np.float64), resp.wavelengths_nm):
+        if wavelengths_nm is not None and not np.allclose(
+            np.asarray(wavelengths_nm, dtype=np.float64), resp.wavelengths_nm
+        ):
             raise InputError(lens.source, "wavelengths_nm", "expected the wavelengths of the given SpectralResponse")
     else:
         resp = spectral_response(wavelengths_nm, response, illuminant)
@@ -300,8 +330,15 @@ class BankPlan:
     compute; finish(field) stores one computed field; result() is the whole bank. `label`
     names the bank in sampling warnings (a grid's setting)."""
 
-    def __init__(self, job: _Job, fields: np.ndarray, manifest: dict, para: ParaxialData,
-                 directory: Path | None = None, label: str = "") -> None:
+    def __init__(
+        self,
+        job: _Job,
+        fields: np.ndarray,
+        manifest: dict,
+        para: ParaxialData,
+        directory: Path | None = None,
+        label: str = "",
+    ) -> None:
         self.job, self.fields, self.manifest, self.para = job, fields, manifest, para
         self.directory, self.label = directory, label
         self.done: dict[int, BankField] = {}
@@ -314,8 +351,11 @@ class BankPlan:
 
     def tasks(self, bank: int = 0) -> list[FieldTask]:
         """The fields still to compute, tagged with `bank`."""
-        return [FieldTask(self.job, i, float(f), self.para, bank, self.label) for i, f in enumerate(self.fields)
-                if i not in self.done]
+        return [
+            FieldTask(self.job, i, float(f), self.para, bank, self.label)
+            for i, f in enumerate(self.fields)
+            if i not in self.done
+        ]
 
     def finish(self, bf: BankField) -> None:
         """Store a computed field (written into the directory atomically) and pass on its
@@ -326,8 +366,11 @@ class BankPlan:
         if bf.warnings:
             more = f" (and {len(bf.warnings) - 1} more)" if len(bf.warnings) > 1 else ""
             where = f" ({self.label})" if self.label else ""
-            warnings.warn(f"{self.job.lens.source}: bank field {bf.field:.4f}{where}: {bf.warnings[0]}{more}",
-                          PSFSamplingWarning, stacklevel=6)
+            warnings.warn(
+                f"{self.job.lens.source}: bank field {bf.field:.4f}{where}: {bf.warnings[0]}{more}",
+                PSFSamplingWarning,
+                stacklevel=6,
+            )
 
     def result(self) -> PSFBank:
         """The bank, every field computed."""
@@ -363,14 +406,27 @@ def plan_bank(
         max_spacing_um = 0.5 * 1.22 * min(wl_um) * pf0.working_fno()
     if not (max_spacing_um > 0):
         raise InputError(lens.source, "max_spacing_um", f"expected a positive spacing (um), got {max_spacing_um}")
-    job = _Job(lens, wl_um, resp.weights, lens.primary_wavelength_um, float(pixel_pitch_um), int(kernel_pixels),
-               oversampling_factor(pixel_pitch_um, max_spacing_um), method, int(pupil_samples), int(ri_samples), aiming)
-    return BankPlan(job, flds, _manifest(job, flds, resp, max_spacing_um), para,
-                    None if out_dir is None else Path(out_dir), label)
+    job = _Job(
+        lens,
+        wl_um,
+        resp.weights,
+        lens.primary_wavelength_um,
+        float(pixel_pitch_um),
+        int(kernel_pixels),
+        oversampling_factor(pixel_pitch_um, max_spacing_um),
+        method,
+        int(pupil_samples),
+        int(ri_samples),
+        aiming,
+    )
+    return BankPlan(
+        job, flds, _manifest(job, flds, resp, max_spacing_um), para, None if out_dir is None else Path(out_dir), label
+    )
 
 
-def compute_banks(plans: list[BankPlan], workers: int = 1, scheduler: str | None = None,
-                  progress: Progress | None = None) -> list[PSFBank]:
+def compute_banks(
+    plans: list[BankPlan], workers: int = 1, scheduler: str | None = None, progress: Progress | None = None
+) -> list[PSFBank]:
     """Compute several banks as one list of field jobs (lensim.workers.run_jobs: here, on
     a local Dask cluster of `workers` processes or on the cluster at `scheduler`), each
     resuming from the fields already in its directory and writing each field as it
@@ -436,22 +492,52 @@ def compute_bank(
     another process is writing into out_dir (lensim.io.folder_lock, held while computing).
     """
     _check_arguments(lens, pixel_pitch_um, kernel_pixels, method, aiming, workers)
-    plan = plan_bank(lens, pixel_pitch_um, kernel_pixels, fields, wavelengths_nm, response, method, pupil_samples,
-                     max_spacing_um, aiming, out_dir, illuminant, ri_samples)
+    plan = plan_bank(
+        lens,
+        pixel_pitch_um,
+        kernel_pixels,
+        fields,
+        wavelengths_nm,
+        response,
+        method,
+        pupil_samples,
+        max_spacing_um,
+        aiming,
+        out_dir,
+        illuminant,
+        ri_samples,
+    )
     if out_dir is None:
         return compute_banks([plan], workers, scheduler, progress)[0]
     with folder_lock(out_dir):
         return compute_banks([plan], workers, scheduler, progress)[0]
 
 
-def build_bank(lens: Lens, pixel_pitch_um: float, settings: BankSettings, response: str | Path | None = None,
-               out_dir: str | Path | None = None, workers: int = 1, progress: Progress | None = None,
-               scheduler: str | None = None, **options: Any) -> PSFBank:
+def build_bank(
+    lens: Lens,
+    pixel_pitch_um: float,
+    settings: BankSettings,
+    response: str | Path | None = None,
+    out_dir: str | Path | None = None,
+    workers: int = 1,
+    progress: Progress | None = None,
+    scheduler: str | None = None,
+    **options: Any,
+) -> PSFBank:
     """The bank `settings` ask for, for this lens at this pixel pitch (um) and spectral
     response (compute_bank's): the kernel sized by settings.kernel_size, the fields,
     wavelengths, pupil samples and aiming from the settings; workers, scheduler: where
     the fields are computed (compute_bank's). options: compute_bank's other keywords
     (method, max_spacing_um, illuminant, ri_samples)."""
-    return compute_bank(lens, pixel_pitch_um, settings.kernel_size(lens, pixel_pitch_um), response=response,
-                        workers=workers, out_dir=out_dir, progress=progress, scheduler=scheduler,
-                        **settings.compute_options(), **options)
+    return compute_bank(
+        lens,
+        pixel_pitch_um,
+        settings.kernel_size(lens, pixel_pitch_um),
+        response=response,
+        workers=workers,
+        out_dir=out_dir,
+        progress=progress,
+        scheduler=scheduler,
+        **settings.compute_options(),
+        **options,
+    )

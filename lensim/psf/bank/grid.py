@@ -21,6 +21,7 @@ finishes, so a killed grid resumes where it stopped and a cluster computes the w
 Distances are in metres from the image plane (math.inf allowed; "inf" in JSON), F-numbers
 image-space at infinity. Interpolation between settings: lensim.psf.bank.grid_interp.
 """
+
 from __future__ import annotations
 
 import itertools
@@ -74,8 +75,9 @@ def parse_setting_list(text: str | None, key: str) -> tuple[Any, ...] | None:
     seen: set[Any] = set()
     for v in values:
         if v in seen:
-            raise InputError("<command line>", option, f"{strict_json(v)!s} is given twice in {text!r}; expected "
-                             "distinct values")
+            raise InputError(
+                "<command line>", option, f"{strict_json(v)!s} is given twice in {text!r}; expected distinct values"
+            )
         seen.add(v)
     return values
 
@@ -90,11 +92,16 @@ class GridAxes:
     config: tuple[str, ...] | None = None
 
     @classmethod
-    def from_options(cls, fno: str | None = None, focus_m: str | None = None, object_m: str | None = None,
-                     config: str | None = None) -> GridAxes:
+    def from_options(
+        cls, fno: str | None = None, focus_m: str | None = None, object_m: str | None = None, config: str | None = None
+    ) -> GridAxes:
         """The axes from the command line's comma lists (parse_setting_list)."""
-        return cls(parse_setting_list(fno, "fno"), parse_setting_list(focus_m, "focus_m"),
-                   parse_setting_list(object_m, "object_m"), parse_setting_list(config, "config"))
+        return cls(
+            parse_setting_list(fno, "fno"),
+            parse_setting_list(focus_m, "focus_m"),
+            parse_setting_list(object_m, "object_m"),
+            parse_setting_list(config, "config"),
+        )
 
     @property
     def given(self) -> bool:
@@ -131,18 +138,37 @@ def setting_label(settings: ShootingSettings) -> str:
     return ", ".join(parts) or "as the lens file has it"
 
 
-def _grid_manifest(lens: Lens, axes: GridAxes, settings: list[ShootingSettings], resolved: list[dict],
-                   bank_manifest: dict) -> dict:
+def _grid_manifest(
+    lens: Lens, axes: GridAxes, settings: list[ShootingSettings], resolved: list[dict], bank_manifest: dict
+) -> dict:
     """The grid's manifest; `bank_manifest` is the first setting's bank manifest, whose
     shared options (not its lens) are recorded once."""
-    shared = {k: bank_manifest[k] for k in ("pixel_pitch_um", "kernel_pixels", "fields", "wavelengths_nm",
-                                             "primary_wavelength_nm", "response", "method", "pupil_samples",
-                                             "ri_samples", "aiming")}
+    shared = {
+        k: bank_manifest[k]
+        for k in (
+            "pixel_pitch_um",
+            "kernel_pixels",
+            "fields",
+            "wavelengths_nm",
+            "primary_wavelength_nm",
+            "response",
+            "method",
+            "pupil_samples",
+            "ri_samples",
+            "aiming",
+        )
+    }
     return {
-        "format": GRID_FORMAT, "format_version": GRID_FORMAT_VERSION, "lens_file": lens.source,
-        "lens": lens_to_dict(lens), "axes": axes.to_dict(), "bank": shared,
-        "settings": [{"bank": setting_dir(i), "request": s.to_dict(), "resolved": record(r)}
-                     for i, (s, r) in enumerate(zip(settings, resolved, strict=True))],
+        "format": GRID_FORMAT,
+        "format_version": GRID_FORMAT_VERSION,
+        "lens_file": lens.source,
+        "lens": lens_to_dict(lens),
+        "axes": axes.to_dict(),
+        "bank": shared,
+        "settings": [
+            {"bank": setting_dir(i), "request": s.to_dict(), "resolved": record(r)}
+            for i, (s, r) in enumerate(zip(settings, resolved, strict=True))
+        ],
         "lensim_version": lensim_version(),
     }
 
@@ -178,13 +204,20 @@ def _open_grid_directory(directory: Path, manifest: dict) -> None:
     if p.is_file():
         old = read_grid_manifest(directory)
         if old is None:
-            raise InputError(str(p), "format", f"the folder holds a single PSF bank ({BANK_FORMAT}); expected a new "
-                             "folder for a grid of banks")
+            raise InputError(
+                str(p),
+                "format",
+                f"the folder holds a single PSF bank ({BANK_FORMAT}); expected a new folder for a grid of banks",
+            )
         diff = manifest_differences(old, manifest)
         started = any(directory.glob("s[0-9][0-9][0-9]/field_*.npz"))
         if diff and started:
-            raise InputError(str(p), ", ".join(diff), "the grid on disk was made with different settings; expected "
-                             "the same settings to resume, or a new output folder")
+            raise InputError(
+                str(p),
+                ", ".join(diff),
+                "the grid on disk was made with different settings; expected "
+                "the same settings to resume, or a new output folder",
+            )
         if not diff:
             return
     directory.mkdir(parents=True, exist_ok=True)
@@ -199,9 +232,18 @@ def grid_kernel_pixels(lenses: Sequence[Lens], pitch_um: float, settings: BankSe
     return max(suggest_kernel_pixels(lens, pitch_um, settings.kernel_limit) for lens in lenses)
 
 
-def compute_grid(lens: Lens, pixel_pitch_um: float, axes: GridAxes, settings: BankSettings,
-                 out_dir: str | Path, response: str | Path | None = None, workers: int = 1,
-                 scheduler: str | None = None, progress: Progress | None = None, **options: Any) -> GridBank:
+def compute_grid(
+    lens: Lens,
+    pixel_pitch_um: float,
+    axes: GridAxes,
+    settings: BankSettings,
+    out_dir: str | Path,
+    response: str | Path | None = None,
+    workers: int = 1,
+    scheduler: str | None = None,
+    progress: Progress | None = None,
+    **options: Any,
+) -> GridBank:
     """Compute (or finish, after a kill) the grid of banks `axes` spans for this lens at
     this pixel pitch (um) into out_dir, with the bank options of `settings` (BankSettings;
     its kernel size, when None, is the largest any setting asks for) and compute_bank's
@@ -213,16 +255,27 @@ def compute_grid(lens: Lens, pixel_pitch_um: float, axes: GridAxes, settings: Ba
     Raises InputError for settings the lens cannot take (naming the option), and for a
     folder holding a single bank or a grid of other settings."""
     if not axes.given:
-        raise InputError("<command line>", "--fno/--focus-m/--object-m/--config", "expected at least one setting "
-                         "list for a grid")
+        raise InputError(
+            "<command line>", "--fno/--focus-m/--object-m/--config", "expected at least one setting list for a grid"
+        )
     out = Path(out_dir)
     shots = axes.settings()
     lenses = [lens_at(lens, s) for s in shots]
     resolved = [describe(lens, s) for s in shots]
     kernel = grid_kernel_pixels(lenses, pixel_pitch_um, settings)
-    plans = [plan_bank(at, pixel_pitch_um, kernel, response=response, out_dir=out / setting_dir(i),
-                       label=setting_label(s), **settings.compute_options(), **options)
-             for i, (at, s) in enumerate(zip(lenses, shots, strict=True))]
+    plans = [
+        plan_bank(
+            at,
+            pixel_pitch_um,
+            kernel,
+            response=response,
+            out_dir=out / setting_dir(i),
+            label=setting_label(s),
+            **settings.compute_options(),
+            **options,
+        )
+        for i, (at, s) in enumerate(zip(lenses, shots, strict=True))
+    ]
     for plan, s, r in zip(plans, shots, resolved, strict=True):
         plan.manifest["shooting"] = {"request": s.to_dict(), "resolved": record(r)}
     manifest = _grid_manifest(lens, axes, shots, resolved, plans[0].manifest)
@@ -262,8 +315,12 @@ class GridBank:
         """The grid in a folder; a one-line InputError when it holds none."""
         m = read_grid_manifest(directory)
         if m is None:
-            raise InputError(str(directory), MANIFEST, "not a grid of PSF banks; expected a folder written by "
-                             "`lensim psf bank` with setting lists (--fno, --focus-m, --object-m, --config)")
+            raise InputError(
+                str(directory),
+                MANIFEST,
+                "not a grid of PSF banks; expected a folder written by "
+                "`lensim psf bank` with setting lists (--fno, --focus-m, --object-m, --config)",
+            )
         return cls(directory, m)
 
     def __len__(self) -> int:
@@ -277,8 +334,7 @@ class GridBank:
     @property
     def axes(self) -> dict[str, list | None]:
         """{axis: its values (math.inf for infinite distances) or None}."""
-        return {k: None if v is None else [from_strict(x) for x in v]
-                for k, v in self.manifest["axes"].items()}
+        return {k: None if v is None else [from_strict(x) for x in v] for k, v in self.manifest["axes"].items()}
 
     def bank(self, index: int) -> PSFBank:
         """The bank of setting `index` (0-based), loaded once."""
@@ -296,15 +352,25 @@ class GridBank:
         """Setting `index` in words (setting_label)."""
         return setting_label(self.settings[index])
 
-    def nearest(self, fno: float | None = None, focus_m: float | None = None, object_m: float | None = None,
-                config: str | None = None) -> int:
+    def nearest(
+        self,
+        fno: float | None = None,
+        focus_m: float | None = None,
+        object_m: float | None = None,
+        config: str | None = None,
+    ) -> int:
         """The index of the setting nearest the given values (grid_interp.nearest_setting)."""
         from lensim.psf.bank.grid_interp import nearest_setting
 
         return nearest_setting(self, {"fno": fno, "focus_m": focus_m, "object_m": object_m, "config": config})
 
-    def interpolated(self, fno: float | None = None, focus_m: float | None = None, object_m: float | None = None,
-                     config: str | None = None) -> PSFBank:
+    def interpolated(
+        self,
+        fno: float | None = None,
+        focus_m: float | None = None,
+        object_m: float | None = None,
+        config: str | None = None,
+    ) -> PSFBank:
         """A bank at the given values blended from the settings around them
         (grid_interp.interpolate_bank); values outside the grid are refused."""
         from lensim.psf.bank.grid_interp import interpolate_bank
@@ -312,16 +378,33 @@ class GridBank:
         return interpolate_bank(self, {"fno": fno, "focus_m": focus_m, "object_m": object_m, "config": config})
 
 
-def compute_setting_bank(lens: Lens, pixel_pitch_um: float, shot: ShootingSettings, settings: BankSettings,
-                         out_dir: str | Path | None, response: str | Path | None = None, workers: int = 1,
-                         scheduler: str | None = None, progress: Progress | None = None, **options: Any) -> PSFBank:
+def compute_setting_bank(
+    lens: Lens,
+    pixel_pitch_um: float,
+    shot: ShootingSettings,
+    settings: BankSettings,
+    out_dir: str | Path | None,
+    response: str | Path | None = None,
+    workers: int = 1,
+    scheduler: str | None = None,
+    progress: Progress | None = None,
+    **options: Any,
+) -> PSFBank:
     """One ordinary bank of the lens at one setting (lens_at), its manifest describing the
     setting ("shooting": request and resolved numbers); the same bank, field for field, as
     that setting's bank in a grid with the same kernel size. Arguments as compute_grid's."""
     at = lens_at(lens, shot)
     kernel = grid_kernel_pixels([at], pixel_pitch_um, settings)
-    plan = plan_bank(at, pixel_pitch_um, kernel, response=response, out_dir=out_dir, label=setting_label(shot),
-                     **settings.compute_options(), **options)
+    plan = plan_bank(
+        at,
+        pixel_pitch_um,
+        kernel,
+        response=response,
+        out_dir=out_dir,
+        label=setting_label(shot),
+        **settings.compute_options(),
+        **options,
+    )
     plan.manifest["shooting"] = {"request": shot.to_dict(), "resolved": record(describe(lens, shot))}
     if out_dir is None:
         return compute_banks([plan], workers, scheduler, progress)[0]

@@ -19,6 +19,7 @@ worst kernel NCC of 0.96 (either neighbour alone 0.92); F/8 from F/5.6 and F/11 
 stops) 0.91. Blending across F-numbers more than one stop apart therefore warns
 (GridInterpolationWarning): make the grid denser in F-number instead.
 """
+
 from __future__ import annotations
 
 import itertools
@@ -65,8 +66,11 @@ def _axis_value(grid: GridBank, key: str, query: Any) -> float | str | None:
     values = grid.axes.get(key)
     if values is None:
         if query is not None:
-            raise InputError(str(grid.directory), OPTIONS[key], f"the grid does not vary {key} (the lens file's "
-                             f"value throughout); expected no {OPTIONS[key]}")
+            raise InputError(
+                str(grid.directory),
+                OPTIONS[key],
+                f"the grid does not vary {key} (the lens file's value throughout); expected no {OPTIONS[key]}",
+            )
         return None
     if query is None:
         if len(values) > 1:
@@ -85,17 +89,24 @@ def _bracket(key: str, values: list[float], q: float, where: str) -> list[tuple[
     tol = 1e-9 * max(1.0, abs(lo), abs(hi))
     if not lo - tol <= c <= hi + tol:
         span = f"{_show(key, coords[0][1])} .. {_show(key, coords[-1][1])}"
-        raise InputError(where, OPTIONS[key], f"{_show(key, q)} is outside the grid ({span}); expected a value "
-                         "inside it (kernels are not extrapolated)")
+        raise InputError(
+            where,
+            OPTIONS[key],
+            f"{_show(key, q)} is outside the grid ({span}); expected a value inside it (kernels are not extrapolated)",
+        )
     for (c0, v0), (c1, v1) in zip(coords, coords[1:], strict=False):
         if c0 - tol <= c <= c1 + tol:
             t = min(1.0, max(0.0, (c - c0) / (c1 - c0)))
             if not 0.0 < t < 1.0:
                 return [(v1 if t >= 1.0 else v0, 1.0)]
             if key == "fno" and c1 - c0 > FNO_STEP_STOPS + 0.1:  # nominal F-numbers: F/5.6 to F/8 is 1.03
-                warnings.warn(f"{where}: F/{q:g} blended from F/{v0:g} and F/{v1:g}, {c1 - c0:.2g} stops apart: the "
-                              f"kernels are an approximation (a grid at most {FNO_STEP_STOPS:g} stop apart keeps "
-                              "kernel NCC about 0.96 or better)", GridInterpolationWarning, stacklevel=5)
+                warnings.warn(
+                    f"{where}: F/{q:g} blended from F/{v0:g} and F/{v1:g}, {c1 - c0:.2g} stops apart: the "
+                    f"kernels are an approximation (a grid at most {FNO_STEP_STOPS:g} stop apart keeps "
+                    "kernel NCC about 0.96 or better)",
+                    GridInterpolationWarning,
+                    stacklevel=5,
+                )
             return [(v0, 1.0 - t), (v1, t)]
     return [(coords[0][1], 1.0)]  # a single value
 
@@ -112,8 +123,9 @@ def setting_weights(grid: GridBank, query: dict[str, Any]) -> list[tuple[int, fl
     config = _axis_value(grid, "config", query.get("config"))
     configs = axes["config"] or []
     if config is not None and config not in configs:
-        raise InputError(where, "--config", f"{config!r} is not one of the grid's configurations "
-                         f"({', '.join(map(str, configs))})")
+        raise InputError(
+            where, "--config", f"{config!r} is not one of the grid's configurations ({', '.join(map(str, configs))})"
+        )
     per_axis: list[list[tuple[Any, float]]] = []
     for key in NUMERIC_AXES:
         q = _axis_value(grid, key, query.get(key))
@@ -154,16 +166,24 @@ def nearest_setting(grid: GridBank, query: dict[str, Any]) -> int:
 
 def _blend_field(fields: list[BankField], w: list[float]) -> BankField:
     """One field blended from the same field of several banks (weights w)."""
+
     def mix(name: str) -> Any:
         return sum(wi * np.asarray(getattr(f, name), dtype=np.float64) for wi, f in zip(w, fields, strict=True))
 
     top = fields[int(np.argmax(w))]
     fine_same = all(f.primary_fine.shape == top.primary_fine.shape for f in fields)
     return BankField(
-        index=top.index, field=top.field, field_value=float(mix("field_value")), rgb=mix("rgb").astype(np.float32),
-        reference_xy_mm=mix("reference_xy_mm"), paraxial_xy_mm=mix("paraxial_xy_mm"),
-        chief_offsets_mm=mix("chief_offsets_mm"), relative_illumination=mix("relative_illumination"),
-        transmission=mix("transmission"), window_energy=mix("window_energy"), strehl=float(mix("strehl")),
+        index=top.index,
+        field=top.field,
+        field_value=float(mix("field_value")),
+        rgb=mix("rgb").astype(np.float32),
+        reference_xy_mm=mix("reference_xy_mm"),
+        paraxial_xy_mm=mix("paraxial_xy_mm"),
+        chief_offsets_mm=mix("chief_offsets_mm"),
+        relative_illumination=mix("relative_illumination"),
+        transmission=mix("transmission"),
+        window_energy=mix("window_energy"),
+        strehl=float(mix("strehl")),
         working_fno=float(mix("working_fno")),
         primary_fine=(mix("primary_fine") if fine_same else top.primary_fine).astype(np.float32),
     )
@@ -179,8 +199,12 @@ def interpolate_bank(grid: GridBank, query: dict[str, Any]) -> PSFBank:
         return banks[0]
     fields = [_blend_field([b.fields[j] for b in banks], w) for j in range(len(banks[0].fields))]
     top = banks[int(np.argmax(w))]
-    manifest = {**top.manifest, "interpolated": {
-        "request": strict_json(query),
-        "from": [{"bank": grid.names[i], "weight": x} for i, x in weights]}}
+    manifest = {
+        **top.manifest,
+        "interpolated": {
+            "request": strict_json(query),
+            "from": [{"bank": grid.names[i], "weight": x} for i, x in weights],
+        },
+    }
     manifest.pop("shooting", None)
     return PSFBank(manifest, fields, None)

@@ -7,6 +7,7 @@ parser of wavelength lists typed on the command line.
 
 Units: wavelengths nm, normalized fields 0..1 (of the lens's maximum field).
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -64,12 +65,21 @@ def parse_wavelengths_nm(text: str) -> tuple[float, ...]:
         else:
             values = tuple(float(p) for p in spec.split(",") if p.strip())
     except ValueError:
-        raise InputError("<command line>", "--wavelengths-nm", f"expected START:STOP:STEP (e.g. 400:700:10) or a "
-                         f"comma list in nm, got {text!r}") from None
-    if not values or not all(math.isfinite(v) and v > 0 for v in values) or any(
-            b <= a for a, b in zip(values, values[1:])):
-        raise InputError("<command line>", "--wavelengths-nm", f"expected positive, strictly increasing wavelengths "
-                         f"in nm, got {text!r}")
+        raise InputError(
+            "<command line>",
+            "--wavelengths-nm",
+            f"expected START:STOP:STEP (e.g. 400:700:10) or a comma list in nm, got {text!r}",
+        ) from None
+    if (
+        not values
+        or not all(math.isfinite(v) and v > 0 for v in values)
+        or any(b <= a for a, b in zip(values, values[1:]))
+    ):
+        raise InputError(
+            "<command line>",
+            "--wavelengths-nm",
+            f"expected positive, strictly increasing wavelengths in nm, got {text!r}",
+        )
     return values
 
 
@@ -140,13 +150,15 @@ class BankSettings:
     def __post_init__(self) -> None:
         object.__setattr__(self, "wavelengths_nm", tuple(float(w) for w in self.wavelengths_nm))
         if self.fields < 2:
-            raise InputError(_SOURCE, "fields", f"expected at least 2 fields (the axis and the edge of the field), "
-                             f"got {self.fields}")
+            raise InputError(
+                _SOURCE, "fields", f"expected at least 2 fields (the axis and the edge of the field), got {self.fields}"
+            )
         field_positions(2, self.field_spacing)  # checks the spacing's name
         wl = self.wavelengths_nm
         if not wl or not all(math.isfinite(w) and w > 0 for w in wl) or any(b <= a for a, b in zip(wl, wl[1:])):
-            raise InputError(_SOURCE, "wavelengths_nm", f"expected positive, strictly increasing wavelengths (nm), "
-                             f"got {wl}")
+            raise InputError(
+                _SOURCE, "wavelengths_nm", f"expected positive, strictly increasing wavelengths (nm), got {wl}"
+            )
         if self.pupil_samples < 8:
             raise InputError(_SOURCE, "pupil_samples", f"expected at least 8 pupil samples, got {self.pupil_samples}")
         if self.aiming not in ("real", "paraxial"):
@@ -154,8 +166,11 @@ class BankSettings:
         for name in ("kernel_pixels", "kernel_limit"):
             value = getattr(self, name)
             if value is not None and (value < 1 or (name == "kernel_pixels" and value % 2 == 0)):
-                raise InputError(_SOURCE, name, f"expected a positive{' odd' if name == 'kernel_pixels' else ''} "
-                                 f"number of pixels, got {value}")
+                raise InputError(
+                    _SOURCE,
+                    name,
+                    f"expected a positive{' odd' if name == 'kernel_pixels' else ''} number of pixels, got {value}",
+                )
 
     def field_positions(self) -> np.ndarray:
         """(fields,) normalized field positions 0..1."""
@@ -171,14 +186,27 @@ class BankSettings:
 
     def compute_options(self) -> dict:
         """The keyword arguments of compute_bank these settings fix."""
-        return {"fields": [float(f) for f in self.field_positions()], "wavelengths_nm": list(self.wavelengths_nm),
-                "pupil_samples": int(self.pupil_samples), "aiming": self.aiming}
+        return {
+            "fields": [float(f) for f in self.field_positions()],
+            "wavelengths_nm": list(self.wavelengths_nm),
+            "pupil_samples": int(self.pupil_samples),
+            "aiming": self.aiming,
+        }
 
     def cache_key(self, lens: Lens, pitch_um: float, kernel_pixels: int, response: str | None) -> str:
         """A short hash naming the cached bank of this lens (as a native mapping) at this
         pitch (um), kernel size and spectral response with these settings."""
         from lensim.optics.lens_file import lens_to_dict
 
-        blob = json.dumps({"lens": lens_to_dict(lens), "pitch_um": round(pitch_um, 9), "kernel": kernel_pixels,
-                           "response": response, **self.compute_options()}, sort_keys=True, default=str)
+        blob = json.dumps(
+            {
+                "lens": lens_to_dict(lens),
+                "pitch_um": round(pitch_um, 9),
+                "kernel": kernel_pixels,
+                "response": response,
+                **self.compute_options(),
+            },
+            sort_keys=True,
+            default=str,
+        )
         return hashlib.sha256(blob.encode()).hexdigest()[:16]

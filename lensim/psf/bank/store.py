@@ -2,6 +2,7 @@
 as a native-format mapping, the spectral weights) and one ``field_XXXX.npz`` per field,
 each written atomically. Rerunning with the same settings finds the fields already on
 disk (resume after a kill); a bank made with different settings is refused."""
+
 from __future__ import annotations
 
 import hashlib
@@ -44,8 +45,12 @@ def read_manifest(directory: str | Path) -> dict | None:
     except (OSError, json.JSONDecodeError) as e:
         raise InputError(str(p), None, f"not valid JSON: {e}") from None
     if isinstance(m, dict) and m.get("format") == "lensim-psf-grid":
-        raise InputError(str(p), "format", f"a grid of {len(m.get('settings') or [])} banks, not one bank; expected "
-                         "one setting's bank, a sub-folder s000, s001, ... (its manifest.json lists the settings)")
+        raise InputError(
+            str(p),
+            "format",
+            f"a grid of {len(m.get('settings') or [])} banks, not one bank; expected "
+            "one setting's bank, a sub-folder s000, s001, ... (its manifest.json lists the settings)",
+        )
     if not isinstance(m, dict) or m.get("format") != FORMAT:
         raise InputError(str(p), "format", f"expected {FORMAT!r}; not a PSF bank manifest")
     if m.get("format_version") != FORMAT_VERSION:
@@ -82,11 +87,16 @@ def _read_field(path: Path, manifest: dict, index: int) -> BankField:
     if abs(bf.field - expected) > 1e-12:
         raise InputError(str(path), "field", f"expected field {expected!r} as the manifest says, got {bf.field!r}")
     if bf.rgb.shape != (3, size, size):
-        raise InputError(str(path), "rgb", f"expected a (3, {size}, {size}) kernel as the manifest says, got "
-                         f"{bf.rgb.shape}")
+        raise InputError(
+            str(path), "rgb", f"expected a (3, {size}, {size}) kernel as the manifest says, got {bf.rgb.shape}"
+        )
     if bf.settings_key and bf.settings_key != settings_key(manifest):
-        raise InputError(str(path), "settings_key", f"computed with other settings than {MANIFEST} says (another "
-                         "bank's field); rerun `lensim psf bank` with the manifest's settings to recompute it")
+        raise InputError(
+            str(path),
+            "settings_key",
+            f"computed with other settings than {MANIFEST} says (another "
+            "bank's field); rerun `lensim psf bank` with the manifest's settings to recompute it",
+        )
     return bf
 
 
@@ -104,8 +114,12 @@ def open_bank_directory(directory: Path, manifest: dict, fields: np.ndarray) -> 
     if old is not None:
         diff = manifest_differences(old, manifest)
         if diff:
-            raise InputError(str(directory / MANIFEST), ", ".join(diff), "the bank on disk was made with different "
-                             "settings; expected the same settings to resume, or a new output directory")
+            raise InputError(
+                str(directory / MANIFEST),
+                ", ".join(diff),
+                "the bank on disk was made with different "
+                "settings; expected the same settings to resume, or a new output directory",
+            )
     else:
         directory.mkdir(parents=True, exist_ok=True)
         atomic_write_text(directory / MANIFEST, json.dumps(manifest, indent=2) + "\n")
@@ -140,7 +154,10 @@ def load_bank(directory: str | Path) -> PSFBank:
     for i in range(len(fields)):
         p = d / field_file(i)
         if not p.exists():
-            raise InputError(str(d), field_file(i), "missing: the bank is incomplete; rerun `lensim psf bank` with the "
-                             "same settings to finish it")
+            raise InputError(
+                str(d),
+                field_file(i),
+                "missing: the bank is incomplete; rerun `lensim psf bank` with the same settings to finish it",
+            )
         flds.append(_read_field(p, manifest, i))
     return PSFBank(manifest, flds, d)

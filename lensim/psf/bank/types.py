@@ -1,5 +1,6 @@
 """The in-memory types of a PSF bank: one field (BankField) and the whole bank (PSFBank),
 with the kernel lookup at any image point."""
+
 from __future__ import annotations
 
 import io
@@ -58,12 +59,22 @@ class BankField:
         processes send back)."""
         buf = io.BytesIO()
         np.savez(
-            buf, index=np.int64(self.index), field=np.float64(self.field), field_value=np.float64(self.field_value),
-            rgb=self.rgb.astype(np.float32), reference_xy_mm=self.reference_xy_mm, paraxial_xy_mm=self.paraxial_xy_mm,
-            chief_offsets_mm=self.chief_offsets_mm, relative_illumination=self.relative_illumination,
-            transmission=self.transmission, window_energy=self.window_energy, strehl=np.float64(self.strehl),
-            working_fno=np.float64(self.working_fno), primary_fine=self.primary_fine.astype(np.float32),
-            warnings=np.array(json.dumps(self.warnings)), settings_key=np.array(self.settings_key),
+            buf,
+            index=np.int64(self.index),
+            field=np.float64(self.field),
+            field_value=np.float64(self.field_value),
+            rgb=self.rgb.astype(np.float32),
+            reference_xy_mm=self.reference_xy_mm,
+            paraxial_xy_mm=self.paraxial_xy_mm,
+            chief_offsets_mm=self.chief_offsets_mm,
+            relative_illumination=self.relative_illumination,
+            transmission=self.transmission,
+            window_energy=self.window_energy,
+            strehl=np.float64(self.strehl),
+            working_fno=np.float64(self.working_fno),
+            primary_fine=self.primary_fine.astype(np.float32),
+            warnings=np.array(json.dumps(self.warnings)),
+            settings_key=np.array(self.settings_key),
         )
         return buf.getvalue()
 
@@ -74,17 +85,29 @@ class BankField:
         try:
             with np.load(path, allow_pickle=False) as z:
                 return cls(
-                    index=int(z["index"]), field=float(z["field"]), field_value=float(z["field_value"]), rgb=z["rgb"],
-                    reference_xy_mm=z["reference_xy_mm"], paraxial_xy_mm=z["paraxial_xy_mm"],
-                    chief_offsets_mm=z["chief_offsets_mm"], relative_illumination=z["relative_illumination"],
-                    transmission=z["transmission"], window_energy=z["window_energy"], strehl=float(z["strehl"]),
-                    working_fno=float(z["working_fno"]), primary_fine=z["primary_fine"],
+                    index=int(z["index"]),
+                    field=float(z["field"]),
+                    field_value=float(z["field_value"]),
+                    rgb=z["rgb"],
+                    reference_xy_mm=z["reference_xy_mm"],
+                    paraxial_xy_mm=z["paraxial_xy_mm"],
+                    chief_offsets_mm=z["chief_offsets_mm"],
+                    relative_illumination=z["relative_illumination"],
+                    transmission=z["transmission"],
+                    window_energy=z["window_energy"],
+                    strehl=float(z["strehl"]),
+                    working_fno=float(z["working_fno"]),
+                    primary_fine=z["primary_fine"],
                     warnings=list(json.loads(str(z["warnings"]))),
                     settings_key=str(z["settings_key"]) if "settings_key" in z.files else "",
                 )
         except (OSError, EOFError, KeyError, ValueError, zipfile.BadZipFile) as e:  # truncated, foreign
-            raise InputError(str(path), None, f"not a readable bank field file ({type(e).__name__}: {e}); "
-                             "rerun `lensim psf bank` with the same settings to recompute it") from None
+            raise InputError(
+                str(path),
+                None,
+                f"not a readable bank field file ({type(e).__name__}: {e}); "
+                "rerun `lensim psf bank` with the same settings to recompute it",
+            ) from None
 
 
 @dataclass
@@ -163,8 +186,12 @@ class PSFBank:
         the first and last field)."""
         radii = self.radii_mm
         if len(radii) > 1 and np.any(np.diff(radii) <= 0):
-            raise InputError(str(self.directory or "<bank>"), "fields", "the reference-point radii do not increase with "
-                             "field; expected a lens whose image height grows with field")
+            raise InputError(
+                str(self.directory or "<bank>"),
+                "fields",
+                "the reference-point radii do not increase with "
+                "field; expected a lens whose image height grows with field",
+            )
         r = float(radius_mm)
         if len(radii) == 1 or r <= radii[0]:
             return self.fields[0].rgb.astype(np.float64)
