@@ -13,8 +13,9 @@ starts again. torch and the training modules load when run_ablation runs."""
 from __future__ import annotations
 
 import shutil
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from lensim.data.manifest import read_held_out, read_pairs_manifest
 from lensim.errors import InputError

@@ -14,9 +14,10 @@ from __future__ import annotations
 import json
 import shutil
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any
 
 from lensim.assets import DEFAULT_LENS
 from lensim.assets.images import available_sample_images, read_sample_image
@@ -64,7 +65,7 @@ class DemoSettings:
     stem: int = 2
 
     @classmethod
-    def make(cls, quick: bool) -> "DemoSettings":
+    def make(cls, quick: bool) -> DemoSettings:
         if quick:
             return cls(5, (450.0, 500.0, 550.0, 600.0, 650.0), 96, 256, 3, 2, 96, 35.0, 16, 64, 1)
         return cls(12, tuple(float(w) for w in range(400, 701, 25)), 128, 512, 3, 4, 128, 300.0, 32, 96, 1)

@@ -125,7 +125,7 @@ class StageBars:
                 transient=True,
             )
 
-    def __enter__(self) -> "StageBars":
+    def __enter__(self) -> StageBars:
         if self.bars is not None:
             self.bars.start()
         return self

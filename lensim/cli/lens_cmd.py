@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from enum import Enum
 from pathlib import Path
-from typing import TYPE_CHECKING, Optional
+from typing import TYPE_CHECKING
 
 import typer
 from rich.table import Table
@@ -33,7 +33,7 @@ GLASS_MAKERS_HELP = (
 )
 
 
-def _glass_makers(makers: Optional[str], match_glass: bool) -> Optional[list[str]]:
+def _glass_makers(makers: str | None, match_glass: bool) -> list[str] | None:
     """The --glass-makers list, checked before any work (an unknown maker is a one-line error)."""
     from lensim.optics.materials import CATALOGS
 
@@ -56,8 +56,8 @@ def _glass_makers(makers: Optional[str], match_glass: bool) -> Optional[list[str
 def _load(
     lens_file: str,
     match_glass: bool = False,
-    makers: Optional[list[str]] = None,
-    shooting: tuple[Optional[str], ...] = (None, None, None, None),
+    makers: list[str] | None = None,
+    shooting: tuple[str | None, ...] = (None, None, None, None),
 ):
     """Load a lens; with match_glass its model glasses become the nearest catalogue glasses;
     then it is set to the shooting options (--fno, --object-m, --focus-m, --config).
@@ -69,8 +69,8 @@ def _load(
 def _load_set(
     lens_file: str,
     match_glass: bool = False,
-    makers: Optional[list[str]] = None,
-    shooting: tuple[Optional[str], ...] = (None, None, None, None),
+    makers: list[str] | None = None,
+    shooting: tuple[str | None, ...] = (None, None, None, None),
 ):
     """_load, and the shooting settings resolved as records keep them (None when none is
     given)."""
@@ -101,11 +101,11 @@ def info(
     json_out: bool = typer.Option(False, "--json", help="Print a JSON object instead of tables."),
     aiming: str = typer.Option("real", help="Ray aiming for real-ray figures: real or paraxial."),
     match_glass: bool = typer.Option(False, "--match-glass", help=MATCH_GLASS_HELP),
-    glass_makers: Optional[str] = typer.Option(None, "--glass-makers", help=GLASS_MAKERS_HELP),
-    fno: Optional[str] = fno_option(),
-    object_m: Optional[str] = object_m_option(),
-    focus_m: Optional[str] = focus_m_option(),
-    config: Optional[str] = config_option(),
+    glass_makers: str | None = typer.Option(None, "--glass-makers", help=GLASS_MAKERS_HELP),
+    fno: str | None = fno_option(),
+    object_m: str | None = object_m_option(),
+    focus_m: str | None = focus_m_option(),
+    config: str | None = config_option(),
 ) -> None:
     """Surface table and first-order data (EFL, BFL, F/#, pupils, fields, wavelengths), of
     the lens at the shooting options when given.
@@ -197,7 +197,7 @@ def convert(
     lens_file: str = LENS_ARG,
     output: Path = typer.Option(..., "-o", "--output", help="Native lens file to write (.json or .yaml)."),
     match_glass: bool = typer.Option(False, "--match-glass", help=MATCH_GLASS_HELP),
-    glass_makers: Optional[str] = typer.Option(None, "--glass-makers", help=GLASS_MAKERS_HELP),
+    glass_makers: str | None = typer.Option(None, "--glass-makers", help=GLASS_MAKERS_HELP),
 ) -> None:
     """Convert any supported lens file to lensim's native format.
 
@@ -254,7 +254,7 @@ def _check_figure_name(output: Path) -> None:
     output_file(output)
 
 
-def _channel_weights(sensor: Optional[str]):
+def _channel_weights(sensor: str | None):
     """(wavelengths_nm, (3, W) channel weights) of the sensor's spectral response."""
     from lensim.sensor.profile import load_sensor
     from lensim.sensor.spectral import spectral_response
@@ -263,7 +263,7 @@ def _channel_weights(sensor: Optional[str]):
     return resp.wavelengths_nm, resp.weights
 
 
-def _field_report(lens: Lens, fields: Optional[list[float]], sensor: Optional[str], aiming: AimingChoice) -> dict:
+def _field_report(lens: Lens, fields: list[float] | None, sensor: str | None, aiming: AimingChoice) -> dict:
     from lensim.optics.field_analysis import field_report
 
     wavelengths_nm, weights = _channel_weights(sensor)
@@ -318,20 +318,20 @@ def plot(
     output: Path = typer.Option(..., "-o", "--output", help="Image to write (.png, .pdf or .svg)."),
     aiming: AimingChoice = typer.Option(AimingChoice.real, help="Ray aiming for the ray fans."),
     rays: int = typer.Option(7, "--rays", min=1, max=101, help="Meridional rays per field, spread across the pupil."),
-    field: Optional[list[float]] = typer.Option(None, "--field", help=FIELD_HELP),
-    field_deg: Optional[list[float]] = typer.Option(None, "--field-deg", help=FIELD_DEG_HELP),
-    image_height_mm: Optional[list[float]] = typer.Option(None, "--image-height-mm", help=IMAGE_HEIGHT_HELP),
+    field: list[float] | None = typer.Option(None, "--field", help=FIELD_HELP),
+    field_deg: list[float] | None = typer.Option(None, "--field-deg", help=FIELD_DEG_HELP),
+    image_height_mm: list[float] | None = typer.Option(None, "--image-height-mm", help=IMAGE_HEIGHT_HELP),
     kind: PlotKind = typer.Option(
         PlotKind.layout,
         "--kind",
         help="layout (ray fans), or against the field: "
         "distortion (%), lateral-colour (um per sensor channel) or illumination.",
     ),
-    sensor: Optional[str] = typer.Option(None, "--sensor", help=SENSOR_HELP),
-    fno: Optional[str] = fno_option(),
-    object_m: Optional[str] = object_m_option(),
-    focus_m: Optional[str] = focus_m_option(),
-    config: Optional[str] = config_option(),
+    sensor: str | None = typer.Option(None, "--sensor", help=SENSOR_HELP),
+    fno: str | None = fno_option(),
+    object_m: str | None = object_m_option(),
+    focus_m: str | None = focus_m_option(),
+    config: str | None = config_option(),
 ) -> None:
     """Draw the lens layout (a y-z cross-section with a fan of rays per field), or its
     distortion, lateral colour or relative illumination against the field.
@@ -361,7 +361,7 @@ def plot(
 @lens_app.command("spot")
 def spot(
     lens_file: str = LENS_ARG,
-    output: Optional[Path] = typer.Option(
+    output: Path | None = typer.Option(
         None, "-o", "--output", help="Spot-diagram image to write (.png, .pdf or .svg)."
     ),
     aiming: AimingChoice = typer.Option(AimingChoice.paraxial, help="Ray aiming."),
@@ -371,16 +371,16 @@ def spot(
         help="Print, per field and wavelength, the RMS spot radius (um) "
         "and the chief-ray position on the image plane (mm) as JSON.",
     ),
-    field: Optional[list[float]] = typer.Option(None, "--field", help=FIELD_HELP),
-    field_deg: Optional[list[float]] = typer.Option(None, "--field-deg", help=FIELD_DEG_HELP),
-    image_height_mm: Optional[list[float]] = typer.Option(None, "--image-height-mm", help=IMAGE_HEIGHT_HELP),
+    field: list[float] | None = typer.Option(None, "--field", help=FIELD_HELP),
+    field_deg: list[float] | None = typer.Option(None, "--field-deg", help=FIELD_DEG_HELP),
+    image_height_mm: list[float] | None = typer.Option(None, "--image-height-mm", help=IMAGE_HEIGHT_HELP),
     reference: ReferenceChoice = typer.Option(
         ReferenceChoice.chief, help="Centre of the spots and of the RMS radius: the chief ray or the centroid."
     ),
-    fno: Optional[str] = fno_option(),
-    object_m: Optional[str] = object_m_option(),
-    focus_m: Optional[str] = focus_m_option(),
-    config: Optional[str] = config_option(),
+    fno: str | None = fno_option(),
+    object_m: str | None = object_m_option(),
+    focus_m: str | None = focus_m_option(),
+    config: str | None = config_option(),
 ) -> None:
     """Spot diagrams and RMS spot radii for each field, all wavelengths.
 
@@ -423,21 +423,21 @@ def spot(
 def field_command(
     lens_file: str = LENS_ARG,
     json_out: bool = typer.Option(False, "--json", help="Print the per-field records as JSON instead of a table."),
-    sensor: Optional[str] = typer.Option(None, "--sensor", help=SENSOR_HELP),
+    sensor: str | None = typer.Option(None, "--sensor", help=SENSOR_HELP),
     aiming: AimingChoice = typer.Option(AimingChoice.real, help="Ray aiming of the chief rays."),
-    field: Optional[list[float]] = typer.Option(
+    field: list[float] | None = typer.Option(
         None,
         "--field",
         help=FIELD_HELP.replace("Default: the lens's own fields.", "Default: 21 fields from the axis to the maximum."),
     ),
-    field_deg: Optional[list[float]] = typer.Option(None, "--field-deg", help=FIELD_DEG_HELP),
-    image_height_mm: Optional[list[float]] = typer.Option(None, "--image-height-mm", help=IMAGE_HEIGHT_HELP),
+    field_deg: list[float] | None = typer.Option(None, "--field-deg", help=FIELD_DEG_HELP),
+    image_height_mm: list[float] | None = typer.Option(None, "--image-height-mm", help=IMAGE_HEIGHT_HELP),
     match_glass: bool = typer.Option(False, "--match-glass", help=MATCH_GLASS_HELP),
-    glass_makers: Optional[str] = typer.Option(None, "--glass-makers", help=GLASS_MAKERS_HELP),
-    fno: Optional[str] = fno_option(),
-    object_m: Optional[str] = object_m_option(),
-    focus_m: Optional[str] = focus_m_option(),
-    config: Optional[str] = config_option(),
+    glass_makers: str | None = typer.Option(None, "--glass-makers", help=GLASS_MAKERS_HELP),
+    fno: str | None = fno_option(),
+    object_m: str | None = object_m_option(),
+    focus_m: str | None = focus_m_option(),
+    config: str | None = config_option(),
 ) -> None:
     """Lens-level outputs per field: the real chief-ray height at each wavelength, the
     paraxial height, distortion (%), lateral colour of each sensor channel (its chief-ray
@@ -487,7 +487,7 @@ def lensfun_command(
     ),
     focal: float = typer.Option(..., "--focal", help="Focal length (mm) the profile is filed under."),
     aperture: float = typer.Option(..., "--aperture", help="F-number: the lens is evaluated stopped to it."),
-    distance: Optional[float] = typer.Option(
+    distance: float | None = typer.Option(
         None,
         "--distance",
         help="Focus distance (m from the image plane, as "
@@ -495,10 +495,10 @@ def lensfun_command(
         "Default: the lens file's object distance.",
     ),
     output: Path = typer.Option(..., "-o", "--output", help="lensfun database file to write (.xml)."),
-    sensor: Optional[str] = typer.Option(None, "--sensor", help=SENSOR_HELP),
+    sensor: str | None = typer.Option(None, "--sensor", help=SENSOR_HELP),
     aiming: AimingChoice = typer.Option(AimingChoice.real, help="Ray aiming of the chief rays."),
     match_glass: bool = typer.Option(False, "--match-glass", help=MATCH_GLASS_HELP),
-    glass_makers: Optional[str] = typer.Option(None, "--glass-makers", help=GLASS_MAKERS_HELP),
+    glass_makers: str | None = typer.Option(None, "--glass-makers", help=GLASS_MAKERS_HELP),
 ) -> None:
     """Write a lensfun profile of the lens (for darktable, RawTherapee, Hugin): ptlens
     distortion, poly3 lateral colour (from the sensor-channel-weighted chief rays) and pa

@@ -72,7 +72,8 @@ of ``sigma_px`` pixels (defaults 1.0 px and 0.6). It uses neither the mapping no
 from __future__ import annotations
 
 import math
-from typing import Any, Callable, Mapping
+from collections.abc import Callable, Mapping
+from typing import Any
 
 import numpy as np
 import torch

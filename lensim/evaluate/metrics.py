@@ -26,14 +26,13 @@ edge rho >= 2/3; every pixel lies in exactly one.
 from __future__ import annotations
 
 import math
-from typing import Union
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 from scipy.ndimage import correlate1d
 
-ArrayLike = Union[np.ndarray, torch.Tensor]
+ArrayLike = np.ndarray | torch.Tensor
 
 ZONES: tuple[str, ...] = ("centre", "middle", "edge")
 #: Zone limits on the normalized radius rho (fractions of the sensor half-diagonal).

@@ -305,7 +305,7 @@ class Lens:
         solved for a launch value of this type (lensim.optics.aiming.object_field)."""
         return "angle" if self.infinite_object or self.field_type == "angle" else "object_height"
 
-    def launch_lens(self) -> "Lens":
+    def launch_lens(self) -> Lens:
         """This lens with field_type set to :attr:`launch_field_type`, so that launch values
         (from object_field) are read the right way by functions that take a field in the
         lens's unit (paraxial_image_height, chief_ray_image_height). The lens itself when
@@ -317,7 +317,7 @@ class Lens:
             return self
         return self.with_changes(field_type=launch_type, fields=[0.0])
 
-    def with_changes(self, **changes) -> "Lens":
+    def with_changes(self, **changes) -> Lens:
         """A copy with some top-level attributes replaced (surfaces are shared)."""
         from dataclasses import replace
 

@@ -56,7 +56,7 @@ class Material:
             return 0.0
         return float((ng - nf) / (nf - nc)) - normal_line_pgf(self.vd)
 
-    def as_model(self, on_normal_line: bool = False) -> "ModelGlass":
+    def as_model(self, on_normal_line: bool = False) -> ModelGlass:
         """The model glass with this material's nd, Vd and dPgF (dPgF 0 when on_normal_line)."""
         return ModelGlass(self.nd, self.vd, 0.0 if on_normal_line else self.dpgf, name=f"model of {self.name}")
 
@@ -202,7 +202,7 @@ def _normalize(name: str) -> str:
     return re.sub(r"[^A-Z0-9]", "", name.upper())
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _catalog_names(catalog: str) -> dict[str, str]:
     """Normalized name -> vendor name for one catalogue (loaded lazily, ~0.1-0.8 s each)."""
     import warnings
@@ -223,7 +223,7 @@ def _catalog_key(catalog: str) -> str:
     raise InputError(None, "catalog", f"unknown glass catalogue {catalog!r}; expected one of {', '.join(CATALOGS)}")
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def catalog_glass(name: str, catalog: str) -> CatalogGlass:
     """Look a glass up in one catalogue by name (case, dashes and spaces ignored)."""
     from opticalglass import glassfactory
@@ -282,7 +282,7 @@ def resolve_glass(name: str, catalogs: tuple[str, ...] | list[str] | None = None
 MATCH_WAVELENGTHS_UM = np.linspace(0.40, 0.70, 31)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _catalog_index_table(catalog: str) -> tuple[tuple[str, ...], np.ndarray]:
     """(names, indices (N, len(MATCH_WAVELENGTHS_UM))) of every glass of one catalogue whose
     data give finite indices over the matching range (a few vendor rows are incomplete)."""

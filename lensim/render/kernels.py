@@ -9,7 +9,8 @@ pixels (0, tile, 2 tile, ... in both axes), at the centre's sensor position
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any, Callable
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch

@@ -16,8 +16,9 @@ lensim.render.kernels; the bank itself (cached): lensim.render.bank_cache.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING
 
 import torch
 

@@ -42,8 +42,9 @@ networks take them in at their input.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any
 
 import torch
 
@@ -129,7 +130,7 @@ class Conditioning:
     keys: tuple[str, ...] = ()
 
     @classmethod
-    def from_records(cls, settings: Iterable[Mapping[str, float] | None], use: bool = True) -> "Conditioning":
+    def from_records(cls, settings: Iterable[Mapping[str, float] | None], use: bool = True) -> Conditioning:
         """From the training records' settings (record_settings output, or None for a record
         without): ranges over them; inputs are the keys whose feature varies (none when
         ``use`` is False: the network is not conditioned, the ranges are still kept). A key
@@ -147,7 +148,7 @@ class Conditioning:
         return cls(ranges, keys)
 
     @classmethod
-    def from_dict(cls, data: Any, source: str | None = None) -> "Conditioning":
+    def from_dict(cls, data: Any, source: str | None = None) -> Conditioning:
         """From :meth:`to_dict`'s output (None or {}: no conditioning); one-line InputError
         naming ``source`` when malformed."""
         if not data:

@@ -111,7 +111,7 @@ class TrainConfig:
     use_settings: bool = True
     conditioning: dict[str, Any] | None = None
 
-    def resolved(self) -> "TrainConfig":
+    def resolved(self) -> TrainConfig:
         """A copy with the architecture's defaults filled in: use_deformable, use_context
         (None) and stem (0) from ARCH_DEFAULTS, and width (0) from
         lensim.restore.models.default_width (imports torch; the size-matched width of the

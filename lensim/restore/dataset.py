@@ -29,9 +29,10 @@ crops of one photo overlap and share content.
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import torch
 from torch.utils.data import Dataset
@@ -149,7 +150,7 @@ class PairDataset(Dataset):
             self.settings = [conditioning.vector(r.settings or {}, str(r.input)) for r in self.refs]
 
     @classmethod
-    def from_folder(cls, dataset_dir: str | Path, sources: Sequence[str] | None = None, **kwargs: Any) -> "PairDataset":
+    def from_folder(cls, dataset_dir: str | Path, sources: Sequence[str] | None = None, **kwargs: Any) -> PairDataset:
         """All crops of a pairs folder (or those of the named source photos)."""
         manifest = read_pairs_manifest(dataset_dir)
         refs = crop_refs(dataset_dir, manifest)

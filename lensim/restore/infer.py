@@ -35,7 +35,8 @@ is given (then it is at the sensor's native pixel scale, like lensim.render.mapp
 
 from __future__ import annotations
 
-from typing import Callable, Protocol, runtime_checkable
+from collections.abc import Callable
+from typing import Protocol, runtime_checkable
 
 import torch
 

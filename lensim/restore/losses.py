@@ -20,7 +20,7 @@ Every loss takes (B, 3, H, W) float tensors (sRGB in [0, 1]) and returns a scala
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import torch
 import torch.nn.functional as F

@@ -13,7 +13,7 @@ architecture's width at that size (NAFNet: :func:`lensim.restore.nafnet.nafnet_w
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 from typing import Any
 
 import torch
@@ -62,7 +62,7 @@ def describe_network(config: dict[str, Any]) -> str:
     return f"{arch} with {', '.join(parts)} ({sizes})" if parts else f"plain {arch} ({sizes})"
 
 
-@lru_cache(maxsize=None)
+@cache
 def reference_parameters() -> int:
     """Parameters of the reference FieldAwareUNet (width 32, 3 scales, DCN at the coarsest
     decoder scale, FOV input, context block): the size every default matches."""
@@ -70,7 +70,7 @@ def reference_parameters() -> int:
         return count_parameters(FieldAwareUNet(width=UNET_WIDTH, deformable_scales=1))
 
 
-@lru_cache(maxsize=None)
+@cache
 def _nafnet_default_width(frozen: tuple[tuple[str, Any], ...]) -> int:
     return nafnet_width(reference_parameters(), **dict(frozen))
 

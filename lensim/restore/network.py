@@ -59,7 +59,8 @@ as a given field-aware configuration, for the paper's ablation/baseline.
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import torch
 import torch.nn as nn
