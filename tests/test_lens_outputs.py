@@ -259,3 +259,17 @@ def test_field_plot_bad_inputs_are_one_line_errors(tmp_path, capsys, monkeypatch
     assert code == 2 and "expected an image name ending in .png, .pdf or .svg" in err
     code, _, err = run_cli(["lens", "field", "cooke_triplet", "--sensor", "no-such-sensor"], capsys, monkeypatch)
     assert code == 2 and len(err.strip().splitlines()) == 1 and "no-such-sensor" in err
+
+
+def test_lensfun_takes_a_nominal_aperture_with_one_warning_line(tmp_path, capsys, monkeypatch) -> None:
+    """`--aperture 4.8` on the F/5 triplet (0.12 stop: a rounded marking) writes the wide-open
+    profile and says so in one warning line; 4.5 (0.30 stop) is refused in one line."""
+    args = "lens lensfun cooke_triplet --maker m --model x --mount Generic --crop-factor 1.5 --focal 50 --aperture"
+    code, _, err = run_cli([*args.split(), "4.8", "-o", str(tmp_path / "p.xml")], capsys, monkeypatch)
+    assert code == 0, err
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("warning: F/4.8 is 0.12 stop faster"), err
+    assert "F/5 " in lines[0] and (tmp_path / "p.xml").is_file()
+    code, _, err = run_cli([*args.split(), "4.5", "-o", str(tmp_path / "q.xml")], capsys, monkeypatch)
+    assert code == 2 and err.count("\n") == 1 and "--aperture: F/4.5 is faster" in err, err
+    assert not (tmp_path / "q.xml").exists()

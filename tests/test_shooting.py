@@ -110,11 +110,29 @@ def test_a_rounded_marking_of_wide_open_is_wide_open() -> None:
     lens = load_lens("double_gauss")  # EPD 50 mm at EFL 100.0002 mm: wide open is F/2.0001
     wide_open = describe(lens, ShootingSettings())["fno"]
     assert 2.0 < wide_open < 2.001
-    at_two = lens_at(lens, ShootingSettings(fno=2))
-    assert describe(lens, ShootingSettings(fno=2))["fno"] == pytest.approx(wide_open, rel=1e-9)
+    with pytest.warns(UserWarning) as caught:
+        at_two = lens_at(lens, ShootingSettings(fno=2))
+    assert len(caught) == 1 and "F/2 is 0.00 stop faster" in str(caught[0].message)
+    with pytest.warns(UserWarning):
+        assert describe(lens, ShootingSettings(fno=2))["fno"] == pytest.approx(wide_open, rel=1e-9)
     assert at_two.aperture_value == pytest.approx(max_stop_mm(lens), rel=1e-9)
-    with pytest.raises(InputError, match=r"--fno: F/1.97 is faster than the lens's maximum aperture F/2\b"):
-        lens_at(lens, ShootingSettings(fno=1.97))  # more than 1 % faster
+
+
+def test_nominal_f_numbers_within_a_sixth_of_a_stop_mean_wide_open() -> None:
+    """Markings and EXIF FNumber are rounded to third stops: F/4.8 (0.12 stop faster) on the
+    F/5 triplet is F/5 with one warning line naming both; F/4.7 (0.18 stop) is refused."""
+    lens = load_lens("cooke_triplet")
+    with pytest.warns(UserWarning) as caught:
+        at = lens_at(lens, ShootingSettings(fno=4.8))
+    assert len(caught) == 1
+    text = str(caught[0].message)
+    assert "\n" not in text and "F/4.8" in text and "F/5 " in text and "wide open" in text
+    assert at.aperture_value == pytest.approx(max_stop_mm(lens), rel=1e-9)
+    assert paraxial_data(at).fno == pytest.approx(5.0, rel=1e-4)
+    with pytest.raises(InputError, match=r"--fno: F/4.7 is faster than the lens's maximum aperture F/5 by 0.18 stop"):
+        lens_at(lens, ShootingSettings(fno=4.7))
+    with pytest.raises(InputError, match=r"--fno: F/1.8 is faster than the lens's maximum aperture F/2\b"):
+        lens_at(load_lens("double_gauss"), ShootingSettings(fno=1.8))
 
 
 def test_the_stop_clear_aperture_limits_the_maximum_aperture() -> None:

@@ -21,7 +21,9 @@ holds those four choices, ``None`` meaning "as the lens file has it", and
    The stop then keeps that size whatever the focus (a real iris does), so the working
    F-number at a near object is larger (``describe`` reports it). The lens file's own
    aperture (its stop size at the file's own settings, and the stop surface's clear
-   semi-diameter where given) is the largest the iris opens: a faster N is refused.
+   semi-diameter where given) is the largest the iris opens: an N within 1/6 stop of it
+   (a marking rounded to third stops) means wide open, with one UserWarning line saying
+   so; a faster N is refused.
    Without ``fno`` the stop keeps the file's size.
 4. The object at ``object_m`` metres from the image plane (math.inf: at infinity). Only
    one of object_m and focus_m given: the other equals it (the camera focused on its
@@ -37,6 +39,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -53,8 +56,9 @@ OPTIONS = {"fno": "--fno", "object_m": "--object-m", "focus_m": "--focus-m", "co
 MAX_DISTANCE_M = 1.0e6
 _NEWTON_STEPS = 60
 _TOLERANCE_MM = 1e-9
-#: relative amount an --fno may be faster than wide open and still mean wide open (markings are rounded)
-WIDE_OPEN_TOLERANCE = 0.01
+#: how much faster than wide open (in stops) an --fno may be and still mean wide open: marked
+#: F-numbers are rounded to third stops (F/3.5 on a lens at F/3.56) and EXIF FNumber carries the marking
+WIDE_OPEN_TOLERANCE_STOPS = 1.0 / 6.0
 
 
 def _number(value: Any, key: str, allow_inf: bool) -> float:
@@ -306,19 +310,27 @@ def _fields_for_object(file_lens: Lens, object_mm: float) -> dict[str, Any]:
 
 
 def _check_fno(lens_inf: Lens, fno: float, largest_mm: float) -> float:
-    """The stop semi-diameter (mm) for F/fno at infinity; an fno within WIDE_OPEN_TOLERANCE
-    of the wide-open F-number is wide open (lens markings are rounded), a faster fno is
-    refused naming --fno."""
+    """The stop semi-diameter (mm) for F/fno at infinity. An fno faster than wide open by at
+    most WIDE_OPEN_TOLERANCE_STOPS is wide open (lens markings and EXIF FNumber are rounded
+    to third stops), said in one UserWarning line; a faster fno is refused naming --fno."""
     stop = _stop_at_fno(lens_inf, fno)
     if stop > largest_mm * (1 + 1e-9):
         fastest = _fno_of_stop(lens_inf, largest_mm)
-        if fno >= fastest * (1 - WIDE_OPEN_TOLERANCE):  # a rounded marking of wide open (F/2 for F/2.0001)
+        stops = 2.0 * math.log2(fastest / fno)  # the F-number grows by sqrt(2) a stop
+        if stops <= WIDE_OPEN_TOLERANCE_STOPS * (1 + 1e-9):
+            warnings.warn(
+                f"F/{fno:g} is {stops:.2f} stop faster than the lens's maximum aperture F/{fastest:.4g}, "
+                f"within the 1/6 stop of a rounded marking: using F/{fastest:.4g} (wide open)",
+                UserWarning,
+                stacklevel=2,  # lens_at's line: lens_at and describe then say it once
+            )
             return largest_mm
         raise InputError(
             "<command line>",
             "--fno",
             f"F/{fno:g} is faster than the lens's maximum aperture "
-            f"F/{fastest:.3g}; expected --fno {fastest:.3g} or more",
+            f"F/{fastest:.3g} by {stops:.2f} stop (more than the 1/6 stop of a rounded marking); "
+            f"expected --fno {fastest:.3g} or more",
         )
     return stop
 
