@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -45,6 +46,21 @@ _X_FIELD_KEYS = {"XAN", "XOB", "XIM", "XRI"}
 _ASPHERE_LETTERS = {"A": 4, "B": 6, "C": 8, "D": 10, "E": 12, "F": 14, "G": 16, "H": 18, "J": 20}
 _IGNORED = {"INI", "DER", "WTF", "CCY", "THC", "CCX"}
 _CATALOG_SUFFIX = {c.upper(): c for c in CATALOGS}
+
+# keyword -> handler(reader, line number, keyword, arguments): filled by @_command below
+_Handler = Callable[["_Reader", int, str, list[str]], None]
+_COMMANDS: dict[str, _Handler] = {}
+
+
+def _command(*keys: str) -> Callable[[_Handler], _Handler]:
+    """Register the decorated _Reader method as the handler of CODE V commands ``keys``."""
+
+    def register(handler: _Handler) -> _Handler:
+        for key in keys:
+            _COMMANDS[key] = handler
+        return handler
+
+    return register
 
 
 @dataclass
@@ -135,120 +151,160 @@ class _Reader:
 
     # ---- commands ----------------------------------------------------------------
     def command(self, lineno: int, tokens: list[str]) -> None:
+        """Read one command: its keyword's handler in ``_COMMANDS`` does the work."""
         cmd, args = tokens[0].upper(), tokens[1:]
         if self.done:
             raise self.err(lineno, cmd, "expected nothing after GO")
-        if cmd == "GO":
-            self.done = True
-        elif cmd in _IGNORED:
+        if cmd in _IGNORED:
             return
-        elif cmd == "RDM":
-            flag = args[0].upper() if args else "Y"
-            if flag not in ("Y", "N", "YES", "NO"):
-                raise self.err(lineno, cmd, f"expected Y or N, got {args[0]!r}")
-            self.radius_mode = flag.startswith("Y")
-        elif cmd == "LEN":
-            if self.surfaces or self.object:
-                raise self.err(lineno, cmd, "expected one lens per file (LEN after surfaces)")
-            if args:
-                self.title = self.title or args[0].strip("'\"")
-        elif cmd == "TITLE":
-            self.title = " ".join(a.strip("'\"") for a in args).strip()
-        elif cmd == "DIM":
-            unit = args[0].upper() if args else ""
-            if unit != "M":
-                raise self.err(
-                    lineno,
-                    cmd,
-                    f"expected DIM M (millimetres), got {' '.join(args) or 'nothing'}; convert the lens to millimetres",
-                )
-        elif cmd == "EPD":
-            self.aperture = ("epd", self.nums(lineno, cmd, args)[0])
-        elif cmd == "FNO":
-            self.aperture = ("fno", self.nums(lineno, cmd, args)[0])
-        elif cmd in ("NAO", "NA"):
-            raise self.err(lineno, cmd, "numerical-aperture system apertures are not supported; expected EPD or FNO")
-        elif cmd == "WL":
-            self.wavelengths_nm = self.nums(lineno, cmd, args)
-        elif cmd == "REF":
-            ref = self.nums(lineno, cmd, args)[0]
-            if ref != int(ref):
-                raise self.err(lineno, cmd, f"expected a whole wavelength number, got {args[0]}")
-            self.ref = int(ref)
-        elif cmd == "WTW":
-            self.weights = self.nums(lineno, cmd, args)
-        elif cmd in _FIELD_KEYS:
-            if self.field_type is not None and self.field_type != _FIELD_KEYS[cmd]:
-                raise self.err(
-                    lineno, cmd, f"expected one field type, got both {self.field_type} and {_FIELD_KEYS[cmd]}"
-                )
-            self.field_type = _FIELD_KEYS[cmd]
-            self.fields = self.nums(lineno, cmd, args)
-        elif cmd in _X_FIELD_KEYS:
-            xs = self.nums(lineno, cmd, args)
-            if any(x != 0.0 for x in xs):
-                raise self.err(
-                    lineno,
-                    cmd,
-                    "expected zero x fields: lensim models rotationally symmetric lenses "
-                    "with fields along y (give the radial field as Y values)",
-                )
-            self.x_fields = xs
-        elif cmd in ("VUX", "VLX", "VUY", "VLY"):
-            self.vignetting[cmd] = self.nums(lineno, cmd, args)
-        elif cmd == "SO":
-            if self.object is not None or self.surfaces:
-                raise self.err(lineno, cmd, "expected one SO line before the surfaces")
-            vals = self.nums(lineno, cmd, args[:2], 2)
-            glass = args[2] if len(args) > 2 else None
-            self.object = (lineno, vals[0], vals[1], glass)
-        elif cmd == "S":
-            if self.object is None:
-                raise self.err(lineno, cmd, "expected the object surface (SO) first")
-            if self.image is not None:
-                raise self.err(lineno, cmd, "expected no surface after the image surface (SI)")
-            n = len(self.surfaces) + 1
-            vals = self.nums(lineno, f"S {n}", args[:2], 2)
-            if len(args) > 3:
-                raise self.err(lineno, f"S {n}", f"expected 'S curvature thickness [glass]', got {' '.join(args)}")
-            self.surfaces.append(_SurfaceData(n, lineno, vals[0], vals[1], args[2] if len(args) > 2 else None))
-        elif cmd == "SI":
-            if not self.surfaces:
-                raise self.err(lineno, cmd, "expected surfaces (S) before the image surface")
-            vals = self.nums(lineno, cmd, args[:2], 1)
-            self.image = (lineno, vals[0], vals[1] if len(vals) > 1 else 0.0)
-        elif cmd == "STO":
-            s = self.current(lineno, cmd)
-            if self.image is not None:
-                raise self.err(lineno, cmd, "expected the stop on a lens surface, not the image")
-            if any(t.is_stop for t in self.surfaces):
-                raise self.err(lineno, cmd, "expected one stop, found a second STO")
-            s.is_stop = True
-        elif cmd == "PIM":
-            if self.image is not None:
-                raise self.err(lineno, cmd, "expected PIM on the last lens surface, not after SI")
-            self.current(lineno, cmd).pim = True
-        elif cmd == "K":
-            self.current(lineno, cmd).conic = self.nums(lineno, cmd, args)[0]
-        elif cmd == "ASP":
-            self.current(lineno, cmd)
-        elif cmd in _ASPHERE_LETTERS:
-            s = self.current(lineno, cmd)
-            s.asphere[_ASPHERE_LETTERS[cmd]] = self.nums(lineno, f"S {s.number} {cmd}", args)[0]
-        elif cmd == "SPS":
-            self.special_surface(lineno, args)
-        elif cmd == "SCO":
-            self.special_coefficient(lineno, args)
-        elif cmd == "CIR":
-            s = self.current(lineno, cmd)
-            r = self.nums(lineno, f"S {s.number} CIR", args)[0]
-            if r <= 0:
-                raise self.err(lineno, f"S {s.number} CIR", f"expected a positive clear semi-diameter, got {r}")
-            s.clear_radius = r
-        else:
+        handler = _COMMANDS.get(cmd)
+        if handler is None:
             raise self.err(lineno, cmd, f"unsupported CODE V command {tokens[0]!r}")
+        handler(self, lineno, cmd, args)
 
-    def special_surface(self, lineno: int, args: list[str]) -> None:
+    @_command("GO")
+    def _go(self, lineno: int, cmd: str, args: list[str]) -> None:
+        self.done = True
+
+    @_command("RDM")
+    def _radius_mode(self, lineno: int, cmd: str, args: list[str]) -> None:
+        flag = args[0].upper() if args else "Y"
+        if flag not in ("Y", "N", "YES", "NO"):
+            raise self.err(lineno, cmd, f"expected Y or N, got {args[0]!r}")
+        self.radius_mode = flag.startswith("Y")
+
+    @_command("LEN")
+    def _lens(self, lineno: int, cmd: str, args: list[str]) -> None:
+        if self.surfaces or self.object:
+            raise self.err(lineno, cmd, "expected one lens per file (LEN after surfaces)")
+        if args:
+            self.title = self.title or args[0].strip("'\"")
+
+    @_command("TITLE")
+    def _title(self, lineno: int, cmd: str, args: list[str]) -> None:
+        self.title = " ".join(a.strip("'\"") for a in args).strip()
+
+    @_command("DIM")
+    def _dimension(self, lineno: int, cmd: str, args: list[str]) -> None:
+        unit = args[0].upper() if args else ""
+        if unit != "M":
+            raise self.err(
+                lineno,
+                cmd,
+                f"expected DIM M (millimetres), got {' '.join(args) or 'nothing'}; convert the lens to millimetres",
+            )
+
+    @_command("EPD", "FNO")
+    def _aperture(self, lineno: int, cmd: str, args: list[str]) -> None:
+        self.aperture = (cmd.lower(), self.nums(lineno, cmd, args)[0])
+
+    @_command("NAO", "NA")
+    def _numerical_aperture(self, lineno: int, cmd: str, args: list[str]) -> None:
+        raise self.err(lineno, cmd, "numerical-aperture system apertures are not supported; expected EPD or FNO")
+
+    @_command("WL")
+    def _wavelengths(self, lineno: int, cmd: str, args: list[str]) -> None:
+        self.wavelengths_nm = self.nums(lineno, cmd, args)
+
+    @_command("REF")
+    def _reference(self, lineno: int, cmd: str, args: list[str]) -> None:
+        ref = self.nums(lineno, cmd, args)[0]
+        if ref != int(ref):
+            raise self.err(lineno, cmd, f"expected a whole wavelength number, got {args[0]}")
+        self.ref = int(ref)
+
+    @_command("WTW")
+    def _weights(self, lineno: int, cmd: str, args: list[str]) -> None:
+        self.weights = self.nums(lineno, cmd, args)
+
+    @_command(*_FIELD_KEYS)
+    def _fields(self, lineno: int, cmd: str, args: list[str]) -> None:
+        if self.field_type is not None and self.field_type != _FIELD_KEYS[cmd]:
+            raise self.err(lineno, cmd, f"expected one field type, got both {self.field_type} and {_FIELD_KEYS[cmd]}")
+        self.field_type = _FIELD_KEYS[cmd]
+        self.fields = self.nums(lineno, cmd, args)
+
+    @_command(*_X_FIELD_KEYS)
+    def _x_fields(self, lineno: int, cmd: str, args: list[str]) -> None:
+        xs = self.nums(lineno, cmd, args)
+        if any(x != 0.0 for x in xs):
+            raise self.err(
+                lineno,
+                cmd,
+                "expected zero x fields: lensim models rotationally symmetric lenses "
+                "with fields along y (give the radial field as Y values)",
+            )
+        self.x_fields = xs
+
+    @_command("VUX", "VLX", "VUY", "VLY")
+    def _vignetting(self, lineno: int, cmd: str, args: list[str]) -> None:
+        self.vignetting[cmd] = self.nums(lineno, cmd, args)
+
+    @_command("SO")
+    def _object_surface(self, lineno: int, cmd: str, args: list[str]) -> None:
+        if self.object is not None or self.surfaces:
+            raise self.err(lineno, cmd, "expected one SO line before the surfaces")
+        vals = self.nums(lineno, cmd, args[:2], 2)
+        glass = args[2] if len(args) > 2 else None
+        self.object = (lineno, vals[0], vals[1], glass)
+
+    @_command("S")
+    def _surface(self, lineno: int, cmd: str, args: list[str]) -> None:
+        if self.object is None:
+            raise self.err(lineno, cmd, "expected the object surface (SO) first")
+        if self.image is not None:
+            raise self.err(lineno, cmd, "expected no surface after the image surface (SI)")
+        n = len(self.surfaces) + 1
+        vals = self.nums(lineno, f"S {n}", args[:2], 2)
+        if len(args) > 3:
+            raise self.err(lineno, f"S {n}", f"expected 'S curvature thickness [glass]', got {' '.join(args)}")
+        self.surfaces.append(_SurfaceData(n, lineno, vals[0], vals[1], args[2] if len(args) > 2 else None))
+
+    @_command("SI")
+    def _image_surface(self, lineno: int, cmd: str, args: list[str]) -> None:
+        if not self.surfaces:
+            raise self.err(lineno, cmd, "expected surfaces (S) before the image surface")
+        vals = self.nums(lineno, cmd, args[:2], 1)
+        self.image = (lineno, vals[0], vals[1] if len(vals) > 1 else 0.0)
+
+    @_command("STO")
+    def _stop(self, lineno: int, cmd: str, args: list[str]) -> None:
+        s = self.current(lineno, cmd)
+        if self.image is not None:
+            raise self.err(lineno, cmd, "expected the stop on a lens surface, not the image")
+        if any(t.is_stop for t in self.surfaces):
+            raise self.err(lineno, cmd, "expected one stop, found a second STO")
+        s.is_stop = True
+
+    @_command("PIM")
+    def _paraxial_image(self, lineno: int, cmd: str, args: list[str]) -> None:
+        if self.image is not None:
+            raise self.err(lineno, cmd, "expected PIM on the last lens surface, not after SI")
+        self.current(lineno, cmd).pim = True
+
+    @_command("K")
+    def _conic(self, lineno: int, cmd: str, args: list[str]) -> None:
+        self.current(lineno, cmd).conic = self.nums(lineno, cmd, args)[0]
+
+    @_command("ASP")
+    def _asphere(self, lineno: int, cmd: str, args: list[str]) -> None:
+        self.current(lineno, cmd)
+
+    @_command(*_ASPHERE_LETTERS)
+    def _asphere_coefficient(self, lineno: int, cmd: str, args: list[str]) -> None:
+        s = self.current(lineno, cmd)
+        s.asphere[_ASPHERE_LETTERS[cmd]] = self.nums(lineno, f"S {s.number} {cmd}", args)[0]
+
+    @_command("CIR")
+    def _clear_radius(self, lineno: int, cmd: str, args: list[str]) -> None:
+        s = self.current(lineno, cmd)
+        r = self.nums(lineno, f"S {s.number} CIR", args)[0]
+        if r <= 0:
+            raise self.err(lineno, f"S {s.number} CIR", f"expected a positive clear semi-diameter, got {r}")
+        s.clear_radius = r
+
+    @_command("SPS")
+    def special_surface(self, lineno: int, cmd: str, args: list[str]) -> None:
         """SPS ODD [NRADIUS]: an odd polynomial asphere (CODE V's ODD special surface)."""
         s = self.current(lineno, "SPS")
         kind = args[0].upper() if args else ""
@@ -266,7 +322,8 @@ class _Reader:
             )
         s.odd = True
 
-    def special_coefficient(self, lineno: int, args: list[str]) -> None:
+    @_command("SCO")
+    def special_coefficient(self, lineno: int, cmd: str, args: list[str]) -> None:
         """SCO K k | SCO ARn v | SCO Cn v of an SPS ODD surface (C1 = K, C(n+1) = ARn)."""
         s = self.current(lineno, "SCO")
         what = f"S {s.number} SCO"
@@ -320,7 +377,8 @@ class _Reader:
             notes.append(note)
         return glass
 
-    def build(self) -> Lens:
+    def required(self) -> tuple[tuple[int, float, float, str | None], tuple[int, float, float], tuple[str, float]]:
+        """(object, image, aperture): what every lens needs, checked present in this order."""
         if self.object is None:
             raise InputError(self.src, "SO", "missing the object surface (SO curvature thickness)")
         if not self.surfaces:
@@ -333,7 +391,10 @@ class _Reader:
             raise InputError(self.src, "WL", "missing the wavelengths (WL, nm)")
         if not any(s.is_stop for s in self.surfaces):
             raise InputError(self.src, "STO", "missing the aperture stop (STO after one of the S lines)")
-        notes = self.notes
+        return self.object, self.image, self.aperture
+
+    def wavelength_data(self) -> tuple[list[float], int]:
+        """(weights, 1-based reference wavelength): WTW and REF, or their defaults."""
         w = len(self.wavelengths_nm)
         weights = self.weights if self.weights is not None else [1.0] * w
         if len(weights) != w:
@@ -341,40 +402,45 @@ class _Reader:
         ref = self.ref if self.ref is not None else (w + 1) // 2
         if not 1 <= ref <= w:
             raise InputError(self.src, "REF", f"expected a wavelength number 1..{w}, got {ref}")
-        fields = self.fields if self.fields is not None else [0.0]
-        field_type = self.field_type or "angle"
+        return weights, ref
+
+    def note_vignetting(self) -> None:
+        """A note naming the non-zero vignetting factors, which are not applied."""
         vig = [
             f"{key} {' '.join(f'{v:g}' for v in vals)}"
             for key, vals in self.vignetting.items()
             if any(v != 0.0 for v in vals)
         ]
         if vig:
-            notes.append(
+            self.notes.append(
                 f"vignetting factors ({'; '.join(vig)}) are not applied; "
                 "lensim vignettes rays with the real surface apertures"
             )
-        # object
-        lineno, obj_c, obj_t, obj_glass = self.object
+
+    def object_space(self, obj: tuple[int, float, float, str | None]) -> tuple[float, Material]:
+        """(object distance in mm or math.inf, object-space material) from the SO line."""
+        lineno, obj_c, obj_t, obj_glass = obj
         object_distance = math.inf if abs(obj_t) >= INFINITE_THICKNESS_MM else obj_t
         if not (object_distance > 0):
             raise self.err(lineno, "SO thickness", f"expected a positive object distance, got {obj_t}")
         if math.isfinite(object_distance) and self.curvature(obj_c) != 0.0:
             raise self.err(lineno, "SO curvature", "expected a flat object surface")
-        object_material: Material = Air()
-        if obj_glass is not None:
-            object_material = self.material(lineno, "SO glass", obj_glass, notes)
-        # surfaces
+        if obj_glass is None:
+            return object_distance, Air()
+        return object_distance, self.material(lineno, "SO glass", obj_glass, self.notes)
+
+    def lens_surfaces(self, object_material: Material) -> list[Surface]:
+        """The S lines as Surfaces (a REFL mirror keeps the medium it reflects in)."""
         surfaces: list[Surface] = []
         medium = object_material
         for sd in self.surfaces:
-            what = f"S {sd.number}"
             mirror = sd.glass is not None and sd.glass.upper() == "REFL"
             if mirror:
                 material = medium
             elif sd.glass is None:
                 material = Air()
             else:
-                material = self.material(sd.line, f"{what} glass", sd.glass, notes)
+                material = self.material(sd.line, f"S {sd.number} glass", sd.glass, self.notes)
             medium = material
             surfaces.append(
                 Surface(
@@ -388,15 +454,35 @@ class _Reader:
                     is_mirror=mirror,
                 )
             )
-        img_line, img_c, img_t = self.image
+        return surfaces
+
+    def solve_pim(self, lens: Lens) -> None:
+        """PIM: set the last thickness to the paraxial focus (on the last surface only)."""
+        pim = [s for s in self.surfaces if s.pim]
+        if not pim:
+            return
+        if pim[-1] is not self.surfaces[-1]:
+            raise self.err(pim[-1].line, f"S {pim[-1].number} PIM", "expected PIM on the last surface before SI")
+        try:
+            lens.surfaces[-1].thickness = paraxial_focus_thickness(lens)
+        except InputError as e:
+            raise InputError(lens.source, "PIM", f"{e.message}; remove the PIM solve") from None
+
+    def build(self) -> Lens:
+        """The Lens the commands describe; InputError naming the command for what is missing or wrong."""
+        obj, (img_line, img_c, img_t), aperture = self.required()
+        weights, ref = self.wavelength_data()
+        self.note_vignetting()
+        object_distance, object_material = self.object_space(obj)
+        surfaces = self.lens_surfaces(object_material)
         if self.curvature(img_c) != 0.0:
             raise self.err(img_line, "SI curvature", "expected a flat image surface")
         lens = Lens(
             surfaces=surfaces,
-            aperture_type=self.aperture[0],
-            aperture_value=self.aperture[1],
-            field_type=field_type,
-            fields=fields,
+            aperture_type=aperture[0],
+            aperture_value=aperture[1],
+            field_type=self.field_type or "angle",
+            fields=self.fields if self.fields is not None else [0.0],
             wavelengths_um=[v / 1000.0 for v in self.wavelengths_nm],
             wavelength_weights=weights,
             primary=ref - 1,
@@ -405,16 +491,9 @@ class _Reader:
             image_defocus=img_t,
             name=self.title or Path(self.src).stem,
             source=self.src,
-            notes=notes,
+            notes=self.notes,
         )
-        pim = [s for s in self.surfaces if s.pim]
-        if pim:
-            if pim[-1] is not self.surfaces[-1]:
-                raise self.err(pim[-1].line, f"S {pim[-1].number} PIM", "expected PIM on the last surface before SI")
-            try:
-                lens.surfaces[-1].thickness = paraxial_focus_thickness(lens)
-            except InputError as e:
-                raise InputError(lens.source, "PIM", f"{e.message}; remove the PIM solve") from None
+        self.solve_pim(lens)
         return lens
 
 
