@@ -14,6 +14,7 @@ from lensim.cli.develop_cmd import develop_command
 from lensim.cli.evaluate_cmd import evaluate_command
 from lensim.cli.export_cmd import export_command
 from lensim.cli.lens_cmd import lens_app
+from lensim.cli.library_cmd import library_app
 from lensim.cli.psf_cmd import psf_app
 from lensim.cli.raw_cmd import raw_app
 from lensim.cli.restore_cmd import restore_command
@@ -29,6 +30,7 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
 )
 app.add_typer(lens_app, name="lens")
+app.add_typer(library_app, name="library")
 app.add_typer(psf_app, name="psf")
 app.add_typer(raw_app, name="raw")
 app.add_typer(sensor_app, name="sensor")
