@@ -120,15 +120,18 @@ def test_fast_huygens_equals_direct_summation():
 
 
 def test_complex64_huygens_matches_complex128():
-    # the default complex64 phase factors against the all-float64 sum, off axis (several
-    # tiles) and at two wavelengths: within 1e-6 of the peak, at 5x oversampling
+    # the default float32 phases and complex64 products against the all-float64 sum, off
+    # axis (several tiles) and at two wavelengths: each sample within 5e-6 of the peak (1e-6
+    # measured), and 5 x 5 samples binned as pixels within 1e-6 (2e-7 measured)
     lens = load_lens("cooke_triplet")
     for wl in (0.45, 0.65):
         pf = pupil_field(lens, 0.8 * lens.max_field, wl, 96, "real")
         fast = huygens_psf(pf, 100, 0.8)
         exact = huygens_psf(pf, 100, 0.8, dtype=torch.complex128)
         assert fast.dtype == torch.float64
-        assert float((fast - exact).abs().max()) < 1e-6 * float(exact.max())
+        assert float((fast - exact).abs().max()) < 5e-6 * float(exact.max())
+        fast_px, exact_px = (x.reshape(20, 5, 20, 5).sum((1, 3)) for x in (fast, exact))
+        assert float((fast_px - exact_px).abs().max()) < 1e-6 * float(exact_px.max())
 
 
 def test_geometric_psf_approaches_huygens_envelope_for_large_aberrations():
