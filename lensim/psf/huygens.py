@@ -18,6 +18,11 @@ in x and y: one complex matrix product per tile. The tile size is chosen so that
 dropped phase stays below `max_phase_error` radians; tile size 1 is the exact direct sum.
 Memory is bounded by chunking the rays: about 32 * tiles * tile_size * chunk bytes.
 
+Symmetry: for a field on the y axis of a rotationally symmetric lens (every bank field) the
+wavelets are mirror images about the meridional plane x = 0, and so is the PSF;
+:func:`mirror_symmetric` checks that on the traced pupil, and then only the columns at
+x >= 0 are summed and mirrored (about half the work).
+
 Precision: each wavelet's amplitude and its large phase k (l_j + n' r_j) (1e5-1e6 rad) are
 computed in float64 and the phase reduced modulo 2 pi; the per-tile phases (a few hundred
 radians at most), their sines and cosines and the matrix products run in float32 /
@@ -80,6 +85,48 @@ def _phasors(
     return torch.complex(cos, sin)
 
 
+def _axis_tiles(offsets: torch.Tensor, m: int, one_sided: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
+    """Sample offsets (g,) (mm, evenly spaced) cut into tiles of m samples, the last one
+    padded: the tiles' expansion centres (n,) and the offsets within each tile (n, m). A
+    tile's centre is its middle sample, except the first one's with one_sided: its first
+    sample (so a tile of m samples reaches as far from its centre as one of 2m - 1)."""
+    n = math.ceil(offsets.shape[0] / m)
+    step = float(offsets[1] - offsets[0]) if offsets.shape[0] > 1 else 0.0
+    padded = (offsets[0] + torch.arange(n * m, dtype=torch.float64) * step).reshape(n, m)
+    centres = padded.mean(1)
+    if one_sided:
+        centres[0] = padded[0, 0]
+    return centres, padded - centres.unsqueeze(1)
+
+
+def mirror_symmetric(pf: PupilField, x0_mm: float, rtol: float = 1e-9) -> bool:
+    """Whether the wavelets of pf are mirror images about the plane x = x0_mm, so that the
+    PSF is too: pf's rays come from a square pupil grid (pupil_xy), every ray's mirror
+    (-px, py) is there too, and their positions, directions, optical paths, powers and
+    areas agree to rtol (a rotationally symmetric lens and a field on the y axis)."""
+    n = pf.samples
+    if pf.pupil_xy.shape[0] < 2 or abs(x0_mm) > rtol * pf.radius:
+        return False
+    ij = torch.round((pf.pupil_xy + 1.0) * (n / 2.0) - 0.5).long()
+    if bool((ij < 0).any() or (ij >= n).any()):
+        return False
+    index = torch.full((n, n), -1, dtype=torch.long)
+    index[ij[:, 1], ij[:, 0]] = torch.arange(ij.shape[0])
+    partner = index[ij[:, 1], n - 1 - ij[:, 0]]
+    if bool((partner < 0).any()):
+        return False
+    flip = torch.tensor([-1.0, 1.0, 1.0], dtype=pf.points.dtype)
+    mirrored = (pf.points - torch.tensor([2.0 * x0_mm, 0.0, 0.0], dtype=pf.points.dtype)) * flip
+    differences = (  # each relative to its scale
+        (mirrored - pf.points[partner]).abs().max() / pf.radius,
+        (pf.directions * flip - pf.directions[partner]).abs().max(),
+        (pf.opl - pf.opl[partner]).abs().max() / pf.wavelength_mm,  # in waves
+        (pf.power - pf.power[partner]).abs().max() / pf.power.abs().max(),
+        (pf.area - pf.area[partner]).abs().max() / pf.area.abs().max(),
+    )
+    return all(float(d) <= rtol for d in differences)
+
+
 def huygens_psf(
     pf: PupilField,
     grid: int,
@@ -88,37 +135,45 @@ def huygens_psf(
     max_phase_error: float = 0.01,
     tile: int | None = None,
     dtype: torch.dtype = torch.complex64,
+    mirror: bool | None = None,
 ) -> torch.Tensor:
     """Huygens PSF (grid x grid, energy per sample, float64) on the image plane, sampled
     every spacing_um, centred (sample grid//2) on the chief-ray point plus offset_mm.
     Rows are y, columns x. dtype: the complex type of the per-tile phase factors and their
-    matrix products (complex64 or complex128; see the module's note on precision)."""
+    matrix products (complex64 or complex128; see the module's note on precision).
+    mirror: compute the columns at x >= the window centre only and mirror them, for a PSF
+    symmetric about the meridional plane (about half the work); None: when
+    :func:`mirror_symmetric` finds the wavelets symmetric about the window's centre line."""
     s = spacing_um * 1e-3
     k_vac = 2.0 * math.pi / pf.wavelength_mm
     kn = k_vac * pf.n_image
     m = tile or min(grid, _tile_size(pf, s, max_phase_error))
-    n_t = math.ceil(grid / m)
-    full = n_t * m
-    # sample coordinates of the padded grid, sample 0 of the requested grid first
-    offs = sample_offsets(grid, s)[0] + torch.arange(full, dtype=torch.float64) * s
-    tile_c = offs.reshape(n_t, m).mean(1)  # tile centres along one axis
-    eps = offs.reshape(n_t, m) - tile_c.unsqueeze(1)  # (n_t, m) offsets within tiles
     cx = pf.chief[0].item() + offset_mm[0]
     cy = pf.chief[1].item() + offset_mm[1]
     cz = pf.chief[2].item()
+    if mirror is None:
+        mirror = mirror_symmetric(pf, cx)
+    k = torch.arange(grid) - grid // 2  # sample index from the window centre
+    ty_c, ey_t = _axis_tiles(k.to(torch.float64) * s, m)
+    if mirror:  # the columns at x >= 0, the first tile reaching m // 2 from its centre at x = 0
+        columns = torch.arange(int(k.abs().max()) + 1)
+        mx = min(m // 2 + 1, columns.shape[0])
+        tx_c, ex_t = _axis_tiles(columns.to(torch.float64) * s, mx, one_sided=True)
+    else:
+        columns, mx = k, m
+        tx_c, ex_t = ty_c, ey_t
+    n_ty, n_tx = ty_c.shape[0], tx_c.shape[0]
     amp = _amplitudes(pf)
     nu = (pf.chief.unsqueeze(0) - pf.points) / pf.radius
     cos_d = (nu * pf.directions).sum(-1)
-    ty, tx = torch.meshgrid(tile_c, tile_c, indexing="ij")
-    centres = torch.stack(
-        [cx + tx.reshape(-1), cy + ty.reshape(-1), torch.full((n_t * n_t,), cz, dtype=torch.float64)], -1
-    )
+    ty, tx = torch.meshgrid(ty_c, tx_c, indexing="ij")
+    T = n_ty * n_tx
+    centres = torch.stack([cx + tx.reshape(-1), cy + ty.reshape(-1), torch.full((T,), cz, dtype=torch.float64)], -1)
     # tile t = (row ty, column tx): its x offsets and y offsets, (T, m)
-    ex = eps[torch.arange(n_t).repeat(n_t)]
-    ey = eps[torch.arange(n_t).repeat_interleave(n_t)]
-    T = n_t * n_t
+    ex = ex_t[torch.arange(n_tx).repeat(n_ty)]
+    ey = ey_t[torch.arange(n_ty).repeat_interleave(n_tx)]
     real = torch.float32 if dtype == torch.complex64 else torch.float64
-    out = torch.zeros(T, m, m, dtype=dtype, device=pf.points.device)
+    out = torch.zeros(T, m, mx, dtype=dtype, device=pf.points.device)
     for a in range(0, pf.points.shape[0], CHUNK_RAYS):
         q = pf.points[a : a + CHUNK_RAYS]
         v = centres.unsqueeze(1) - q.unsqueeze(0)  # (T, N, 3)
@@ -133,7 +188,10 @@ def huygens_psf(
         bx = _phasors(ex, kn * ux, kn * (1 - ux * ux) * inv2r, real)
         by = _phasors(ey, kn * uy, kn * (1 - uy * uy) * inv2r, real, weight, phase)
         out += torch.bmm(by, bx.transpose(1, 2))
-    out = out.reshape(n_t, n_t, m, m).permute(0, 2, 1, 3).reshape(full, full)[:grid, :grid].to(torch.complex128)
+    out = out.reshape(n_ty, n_tx, m, mx).permute(0, 2, 1, 3).reshape(n_ty * m, n_tx * mx)[:grid, : columns.shape[0]]
+    if mirror:
+        out = out[:, k.abs()]
+    out = out.to(torch.complex128)
     return (out.real**2 + out.imag**2) * s * s * plane_obliquity(pf)
 
 
@@ -156,4 +214,4 @@ def huygens_psf_direct(
     pf: PupilField, grid: int, spacing_um: float, offset_mm: tuple[float, float] = (0.0, 0.0)
 ) -> torch.Tensor:
     """Exact direct float64 summation of every wavelet at every sample (slow reference)."""
-    return huygens_psf(pf, grid, spacing_um, offset_mm, tile=1, dtype=torch.complex128)
+    return huygens_psf(pf, grid, spacing_um, offset_mm, tile=1, dtype=torch.complex128, mirror=False)
