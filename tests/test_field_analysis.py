@@ -208,3 +208,19 @@ def test_relative_illumination_result_fields():
     # for the rim rays the clear apertures cut and the working F-number's difference)
     assert r["projected_solid_angle_sr"][0] == pytest.approx(math.pi / (4 * 2.1**2), rel=0.08)
     assert r["relative_illumination"][1] < 0.5  # strongly vignetted at full field
+
+
+def test_relative_illumination_spectrum_equals_one_wavelength_at_a_time():
+    # the bank's form (all wavelengths traced together) against relative_illumination per
+    # wavelength: the same to rounding
+    from lensim.optics.field_analysis import relative_illumination, relative_illumination_spectrum
+
+    lens = load_lens("cooke_triplet")
+    wavelengths = [0.45, 0.55, 0.65]
+    field = 0.9 * lens.max_field
+    together = relative_illumination_spectrum(lens, field, wavelengths, samples=16)
+    one_by_one = [relative_illumination(lens, [field], wl, 16)["relative_illumination"][0] for wl in wavelengths]
+    assert together.shape == (3,)
+    assert np.allclose(together, one_by_one, rtol=0, atol=1e-12)
+    assert 0.3 < together.min() < 1.0
+    assert np.array_equal(relative_illumination_spectrum(lens, 0.0, wavelengths, samples=16), np.ones(3))

@@ -24,7 +24,7 @@ from lensim.optics.aiming import (
 )
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import ParaxialData, paraxial_data, paraxial_image_height
-from lensim.optics.trace import DTYPE, TraceResult, trace
+from lensim.optics.trace import DTYPE, Rays, TraceResult, trace
 
 DEFAULT_FIELD_STEPS = 21
 
@@ -174,6 +174,70 @@ class _PupilCells:
         return (frac / counts.clamp_min(1.0)).reshape(-1, n, n)
 
 
+def _by_field(res: TraceResult) -> TraceResult:
+    """A (W, F, P) trace as (1, W * F, P): each wavelength's fields as more fields."""
+
+    def flat(x: torch.Tensor) -> torch.Tensor:
+        return x.reshape(1, -1, *x.shape[2:])
+
+    r = res.rays
+    return TraceResult(
+        Rays(flat(r.position), flat(r.direction), flat(r.opl), flat(r.valid)), flat(res.status), flat(res.failed_at)
+    )
+
+
+def _beam_solid_angles(
+    lens: Lens,
+    launch: list[float],
+    wavelengths_um: list[float],
+    samples: int,
+    subsamples: int,
+    aiming: Aiming,
+    para: ParaxialData,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """relative_illumination's measure at launch fields (F,) and wavelengths (W,), traced
+    together: the projected solid angles (W, F) (sr), the unvignetted fractions of the pupil
+    disc (W, F) and the chief-ray image points (W, F, 3) (mm)."""
+    cells = _PupilCells(samples, subsamples)
+    pupil = torch.cat([torch.zeros(1, 2, dtype=DTYPE), cells.nodes, cells.sub])
+    rays, wlt = generate_rays(lens, launch, pupil, wavelengths_um, aiming, para)
+    n_nodes = cells.nodes.shape[0]
+    free = _by_field(trace(lens, rays.select(slice(0, 1 + n_nodes)), wlt, apertures=False))
+    blocked = _by_field(trace(lens, rays.select(slice(1 + n_nodes, None)), wlt))
+    chief_ok = free.rays.valid[0, :, 0]
+    if not bool(chief_ok.all()):
+        fi = int(torch.nonzero(~chief_ok)[0, 0])
+        mask = torch.zeros_like(free.rays.valid)
+        mask[0, fi, 0] = True
+        failure = free.first_failure(mask)
+        raise RayTraceError(describe_failure(lens, launch[fi % len(launch)], failure, "chief ray"))
+    area = cells.cell_areas(free, para.exit_pupil_z_mm)
+    weight = cells.disc.unsqueeze(0) * cells.passed_fraction(blocked)
+    W, F = len(wavelengths_um), len(launch)
+    solid = (area * weight).sum((-1, -2)).reshape(W, F)
+    unvignetted = (weight.sum((-1, -2)) / cells.disc.sum()).reshape(W, F)
+    return solid, unvignetted, free.rays.position[0, :, 0].reshape(W, F, 3)
+
+
+def relative_illumination_spectrum(
+    lens: Lens,
+    field: float,
+    wavelengths_um: list[float],
+    samples: int = 64,
+    aiming: Aiming = "real",
+    subsamples: int = 2,
+    para: ParaxialData | None = None,
+) -> np.ndarray:
+    """:func:`relative_illumination` of one field (lens units) at several wavelengths (um),
+    each normalized on axis at its own wavelength, all traced together: (W,) float64."""
+    para = para or paraxial_data(lens)
+    launch = object_field(lens, field, aiming, para)
+    if launch == 0.0:
+        return np.ones(len(wavelengths_um))
+    solid, _, _ = _beam_solid_angles(lens, [0.0, launch], list(wavelengths_um), samples, subsamples, aiming, para)
+    return (solid[:, 1] / solid[:, 0]).numpy()
+
+
 def relative_illumination(
     lens: Lens,
     fields: list[float] | np.ndarray | None = None,
@@ -218,26 +282,9 @@ def relative_illumination(
     all_launch = [0.0] * off + launch
     axis_index = all_launch.index(0.0)
 
-    n = samples
-    cells = _PupilCells(n, subsamples)
-    pupil = torch.cat([torch.zeros(1, 2, dtype=DTYPE), cells.nodes, cells.sub])
-    rays, wlt = generate_rays(lens, all_launch, pupil, [wl], aiming, para)
-    n_nodes = cells.nodes.shape[0]
-    free = trace(lens, rays.select(slice(0, 1 + n_nodes)), wlt, apertures=False)
-    blocked = trace(lens, rays.select(slice(1 + n_nodes, None)), wlt)
-
-    chief_ok = free.rays.valid[0, :, 0]
-    if not bool(chief_ok.all()):
-        fi = int(torch.nonzero(~chief_ok)[0, 0])
-        mask = torch.zeros_like(free.rays.valid)
-        mask[0, fi, 0] = True
-        raise RayTraceError(describe_failure(lens, all_launch[fi], free.first_failure(mask), "chief ray"))
-    P = free.rays.position[0][:, :1, :]  # chief-ray image points (F, 1, 3)
-    area = cells.cell_areas(free, para.exit_pupil_z_mm)
-    weight = cells.disc.unsqueeze(0) * cells.passed_fraction(blocked)
-    solid = (area * weight).sum((-1, -2))
+    solid, unvignetted_wf, P = _beam_solid_angles(lens, all_launch, [wl], samples, subsamples, aiming, para)
+    solid, P, unvignetted = solid[0], P[0], unvignetted_wf[0].tolist()
     n_img = float(lens.indices([wl])[-1, 0])
-    unvignetted = (weight.sum((-1, -2)) / cells.disc.sum()).tolist()
     ri = (solid / solid[axis_index]).tolist()
     pick = slice(off, off + len(launch))
     return {
@@ -249,7 +296,7 @@ def relative_illumination(
         "projected_solid_angle_sr": solid.tolist()[pick],
         "n2_projected_solid_angle_sr": (solid * n_img * n_img).tolist()[pick],
         "unvignetted_fraction": unvignetted[pick],
-        "image_height_mm": P[:, 0, 1].tolist()[pick],
+        "image_height_mm": P[:, 1].tolist()[pick],
     }
 
 

@@ -148,15 +148,14 @@ class _FieldWork:
         fine = _psf_fn(job.method)(pf, m * job.k, job.spacing_um, offset)
         return embed_centred(fine.numpy(), job.k * job.kernel_pixels)
 
-    def relative_illumination(self, wl_um: float) -> float:
-        """Relative illumination at this field and wavelength (1 on axis)."""
-        from lensim.optics.field_analysis import relative_illumination
+    def relative_illumination(self) -> np.ndarray:
+        """Relative illumination at this field (1 on axis) at each bank wavelength, (W,),
+        all wavelengths traced together."""
+        from lensim.optics.field_analysis import relative_illumination_spectrum
 
-        if self.value == 0:
-            return 1.0
-        return relative_illumination(
-            self.lens, [self.value], wl_um, self.job.ri_samples, self.job.aiming, para=self.para
-        )["relative_illumination"][0]
+        return relative_illumination_spectrum(
+            self.lens, self.value, self.job.wavelengths_um, self.job.ri_samples, self.job.aiming, para=self.para
+        )
 
 
 def _compute_field(job: _Job, index: int, fld: float, para: ParaxialData | None = None) -> BankField:
@@ -173,7 +172,8 @@ def _compute_field(job: _Job, index: int, fld: float, para: ParaxialData | None 
     para_y = paraxial_image_height(lens.launch_lens(), object_field(lens, work.value, job.aiming, para), para)
     W, P = len(job.wavelengths_um), job.kernel_pixels
     rgb = np.zeros((3, P, P))
-    offsets, ri, trans, window = np.zeros((W, 2)), np.zeros(W), np.zeros(W), np.zeros(W)
+    offsets, trans, window = np.zeros((W, 2)), np.zeros(W), np.zeros(W)
+    ri = work.relative_illumination()
     primary_fine = None
     strehl = math.nan
     for w, wl in enumerate(job.wavelengths_um):
@@ -189,7 +189,6 @@ def _compute_field(job: _Job, index: int, fld: float, para: ParaxialData | None 
                 f"field {fld:g} at {wl * 1e3:g} nm",
                 "no energy inside the kernel window; expected a larger kernel",
             )
-        ri[w] = work.relative_illumination(wl)
         rgb += (job.weights[:, w] * ri[w])[:, None, None] * (pix / total)[None]
         offsets[w] = [-off[0], -off[1]]
         trans[w] = pf.transmission
