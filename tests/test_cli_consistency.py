@@ -27,6 +27,7 @@ TOP = {
     "develop",
     "sensor",
     "export",
+    "library",
 }
 # other spellings of the common options that must not appear anywhere
 FORBIDDEN = {
@@ -78,6 +79,7 @@ def test_common_options_are_spelled_one_way(path: tuple[str, ...], cmd: Any) -> 
         ("lens", "field"),
         ("psf", "compute"),
         ("assets",),
+        ("library", "list"),
         ("raw", "info"),
         ("sensor", "from-raw"),
     }:

@@ -39,6 +39,8 @@ FAMILIES = (
     "zoom",
     "phone",
     "catadioptric",
+    "petzval",
+    "objective",
 )
 # How the focal length in the index was stated by the source: the design value (the
 # prescription's own EFL, as a table or design report gives it) or the marked focal
@@ -73,8 +75,9 @@ class LibraryLens:
 
     @property
     def path(self) -> Path:
-        """The prescription file (native YAML)."""
-        return LIBRARY_DIR / self.file
+        """The prescription file (native YAML; a built-in lens's file for an entry that
+        names one, such as ``../lenses/cooke_triplet.yaml``)."""
+        return (LIBRARY_DIR / self.file).resolve()
 
 
 _FIELDS = {
