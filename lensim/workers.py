@@ -54,6 +54,14 @@ def exit_with_parent(parent_pid: int, poll_s: float = 0.25) -> None:
     threading.Thread(target=_watch, args=(parent_pid, poll_s), name="lensim-exit-with-parent", daemon=True).start()
 
 
+def available_cores() -> int:
+    """The CPU cores this process may run on (its affinity mask where the system has one)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # no affinity masks (macOS, Windows)
+        return max(1, os.cpu_count() or 1)
+
+
 class _Failed:
     """An exception raised by a job, sent back as its result (so the worker does not log a
     multi-line traceback of an error the parent reports in one line); an unexpected one
@@ -190,4 +198,4 @@ def _run_on_dask(
             cluster.close()
 
 
-__all__ = ["exit_with_parent", "run_jobs"]
+__all__ = ["available_cores", "exit_with_parent", "run_jobs"]

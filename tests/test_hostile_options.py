@@ -361,7 +361,7 @@ EVALUATING = [
     case("ablation-crop-tiny", "ablation {w.data} -o {t}/a --crop 8", "--crop"),
     case("ablation-device-banana", "ablation {w.data} -o {t}/a --device banana", "--device", "banana"),
     case("ablation-output-file", "ablation {w.data} -o {t}/afile", "afile", make=AFILE),
-    case("demo-workers-zero", "demo -o {t}/demo --quick --workers 0", "--workers"),
+    case("demo-workers-negative", "demo -o {t}/demo --quick --workers -1", "--workers"),
     case("demo-device-banana", "demo -o {t}/demo --quick --device banana", "--device", "banana"),
     case("demo-device-cuda9", "demo -o {t}/demo --quick --device cuda:9", "--device", "cuda:9"),
     case("demo-output-file", "demo -o {t}/afile --quick", "afile", make=AFILE),

@@ -18,7 +18,12 @@ def demo_command(
     ),
     quick: bool = typer.Option(False, "--quick", help="A ~3-minute run (CI); the default takes about 15 minutes."),
     seed: int = typer.Option(0, "--seed", help="Seed of every random draw."),
-    workers: int = typer.Option(1, "--workers", help="Processes for the PSF bank and the pairs."),
+    workers: int = typer.Option(
+        0,
+        "--workers",
+        help="Processes for the PSF bank and the pairs; two or more also train the two networks side by side "
+        "(0: one per available core).",
+    ),
     device: str = typer.Option("cpu", "--device", help="cpu, cuda or cuda:N: where the networks train and run."),
     quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
     json_out: bool = typer.Option(False, "--json", help="Print report.json's metrics."),
@@ -37,7 +42,7 @@ def demo_command(
     """
     from lensim.demo import run_demo
 
-    at_least(workers, 1, "--workers", what="a number of processes")
+    at_least(workers, 0, "--workers", what="a number of processes (0: one per core)")
     check_device(device)
     shooting = shooting_settings(fno, object_m, focus_m, config)
     if not shooting.is_default:  # refused before the folder is made
@@ -52,7 +57,7 @@ def demo_command(
             output,
             quick=quick,
             seed=seed,
-            workers=workers,
+            workers=workers or None,
             say=bars.say,
             device=device,
             progress=bars.progress,
