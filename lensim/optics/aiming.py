@@ -49,12 +49,17 @@ def generate_rays(
     wavelength_um: torch.Tensor | float | list,
     aiming: Aiming = "paraxial",
     para: ParaxialData | None = None,
+    start: torch.Tensor | None = None,
 ) -> tuple[Rays, torch.Tensor]:
     """Rays for every wavelength x field x pupil point, shape (W, F, P).
 
     field: object-space field values (angle deg for an infinite object, object height mm
     or angle for a finite one; see object_field for image-height fields). pupil: (P, 2)
     normalized pupil coordinates. Returns (rays, wavelength tensor shaped (W, 1, 1)).
+    start: with real aiming, a nearby solution of the aim (the ``entrance_xy`` of rays
+    aimed before, e.g. at a neighbouring wavelength) to start from
+    (lensim.optics.real_aiming.aim_real). Real-aimed rays carry their aim as
+    ``rays.entrance_xy`` (W, F, P, 2).
     """
     device = pupil.device
     para = para or paraxial_data(lens)
@@ -71,10 +76,11 @@ def generate_rays(
         return object_rays(lens, pos, dirs, n[0]), wl
     if aiming != "real":
         raise InputError(None, "aiming", f"expected 'paraxial' or 'real', got {aiming!r}")
-    solved, converged = aim_real(lens, fld, pupil, wl, n, para)
+    solved, converged = aim_real(lens, fld, pupil, wl, n, para, start)
     pos, dirs = launch_at(lens, fld.reshape(1, F, 1), solved, para.entrance_pupil_z_mm)
     rays = object_rays(lens, pos, dirs, n[0])
     rays.valid = rays.valid & converged
+    rays.entrance_xy = solved
     return rays, wl
 
 

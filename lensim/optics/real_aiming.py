@@ -292,15 +292,30 @@ def _continue_from_chief(
 
 
 def aim_real(
-    lens: Lens, field: torch.Tensor, pupil: torch.Tensor, wl: torch.Tensor, n: torch.Tensor, para: ParaxialData
+    lens: Lens,
+    field: torch.Tensor,
+    pupil: torch.Tensor,
+    wl: torch.Tensor,
+    n: torch.Tensor,
+    para: ParaxialData,
+    start: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Entrance-plane points (W, F, P, 2) of the rays of launch fields field (F,) and
     wavelengths wl (W, 1, 1) (media indices n, (N+1, W, 1, 1)) that cross the real stop at
-    pupil (P, 2) x the paraxial stop semi-diameter, and where the aim converged."""
+    pupil (P, 2) x the paraxial stop semi-diameter, and where the aim converged.
+
+    start: a nearby solution (broadcasting to (W, F, P, 2)), such as the same rays' aim at a
+    neighbouring wavelength: Newton starts there, and only when a ray does not converge
+    from it are all the rays aimed from scratch (steps 1-4 above). Newton polishes every
+    ray to rounding, so the result does not depend on the start."""
     W, F, P = wl.shape[0], field.shape[0], pupil.shape[0]
     target = pupil.to(DTYPE) * para.stop_semi_diameter_mm  # (P, 2)
-    chief, chief_ok = _aim_chief(lens, field, wl, n, para)
     pb = _Problem(lens, field.reshape(1, F, 1), wl, n, para)
+    if start is not None:
+        x, conv = _newton(pb, start.to(DTYPE).expand(W, F, P, 2), target)
+        if bool(conv.all()):
+            return x, conv
+    chief, chief_ok = _aim_chief(lens, field, wl, n, para)
     s_chief, _ = pb.stop_xy(chief)
     jac, jac_ok = pb.jacobian(chief, s_chief)
     model, inv_ok = _solve2(jac, target.reshape(1, 1, P, 2))  # the chief ray's linear pupil model

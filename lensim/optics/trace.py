@@ -46,6 +46,7 @@ class Rays:
     direction: torch.Tensor
     opl: torch.Tensor
     valid: torch.Tensor
+    entrance_xy: torch.Tensor | None = None  # (..., 2) mm: where real aiming launched them (lensim.optics.aiming)
 
     @property
     def shape(self) -> torch.Size:

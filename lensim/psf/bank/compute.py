@@ -104,10 +104,12 @@ class _FieldWork:
         self.value = field_in_lens_units(job.lens, fld)
         self.caught: list[str] = []
 
-    def trace(self, wl_um: float) -> PupilField:
-        """The pupil field at a wavelength (um); a failed trace names the field."""
+    def trace(self, wl_um: float, near: PupilField | None = None) -> PupilField:
+        """The pupil field at a wavelength (um), its aiming started from that of ``near``
+        (the same field at another wavelength) when given; a failed trace names the field."""
+        start = None if near is None else near.aim
         try:
-            return pupil_field(self.lens, self.value, wl_um, self.job.pupil_samples, self.job.aiming, self.para)
+            return pupil_field(self.lens, self.value, wl_um, self.job.pupil_samples, self.job.aiming, self.para, start)
         except InputError as e:
             raise InputError(
                 self.lens.source, f"field {self.fld:g} ({self.value:g}) at {wl_um * 1e3:g} nm", e.message
@@ -176,9 +178,11 @@ def _compute_field(job: _Job, index: int, fld: float, para: ParaxialData | None 
     ri = work.relative_illumination()
     primary_fine = None
     strehl = math.nan
+    near = primary_pf  # each wavelength's aiming starts from the last one's
     for w, wl in enumerate(job.wavelengths_um):
         is_primary = abs(wl - job.primary_um) < 1e-9
-        pf = primary_pf if is_primary else work.trace(wl)
+        pf = primary_pf if is_primary else work.trace(wl, near)
+        near = pf
         off = (ref - pf.chief[:2]).tolist()
         fine = work.fine_psf(pf, wl, (off[0], off[1]))
         pix = integrate_pixels(fine, job.k)
