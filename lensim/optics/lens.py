@@ -73,6 +73,28 @@ class Lens:
         """Check the prescription; raise InputError naming the offending field."""
         if not self.surfaces:
             raise self._err("surfaces", "expected at least one surface")
+        self._check_aperture_and_fields()
+        self._check_wavelengths()
+        if not (self.object_distance > 0):
+            raise self._err(
+                "object.distance", f"expected a positive distance (mm) or infinity, got {self.object_distance}"
+            )
+        stops = [i for i, s in enumerate(self.surfaces) if s.is_stop]
+        if len(stops) != 1:
+            found = f"{len(stops)} (surfaces {', '.join(f'[{i}]' for i in stops)})" if stops else "0"
+            raise self._err("surfaces", f"expected exactly one stop surface, found {found}")
+        media, dirs = self.media(), self.directions()
+        for i, s in enumerate(self.surfaces):
+            self._check_surface(i, s, media[i + 1], dirs[i + 1])
+        self._check_air_gaps(media, dirs)
+        self._check_focus(media)
+        if self.configurations:
+            from lensim.optics.configurations import check_configurations
+
+            check_configurations(self)
+
+    def _check_aperture_and_fields(self) -> None:
+        """aperture.type/value and fields.type/values."""
         if self.aperture_type not in APERTURE_TYPES:
             raise self._err("aperture.type", f"expected one of {', '.join(APERTURE_TYPES)}, got {self.aperture_type!r}")
         if not (self.aperture_value > 0 and math.isfinite(self.aperture_value)):
@@ -89,6 +111,9 @@ class Lens:
             raise self._err("fields.values", "expected finite numbers")
         if self.field_type == "angle" and any(abs(f) >= 90 for f in self.fields):
             raise self._err("fields.values", "field angles must be below 90 degrees")
+
+    def _check_wavelengths(self) -> None:
+        """wavelengths: 200..15000 nm, one non-negative weight each, the primary's index."""
         if not self.wavelengths_um:
             raise self._err("wavelengths", "expected at least one wavelength")
         for i, w in enumerate(self.wavelengths_um):
@@ -96,59 +121,44 @@ class Lens:
                 raise self._err(
                     f"wavelengths.nm[{i}]", f"expected a wavelength between 200 and 15000 nm, got {w * 1000:g} nm"
                 )
-        if len(self.wavelength_weights) != len(self.wavelengths_um) or any(w < 0 for w in self.wavelength_weights):
+        weights = self.wavelength_weights
+        if weights is None or len(weights) != len(self.wavelengths_um) or any(w < 0 for w in weights):
             raise self._err("wavelengths.weights", "expected one non-negative weight per wavelength")
         if not (0 <= self.primary < len(self.wavelengths_um)):
             raise self._err(
                 "wavelengths.primary", f"expected an index 0..{len(self.wavelengths_um) - 1}, got {self.primary}"
             )
-        if not (self.object_distance > 0):
-            raise self._err(
-                "object.distance", f"expected a positive distance (mm) or infinity, got {self.object_distance}"
-            )
-        stops = [i for i, s in enumerate(self.surfaces) if s.is_stop]
-        if len(stops) != 1:
-            found = f"{len(stops)} (surfaces {', '.join(f'[{i}]' for i in stops)})" if stops else "0"
-            raise self._err("surfaces", f"expected exactly one stop surface, found {found}")
-        media, dirs = self.media(), self.directions()
-        last = len(self.surfaces) - 1
-        for i, s in enumerate(self.surfaces):
-            if not math.isfinite(s.thickness):
-                raise self._err(f"surfaces[{i}].thickness", f"expected a finite number, got {s.thickness}")
-            if not math.isfinite(s.curvature) or not math.isfinite(s.conic):
-                raise self._err(f"surfaces[{i}]", "expected finite curvature and conic")
-            medium, direction = media[i + 1], dirs[i + 1]
-            if not isinstance(medium, Air) and s.thickness * direction < 0:
-                expected = "positive" if direction > 0 else "negative (light travels towards -z after a mirror)"
-                raise self._err(
-                    f"surfaces[{i}].thickness",
-                    f"expected a {expected} thickness inside {medium.name}, got {s.thickness:g}: a ray "
-                    f"cannot travel backwards inside glass (negative thicknesses are allowed in air only)",
-                )
-            if s.thickness == 0 and not s.is_mirror and not isinstance(s.material, Air) and i < last:
-                raise self._err(
-                    f"surfaces[{i}].thickness", f"expected a non-zero thickness inside {s.material.name}, got 0"
-                )
-            if s.clear_radius is not None and s.clear_radius <= 0:
-                raise self._err(
-                    f"surfaces[{i}].clear_semi_diameter", f"expected a positive number, got {s.clear_radius}"
-                )
-            limit = s.clear_radius if s.clear_radius is not None else math.inf
-            if s.obscuration_radius is not None and not (0 <= s.obscuration_radius < limit):
-                within = "" if s.clear_radius is None else f" below the clear semi-diameter {s.clear_radius:g}"
-                raise self._err(
-                    f"surfaces[{i}].obscuration",
-                    f"expected a central obscuration radius >= 0 mm{within}, got {s.obscuration_radius:g}",
-                )
-            for p in s.asphere:
-                if not (1 <= p <= MAX_ASPHERE_POWER):
-                    raise self._err(f"surfaces[{i}].asphere", f"expected powers r1..r{MAX_ASPHERE_POWER}, got r{p}")
-        self._check_air_gaps(media, dirs)
-        self._check_focus(media)
-        if self.configurations:
-            from lensim.optics.configurations import check_configurations
 
-            check_configurations(self)
+    def _check_surface(self, i: int, s: Surface, medium: Material, direction: float) -> None:
+        """surfaces[i]: finite numbers, a thickness that light can travel inside glass,
+        apertures and aspheric powers in range. medium, direction: after the surface."""
+        if not math.isfinite(s.thickness):
+            raise self._err(f"surfaces[{i}].thickness", f"expected a finite number, got {s.thickness}")
+        if not math.isfinite(s.curvature) or not math.isfinite(s.conic):
+            raise self._err(f"surfaces[{i}]", "expected finite curvature and conic")
+        if not isinstance(medium, Air) and s.thickness * direction < 0:
+            expected = "positive" if direction > 0 else "negative (light travels towards -z after a mirror)"
+            raise self._err(
+                f"surfaces[{i}].thickness",
+                f"expected a {expected} thickness inside {medium.name}, got {s.thickness:g}: a ray "
+                f"cannot travel backwards inside glass (negative thicknesses are allowed in air only)",
+            )
+        if s.thickness == 0 and not s.is_mirror and not isinstance(s.material, Air) and i < len(self.surfaces) - 1:
+            raise self._err(
+                f"surfaces[{i}].thickness", f"expected a non-zero thickness inside {s.material.name}, got 0"
+            )
+        if s.clear_radius is not None and s.clear_radius <= 0:
+            raise self._err(f"surfaces[{i}].clear_semi_diameter", f"expected a positive number, got {s.clear_radius}")
+        limit = s.clear_radius if s.clear_radius is not None else math.inf
+        if s.obscuration_radius is not None and not (0 <= s.obscuration_radius < limit):
+            within = "" if s.clear_radius is None else f" below the clear semi-diameter {s.clear_radius:g}"
+            raise self._err(
+                f"surfaces[{i}].obscuration",
+                f"expected a central obscuration radius >= 0 mm{within}, got {s.obscuration_radius:g}",
+            )
+        for p in s.asphere:
+            if not (1 <= p <= MAX_ASPHERE_POWER):
+                raise self._err(f"surfaces[{i}].asphere", f"expected powers r1..r{MAX_ASPHERE_POWER}, got r{p}")
 
     def _check_focus(self, media: list[Material]) -> None:
         """The focus group's gaps: surface indices in range, in air, distinct; a compensator

@@ -4,7 +4,8 @@
     units: mm                      # lengths in mm (the only unit accepted)
     object: {distance: infinity}   # or a distance in mm from the first vertex
     aperture: {type: epd, value: 10}           # epd (mm) | fno (image-space EFL/EPD) | stop_semi_diameter (mm)
-    fields: {type: angle, values: [0, 14, 20]} # angle (deg) | object_height | paraxial_image_height | real_image_height (mm)
+    fields: {type: angle, values: [0, 14, 20]}
+    # fields.type: angle (deg) | object_height | paraxial_image_height | real_image_height (mm)
     wavelengths: {nm: [480, 550, 650], weights: [1, 1, 1], primary: 1}   # primary: index into nm
     surfaces:                      # first surface to last surface before the image
       - {radius: 22.01359, thickness: 3.25896, material: J-SK16@Hikari}
@@ -139,76 +140,12 @@ def lens_from_dict(data: dict, source: str = "<lens>") -> Lens:
     values = flds.get("values", [0])
     if not isinstance(values, list):
         raise InputError(src, "fields.values", f"expected a list of numbers, got {values!r}")
-    wls = _check_keys(src, "wavelengths", data.get("wavelengths", {"nm": [587.5618]}), {"nm", "weights", "primary"})
-    nm = wls.get("nm")
-    if not isinstance(nm, list) or not nm:
-        raise InputError(src, "wavelengths.nm", f"expected a non-empty list of wavelengths in nm, got {nm!r}")
-    nm = [_number(src, f"wavelengths.nm[{i}]", v) for i, v in enumerate(nm)]
-    weights = wls.get("weights", [1.0] * len(nm))
-    if not isinstance(weights, list):
-        raise InputError(src, "wavelengths.weights", "expected a list of numbers")
-    primary = wls.get("primary", 0)
-    if not isinstance(primary, int) or isinstance(primary, bool):
-        raise InputError(src, "wavelengths.primary", f"expected an integer index, got {primary!r}")
+    nm, weights, primary = _wavelengths_from_data(src, data.get("wavelengths", {"nm": [587.5618]}))
     surfaces_data = data.get("surfaces")
     if not isinstance(surfaces_data, list) or not surfaces_data:
         raise InputError(src, "surfaces", "expected a non-empty list of surfaces")
     notes: list[str] = list(data.get("notes", []))
-    surfaces = []
-    for i, sd in enumerate(surfaces_data):
-        f = f"surfaces[{i}]"
-        sd = _check_keys(src, f, sd, SURFACE_KEYS)
-        if "radius" in sd and "curvature" in sd:
-            raise InputError(src, f, "give either radius or curvature, not both")
-        if "curvature" in sd:
-            curv = _number(src, f + ".curvature", sd["curvature"])
-        else:
-            r = _number(src, f + ".radius", sd.get("radius", "infinity"), allow_inf=True)
-            if r == 0:
-                raise InputError(src, f + ".radius", "expected a non-zero radius (use infinity for a plane)")
-            curv = 0.0 if math.isinf(r) else 1.0 / r
-        asph_raw = sd.get("asphere", {}) or {}
-        if not isinstance(asph_raw, dict):
-            raise InputError(src, f + ".asphere", "expected a mapping like {r4: 1e-5, r6: -2e-8}")
-        asphere = {}
-        for k, v in asph_raw.items():
-            ks = str(k).lower().lstrip("ra")
-            if not ks.isdigit() or not 1 <= int(ks) <= MAX_ASPHERE_POWER:
-                raise InputError(
-                    src,
-                    f"{f}.asphere.{k}",
-                    f"expected a key r1, r2, ... r{MAX_ASPHERE_POWER} "
-                    "(even powers: an even asphere; any odd power: an odd asphere)",
-                )
-            asphere[int(ks)] = _number(src, f"{f}.asphere.{k}", v)
-        try:
-            material = material_from_spec(sd.get("material", "air"), notes=notes)
-        except InputError as e:
-            raise InputError(src, f + ".material", e.message) from None
-        opt = {}
-        for key, attr in (
-            ("clear_semi_diameter", "clear_radius"),
-            ("obscuration", "obscuration_radius"),
-            ("semi_diameter", "semi_diameter"),
-        ):
-            if sd.get(key) is not None:
-                opt[attr] = _number(src, f"{f}.{key}", sd[key])
-        for key in ("stop", "mirror"):
-            if key in sd and not isinstance(sd[key], bool):
-                raise InputError(src, f"{f}.{key}", f"expected true or false, got {sd[key]!r}")
-        surfaces.append(
-            Surface(
-                curvature=curv,
-                thickness=_length(src, f + ".thickness", sd.get("thickness", 0.0)),
-                material=material,
-                conic=_number(src, f + ".conic", sd.get("conic", 0.0)),
-                asphere=asphere,
-                is_stop=bool(sd.get("stop", False)),
-                is_mirror=bool(sd.get("mirror", False)),
-                comment=str(sd.get("comment", "")),
-                **opt,
-            )
-        )
+    surfaces = [_surface_from_data(src, i, sd, notes) for i, sd in enumerate(surfaces_data)]
     image = _check_keys(src, "image", data.get("image", {}) or {}, {"defocus", "clear_semi_diameter"})
     lens = Lens(
         surfaces=surfaces,
@@ -234,6 +171,89 @@ def lens_from_dict(data: dict, source: str = "<lens>") -> Lens:
         **_focus_from_data(src, data.get("focus")),
     )
     return lens
+
+
+def _wavelengths_from_data(src: str, data: Any) -> tuple[list[float], list, int]:
+    """The ``wavelengths`` block {nm: [...], weights: [...], primary: i}: (wavelengths in
+    nm, the weights as given (one list; Lens checks them), the 0-based primary index)."""
+    wls = _check_keys(src, "wavelengths", data, {"nm", "weights", "primary"})
+    nm = wls.get("nm")
+    if not isinstance(nm, list) or not nm:
+        raise InputError(src, "wavelengths.nm", f"expected a non-empty list of wavelengths in nm, got {nm!r}")
+    nm = [_number(src, f"wavelengths.nm[{i}]", v) for i, v in enumerate(nm)]
+    weights = wls.get("weights", [1.0] * len(nm))
+    if not isinstance(weights, list):
+        raise InputError(src, "wavelengths.weights", "expected a list of numbers")
+    primary = wls.get("primary", 0)
+    if not isinstance(primary, int) or isinstance(primary, bool):
+        raise InputError(src, "wavelengths.primary", f"expected an integer index, got {primary!r}")
+    return nm, weights, primary
+
+
+def _curvature_from_data(src: str, f: str, sd: dict) -> float:
+    """A surface's curvature (1/mm) from its radius or curvature key (a plane without either)."""
+    if "radius" in sd and "curvature" in sd:
+        raise InputError(src, f, "give either radius or curvature, not both")
+    if "curvature" in sd:
+        return _number(src, f + ".curvature", sd["curvature"])
+    r = _number(src, f + ".radius", sd.get("radius", "infinity"), allow_inf=True)
+    if r == 0:
+        raise InputError(src, f + ".radius", "expected a non-zero radius (use infinity for a plane)")
+    return 0.0 if math.isinf(r) else 1.0 / r
+
+
+def _asphere_from_data(src: str, f: str, raw: Any) -> dict[int, float]:
+    """A surface's ``asphere`` block {rN: coefficient} as {N: coefficient}."""
+    raw = raw or {}
+    if not isinstance(raw, dict):
+        raise InputError(src, f + ".asphere", "expected a mapping like {r4: 1e-5, r6: -2e-8}")
+    asphere = {}
+    for k, v in raw.items():
+        ks = str(k).lower().lstrip("ra")
+        if not ks.isdigit() or not 1 <= int(ks) <= MAX_ASPHERE_POWER:
+            raise InputError(
+                src,
+                f"{f}.asphere.{k}",
+                f"expected a key r1, r2, ... r{MAX_ASPHERE_POWER} "
+                "(even powers: an even asphere; any odd power: an odd asphere)",
+            )
+        asphere[int(ks)] = _number(src, f"{f}.asphere.{k}", v)
+    return asphere
+
+
+# optional surface keys that are numbers: native key -> Surface attribute
+_SURFACE_NUMBERS = (
+    ("clear_semi_diameter", "clear_radius"),
+    ("obscuration", "obscuration_radius"),
+    ("semi_diameter", "semi_diameter"),
+)
+
+
+def _surface_from_data(src: str, i: int, sd: Any, notes: list[str]) -> Surface:
+    """surfaces[i] of a native file as a Surface (glass notes are appended to ``notes``)."""
+    f = f"surfaces[{i}]"
+    sd = _check_keys(src, f, sd, SURFACE_KEYS)
+    curv = _curvature_from_data(src, f, sd)
+    asphere = _asphere_from_data(src, f, sd.get("asphere", {}))
+    try:
+        material = material_from_spec(sd.get("material", "air"), notes=notes)
+    except InputError as e:
+        raise InputError(src, f + ".material", e.message) from None
+    opt = {attr: _number(src, f"{f}.{key}", sd[key]) for key, attr in _SURFACE_NUMBERS if sd.get(key) is not None}
+    for key in ("stop", "mirror"):
+        if key in sd and not isinstance(sd[key], bool):
+            raise InputError(src, f"{f}.{key}", f"expected true or false, got {sd[key]!r}")
+    return Surface(
+        curvature=curv,
+        thickness=_length(src, f + ".thickness", sd.get("thickness", 0.0)),
+        material=material,
+        conic=_number(src, f + ".conic", sd.get("conic", 0.0)),
+        asphere=asphere,
+        is_stop=bool(sd.get("stop", False)),
+        is_mirror=bool(sd.get("mirror", False)),
+        comment=str(sd.get("comment", "")),
+        **opt,
+    )
 
 
 def _focus_from_data(src: str, data: Any) -> dict[str, int | None]:
@@ -298,30 +318,27 @@ def _material_spec(m: Material):
     return m.spec()
 
 
+def _surface_to_dict(s: Surface) -> dict[str, Any]:
+    """One surface in the native format (keys left out where they hold their default)."""
+    d: dict[str, Any] = {"radius": "infinity" if s.curvature == 0 else 1.0 / s.curvature, "thickness": s.thickness}
+    if not isinstance(s.material, Air) and not s.is_mirror:
+        d["material"] = _material_spec(s.material)
+    if s.conic:
+        d["conic"] = s.conic
+    if s.asphere:
+        d["asphere"] = {f"r{p}": v for p, v in sorted(s.asphere.items()) if v}
+    for key, attr in _SURFACE_NUMBERS:
+        if getattr(s, attr) is not None:
+            d[key] = getattr(s, attr)
+    d.update({key: True for key, on in (("stop", s.is_stop), ("mirror", s.is_mirror)) if on})
+    if s.comment:
+        d["comment"] = s.comment
+    return d
+
+
 def lens_to_dict(lens: Lens) -> dict:
     """The native-format mapping of a lens (round-trips through lens_from_dict)."""
-    surfaces = []
-    for s in lens.surfaces:
-        d: dict[str, Any] = {"radius": "infinity" if s.curvature == 0 else 1.0 / s.curvature, "thickness": s.thickness}
-        if not isinstance(s.material, Air) and not s.is_mirror:
-            d["material"] = _material_spec(s.material)
-        if s.conic:
-            d["conic"] = s.conic
-        if s.asphere:
-            d["asphere"] = {f"r{p}": v for p, v in sorted(s.asphere.items()) if v}
-        if s.clear_radius is not None:
-            d["clear_semi_diameter"] = s.clear_radius
-        if s.obscuration_radius is not None:
-            d["obscuration"] = s.obscuration_radius
-        if s.semi_diameter is not None:
-            d["semi_diameter"] = s.semi_diameter
-        if s.is_stop:
-            d["stop"] = True
-        if s.is_mirror:
-            d["mirror"] = True
-        if s.comment:
-            d["comment"] = s.comment
-        surfaces.append(d)
+    surfaces = [_surface_to_dict(s) for s in lens.surfaces]
     out: dict[str, Any] = {
         "name": lens.name,
         "units": "mm",
@@ -330,7 +347,7 @@ def lens_to_dict(lens: Lens) -> dict:
         "fields": {"type": lens.field_type, "values": list(lens.fields)},
         "wavelengths": {
             "nm": [round(w * 1000.0, 6) for w in lens.wavelengths_um],
-            "weights": list(lens.wavelength_weights),
+            "weights": list(lens.wavelength_weights or []),
             "primary": lens.primary,
         },
         "surfaces": surfaces,
