@@ -30,36 +30,46 @@ def read_image(path: str | Path) -> tuple[torch.Tensor, int]:
     if not path.is_file():
         raise InputError(src, None, "no such file")
     try:
-        if path.suffix.lower() in (".tif", ".tiff"):
-            arr = _read_tiff(path, src)
-        else:
-            from PIL import Image
-
-            if _png_bit_depth(path) == 16:
-                arr = _read_png16(path)
-            else:
-                with Image.open(path) as im:
-                    if im.mode in ("I;16", "I;16B", "I;16L", "I"):
-                        arr = np.array(im).astype(np.uint16)
-                    elif im.mode in ("P", "PA"):
-                        arr = np.array(im.convert("RGBA"))
-                    elif im.mode in ("1", "L", "LA", "RGB", "RGBA"):
-                        arr = np.array(im)
-                    else:
-                        raise InputError(
-                            src, "mode", f"unsupported pixel mode {im.mode}; expected grayscale, RGB or RGBA"
-                        )
+        arr = _decode(path, src)
     except InputError:
         raise
     except Exception as e:  # a corrupt or truncated file
         raise InputError(src, None, f"cannot be decoded as an image ({type(e).__name__}: {e})") from None
-    arr = np.asarray(arr)
+    arr, bits = _opaque_rgb(np.asarray(arr), src)
+    if min(arr.shape[:2]) < 16:
+        raise InputError(src, "size", f"image is {arr.shape[1]}x{arr.shape[0]}; expected at least 16x16 pixels")
+    scale = 255.0 if bits == 8 else 65535.0
+    img = torch.from_numpy(np.ascontiguousarray(arr.transpose(2, 0, 1)).astype(np.float32) / scale)
+    return img, bits
+
+
+def _decode(path: Path, src: str) -> np.ndarray:
+    """The file's samples as stored: (H, W) or (H, W, channels), bool, uint8 or uint16."""
+    if path.suffix.lower() in (".tif", ".tiff"):
+        return _read_tiff(path, src)
+    from PIL import Image
+
+    if _png_bit_depth(path) == 16:
+        return _read_png16(path)
+    with Image.open(path) as im:
+        if im.mode in ("I;16", "I;16B", "I;16L", "I"):
+            return np.array(im).astype(np.uint16)
+        if im.mode in ("P", "PA"):
+            return np.array(im.convert("RGBA"))
+        if im.mode in ("1", "L", "LA", "RGB", "RGBA"):
+            return np.array(im)
+        raise InputError(src, "mode", f"unsupported pixel mode {im.mode}; expected grayscale, RGB or RGBA")
+
+
+def _opaque_rgb(arr: np.ndarray, src: str) -> tuple[np.ndarray, int]:
+    """(H, W, 3) samples and their bit depth (8 or 16) from decoded samples: gray expanded
+    to three channels, a fully opaque alpha channel dropped (a transparent one refused)."""
     if arr.dtype == np.bool_:
         arr = arr.astype(np.uint8) * 255
     if arr.dtype == np.uint8:
-        bits, scale = 8, 255.0
+        bits = 8
     elif arr.dtype == np.uint16:
-        bits, scale = 16, 65535.0
+        bits = 16
     else:
         raise InputError(src, "bit depth", f"expected 8- or 16-bit integer samples, got {arr.dtype}")
     if arr.ndim == 2:
@@ -73,10 +83,7 @@ def read_image(path: str | Path) -> tuple[torch.Tensor, int]:
         arr = arr[..., :-1]
         if arr.shape[2] == 1:
             arr = np.repeat(arr, 3, axis=2)
-    if min(arr.shape[:2]) < 16:
-        raise InputError(src, "size", f"image is {arr.shape[1]}x{arr.shape[0]}; expected at least 16x16 pixels")
-    img = torch.from_numpy(np.ascontiguousarray(arr.transpose(2, 0, 1)).astype(np.float32) / scale)
-    return img, bits
+    return arr, bits
 
 
 def _read_tiff(path: Path, src: str) -> np.ndarray:

@@ -146,10 +146,10 @@ class SFRResult(MTFCurve):
     freq_cy_px, mtf: the spatial frequency response along the edge normal (cycles/pixel,
     up to ``max_frequency``), with the inherited mtf50 (cycles/pixel) and area_to_nyquist
     (the paper's "MTF area": area under the MTF from 0 to 0.5 cycles/pixel, cycles/pixel
-    units; 0.5 for a perfect system without a pixel aperture); edge: the fitted edge; esf_distance_px / esf: the binned edge spread function (image
-    units) at distances (pixels) along the normal from the edge; lsf: its centred difference
-    (image units per pixel, positive, at esf_distance_px[1:-1]); rows_used: number of rows
-    projected.
+    units; 0.5 for a perfect system without a pixel aperture); edge: the fitted edge;
+    esf_distance_px / esf: the binned edge spread function (image units) at distances
+    (pixels) along the normal from the edge; lsf: its centred difference (image units per
+    pixel, positive, at esf_distance_px[1:-1]); rows_used: number of rows projected.
     """
 
     edge: EdgeFit | None = None
@@ -311,41 +311,14 @@ def locate_edge(
         raise InputError(None, "orientation", f"expected 'vertical' or 'horizontal', got {orientation!r}")
     v = a if orientation == "vertical" else a.T
     n_rows, n_cols = v.shape
-    quarter = max(2, n_cols // 4)
-    step = v[:, -quarter:].mean() - v[:, :quarter].mean()
-    if step == 0:
-        raise InputError(None, name, "no edge found: both sides of the region have the same mean level")
-    polarity = 1 if step > 0 else -1
-    deriv = polarity * 0.5 * (v[:, 2:] - v[:, :-2])  # columns 1..n_cols-2
-
-    # A step is localized: each row's derivative peaks well above its typical magnitude.
-    # Flat shading or a ramp gives a ratio near 1, white noise about 3.5 (caught below).
-    med = np.median(np.abs(deriv), axis=1)
-    peak = deriv.max(axis=1)
-    ratio = float(np.median(peak / np.maximum(med, 1e-300)))
-    if not ratio > 3.0:
-        raise InputError(
-            None,
-            name,
-            f"no edge found: the derivative across the region has no localized peak (peak/median {ratio:.2g}, need > 3)",
-        )
-
+    deriv, polarity = _edge_derivative(v, name)
     y = np.arange(n_rows, dtype=np.float64)
     loc = _row_centroids(deriv, None)
-    slope = intercept = 0.0
     for _ in range(3):
-        ok = np.isfinite(loc)
-        if ok.sum() < max(3, n_rows // 2):
-            raise InputError(
-                None, name, f"no edge found: the edge could be located in only {int(ok.sum())} of {n_rows} rows"
-            )
+        ok = _located_rows(loc, name)
         slope, intercept = np.polyfit(y[ok], loc[ok] + 1.0, 1)  # +1: derivative column 0 is pixel 1
         loc = _row_centroids(deriv, intercept + slope * y - 1.0)
-    ok = np.isfinite(loc)
-    if ok.sum() < max(3, n_rows // 2):
-        raise InputError(
-            None, name, f"no edge found: the edge could be located in only {int(ok.sum())} of {n_rows} rows"
-        )
+    ok = _located_rows(loc, name)
     slope, intercept = np.polyfit(y[ok], loc[ok] + 1.0, 1)
     resid = loc[ok] + 1.0 - (intercept + slope * y[ok])
     rms = float(np.sqrt(np.mean(resid**2)))
@@ -354,34 +327,10 @@ def locate_edge(
         raise InputError(
             None,
             name,
-            f"no straight edge found: per-row edge locations scatter {rms:.2g} px RMS about the fitted line (limit {limit:.2g} px)",
+            f"no straight edge found: per-row edge locations scatter {rms:.2g} px RMS about the fitted line "
+            f"(limit {limit:.2g} px)",
         )
-    angle = abs(math.degrees(math.atan(slope)))
-    if angle < min_angle_deg:
-        raise InputError(
-            None,
-            name,
-            f"edge slant too small: {angle:.2f} deg from {orientation}, need {min_angle_deg:g}-{max_angle_deg:g} deg",
-        )
-    if angle > max_angle_deg:
-        raise InputError(
-            None,
-            name,
-            f"edge slant too large: {angle:.2f} deg from {orientation}, need {min_angle_deg:g}-{max_angle_deg:g} deg",
-        )
-    if math.floor(n_rows * abs(slope)) < 1:
-        raise InputError(
-            None,
-            name,
-            f"edge slant too small for the region: the edge crosses {n_rows * abs(slope):.2f} px over {n_rows} rows, need >= 1 px (more rows or more slant)",
-        )
-    x_ends = intercept + slope * np.array([0.0, n_rows - 1.0])
-    if x_ends.min() < 0 or x_ends.max() > n_cols - 1:
-        raise InputError(
-            None,
-            name,
-            f"edge leaves the region: it runs from column {x_ends[0]:.1f} to {x_ends[1]:.1f} of 0..{n_cols - 1}",
-        )
+    _check_slant(slope, intercept, v.shape, orientation, (min_angle_deg, max_angle_deg), name)
     loc_full = np.where(ok, loc + 1.0, np.nan)
     return EdgeFit(
         orientation=orientation,
@@ -392,6 +341,80 @@ def locate_edge(
         polarity=polarity,
         shape=(int(a.shape[0]), int(a.shape[1])),
     )
+
+
+def _edge_derivative(v: np.ndarray, name: str) -> tuple[np.ndarray, int]:
+    """(centred derivative across the edge (n_rows, n_cols - 2), columns 1..n_cols-2,
+    signed so that the edge rises; polarity +1 dark-to-bright along a row, -1 the other
+    way) of a region in the edge's frame (v: (n_rows, n_cols), the edge along the rows)."""
+    quarter = max(2, v.shape[1] // 4)
+    step = v[:, -quarter:].mean() - v[:, :quarter].mean()
+    if step == 0:
+        raise InputError(None, name, "no edge found: both sides of the region have the same mean level")
+    polarity = 1 if step > 0 else -1
+    deriv = polarity * 0.5 * (v[:, 2:] - v[:, :-2])
+    # A step is localized: each row's derivative peaks well above its typical magnitude.
+    # Flat shading or a ramp gives a ratio near 1, white noise about 3.5 (caught below).
+    med = np.median(np.abs(deriv), axis=1)
+    peak = deriv.max(axis=1)
+    ratio = float(np.median(peak / np.maximum(med, 1e-300)))
+    if not ratio > 3.0:
+        raise InputError(
+            None,
+            name,
+            "no edge found: the derivative across the region has no localized peak "
+            f"(peak/median {ratio:.2g}, need > 3)",
+        )
+    return deriv, polarity
+
+
+def _located_rows(loc: np.ndarray, name: str) -> np.ndarray:
+    """The rows where the edge was located (finite loc), at least max(3, half the rows)."""
+    ok = np.isfinite(loc)
+    n_rows = len(loc)
+    if ok.sum() < max(3, n_rows // 2):
+        raise InputError(
+            None, name, f"no edge found: the edge could be located in only {int(ok.sum())} of {n_rows} rows"
+        )
+    return ok
+
+
+def _check_slant(
+    slope: float,
+    intercept: float,
+    shape: tuple[int, int],
+    orientation: str,
+    angles_deg: tuple[float, float],
+    name: str,
+) -> None:
+    """The fitted line x = intercept + slope * row (edge frame, shape (n_rows, n_cols)) is
+    slanted within angles_deg (min, max; degrees), crosses at least one pixel over the rows
+    and stays inside the region."""
+    n_rows, n_cols = shape
+    lo, hi = angles_deg
+    angle = abs(math.degrees(math.atan(slope)))
+    if angle < lo:
+        raise InputError(
+            None, name, f"edge slant too small: {angle:.2f} deg from {orientation}, need {lo:g}-{hi:g} deg"
+        )
+    if angle > hi:
+        raise InputError(
+            None, name, f"edge slant too large: {angle:.2f} deg from {orientation}, need {lo:g}-{hi:g} deg"
+        )
+    if math.floor(n_rows * abs(slope)) < 1:
+        raise InputError(
+            None,
+            name,
+            f"edge slant too small for the region: the edge crosses {n_rows * abs(slope):.2f} px over {n_rows} "
+            "rows, need >= 1 px (more rows or more slant)",
+        )
+    x_ends = intercept + slope * np.array([0.0, n_rows - 1.0])
+    if x_ends.min() < 0 or x_ends.max() > n_cols - 1:
+        raise InputError(
+            None,
+            name,
+            f"edge leaves the region: it runs from column {x_ends[0]:.1f} to {x_ends[1]:.1f} of 0..{n_cols - 1}",
+        )
 
 
 def _phase_rows(n_rows: int, slope: float) -> tuple[int, int]:
@@ -429,7 +452,8 @@ def edge_spread_function(
         raise InputError(
             None,
             name,
-            f"edge too close to the region border: {max(half, 0.0):.1f} px of profile on one side, need >= {MIN_HALF_PROFILE_PX:g} px",
+            f"edge too close to the region border: {max(half, 0.0):.1f} px of profile on one side, "
+            f"need >= {MIN_HALF_PROFILE_PX:g} px",
         )
     fac = int(bins_per_pixel)
     k_max = math.floor(half * fac - 0.5)
@@ -521,7 +545,8 @@ def slanted_edge_mtf(
         raise InputError(
             None,
             "max_frequency",
-            f"expected above 0.5 cycles/pixel (Nyquist) and at most {bins_per_pixel / 4.0:g} (bins_per_pixel / 4), got {max_frequency}",
+            f"expected above 0.5 cycles/pixel (Nyquist) and at most {bins_per_pixel / 4.0:g} "
+            f"(bins_per_pixel / 4), got {max_frequency}",
         )
     a = _as_region(region, name)
     edge = locate_edge(a, orientation, min_angle_deg, max_angle_deg, name)

@@ -29,6 +29,7 @@ Backends
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable
 
@@ -174,6 +175,23 @@ def deform_conv2d(
     return fn(x, offset, weight, bias, stride=1, padding=(k - 1) // 2, dilation=1, mask=mask)
 
 
+def _bilinear_sample(img: np.ndarray, yy: float, xx: float) -> np.ndarray:
+    """img (C, H, W) sampled at (yy, xx) in pixels -> (C,), by torchvision's rules: 0 for
+    yy <= -1, yy >= H, xx <= -1 or xx >= W; a neighbour outside the image contributes 0."""
+    _, h, w = img.shape
+    out = np.zeros(img.shape[0], dtype=np.float64)
+    if yy <= -1.0 or yy >= h or xx <= -1.0 or xx >= w:
+        return out
+    y0 = math.floor(yy)
+    x0 = math.floor(xx)
+    ly, lx = yy - y0, xx - x0
+    for yi, wy in ((y0, 1.0 - ly), (y0 + 1, ly)):
+        for xi, wx in ((x0, 1.0 - lx), (x0 + 1, lx)):
+            if 0 <= yi < h and 0 <= xi < w:
+                out += wy * wx * img[:, yi, xi]
+    return out
+
+
 def deform_conv2d_reference(
     x: torch.Tensor,
     offset: torch.Tensor,
@@ -199,32 +217,12 @@ def deform_conv2d_reference(
     wn = weight.detach().to(torch.float64).cpu().numpy().reshape(weight.shape[0], c, kk)
     cols = np.zeros((b, c, kk, h, w), dtype=np.float64)
 
-    def bilinear(img: np.ndarray, yy: float, xx: float) -> np.ndarray:
-        """img (cg, H, W) sampled at (yy, xx) -> (cg,)."""
-        out = np.zeros(img.shape[0], dtype=np.float64)
-        if yy <= -1.0 or yy >= h or xx <= -1.0 or xx >= w:
-            return out
-        y0 = math.floor(yy)
-        x0 = math.floor(xx)
-        ly, lx = yy - y0, xx - x0
-        for yi, wy in ((y0, 1.0 - ly), (y0 + 1, ly)):
-            for xi, wx in ((x0, 1.0 - lx), (x0 + 1, lx)):
-                if 0 <= yi < h and 0 <= xi < w:
-                    out += wy * wx * img[:, yi, xi]
-        return out
-
-    for bi in range(b):
-        for gi in range(g):
-            img = xn[bi, gi * cg : (gi + 1) * cg]
-            for oy in range(h):
-                for ox in range(w):
-                    for i in range(k):
-                        for j in range(k):
-                            t = i * k + j
-                            dy = on[bi, gi * 2 * kk + 2 * t, oy, ox]
-                            dx = on[bi, gi * 2 * kk + 2 * t + 1, oy, ox]
-                            val = bilinear(img, oy - p + i + dy, ox - p + j + dx)
-                            cols[bi, gi * cg : (gi + 1) * cg, t, oy, ox] = val * mn[bi, gi * kk + t, oy, ox]
+    for bi, gi, oy, ox, i, j in itertools.product(range(b), range(g), range(h), range(w), range(k), range(k)):
+        t = i * k + j
+        dy = on[bi, gi * 2 * kk + 2 * t, oy, ox]
+        dx = on[bi, gi * 2 * kk + 2 * t + 1, oy, ox]
+        val = _bilinear_sample(xn[bi, gi * cg : (gi + 1) * cg], oy - p + i + dy, ox - p + j + dx)
+        cols[bi, gi * cg : (gi + 1) * cg, t, oy, ox] = val * mn[bi, gi * kk + t, oy, ox]
     out = np.einsum("ock,bckhw->bohw", wn, cols)
     if bias is not None:
         out = out + bias.detach().to(torch.float64).cpu().numpy()[None, :, None, None]
