@@ -31,19 +31,32 @@ def direction_scale(pf: PupilField) -> tuple[float, float]:
     return out[0], out[1]
 
 
+def pupil_indices(pf: PupilField) -> tuple[torch.Tensor, torch.Tensor]:
+    """(row, column) of each ray's cell on the samples x samples pupil grid (rows are y)."""
+    h = 2.0 / pf.samples
+    ix = torch.round((pf.pupil_xy[:, 0] + 1.0) / h - 0.5).long()
+    iy = torch.round((pf.pupil_xy[:, 1] + 1.0) / h - 0.5).long()
+    return iy, ix
+
+
+def pupil_function(pf: PupilField) -> torch.Tensor:
+    """The complex pupil function on the (samples, samples) pupil grid (rows are y): each
+    ray's amplitude over the sphere radius times exp(i k OPL), 0 where no ray passes."""
+    k_vac = 2.0 * math.pi / pf.wavelength_mm
+    iy, ix = pupil_indices(pf)
+    pupil = torch.zeros(pf.samples, pf.samples, dtype=torch.complex128)
+    pupil[iy, ix] = (_amplitudes(pf) / pf.radius).to(torch.complex128) * torch.exp(1j * k_vac * pf.opl)
+    return pupil
+
+
 def fft_psf(pf: PupilField, grid: int, spacing_um: float, offset_mm: tuple[float, float] = (0.0, 0.0)) -> torch.Tensor:
     """Fourier-optics PSF (grid x grid, energy per sample), same framing as huygens_psf."""
     s = spacing_um * 1e-3
     kn = 2.0 * math.pi / pf.wavelength_mm * pf.n_image
-    k_vac = 2.0 * math.pi / pf.wavelength_mm
     ax, ay = direction_scale(pf)
     n = pf.samples
     h = 2.0 / n
-    # pupil grid index of each ray
-    ix = torch.round((pf.pupil_xy[:, 0] + 1.0) / h - 0.5).long()
-    iy = torch.round((pf.pupil_xy[:, 1] + 1.0) / h - 0.5).long()
-    pupil = torch.zeros(n, n, dtype=torch.complex128)
-    pupil[iy, ix] = (_amplitudes(pf) / pf.radius).to(torch.complex128) * torch.exp(1j * k_vac * pf.opl)
+    pupil = pupil_function(pf)
     pc = (torch.arange(n, dtype=torch.float64) + 0.5) * h - 1.0
     dx = sample_offsets(grid, s) + offset_mm[0]
     dy = sample_offsets(grid, s) + offset_mm[1]

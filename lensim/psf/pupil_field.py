@@ -15,7 +15,7 @@ the sphere is centred on it whether or not an obscuration covers the stop centre
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import torch
 
@@ -110,6 +110,77 @@ def _fill(values: torch.Tensor, ok: torch.Tensor) -> torch.Tensor:
     return torch.where(finite, values, med)
 
 
+@dataclass
+class _ImageRays:
+    """A samples x samples pupil grid traced to the image plane: the grid (pts, inside),
+    the rays' launch positions and directions, their image-plane positions, directions,
+    optical paths and validity, the chief ray's, and the image-space index."""
+
+    pts: torch.Tensor
+    inside: torch.Tensor
+    start_pos: torch.Tensor
+    start_dir: torch.Tensor
+    pos: torch.Tensor
+    dirs: torch.Tensor
+    opl: torch.Tensor
+    valid: torch.Tensor
+    chief: torch.Tensor
+    chief_dir: torch.Tensor
+    chief_opl: torch.Tensor
+    n_img: float
+    samples: int
+    aim: torch.Tensor | None
+
+    def moved(self, dz: float) -> _ImageRays:
+        """The same rays on a plane dz (mm, along +z) from the image plane: each ray carried
+        along its straight image-space path, its optical path with it."""
+        t = dz / self.dirs[:, 2]
+        tc = dz / self.chief_dir[2]
+        return replace(
+            self,
+            pos=self.pos + t.unsqueeze(-1) * self.dirs,
+            opl=self.opl + self.n_img * t,
+            chief=self.chief + tc * self.chief_dir,
+            chief_opl=self.chief_opl + self.n_img * tc,
+        )
+
+
+def _trace_grid(
+    lens: Lens,
+    field: float,
+    wavelength_um: float,
+    samples: int,
+    aiming: Aiming,
+    para: ParaxialData,
+    start: torch.Tensor | None = None,
+) -> _ImageRays:
+    if samples < 8:
+        raise InputError(lens.source, "pupil_samples", f"expected at least 8 pupil samples across, got {samples}")
+    launch = object_field(lens, field, aiming, para)
+    pts, inside = square_grid_full(samples)
+    all_pts = torch.cat([torch.zeros(1, 2, dtype=DTYPE), pts])
+    rays, wl = generate_rays(lens, [launch], all_pts, [wavelength_um], aiming, para, start)
+    start_pos, start_dir = rays.position[0, 0, 1:].clone(), rays.direction[0, 0, 1:].clone()
+    ref = trace_chief_rays(lens, rays.select(0), wl, [launch], aiming, para).rays
+    out = trace(lens, rays.select(slice(1, None)), wl).rays
+    return _ImageRays(
+        pts=pts,
+        inside=inside,
+        start_pos=start_pos,
+        start_dir=start_dir,
+        pos=out.position[0, 0],
+        dirs=out.direction[0, 0],
+        opl=out.opl[0, 0],
+        valid=out.valid[0, 0] & inside,
+        chief=ref.position[0, 0, 0],
+        chief_dir=ref.direction[0, 0, 0],
+        chief_opl=ref.opl[0, 0, 0],
+        n_img=float(lens.indices([wavelength_um])[-1, 0]),
+        samples=samples,
+        aim=rays.entrance_xy,
+    )
+
+
 def pupil_field(
     lens: Lens,
     field: float,
@@ -123,23 +194,36 @@ def pupil_field(
     wavelength (um) to the exit-pupil reference sphere. start: with real aiming, the
     ``aim`` of a pupil field of the same field and sampling at another wavelength, where
     the aiming starts (faster; the same rays to rounding)."""
-    if samples < 8:
-        raise InputError(lens.source, "pupil_samples", f"expected at least 8 pupil samples across, got {samples}")
     para = para or paraxial_data(lens)
-    launch = object_field(lens, field, aiming, para)
-    pts, inside = square_grid_full(samples)
-    all_pts = torch.cat([torch.zeros(1, 2, dtype=DTYPE), pts])
-    rays, wl = generate_rays(lens, [launch], all_pts, [wavelength_um], aiming, para, start)
-    aim = rays.entrance_xy
-    start_pos, start_dir = rays.position[0, 0, 1:].clone(), rays.direction[0, 0, 1:].clone()
-    ref = trace_chief_rays(lens, rays.select(0), wl, [launch], aiming, para).rays
-    out = trace(lens, rays.select(slice(1, None)), wl).rays
-    n_img = float(lens.indices([wavelength_um])[-1, 0])
-    chief = ref.position[0, 0, 0]
-    chief_dir = ref.direction[0, 0, 0]
-    chief_opl = ref.opl[0, 0, 0]
-    pos, dirs, opl = out.position[0, 0], out.direction[0, 0], out.opl[0, 0]
-    valid = out.valid[0, 0] & inside
+    traced = _trace_grid(lens, field, wavelength_um, samples, aiming, para, start)
+    return _on_sphere(lens, traced, field, wavelength_um, para)
+
+
+def pupil_fields_through_focus(
+    lens: Lens,
+    field: float,
+    wavelength_um: float,
+    shifts_mm: list[float],
+    samples: int = 128,
+    aiming: Aiming = "real",
+    para: ParaxialData | None = None,
+    start: torch.Tensor | None = None,
+) -> list[PupilField]:
+    """pupil_field with the image plane moved by each shift (mm, along the image-space
+    light direction: positive away from the lens), from one trace: the same as tracing
+    the lens with its image_defocus changed by that amount (times the direction)."""
+    para = para or paraxial_data(lens)
+    traced = _trace_grid(lens, field, wavelength_um, samples, aiming, para, start)
+    direction = float(lens.directions()[-1])
+    return [_on_sphere(lens, traced.moved(direction * dz), field, wavelength_um, para) for dz in shifts_mm]
+
+
+def _on_sphere(lens: Lens, tr: _ImageRays, field: float, wavelength_um: float, para: ParaxialData) -> PupilField:
+    """The traced grid carried to the exit-pupil reference sphere (the module docstring)."""
+    pts, inside, n_img = tr.pts, tr.inside, tr.n_img
+    chief, chief_dir, chief_opl = tr.chief, tr.chief_dir, tr.chief_opl
+    pos, dirs, opl, valid = tr.pos, tr.dirs, tr.opl, tr.valid
+    start_pos, start_dir = tr.start_pos, tr.start_dir
     # reference sphere: centre at the chief-ray image point, through the chief ray's
     # crossing of the paraxial exit-pupil plane
     z_xp = para.exit_pupil_z_mm
@@ -161,7 +245,7 @@ def pupil_field(
     opl_sphere = opl + n_img * t
     # the chief ray's own path to the sphere (t = -R along it)
     opl_ref = chief_opl - n_img * radius
-    n = samples
+    n = tr.samples
     h = 2.0 / n
     ok_grid = valid.reshape(n, n)
     area = _cell_measure(q.reshape(n, n, 3), ok_grid, h)
@@ -195,7 +279,7 @@ def pupil_field(
         n_image=n_img,
         wavelength_um=wavelength_um,
         transmission=transmission,
-        samples=samples,
+        samples=n,
         image_xy=pos[sel][:, :2],
-        aim=aim,
+        aim=tr.aim,
     )
