@@ -168,6 +168,52 @@ LENS_OUTPUTS = [
     case("lensfun-sensor-missing", LENSFUN + "--sensor {t}/nofile.yaml", "nofile.yaml"),
 ]
 
+MTF = "lens mtf cooke_triplet --json "
+WAVEFRONT = "lens wavefront cooke_triplet --json "
+LENS_ANALYSES = [
+    case("mtf-nothing-asked", "lens mtf cooke_triplet", "--output"),
+    case("mtf-frequency-zero", MTF + "--frequency 0", "--frequency", "lp/mm"),
+    case("mtf-frequency-negative", MTF + "--frequency 10 --frequency -30", "--frequency", "-30"),
+    case("mtf-frequency-nan", MTF + "--frequency nan", "--frequency"),
+    case("mtf-max-frequency-zero", MTF + "--max-frequency 0", "--max-frequency"),
+    case("mtf-field-above-1", MTF + "--field 1.5", "field", "between 0 and 1", "1.5"),
+    case("mtf-field-deg-90", MTF + "--field-deg 95", "--field-deg"),
+    case("mtf-focus-range-zero", MTF + "--focus-range-um 0", "--focus-range-um", "um"),
+    case("mtf-focus-steps-negative", MTF + "--focus-steps -1", "--focus-steps"),
+    case("mtf-pupil-samples-small", MTF + "--pupil-samples 4", "--pupil-samples"),
+    case("mtf-channel-without-sensor", MTF + "--channel g", "--channel", "--sensor"),
+    case("mtf-channel-unknown", MTF + "--sensor phone --channel y", "--channel", "y"),
+    case("mtf-sensor-missing", MTF + "--sensor {t}/nofile.yaml", "nofile.yaml"),
+    case("mtf-wavelengths-zero", MTF + "--wavelengths-nm 0,550", "--wavelengths-nm"),
+    case("mtf-output-suffix", "lens mtf cooke_triplet -o {t}/m.txt", "m.txt"),
+    case("mtf-output-folder", "lens mtf cooke_triplet -o {t}/m.png", "m.png", make=folder("m.png")),
+    case(
+        "wavefront-zernike-terms-above-fringe",
+        WAVEFRONT + "--zernike fringe --zernike-terms 38",
+        "--zernike-terms",
+        "38",
+    ),
+    case("wavefront-zernike-terms-above-noll", WAVEFRONT + "--zernike-terms 232", "--zernike-terms", "232"),
+    case("wavefront-zernike-terms-zero", WAVEFRONT + "--zernike-terms 0", "--zernike-terms"),
+    case("wavefront-zernike-unknown", WAVEFRONT + "--zernike zemax", "--zernike", "zemax"),
+    case("wavefront-two-fields", WAVEFRONT + "--field 0 --field 1", "--field", "one field"),
+    case("wavefront-field-above-1", WAVEFRONT + "--field 2", "field", "2"),
+    case("wavefront-wavelength-zero", WAVEFRONT + "--wavelength-nm 0", "--wavelength-nm", "nm"),
+    case("fans-rays-two", "lens fans cooke_triplet --json --rays 2", "--rays"),
+    case("fans-field-above-1", "lens fans cooke_triplet --json --field 1.01", "field", "1.01"),
+    case("field-curves-output-under-file", "lens field-curves cooke_triplet -o {t}/afile/c.png", "afile", make=AFILE),
+    case(
+        "field-curves-image-height-nan",
+        "lens field-curves cooke_triplet --json --image-height-mm nan",
+        "--image-height-mm",
+    ),
+    case("energy-method-unknown", "lens energy cooke_triplet --json --method banana", "--method", "banana"),
+    case("energy-centre-unknown", "lens energy cooke_triplet --json --centre middle", "--centre", "middle"),
+    case("energy-grid-small", "lens energy cooke_triplet --json --grid 4", "--grid"),
+    case("energy-spacing-zero", "lens energy cooke_triplet --json --spacing-um 0", "--spacing-um", "um"),
+    case("energy-field-above-1", "lens energy cooke_triplet --json --field -0.5", "field", "-0.5"),
+]
+
 SIMULATE = [
     case("simulate-format-jpg", SIM + "--format jpg", "--format", "jpg"),
     case("simulate-raw-format-jpg", "simulate {w.photo} -o {t}/out --raw --format jpg", "--format", "jpg"),
@@ -441,6 +487,7 @@ ALL: list[Case] = (
     + PSF_BANK
     + LENS
     + LENS_OUTPUTS
+    + LENS_ANALYSES
     + SIMULATE
     + DATASET_MAKE
     + TRAINING

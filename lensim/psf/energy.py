@@ -135,12 +135,13 @@ def energy_curves(
         lens, field_value, wavelengths_um, weights, grid, spacing, pupil_samples, aiming, method
     )
     c = psf_centroid_um(psf, spacing) if centre == "centroid" else (0.0, 0.0)
+    diffraction = method != "geometric"
     sizes = np.linspace(0.0, grid * spacing / 2.0, points)
     return EnergyCurves(
         field_value=field_value,
         sizes_um=sizes,
-        encircled=enclosed_energy(psf, spacing, sizes, "circle", c, transmitted),
-        ensquared=enclosed_energy(psf, spacing, sizes, "square", c, transmitted),
+        encircled=enclosed_energy(psf, spacing, sizes, "circle", c, transmitted, band_limited=diffraction),
+        ensquared=enclosed_energy(psf, spacing, sizes, "square", c, transmitted, band_limited=diffraction),
         energy_in_window=float(psf.sum() / transmitted),
         centre_um=c,
         spacing_um=spacing,

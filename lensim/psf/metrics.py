@@ -35,23 +35,28 @@ def encircled_energy_radius(psf: np.ndarray, spacing_um: float, fraction: float)
     return float(r[order][min(i, r.size - 1)])
 
 
-def _sub_samples(psf: np.ndarray, spacing_um: float, sub: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _sub_samples(
+    psf: np.ndarray, spacing_um: float, sub: int, band_limited: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """x, y (um, from the window's centre sample grid//2) and energy of sub x sub points
-    per sample: the PSF read as samples of a band-limited irradiance (sampled finer than
-    lambda N / 2, as lensim's PSFs are), Fourier-interpolated onto the points (a
-    zero-padded FFT), the total energy kept."""
+    per sample, the total energy kept. band_limited: the PSF read as samples of a
+    band-limited irradiance (a diffraction PSF sampled finer than lambda N / 2, as
+    lensim's are), Fourier-interpolated onto the points (zero-padded FFT); otherwise (a
+    ray histogram) each sample's energy shared evenly over the points inside its cell."""
     n_y, n_x = psf.shape
-    spec = np.fft.fftshift(np.fft.fft2(psf))
-    big = np.zeros((n_y * sub, n_x * sub), dtype=np.complex128)
-    y0 = n_y * sub // 2 - n_y // 2
-    x0 = n_x * sub // 2 - n_x // 2
-    big[y0 : y0 + n_y, x0 : x0 + n_x] = spec
-    fine = np.fft.ifft2(np.fft.ifftshift(big)).real
-    # fine sample k sits at k / sub of a coarse sample: move to the sub-point centres
-    e = np.clip(fine, 0.0, None)
+    if band_limited:
+        spec = np.fft.fftshift(np.fft.fft2(psf))
+        big = np.zeros((n_y * sub, n_x * sub), dtype=np.complex128)
+        y0, x0 = n_y * sub // 2 - n_y // 2, n_x * sub // 2 - n_x // 2
+        big[y0 : y0 + n_y, x0 : x0 + n_x] = spec
+        e = np.clip(np.fft.ifft2(np.fft.ifftshift(big)).real, 0.0, None)
+        fx, fy = np.arange(n_x * sub) / sub, np.arange(n_y * sub) / sub  # in samples
+    else:
+        e = np.repeat(np.repeat(psf, sub, axis=0), sub, axis=1)
+        off = (np.arange(sub) + 0.5) / sub - 0.5
+        fx = (np.arange(n_x)[:, None] + off[None, :]).ravel()
+        fy = (np.arange(n_y)[:, None] + off[None, :]).ravel()
     e = e * (psf.sum() / e.sum()) if e.sum() > 0 else e
-    fx = np.arange(n_x * sub) / sub
-    fy = np.arange(n_y * sub) / sub
     x = np.broadcast_to(((fx - n_x // 2) * spacing_um)[None, :], e.shape)
     y = np.broadcast_to(((fy - n_y // 2) * spacing_um)[:, None], e.shape)
     return x.ravel(), y.ravel(), e.ravel()
@@ -75,17 +80,19 @@ def enclosed_energy(
     centre_um: tuple[float, float] | None = None,
     total: float | None = None,
     sub: int = 4,
+    band_limited: bool = True,
 ) -> np.ndarray:
     """Fraction of the energy inside a circle of each radius (shape 'circle': encircled
     energy) or a square of each half-width (shape 'square': ensquared energy), um, around
     centre_um ((x, y) um from the window's centre sample; default the PSF's centroid).
 
-    Each sample's energy is spread over sub x sub points inside it. total: the energy the
-    fractions are of (default the window's sum; give the transmitted energy to count what
-    falls outside the window as lost)."""
+    Each sample stands for sub x sub points (_sub_samples: Fourier-interpolated when
+    band_limited, a diffraction PSF; shared evenly otherwise, a ray histogram). total: the
+    energy the fractions are of (default the window's sum; give the transmitted energy to
+    count what falls outside the window as lost)."""
     psf = np.asarray(psf, dtype=np.float64)
     cx, cy = psf_centroid_um(psf, spacing_um) if centre_um is None else centre_um
-    x, y, e = _sub_samples(psf, spacing_um, sub)
+    x, y, e = _sub_samples(psf, spacing_um, sub, band_limited)
     if shape == "circle":
         d = np.hypot(x - cx, y - cy)
     elif shape == "square":
