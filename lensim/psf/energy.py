@@ -31,7 +31,7 @@ from lensim.psf.compute import check_sampling
 from lensim.psf.fourier import fft_psf, geometric_psf
 from lensim.psf.huygens import huygens_psf
 from lensim.psf.metrics import enclosed_energy, psf_centroid_um, size_at_fraction
-from lensim.psf.pupil_field import pupil_field
+from lensim.psf.pupil_field import PupilField, pupil_field
 
 CENTRES = ("centroid", "chief")
 MIN_PUPIL_SAMPLES = 64
@@ -99,7 +99,9 @@ def polychromatic_psf(
     if pupil_samples is None:
         need = grid * spacing_um / (min(wavelengths_um) * para.working_fno)
         pupil_samples = max(MIN_PUPIL_SAMPLES, 2 * math.ceil(0.6 * need))
-    pfs = [pupil_field(lens, field_value, wl, pupil_samples, aiming, para) for wl in wavelengths_um]
+    pfs: list[PupilField] = []
+    for wl in wavelengths_um:  # each wavelength's real aiming starts from the last one's solution
+        pfs.append(pupil_field(lens, field_value, wl, pupil_samples, aiming, para, pfs[-1].aim if pfs else None))
     w = np.asarray(weights, dtype=np.float64)
     ref = sum(wi * pf.chief[:2] for wi, pf in zip(w, pfs, strict=True)) / w.sum()
     total = np.zeros((grid, grid))

@@ -139,10 +139,12 @@ def field_otf(
     if len(weights) != len(wavelengths_um):
         raise InputError(None, "wavelength_weights", f"expected {len(wavelengths_um)} weights, got {len(weights)}")
     para = para or paraxial_data(lens)
-    cuts = [
-        otf_cuts(pupil_field(lens, field_value, wl, samples, aiming, para), w)
-        for wl, w in zip(wavelengths_um, weights, strict=True)
-    ]
+    cuts = []
+    aim = None  # each wavelength's real aiming starts from the last one's solution
+    for wl, w in zip(wavelengths_um, weights, strict=True):
+        pf = pupil_field(lens, field_value, wl, samples, aiming, para, aim)
+        aim = pf.aim
+        cuts.append(otf_cuts(pf, w))
     return FieldOTF(field_value, cuts)
 
 
@@ -169,7 +171,10 @@ def through_focus(
     lensim.psf.pupil_field.pupil_fields_through_focus)."""
     para = para or paraxial_data(lens)
     shifts = [float(z) for z in shifts_mm]
-    per_wl = [pupil_fields_through_focus(lens, field_value, wl, shifts, samples, aiming, para) for wl in wavelengths_um]
+    per_wl: list[list[PupilField]] = []
+    for wl in wavelengths_um:  # real aiming warm-started as in field_otf
+        aim = per_wl[-1][0].aim if per_wl else None
+        per_wl.append(pupil_fields_through_focus(lens, field_value, wl, shifts, samples, aiming, para, aim))
     sag = np.zeros((len(frequencies), len(shifts)))
     tan = np.zeros_like(sag)
     for k in range(len(shifts)):
