@@ -179,6 +179,7 @@ LENS_ANALYSES = [
     case("mtf-field-above-1", MTF + "--field 1.5", "field", "between 0 and 1", "1.5"),
     case("mtf-field-deg-90", MTF + "--field-deg 95", "--field-deg"),
     case("mtf-focus-range-zero", MTF + "--focus-range-um 0", "--focus-range-um", "um"),
+    case("mtf-sweep-fields-one", MTF + "--sweep-fields 1", "--sweep-fields"),
     case("mtf-focus-steps-negative", MTF + "--focus-steps -1", "--focus-steps"),
     case("mtf-pupil-samples-small", MTF + "--pupil-samples 4", "--pupil-samples"),
     case("mtf-channel-without-sensor", MTF + "--channel g", "--channel", "--sensor"),

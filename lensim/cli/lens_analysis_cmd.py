@@ -125,6 +125,9 @@ def mtf_command(
     sensor: str | None = typer.Option(None, "--sensor", help=SENSOR_HELP),
     channel: str | None = typer.Option(None, "--channel", help=CHANNEL_HELP),
     wavelengths: str | None = typer.Option(None, "--wavelengths-nm", help=WAVELENGTHS_HELP),
+    sweep_fields: int = typer.Option(
+        21, "--sweep-fields", help="Fields of the MTF-against-field curves (0 to the maximum)."
+    ),
     focus_range_um: float | None = typer.Option(
         None,
         "--focus-range-um",
@@ -140,7 +143,7 @@ def mtf_command(
     config: str | None = config_option(),
 ) -> None:
     """Diffraction MTF (FFT: pupil autocorrelation), sagittal and tangential: against
-    frequency at each field, against the field (0 to the maximum, 11 points) at the
+    frequency at each field, against the field (--sweep-fields points from 0 to the maximum) at the
     chosen frequencies, and through focus; polychromatic with the lens file's weights or
     the sensor's spectral response; lateral colour included.
 
@@ -158,6 +161,7 @@ def mtf_command(
     if focus_range_um is not None:
         positive(focus_range_um, "--focus-range-um", "um", "a focus range")
     at_least(focus_steps, 0, "--focus-steps", what="a number of focus positions")
+    in_range(sweep_fields, 2, 1001, "--sweep-fields", what="a number of fields")
     at_least(pupil_samples, 16, "--pupil-samples", what="a number of pupil samples")
     if channel is not None:
         choice(channel, CHANNELS, "--channel")
@@ -178,7 +182,7 @@ def mtf_command(
             wls,
             weights,
             freqs,
-            _sweep(base, lens),
+            _sweep(base, lens, sweep_fields),
             steps,
             max_frequency or nyquist,
             samples=pupil_samples,
@@ -190,12 +194,12 @@ def mtf_command(
     _finish(report, output, json_out, lambda: mtf_figure(report, output))
 
 
-def _sweep(base: Lens, lens: Lens) -> list[float]:
-    """The MTF-against-field sweep, 11 fields from 0: to the lens file's maximum field, or
-    to the largest field shown when they are given in another unit (--field-deg,
+def _sweep(base: Lens, lens: Lens, count: int) -> list[float]:
+    """The MTF-against-field sweep, count fields from 0: to the lens file's maximum field,
+    or to the largest field shown when they are given in another unit (--field-deg,
     --image-height-mm)."""
     top = base.max_field if lens.field_type == base.field_type else lens.max_field
-    return [top * k / 10.0 for k in range(11)]
+    return [top * k / (count - 1) for k in range(count)]
 
 
 def _finish(report: dict, output: Path | None, json_out: bool, draw) -> None:

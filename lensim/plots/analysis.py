@@ -19,7 +19,9 @@ from lensim.plots.lens import FIELD_COLORS, _wavelength_colors
 
 
 def _title(report: dict) -> str:
-    return report.get("name") or Path(report.get("source", "lens")).stem
+    """The lens's name without a parenthesized source, or its file's stem."""
+    name = report.get("name") or Path(report.get("source", "lens")).stem
+    return name.split(" (")[0]
 
 
 def _field_text(report: dict, value: float) -> str:
@@ -51,7 +53,7 @@ def mtf_figure(report: dict, path: str | Path | None = None) -> Figure:
     sweep = report["against_field"]
     for k, freq in enumerate(sweep["frequency_lp_mm"]):
         c = FIELD_COLORS[k % len(FIELD_COLORS)]
-        ax.plot(sweep["fields"], sweep["tangential"][k], color=c, label=f"{freq:g} lp/mm T")
+        ax.plot(sweep["fields"], sweep["tangential"][k], color=c, label=f"{freq:.4g} lp/mm T")
         ax.plot(sweep["fields"], sweep["sagittal"][k], color=c, ls="--", label="S")
     ax.set(xlabel=f"field ({report['field_unit']})", ylabel="MTF", ylim=(0, 1.02), title="MTF against field")
     ax.legend(fontsize="small", ncol=2)
@@ -66,7 +68,7 @@ def mtf_figure(report: dict, path: str | Path | None = None) -> Figure:
             xlabel="focus shift (\N{MICRO SIGN}m, + away from the lens)",
             ylabel="MTF",
             ylim=(0, 1.02),
-            title=f"through focus at {tf['frequency_lp_mm'][0]:g} lp/mm",
+            title=f"through focus at {tf['frequency_lp_mm'][0]:.4g} lp/mm",
         )
         ax.legend(fontsize="small", ncol=2)
     for ax in axes:
@@ -112,7 +114,7 @@ def fans_figure(report: dict, path: str | Path | None = None) -> Figure:
         for w, nm in enumerate(report["wavelengths_nm"]):
             ey = [np.nan if v is None else v for v in f["tangential_ey_um"][w]]
             ex = [np.nan if v is None else v for v in f["sagittal_ex_um"][w]]
-            axes[i, 0].plot(p, ey, color=cols[w], label=f"{nm:g} nm")
+            axes[i, 0].plot(p, ey, color=cols[w], label=f"{nm:.4g} nm")
             axes[i, 1].plot(p, ex, color=cols[w])
         axes[i, 0].set_ylabel(f"{_field_text(report, f['field'])}\ney (\N{MICRO SIGN}m)")
         axes[i, 1].set_ylabel("ex (\N{MICRO SIGN}m)")
@@ -138,7 +140,7 @@ def field_curves_figure(report: dict, path: str | Path | None = None) -> Figure:
     for k, w in enumerate(report["wavelengths"]):
         t = [np.nan if v is None else v for v in w["tangential_mm"]]
         s = [np.nan if v is None else v for v in w["sagittal_mm"]]
-        ax.plot(t, y, color=cols[k], label=f"{w['wavelength_nm']:g} nm T")
+        ax.plot(t, y, color=cols[k], label=f"{w['wavelength_nm']:.4g} nm T")
         ax.plot(s, y, color=cols[k], ls="--", label="S")
     ax.axvline(0.0, color="0.5", lw=0.8)
     ax.set(

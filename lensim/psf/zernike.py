@@ -145,6 +145,12 @@ def term_name(n: int, m: int) -> str:
         (3, 3): "trefoil x",
         (3, -3): "trefoil y",
         (4, 0): "primary spherical",
+        (4, 2): "secondary astigmatism 0 deg",
+        (4, -2): "secondary astigmatism 45 deg",
+        (4, 4): "quadrafoil x",
+        (4, -4): "quadrafoil y",
+        (5, 1): "secondary coma x",
+        (5, -1): "secondary coma y",
         (6, 0): "secondary spherical",
     }
     return names.get((n, m), "")
