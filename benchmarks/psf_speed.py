@@ -9,8 +9,10 @@ Case: the built-in Cooke triplet (f = 50 mm, F/5), full field (20 deg), 0.55 um,
 (lensim 'paraxial' / 'real'; optiland's default paraxial aiming / its 'iterative' aimer
 pointed at the same stop points as lensim's real aiming, see tests/test_psf_peers.py).
 PyTorch runs on 2 threads (torch.set_num_threads(2)) and optiland's numba summation on
-as many (`--threads` changes both). Under outside load, 2 torch threads on 2 cores can be
-many times slower than 1 (see benchmarks/README.md): the load average is printed.
+as many (`--threads` changes both). lensim is imported before torch, as a user's script or
+the CLI does, so its OpenMP setting (passive waiting) applies; `OMP_WAIT_POLICY=ACTIVE` in
+the environment shows torch's own spin-waiting. `--busy` keeps one core busy with another
+process meanwhile (a shared machine). The load average is printed.
 
 Timing: `--rounds` interleaved rounds, each timing every stage of both tools and both
 aiming modes (lensim stages `--repeats` times per round, optiland's once); each figure is
@@ -45,8 +47,12 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+
+# isort: off
+import lensim  # noqa: F401  (before torch, as for a user: lensim's OMP_WAIT_POLICY=PASSIVE applies)
 import torch
 
+# isort: on
 from lensim.optics.aiming import chief_ray_image_height
 from lensim.optics.lens import Lens
 from lensim.optics.lens_file import load_lens
@@ -148,14 +154,32 @@ def optiland_round(lens: Lens, para: ParaxialData, aiming: str, best: dict) -> N
         best["rays"] = int(np.asarray(be.to_numpy(op.get_data((0.0, FIELD), WAVELENGTH_UM).intensity)).size)
 
 
-def main() -> None:
+def keep_a_core_busy() -> None:
+    """Start a process that spins on one core until this one exits."""
+    import atexit
+    import subprocess
+
+    hog = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    atexit.register(hog.kill)
+
+
+def arguments() -> argparse.Namespace:
+    """The command line's arguments; with --busy, a busy core from now on."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rounds", type=int, default=3, help="interleaved rounds over all stages and both tools")
     ap.add_argument("--repeats", type=int, default=3, help="calls of each lensim stage per round")
     ap.add_argument("--skip-direct", action="store_true", help="skip the exact direct summation (~1-4 min per mode)")
     ap.add_argument("--skip-optiland", action="store_true", help="lensim only")
     ap.add_argument("--threads", type=int, default=2, help="torch threads, and numba's for optiland (default 2)")
+    ap.add_argument("--busy", action="store_true", help="keep one core busy with another process meanwhile")
     args = ap.parse_args()
+    if args.busy:
+        keep_a_core_busy()
+    return args
+
+
+def main() -> None:
+    args = arguments()
 
     torch.set_num_threads(args.threads)
     load_start = os.getloadavg()
