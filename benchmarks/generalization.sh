@@ -39,7 +39,7 @@ import sys
 from lensim.assets import DEFAULT_LENS
 from lensim.demo import DemoSettings
 from lensim.optics.lens_file import load_lens
-from lensim.psf.bank import BankSettings, build_bank
+from lensim.psf.bank import BankSettings, get_bank
 from lensim.sensor.profile import DEFAULT_SENSOR, load_sensor
 
 if __name__ == "__main__":
@@ -47,7 +47,7 @@ if __name__ == "__main__":
     lens, sensor = load_lens(DEFAULT_LENS), load_sensor(DEFAULT_SENSOR)
     settings = BankSettings(fields=s.fields, wavelengths_nm=s.wavelengths_nm, pupil_samples=s.pupil_samples,
                             kernel_limit=41)
-    build_bank(lens, sensor.pixel_pitch_um, settings, response=sensor.spectral_response, workers=2, out_dir=sys.argv[1])
+    get_bank(lens, sensor.pixel_pitch_um, settings, response=sensor.spectral_response, workers=2, out_dir=sys.argv[1])
 EOF
 "$PY" "$OUT/make_bank.py" "$OUT/bank"
 

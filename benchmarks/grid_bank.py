@@ -106,7 +106,7 @@ def old_pool(out: str, workers: int) -> None:
     from lensim.optics.lens_file import load_lens
     from lensim.optics.shooting import ShootingSettings, lens_at
     from lensim.psf.bank import BankField
-    from lensim.psf.bank.compute import plan_bank
+    from lensim.psf.bank.compute import _plan_bank
     from lensim.psf.bank.grid import GridAxes, grid_kernel_pixels
     from lensim.sensor.profile import load_sensor
 
@@ -116,13 +116,8 @@ def old_pool(out: str, workers: int) -> None:
         [lens_at(lens, s) for s in GridAxes.from_options(FNOS, FOCI).settings()], sensor.pixel_pitch_um, bank_settings()
     )
     settings = bank_settings(kernel)
-    plan = plan_bank(
-        lens_at(lens, ShootingSettings(fno=5.6)),
-        sensor.pixel_pitch_um,
-        kernel,
-        response=sensor.spectral_response,
-        out_dir=out,
-        **settings.compute_options(),
+    plan = _plan_bank(
+        lens_at(lens, ShootingSettings(fno=5.6)), sensor.pixel_pitch_um, kernel, settings, sensor.spectral_response, out
     )
     plan.open()
     with ProcessPoolExecutor(
@@ -279,8 +274,7 @@ def interpolation(out: Path, workers: int) -> None:
     from lensim.images import read_image
     from lensim.optics.lens_file import load_lens
     from lensim.optics.shooting import ShootingSettings
-    from lensim.psf.bank import GridAxes, GridBank, compute_grid
-    from lensim.psf.bank.grid import compute_setting_bank
+    from lensim.psf.bank import GridAxes, GridBank, get_bank
     from lensim.sensor.isp import srgb_to_linear
     from lensim.sensor.profile import load_sensor
 
@@ -289,12 +283,12 @@ def interpolation(out: Path, workers: int) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         if not (grid_dir / "manifest.json").exists():
-            compute_grid(
+            get_bank(
                 lens,
                 sensor.pixel_pitch_um,
-                GridAxes.from_options(FNOS, FOCI),
                 bank_settings(),
-                grid_dir,
+                shooting=GridAxes.from_options(FNOS, FOCI),
+                out_dir=grid_dir,
                 response=sensor.spectral_response,
                 workers=workers,
             )
@@ -302,23 +296,23 @@ def interpolation(out: Path, workers: int) -> None:
         kernel = full.bank(0).kernel_pixels
         settings = bank_settings(kernel)
         direct4m = {
-            n: compute_setting_bank(
+            n: get_bank(
                 lens,
                 sensor.pixel_pitch_um,
-                ShootingSettings(fno=n, focus_m=4.0),
                 settings,
-                out / f"direct-f{n}-4m",
+                shooting=ShootingSettings(fno=n, focus_m=4.0),
+                out_dir=out / f"direct-f{n}-4m",
                 response=sensor.spectral_response,
                 workers=workers,
             )
             for n in (5.6, 11.0)
         }
-        direct67 = compute_setting_bank(
+        direct67 = get_bank(
             lens,
             sensor.pixel_pitch_um,
-            ShootingSettings(fno=6.7),
             settings,
-            out / "direct-f6.7-inf",
+            shooting=ShootingSettings(fno=6.7),
+            out_dir=out / "direct-f6.7-inf",
             response=sensor.spectral_response,
             workers=workers,
         )

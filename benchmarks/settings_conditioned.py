@@ -89,8 +89,7 @@ def pairs_for(out: Path, sharp: Path, fno: float, focus: float) -> Path:
     from lensim.io import atomic_write_json, read_json
     from lensim.optics.lens_file import load_lens
     from lensim.optics.shooting import ShootingSettings, describe, lens_at
-    from lensim.psf.bank import BankSettings
-    from lensim.render.bank_cache import ensure_bank
+    from lensim.psf.bank import BankSettings, get_bank
     from lensim.sensor.profile import load_sensor
 
     d = out / "pairs" / tag(fno, focus)
@@ -99,7 +98,7 @@ def pairs_for(out: Path, sharp: Path, fno: float, focus: float) -> Path:
     lens, sensor = load_lens(LENS), load_sensor("apsc_mirrorless")
     shot = ShootingSettings(fno=fno, focus_m=focus)
     at = lens_at(lens, shot)
-    bank = ensure_bank(
+    bank = get_bank(
         at,
         sensor.pixel_pitch_um,
         BankSettings(

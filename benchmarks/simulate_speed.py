@@ -20,8 +20,7 @@ import json, resource, sys, time, torch, torch.nn.functional as F
 torch.set_num_threads(int(sys.argv[2]))
 from lensim.optics.lens_file import load_lens
 from lensim.sensor.profile import load_sensor
-from lensim.psf.bank import BankSettings
-from lensim.render.bank_cache import ensure_bank
+from lensim.psf.bank import BankSettings, get_bank
 from lensim.render.kernels import kernel_function
 from lensim.render.mapping import map_to_sensor
 from lensim.render.pipeline import blur_energy_image, simulate
@@ -35,7 +34,7 @@ img = F.interpolate(img[None], size=(1365, 2048), mode="bilinear", align_corners
 m = map_to_sensor(1365, 2048, sensor)
 settings = BankSettings(fields=32, wavelengths_nm=[400 + 20 * i for i in range(16)], pupil_samples=96,
                         cache_dir=sys.argv[3])
-bank = ensure_bank(lens, m.pitch_um, settings, response=sensor.spectral_response)
+bank = get_bank(lens, m.pitch_um, settings, response=sensor.spectral_response)
 cam = img.clone()
 base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 t = time.perf_counter()

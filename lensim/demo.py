@@ -268,12 +268,9 @@ def run_demo(
 
 def _set_lens(shooting: ShootingSettings | None) -> tuple[Any, dict | None]:
     """The built-in lens at the shooting settings and their record (None: the file's own)."""
-    from lensim.optics.shooting import describe, lens_at, record
+    from lensim.optics.shooting import lens_and_record
 
-    lens = load_lens(DEFAULT_LENS)
-    if shooting is None or shooting.is_default:
-        return lens, None
-    return lens_at(lens, shooting), record(describe(lens, shooting))
+    return lens_and_record(load_lens(DEFAULT_LENS), shooting)
 
 
 def _run_demo(
@@ -290,7 +287,7 @@ def _run_demo(
     from lensim.data.pairs import make_dataset
     from lensim.plots.bank import write_bank_figures
     from lensim.plots.lens import plot_layout, plot_spots
-    from lensim.psf.bank import BankSettings, build_bank
+    from lensim.psf.bank import BankSettings, get_bank
     from lensim.report import write_report
 
     say = say or (lambda msg: None)
@@ -317,29 +314,18 @@ def _run_demo(
         pupil_samples=settings.pupil_samples,
         kernel_limit=41,
     )
-    if shooting is None or shooting.is_default:
-        bank = build_bank(
-            lens,
-            sensor.pixel_pitch_um,
-            bank_settings,
-            response=sensor.spectral_response,
-            out_dir=out / "bank",
-            workers=workers,
-            progress=step,
-        )
-    else:  # the bank's manifest records the settings, and so do the pairs made from it
-        from lensim.psf.bank.grid import compute_setting_bank
-
-        bank = compute_setting_bank(
-            load_lens(DEFAULT_LENS),
-            sensor.pixel_pitch_um,
-            shooting,
-            bank_settings,
-            out / "bank",
-            response=sensor.spectral_response,
-            workers=workers,
-            progress=step,
-        )
+    # at shooting settings the bank's manifest records them, and so do the pairs made from it
+    shot = None if shooting is None or shooting.is_default else shooting
+    bank = get_bank(
+        load_lens(DEFAULT_LENS) if shot is not None else lens,
+        sensor.pixel_pitch_um,
+        bank_settings,
+        response=sensor.spectral_response,
+        shooting=shot,
+        out_dir=out / "bank",
+        workers=workers,
+        progress=step,
+    )
     write_bank_figures(bank, figs)
     timings["bank"] = time.perf_counter() - t
 

@@ -52,7 +52,7 @@ def _png(path: Path, h: int, w: int, seed: int) -> Path:
 def build_world(root: Path) -> World:
     """Make the valid inputs (about 3 s): library calls, no CLI."""
     import lensim
-    from lensim.psf.bank import BankSettings, build_bank
+    from lensim.psf.bank import BankSettings, get_bank
     from raw_fixtures import random_mosaic, write_dng
 
     root.mkdir(parents=True, exist_ok=True)
@@ -65,7 +65,7 @@ def build_world(root: Path) -> World:
         _png(photos / f"p{i}.png", 64, 80, i + 1)
     profile = lensim.load_sensor("apsc_mirrorless")
     settings = BankSettings(fields=2, wavelengths_nm=[550.0], pupil_samples=32)
-    bank = build_bank(
+    bank = get_bank(
         lensim.load_lens("cooke_triplet"),
         profile.pixel_pitch_um,
         settings,

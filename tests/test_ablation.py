@@ -48,7 +48,7 @@ def pairs(tmp_path_factory: pytest.TempPathFactory) -> Path:
     from lensim.data.pairs import make_dataset
     from lensim.images import read_image, write_image
     from lensim.optics.lens_file import load_lens
-    from lensim.psf.bank import compute_bank
+    from lensim.psf.bank import BankSettings, get_bank
     from lensim.sensor.profile import load_sensor
 
     base = tmp_path_factory.mktemp("abl")
@@ -56,15 +56,8 @@ def pairs(tmp_path_factory: pytest.TempPathFactory) -> Path:
         img, _ = read_image(sample_image_path(name))
         write_image(base / "sharp" / f"{name}.png", img[:, :96, :96])
     sensor = load_sensor("apsc_mirrorless")
-    bank = compute_bank(
-        load_lens("cooke_triplet"),
-        sensor.pixel_pitch_um,
-        15,
-        fields=[0.0, 1.0],
-        wavelengths_nm=[550],
-        pupil_samples=64,
-        out_dir=base / "bank",
-    )
+    settings = BankSettings(fields=(0.0, 1.0), wavelengths_nm=(550,), pupil_samples=64, kernel_pixels=15)
+    bank = get_bank(load_lens("cooke_triplet"), sensor.pixel_pitch_um, settings, out_dir=base / "bank")
     make_dataset(base / "sharp", base / "pairs", bank, "apsc_mirrorless", sensor, crops=2, size=48, seed=1)
     return base
 

@@ -6,6 +6,7 @@ import math
 import shutil
 import time
 import warnings
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -14,7 +15,7 @@ from lensim.errors import InputError
 from lensim.optics.field_analysis import relative_illumination
 from lensim.optics.lens_file import load_lens
 from lensim.optics.paraxial import paraxial_image_height
-from lensim.psf.bank import MANIFEST, PSFBank, compute_bank, default_fields, field_file
+from lensim.psf.bank import MANIFEST, BankSettings, PSFBank, default_fields, field_file, get_bank
 from lensim.psf.compute import compute_psf
 from lensim.psf.pupil_field import pupil_field
 from lensim.render.rotation import rotate_kernel
@@ -22,8 +23,8 @@ from lensim.sensor.spectral import read_response_csv, spectral_response
 
 FIELDS = [0.0, 0.5, 0.8, 1.0]
 WAVELENGTHS = [450.0, 550.0, 650.0]  # 550 nm is the Cooke triplet's primary
-SETTINGS = dict(fields=FIELDS, wavelengths_nm=WAVELENGTHS, pupil_samples=48)
 PITCH, KERNEL = 4.0, 15
+SETTINGS = BankSettings(fields=tuple(FIELDS), wavelengths_nm=WAVELENGTHS, pupil_samples=48, kernel_pixels=KERNEL)
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +37,7 @@ def bank_dir(lens, tmp_path_factory):
     d = tmp_path_factory.mktemp("bank") / "cooke"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # sampling notes about the small 60 um window at full field
-        compute_bank(lens, PITCH, KERNEL, out_dir=d, **SETTINGS)
+        get_bank(lens, PITCH, SETTINGS, out_dir=d)
     return d
 
 
@@ -125,22 +126,20 @@ def test_resume_recomputes_only_missing_fields_and_refuses_other_settings(lens, 
     calls = []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        again = compute_bank(
-            lens, PITCH, KERNEL, out_dir=d, progress=lambda done, total: calls.append((done, total)), **SETTINGS
-        )
+        again = get_bank(lens, PITCH, SETTINGS, out_dir=d, progress=lambda done, total: calls.append((done, total)))
     assert calls == [(3, 4), (4, 4)]  # the start (3 on disk), then the one recomputed field
     assert (d / field_file(2)).exists()
     np.testing.assert_allclose(again.fields[2].rgb, before.fields[2].rgb, rtol=0, atol=1e-7)
     # a complete bank: nothing to compute
     calls.clear()
-    compute_bank(lens, PITCH, KERNEL, out_dir=d, progress=lambda done, total: calls.append((done, total)), **SETTINGS)
+    get_bank(lens, PITCH, SETTINGS, out_dir=d, progress=lambda done, total: calls.append((done, total)))
     assert calls == [(4, 4)]
     with pytest.raises(InputError, match="kernel_pixels.*different settings"):
-        compute_bank(lens, PITCH, 13, out_dir=d, **SETTINGS)
+        get_bank(lens, PITCH, replace(SETTINGS, kernel_pixels=13), out_dir=d)
     with pytest.raises(InputError, match="pupil_samples"):
-        compute_bank(lens, PITCH, KERNEL, out_dir=d, **{**SETTINGS, "pupil_samples": 64})
+        get_bank(lens, PITCH, replace(SETTINGS, pupil_samples=64), out_dir=d)
     with pytest.raises(InputError, match="lens"):
-        compute_bank(lens.with_changes(image_defocus=0.01), PITCH, KERNEL, out_dir=d, **SETTINGS)
+        get_bank(lens.with_changes(image_defocus=0.01), PITCH, SETTINGS, out_dir=d)
 
 
 def test_truncated_or_foreign_field_files_are_named_by_readers_and_recomputed_on_resume(lens, bank_dir, tmp_path):
@@ -156,7 +155,7 @@ def test_truncated_or_foreign_field_files_are_named_by_readers_and_recomputed_on
     other = tmp_path / "other"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        compute_bank(lens, PITCH, KERNEL, out_dir=other, **{**SETTINGS, "pupil_samples": 40})
+        get_bank(lens, PITCH, replace(SETTINGS, pupil_samples=40), out_dir=other)
     shutil.copy(other / field_file(3), d / field_file(3))
     (d / field_file(1)).write_bytes(good)
     with pytest.raises(InputError, match=f"{field_file(3)}: settings_key: computed with other settings"):
@@ -165,9 +164,7 @@ def test_truncated_or_foreign_field_files_are_named_by_readers_and_recomputed_on
     calls = []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        again = compute_bank(
-            lens, PITCH, KERNEL, out_dir=d, progress=lambda done, total: calls.append(done), **SETTINGS
-        )
+        again = get_bank(lens, PITCH, SETTINGS, out_dir=d, progress=lambda done, total: calls.append(done))
     assert calls == [2, 3, 4]  # fields 1 and 3 recomputed
     for a, b in zip(PSFBank.load(d).fields, before.fields):
         np.testing.assert_array_equal(a.rgb, b.rgb)
@@ -175,14 +172,14 @@ def test_truncated_or_foreign_field_files_are_named_by_readers_and_recomputed_on
 
 
 def test_too_small_kernel_is_refused_and_the_empty_bank_can_be_redone(lens, tmp_path):
-    kw = dict(fields=[1.0], wavelengths_nm=[550.0], pupil_samples=32, out_dir=tmp_path / "b")
+    one = BankSettings(fields=(1.0,), wavelengths_nm=(550.0,), pupil_samples=32, kernel_pixels=3)
     # 3 px of 4 um hold 20 % of the full-field spot (RMS radius 12.9 um)
     with pytest.raises(InputError, match=r"field 1 at 550 nm: the 12.0 um window holds only .*kernel 3 px"):
-        compute_bank(lens, PITCH, 3, **kw)
+        get_bank(lens, PITCH, one, out_dir=tmp_path / "b")
     # no field was written under the refused settings, so other settings may take the directory
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        b = compute_bank(lens, PITCH, KERNEL, **kw)
+        b = get_bank(lens, PITCH, replace(one, kernel_pixels=KERNEL), out_dir=tmp_path / "b")
     assert b.kernel_pixels == KERNEL and PSFBank.load(tmp_path / "b").kernel_pixels == KERNEL
 
 
@@ -240,13 +237,13 @@ def test_psf_at_interpolates_linearly_between_radial_fields(bank):
 
 
 def test_parallel_workers_match_serial(lens, tmp_path):
-    kw = dict(fields=[0.6, 1.0], wavelengths_nm=[550.0, 650.0], pupil_samples=32)
+    settings = BankSettings(fields=(0.6, 1.0), wavelengths_nm=(550.0, 650.0), pupil_samples=32, kernel_pixels=KERNEL)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        serial = compute_bank(lens, PITCH, KERNEL, **kw)
+        serial = get_bank(lens, PITCH, settings, memory_only=True)
         calls = []
-        par = compute_bank(
-            lens, PITCH, KERNEL, workers=2, out_dir=tmp_path / "par", progress=lambda d, t: calls.append((d, t)), **kw
+        par = get_bank(
+            lens, PITCH, settings, workers=2, out_dir=tmp_path / "par", progress=lambda d, t: calls.append((d, t))
         )
     assert calls[0] == (0, 2) and calls[-1] == (2, 2) and len(calls) == 3
     for a, b in zip(serial.fields, par.fields):
@@ -255,7 +252,7 @@ def test_parallel_workers_match_serial(lens, tmp_path):
 
 
 def test_default_fields_are_denser_towards_the_edge():
-    f = default_fields()
+    f = default_fields(64)
     assert len(f) == 64 and f[0] == 0.0 and f[-1] == 1.0
     steps = np.diff(f)
     assert np.all(steps > 0) and steps[-1] < steps[1] / 5
@@ -263,9 +260,15 @@ def test_default_fields_are_denser_towards_the_edge():
 
 def test_bad_bank_arguments_are_refused(lens):
     with pytest.raises(InputError, match="odd"):
-        compute_bank(lens, PITCH, 14, **SETTINGS)
+        replace(SETTINGS, kernel_pixels=14)
     with pytest.raises(InputError, match="between 0 and 1"):
-        compute_bank(lens, PITCH, KERNEL, fields=[0.0, 1.5], wavelengths_nm=WAVELENGTHS)
+        BankSettings(fields=(0.0, 1.5), wavelengths_nm=WAVELENGTHS)
+    with pytest.raises(InputError, match="strictly increasing normalized fields"):
+        BankSettings(fields=(0.5, 0.5, 1.0))
+    with pytest.raises(InputError, match="pixel_pitch_um"):
+        get_bank(lens, -1.0, SETTINGS, memory_only=True)
+    with pytest.raises(InputError, match="workers"):
+        get_bank(lens, PITCH, SETTINGS, memory_only=True, workers=0)
 
 
 # ---- spectral response --------------------------------------------------------------
@@ -452,15 +455,15 @@ def test_cli_bad_csv_is_a_one_line_error(tmp_path):
 
 @pytest.mark.slow
 def test_default_size_bank_on_two_workers(lens, tmp_path):
-    """64 fields x 31 wavelengths (400-700 nm), pupil 64, 4 um pixels, 21 px kernels,
-    2 worker processes: target under 10 minutes."""
+    """BankSettings' defaults (32 fields x 16 wavelengths 400-700 nm, pupil 128), 4 um
+    pixels, 21 px kernels, 2 worker processes: target under 10 minutes."""
     t0 = time.time()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        b = compute_bank(lens, 4.0, 21, workers=2, out_dir=tmp_path / "bank")
+        b = get_bank(lens, 4.0, BankSettings(kernel_pixels=21), workers=2, out_dir=tmp_path / "bank")
     elapsed = time.time() - t0
     print(f"default bank: {elapsed:.0f} s")
-    assert len(b.fields) == 64 and len(b.wavelengths_nm) == 31
+    assert len(b.fields) == 32 and len(b.wavelengths_nm) == 16
     assert elapsed < 600
 
 
@@ -468,11 +471,8 @@ def test_coarse_pitch_uses_the_alias_free_window():
     # 30 um pixels, 9-pixel kernel (270 um) with 48 pupil samples: the diffraction PSF would
     # wrap every ~110 um, so only the central alias-free pixels are computed and the rest
     # stay zero; the on-axis kernel still holds all the energy (sum 1 within 1e-6)
-    from lensim.psf.bank import compute_bank
-
-    bank = compute_bank(
-        load_lens("cooke_triplet"), 30.0, 9, fields=[0.0, 1.0], wavelengths_nm=[450, 550], pupil_samples=48
-    )
+    settings = BankSettings(fields=(0.0, 1.0), wavelengths_nm=(450, 550), pupil_samples=48, kernel_pixels=9)
+    bank = get_bank(load_lens("cooke_triplet"), 30.0, settings, memory_only=True)
     k0 = bank.fields[0].rgb
     assert abs(float(k0.sum(axis=(-2, -1)).max()) - 1.0) < 1e-5
     assert float(np.abs(k0[:, 0, :]).max()) == 0.0  # outer ring untouched

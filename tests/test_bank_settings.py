@@ -90,8 +90,7 @@ def asked(monkeypatch):
         calls.append((lens, pitch_um, settings, response))
         raise _Asked
 
-    monkeypatch.setattr("lensim.render.bank_cache.ensure_bank", record)  # simulate, dataset make (cached_bank)
-    monkeypatch.setattr("lensim.psf.bank.build_bank", record)  # psf bank
+    monkeypatch.setattr("lensim.psf.bank.get_bank", record)  # simulate, dataset make, psf bank
     return calls
 
 

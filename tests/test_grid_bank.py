@@ -15,8 +15,8 @@ import pytest
 from lensim.errors import InputError
 from lensim.optics.lens_file import load_lens
 from lensim.optics.shooting import ShootingSettings, lens_at
-from lensim.psf.bank import BankSettings, PSFBank, compute_bank
-from lensim.psf.bank.grid import GridAxes, GridBank, compute_grid, compute_setting_bank, parse_setting_list
+from lensim.psf.bank import BankSettings, PSFBank, get_bank
+from lensim.psf.bank.grid import GridAxes, GridBank, parse_setting_list
 
 PITCH = 4.0
 SETTINGS = BankSettings(fields=3, wavelengths_nm=(500.0, 600.0), pupil_samples=32, kernel_pixels=15)
@@ -33,7 +33,7 @@ def grid_dir(lens, tmp_path_factory):
     d = tmp_path_factory.mktemp("grid") / "g"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        compute_grid(lens, PITCH, AXES, SETTINGS, d)
+        get_bank(lens, PITCH, SETTINGS, shooting=AXES, out_dir=d)
     return d
 
 
@@ -99,8 +99,8 @@ def test_each_grid_bank_is_the_bank_of_its_setting(grid_dir, lens, tmp_path):
     grid = GridBank.load(grid_dir)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        one = compute_setting_bank(lens, PITCH, grid.settings[3], SETTINGS, tmp_path / "one")
-        direct = compute_bank(lens_at(lens, grid.settings[3]), PITCH, 15, **SETTINGS.compute_options())
+        one = get_bank(lens, PITCH, SETTINGS, shooting=grid.settings[3], out_dir=tmp_path / "one")
+        direct = get_bank(lens_at(lens, grid.settings[3]), PITCH, SETTINGS, memory_only=True)
     _same_fields(grid.bank(3), one)
     _same_fields(grid.bank(3), direct)
     for name in ("field_0000.npz", "field_0002.npz"):
@@ -115,14 +115,14 @@ def test_grid_resumes_only_missing_fields_and_refuses_other_settings(grid_dir, l
     calls = []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        compute_grid(lens, PITCH, AXES, SETTINGS, d, progress=lambda k, n: calls.append((k, n)))
+        get_bank(lens, PITCH, SETTINGS, shooting=AXES, out_dir=d, progress=lambda k, n: calls.append((k, n)))
     assert calls[0] == (10, 12) and calls[-1] == (12, 12)
     for i in range(4):
         _same_fields(GridBank.load(d).bank(i), GridBank.load(grid_dir).bank(i))
     with pytest.raises(InputError, match="different settings"):
-        compute_grid(lens, PITCH, GridAxes(fno=(5.6, 11.0), focus_m=(math.inf, 1.0)), SETTINGS, d)
+        get_bank(lens, PITCH, SETTINGS, shooting=GridAxes(fno=(5.6, 11.0), focus_m=(math.inf, 1.0)), out_dir=d)
     with pytest.raises(InputError, match="single PSF bank"):
-        compute_grid(lens, PITCH, AXES, SETTINGS, grid_dir / "s000")
+        get_bank(lens, PITCH, SETTINGS, shooting=AXES, out_dir=grid_dir / "s000")
 
 
 def test_a_grid_is_not_a_bank(grid_dir):

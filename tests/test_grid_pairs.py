@@ -16,7 +16,7 @@ from lensim.data.pairs import grid_settings_of_photos, make_dataset
 from lensim.errors import InputError
 from lensim.images import read_image, write_image
 from lensim.optics.lens_file import load_lens
-from lensim.psf.bank import BankSettings, GridAxes, GridBank, PSFBank, compute_grid
+from lensim.psf.bank import BankSettings, GridAxes, GridBank, PSFBank, get_bank
 from lensim.sensor.profile import load_sensor
 
 SENSOR = "apsc_mirrorless"
@@ -33,8 +33,12 @@ def world(tmp_path_factory):
     sensor = load_sensor(SENSOR)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        grid = compute_grid(
-            load_lens("cooke_triplet"), sensor.pixel_pitch_um, GridAxes(fno=(5.6, 8.0)), SETTINGS, base / "grid"
+        grid = get_bank(
+            load_lens("cooke_triplet"),
+            sensor.pixel_pitch_um,
+            SETTINGS,
+            shooting=GridAxes(fno=(5.6, 8.0)),
+            out_dir=base / "grid",
         )
         made = make_dataset(base / "sharp", base / "data", grid, SENSOR, sensor, **OPTIONS)
     return base, sensor, grid, made

@@ -15,7 +15,7 @@ from lensim.evaluate import harness
 from lensim.evaluate.metrics import ZONES
 from lensim.images import read_image, write_image
 from lensim.optics.lens_file import load_lens
-from lensim.psf.bank import compute_bank
+from lensim.psf.bank import BankSettings, get_bank
 from lensim.sensor.profile import load_sensor, sensor_from_dict
 
 
@@ -34,15 +34,8 @@ def pairs(tmp_path_factory):
     sensor_file = base / "tiny_sensor.json"
     sensor_file.write_text(json.dumps(d))
     sensor = sensor_from_dict(d, str(sensor_file))
-    bank = compute_bank(
-        load_lens("cooke_triplet"),
-        sensor.pixel_pitch_um,
-        21,
-        fields=[0.0, 0.5, 1.0],
-        wavelengths_nm=[500, 600],
-        pupil_samples=64,
-        out_dir=base / "bank",
-    )
+    settings = BankSettings(fields=(0.0, 0.5, 1.0), wavelengths_nm=(500, 600), pupil_samples=64, kernel_pixels=21)
+    bank = get_bank(load_lens("cooke_triplet"), sensor.pixel_pitch_um, settings, out_dir=base / "bank")
     make_dataset(sharp, base / "pairs", bank, str(sensor_file), sensor, crops=1, size=96, seed=1)
     return base / "pairs"
 

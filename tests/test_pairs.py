@@ -9,7 +9,7 @@ from lensim.data.pairs import crop_capture, make_dataset, place_on_sensor
 from lensim.errors import InputError
 from lensim.images import read_image, write_image
 from lensim.optics.lens_file import load_lens
-from lensim.psf.bank import compute_bank
+from lensim.psf.bank import BankSettings, get_bank
 from lensim.sensor.profile import load_sensor
 
 SENSOR = "apsc_mirrorless"
@@ -23,15 +23,8 @@ def setup(tmp_path_factory):
         img, _ = read_image(sample_image_path(name))
         write_image(sharp / f"{name}.png", img[:, :192, :256])
     sensor = load_sensor(SENSOR)
-    bank = compute_bank(
-        load_lens("cooke_triplet"),
-        sensor.pixel_pitch_um,
-        21,
-        fields=[0.0, 0.5, 0.8, 1.0],
-        wavelengths_nm=[500, 600],
-        pupil_samples=96,
-        out_dir=base / "bank",
-    )
+    settings = BankSettings(fields=(0.0, 0.5, 0.8, 1.0), wavelengths_nm=(500, 600), pupil_samples=96, kernel_pixels=21)
+    bank = get_bank(load_lens("cooke_triplet"), sensor.pixel_pitch_um, settings, out_dir=base / "bank")
     return base, sharp, sensor, bank
 
 

@@ -146,7 +146,7 @@ def test_rays_trace_to_the_image(lens, field_deg, wavelength_um):
 
 
 def test_phone_sensor_fits_the_image_circle(lens):
-    from lensim.psf.bank import compute_bank
+    from lensim.psf.bank import BankSettings, get_bank
 
     sensor = load_sensor("phone")
     w_mm, h_mm = sensor.sensor_size_mm
@@ -155,9 +155,10 @@ def test_phone_sensor_fits_the_image_circle(lens):
     # a small bank at the phone's pitch covers the whole sensor (the check simulate runs)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        bank = compute_bank(
-            lens, sensor.pixel_pitch_um, 31, fields=[0.0, 1.0], wavelengths_nm=[480.0, 550.0, 650.0], pupil_samples=32
+        settings = BankSettings(
+            fields=(0.0, 1.0), wavelengths_nm=(480.0, 550.0, 650.0), pupil_samples=32, kernel_pixels=31
         )
+        bank = get_bank(lens, sensor.pixel_pitch_um, settings, memory_only=True)
     assert float(bank.radii_mm[-1]) == pytest.approx(IMAGE_HEIGHT_MM, abs=2e-4)
     check_bank_fits(bank, map_to_sensor(sensor.height, sensor.width, sensor))
     assert bank.fields[0].strehl > 0.8  # 0.83 on axis at 587.6 nm; 0.27 at 36 deg

@@ -272,19 +272,13 @@ def test_simulated_dng_restores_as_in_memory(tmp_path: Path, capsys, monkeypatch
     on the sensor matters to the field-aware network."""
     from lensim.evaluate.metrics import psnr
     from lensim.optics.lens_file import load_lens
-    from lensim.psf.bank import compute_bank
+    from lensim.psf.bank import BankSettings, get_bank
     from lensim.render.mapping import native_mapping
     from lensim.render.pipeline import simulate
 
     sensor = load_sensor("apsc_mirrorless")
-    bank = compute_bank(
-        load_lens("cooke_triplet"),
-        sensor.pixel_pitch_um,
-        15,
-        fields=[0.0, 0.6, 1.0],
-        wavelengths_nm=[500, 600],
-        pupil_samples=32,
-    )
+    settings = BankSettings(fields=(0.0, 0.6, 1.0), wavelengths_nm=(500, 600), pupil_samples=32, kernel_pixels=15)
+    bank = get_bank(load_lens("cooke_triplet"), sensor.pixel_pitch_um, settings, memory_only=True)
     torch.manual_seed(1)
     model = FieldAwareUNet(8, 2, zero_init_tail=False).eval()
     with torch.no_grad():  # a mild correction, so the PSNRs are those of a photo

@@ -10,7 +10,7 @@ from lensim.errors import InputError
 from lensim.evaluate.edge_target import make_slanted_edge
 from lensim.evaluate.slanted_edge import mtf_area_ratio, mtf_from_psf, slanted_edge_mtf
 from lensim.optics.lens_file import load_lens
-from lensim.psf.bank import compute_bank, suggest_kernel_pixels
+from lensim.psf.bank import BankSettings, get_bank, suggest_kernel_pixels
 from lensim.render.kernels import check_bank_fits
 from lensim.render.mapping import SensorMapping, map_to_sensor, native_mapping
 from lensim.render.pipeline import blur_energy_image, simulate
@@ -24,9 +24,9 @@ def bank():
     """Cooke triplet at the APS-C pitch: 7 fields, 3 wavelengths (a few seconds)."""
     lens = load_lens("cooke_triplet")
     p = suggest_kernel_pixels(lens, PITCH, limit=31)
-    return compute_bank(
-        lens, PITCH, p, fields=[0.0, 0.2, 0.4, 0.6, 0.8, 0.9, 1.0], wavelengths_nm=[500, 550, 600], pupil_samples=128
-    )
+    fields = (0.0, 0.2, 0.4, 0.6, 0.8, 0.9, 1.0)
+    settings = BankSettings(fields=fields, wavelengths_nm=(500, 550, 600), pupil_samples=128, kernel_pixels=p)
+    return get_bank(lens, PITCH, settings, memory_only=True)
 
 
 def _ncc(a, b):

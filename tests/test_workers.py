@@ -14,7 +14,7 @@ import torch
 
 from lensim.errors import InputError
 from lensim.optics.lens_file import load_lens
-from lensim.psf.bank import compute_bank
+from lensim.psf.bank import BankRequest, BankSettings, GridAxes, get_bank, get_banks
 from lensim.workers import run_jobs
 
 
@@ -67,18 +67,38 @@ def test_jobs_on_a_cluster_by_address(scheduler, capfd):
 
 def test_bank_on_a_cluster_by_address_is_bitwise_the_bank_computed_here(scheduler, tmp_path):
     lens = load_lens("cooke_triplet")
-    kw = dict(fields=[0.0, 0.7, 1.0], wavelengths_nm=[500.0, 600.0], pupil_samples=32)
+    settings = BankSettings(fields=(0.0, 0.7, 1.0), wavelengths_nm=(500.0, 600.0), pupil_samples=32, kernel_pixels=15)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        here = compute_bank(lens, 4.0, 15, **kw)
+        here = get_bank(lens, 4.0, settings, memory_only=True)
         calls = []
-        there = compute_bank(
-            lens, 4.0, 15, scheduler=scheduler, out_dir=tmp_path / "b", progress=lambda d, t: calls.append((d, t)), **kw
+        there = get_bank(
+            lens, 4.0, settings, scheduler=scheduler, out_dir=tmp_path / "b", progress=lambda d, t: calls.append((d, t))
         )
     assert calls[0] == (0, 3) and calls[-1] == (3, 3)
     for a, b in zip(here.fields, there.fields, strict=True):
         assert np.array_equal(a.rgb, b.rgb) and np.array_equal(a.primary_fine, b.primary_fine)
         assert a.strehl == b.strehl
+
+
+def test_many_banks_and_a_grid_on_one_cluster_are_the_banks_computed_here(scheduler, tmp_path):
+    lens = load_lens("cooke_triplet")
+    settings = BankSettings(fields=2, wavelengths_nm=(550.0,), pupil_samples=32, kernel_pixels=15)
+    axes = GridAxes(fno=(5.6, 8.0))
+    requests = [
+        BankRequest(lens, 4.0, settings, out_dir=tmp_path / "a"),
+        BankRequest(load_lens("double_gauss"), 4.0, settings, out_dir=tmp_path / "b"),
+        BankRequest(lens, 4.0, settings, shooting=axes, out_dir=tmp_path / "g"),
+    ]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        there = get_banks(requests, scheduler=scheduler)
+        here = [get_bank(r.lens, 4.0, settings, memory_only=True) for r in requests[:2]]
+        here += [get_bank(lens, 4.0, settings, shooting=s, memory_only=True) for s in axes.settings()]
+    banks = [there[0], there[1], there[2].bank(0), there[2].bank(1)]
+    for a, b in zip(here, banks, strict=True):
+        for fa, fb in zip(a.fields, b.fields, strict=True):
+            assert np.array_equal(fa.rgb, fb.rgb)
 
 
 def test_a_scheduler_that_does_not_answer_is_one_line():

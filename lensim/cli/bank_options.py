@@ -1,6 +1,7 @@
 """The PSF-bank options of `psf bank`, `simulate` and `dataset make`, declared once with
-BankSettings' defaults, and the cached bank `simulate` and `dataset make` ask for: the same
-options always name the same cached bank.
+BankSettings' defaults (the same options always name the same cached bank, which
+lensim.psf.bank.get_bank finds or computes), and the bank given by --bank with the lens
+that goes with it (lensim.psf.bank.bank_lens, its errors named by option).
 
 Also the shooting-settings options (--fno, --object-m, --focus-m, --config;
 lensim.optics.shooting), declared once: comma lists (grids) on `psf bank` and `dataset
@@ -17,14 +18,13 @@ from typing import TYPE_CHECKING, Any
 
 import typer
 
-from lensim.cli.common import progress_bar
 from lensim.errors import InputError
 from lensim.psf.defaults import BANK_FIELDS, BANK_PUPIL_SAMPLES, DEFAULT_WAVELENGTHS_TEXT
 
 if TYPE_CHECKING:
     from lensim.optics.lens import Lens
     from lensim.optics.shooting import ShootingSettings
-    from lensim.psf.bank import BankSettings, GridAxes, GridBank, PSFBank
+    from lensim.psf.bank import BankSettings, GridBank, PSFBank
     from lensim.sensor.profile import SensorProfile
 
 
@@ -125,15 +125,11 @@ def shooting_settings(
 
 def lens_and_record(lens_file: str, settings: ShootingSettings) -> tuple[Lens, dict | None]:
     """The lens file (or built-in name) at the shooting settings, and the settings as
-    records keep them (lensim.optics.shooting.record(describe(...))); None for the lens
-    file's own settings (the lens is then the file's, unchanged)."""
+    records keep them (lensim.optics.shooting.lens_and_record)."""
+    from lensim.optics import shooting
     from lensim.optics.lens_file import load_lens
-    from lensim.optics.shooting import describe, lens_at, record
 
-    lens = load_lens(lens_file)
-    if settings.is_default:
-        return lens, None
-    return lens_at(lens, settings), record(describe(lens, settings))
+    return shooting.lens_and_record(load_lens(lens_file), settings)
 
 
 def cache_option() -> Any:
@@ -147,6 +143,9 @@ OPTION_NAMES = {
     "pupil_samples": "--pupil-samples",
     "aiming": "--aiming",
     "kernel_pixels": "--kernel",
+    "method": "--method",
+    "max_spacing_um": "--max-spacing-um",
+    "illuminant": "--illuminant",
 }
 
 
@@ -212,7 +211,7 @@ def bank_for_lens(
                 f"the bank {bank_dir} holds its lens at the settings it was "
                 "computed for; expected --lens with these options, or none of them",
             )
-    return bank, _lens_of(bank.manifest.get("lens"), bank_dir, lens_file, shooting)
+    return bank, _lens_of(bank, bank_dir, lens_file, shooting)
 
 
 def bank_or_grid_for_lens(bank_dir: Path, lens_file: str | None) -> tuple[PSFBank | GridBank, Lens]:
@@ -225,87 +224,24 @@ def bank_or_grid_for_lens(bank_dir: Path, lens_file: str | None) -> tuple[PSFBan
     if not is_grid(folder):
         return bank_for_lens(bank_dir, lens_file)
     grid = GridBank.load(folder)
-    return grid, _lens_of(grid.lens, bank_dir, lens_file)
+    return grid, _lens_of(grid, bank_dir, lens_file)
 
 
-def _lens_of(stored: Any, bank_dir: Path, lens_file: str | None, shooting: ShootingSettings | None = None) -> Lens:
+def _lens_of(
+    bank: PSFBank | GridBank, bank_dir: Path, lens_file: str | None, shooting: ShootingSettings | None = None
+) -> Lens:
     """The lens a bank's manifest stores, or --lens (at the shooting settings) checked
-    against it."""
-    from lensim.optics.lens_file import lens_from_dict, lens_to_dict
+    against it (lensim.psf.bank.bank_lens, its errors named by option)."""
     from lensim.optics.shooting import ShootingSettings
+    from lensim.psf.bank import bank_lens
 
-    if lens_file is None:
-        if not isinstance(stored, dict):
-            raise InputError(str(bank_dir), "lens", "the bank records no lens; expected --lens")
-        return lens_from_dict(stored, source=f"{bank_dir} (manifest lens)")
-    lens, _ = lens_and_record(lens_file, shooting or ShootingSettings())
-    if isinstance(stored, dict) and _optics(lens_to_dict(lens)) != _optics(stored):
+    lens = None if lens_file is None else lens_and_record(lens_file, shooting or ShootingSettings())[0]
+    try:
+        return bank_lens(bank, lens)
+    except InputError as e:
+        if e.field != "lens":
+            raise
+        if lens is None:
+            raise InputError(str(bank_dir), "lens", "the bank records no lens; expected --lens") from None
         at = "" if shooting is None or shooting.is_default else " at these settings"
-        raise InputError(
-            "--lens",
-            None,
-            f"{lens_file}{at} is not the lens the bank {bank_dir} was computed for "
-            f"({stored.get('name') or 'unnamed'}); expected that lens, or no --lens",
-        )
-    return lens
-
-
-def _optics(lens_data: dict) -> Any:
-    """A native lens mapping without its name, JSON-normalized (tuples as lists), for
-    comparing the optics of two lenses."""
-    import json
-
-    return json.loads(json.dumps({k: v for k, v in lens_data.items() if k != "name"}))
-
-
-def cached_bank(
-    lens: Lens,
-    pitch_um: float,
-    sensor: SensorProfile,
-    settings: BankSettings,
-    workers: int,
-    quiet: bool,
-    scheduler: str | None = None,
-) -> PSFBank:
-    """The lens's bank at this pitch (um) with the sensor's spectral response, from the
-    cache or computed into it (with `workers` local processes or on the Dask cluster at
-    `scheduler`), with a progress bar unless quiet."""
-    from lensim.render.bank_cache import ensure_bank
-
-    with progress_bar("PSF bank", "fields", quiet) as cb:
-        return ensure_bank(
-            lens,
-            pitch_um,
-            settings,
-            response=sensor.spectral_response,
-            workers=workers,
-            progress=cb,
-            scheduler=scheduler,
-        )
-
-
-def cached_grid(
-    lens: Lens,
-    pitch_um: float,
-    sensor: SensorProfile,
-    settings: BankSettings,
-    axes: GridAxes,
-    workers: int,
-    quiet: bool,
-    scheduler: str | None = None,
-) -> GridBank:
-    """The lens's grid of banks over `axes` at this pitch (um) with the sensor's spectral
-    response, from the cache or computed into it, with a progress bar unless quiet."""
-    from lensim.render.bank_cache import ensure_grid
-
-    with progress_bar("PSF grid", "fields", quiet) as cb:
-        return ensure_grid(
-            lens,
-            pitch_um,
-            axes,
-            settings,
-            response=sensor.spectral_response,
-            workers=workers,
-            progress=cb,
-            scheduler=scheduler,
-        )
+        raise InputError("--lens", f"{lens_file}{at}", f"{e.message}, or no --lens") from None

@@ -12,8 +12,6 @@ from lensim.cli.bank_options import (
     bank_or_grid_for_lens,
     bank_settings,
     cache_option,
-    cached_bank,
-    cached_grid,
     check_response,
     fields_option,
     pupil_samples_option,
@@ -206,10 +204,19 @@ def _lens_bank(
     cached or computed, once the spectral response and the photos are known to work."""
     from lensim.data.pairs import check_photos, list_images
     from lensim.optics.lens_file import load_lens
+    from lensim.psf.bank import get_bank
 
     lens = load_lens(lens_file or assets.DEFAULT_LENS)
     check_response(settings, sensor.spectral_response, sensor=sensor)
     check_photos(list_images(sharp_dir), size)  # before the bank, which takes minutes
-    if axes.given:
-        return cached_grid(lens, sensor.pixel_pitch_um, sensor, settings, axes, workers, quiet, scheduler)
-    return cached_bank(lens, sensor.pixel_pitch_um, sensor, settings, workers, quiet, scheduler)
+    with progress_bar("PSF grid" if axes.given else "PSF bank", "fields", quiet) as report:
+        return get_bank(
+            lens,
+            sensor.pixel_pitch_um,
+            settings,
+            response=sensor.spectral_response,
+            shooting=axes if axes.given else None,
+            workers=workers,
+            scheduler=scheduler,
+            progress=report,
+        )

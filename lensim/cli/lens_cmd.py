@@ -75,16 +75,15 @@ def _load_set(
     """_load, and the shooting settings resolved as records keep them (None when none is
     given)."""
     from lensim.optics.lens_file import load_lens, match_glasses
-    from lensim.optics.shooting import describe, lens_at, record
+    from lensim.optics.shooting import lens_and_record
 
     settings = shooting_settings(*shooting)
     lens = load_lens(lens_file)
     matches: list[dict] = []
     if match_glass:
         lens, matches = match_glasses(lens, makers)
-    if settings.is_default:
-        return lens, matches, None
-    return lens_at(lens, settings), matches, record(describe(lens, settings))
+    lens, described = lens_and_record(lens, settings)
+    return lens, matches, described
 
 
 def _fmt(x, digits=6) -> str:

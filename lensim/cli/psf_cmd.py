@@ -199,7 +199,16 @@ def bank(
         raise InputError("<command line>", "--sensor/--pixel-um", "expected exactly one of them")
     _check_bank_options(pixel_um, kernel, method, max_spacing_um, workers, output)
     scheduler_address(scheduler)
-    settings = bank_settings(fields, wavelengths_nm, pupil_samples, aiming=aiming, kernel_pixels=kernel or None)
+    settings = bank_settings(
+        fields,
+        wavelengths_nm,
+        pupil_samples,
+        aiming=aiming,
+        kernel_pixels=kernel or None,
+        method=method,
+        max_spacing_um=max_spacing_um,
+        illuminant=illuminant,
+    )
     axes = GridAxes.from_options(fno, focus_m, object_m, config)
     lens = load_lens(name)
     profile = load_sensor(sensor) if sensor is not None else None
@@ -208,9 +217,8 @@ def bank(
     response = response or (profile.spectral_response if profile is not None else DEFAULT_CAMERA)
     check_response(settings, response, illuminant, profile if from_profile else None)
     where = {"workers": workers, "scheduler": scheduler}
-    options = {"method": method, "max_spacing_um": max_spacing_um, "illuminant": illuminant}
     with progress_bar("PSF bank", "fields", quiet or json_out) as report:
-        info = _compute_bank(lens, pitch, settings, axes, response, output, where, report, options)
+        info = _compute_bank(lens, pitch, settings, axes, response, output, where, report)
     info["sensor"] = sensor
     if json_out:
         print_json(info)
@@ -234,29 +242,28 @@ def _compute_bank(
     output: Path,
     where: dict,
     report: Callable[[float, float], None] | None,
-    options: dict,
 ) -> dict:
-    """Compute psf bank's bank, one-setting bank or grid; its summary (--json's)."""
+    """Compute psf bank's bank, one-setting bank or grid (lensim.psf.bank.get_bank); its
+    summary (--json's)."""
     import time
 
-    from lensim.psf.bank import build_bank
-    from lensim.psf.bank.grid import compute_grid, compute_setting_bank
+    from lensim.psf.bank import get_bank
 
     t0 = time.time()
     extra: dict = {}
     if axes.is_grid:
-        grid = compute_grid(lens, pitch, axes, settings, output, response=response, progress=report, **where, **options)
+        grid = get_bank(
+            lens, pitch, settings, response=response, shooting=axes, out_dir=output, progress=report, **where
+        )
         m = grid.bank(0).manifest
         extra = {"settings": len(grid), "grid": [jsonable(r) for r in grid.manifest["settings"]]}
-    elif axes.given:
-        m = compute_setting_bank(
-            lens, pitch, axes.settings()[0], settings, output, response=response, progress=report, **where, **options
-        ).manifest
-        extra = {"shooting": m["shooting"]["resolved"]}
     else:
-        m = build_bank(
-            lens, pitch, settings, response=response, out_dir=output, progress=report, **where, **options
+        shot = axes.settings()[0] if axes.given else None
+        m = get_bank(
+            lens, pitch, settings, response=response, shooting=shot, out_dir=output, progress=report, **where
         ).manifest
+        if shot is not None:
+            extra = {"shooting": m["shooting"]["resolved"]}
     oversampling = m["oversampling"]
     return {
         "bank": str(output),

@@ -15,7 +15,6 @@ from lensim.cli.bank_options import (
     bank_for_lens,
     bank_settings,
     cache_option,
-    cached_bank,
     check_response,
     config_option,
     fields_option,
@@ -27,7 +26,7 @@ from lensim.cli.bank_options import (
     shooting_settings,
     wavelengths_option,
 )
-from lensim.cli.common import console, print_json
+from lensim.cli.common import console, print_json, progress_bar
 from lensim.cli.validate import at_least, choice, distinct_outputs, output_folder
 from lensim.errors import InputError, PupilSamplingError
 from lensim.io import atomic_write_text
@@ -183,9 +182,14 @@ def _photo_bank(
     pixel). A small photo has coarse pixels whose kernel window the default pupil grid
     cannot resolve without wrap-around: then the pupil sampling the window needs is
     chosen (a warning says so), or, when --pupil-samples was given, named in the error."""
+    from lensim.psf.bank import get_bank
+
     for _ in range(4):
         try:
-            return cached_bank(lens, pitch_um, sensor, settings, workers, quiet)
+            with progress_bar("PSF bank", "fields", quiet) as report:
+                return get_bank(
+                    lens, pitch_um, settings, response=sensor.spectral_response, workers=workers, progress=report
+                )
         except PupilSamplingError as e:
             need = -(-int(e.needed * 1.15) // 8) * 8  # a margin, rounded up to a multiple of 8
             where = f"a {size_wh[0]}x{size_wh[1]} photo maps onto the sensor at {pitch_um:.3g} um per pixel"

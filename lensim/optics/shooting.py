@@ -397,3 +397,12 @@ def record(described: Mapping[str, Any]) -> dict[str, Any]:
     """describe()'s dict for a JSON file (strict JSON): infinite distances as the string
     "inf" (float("inf") reads it back; so does lensim.restore.conditioning)."""
     return strict_json(dict(described))
+
+
+def lens_and_record(lens: Lens, settings: ShootingSettings | None) -> tuple[Lens, dict[str, Any] | None]:
+    """The lens at these shooting settings (lens_at) and the settings as records keep them
+    (record(describe(...)): strict JSON); for the lens's own settings (None, or every
+    setting None) the lens itself, unchanged, and None."""
+    if settings is None or settings.is_default:
+        return lens, None
+    return lens_at(lens, settings), record(describe(lens, settings))

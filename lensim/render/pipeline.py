@@ -11,7 +11,7 @@ hook after the ADC (e.g. :func:`dng_writer`: a CFA DNG, lensim.raw.dng), so writ
 output never repeats the stages.
 
 Where the image lies on the sensor: lensim.render.mapping; kernels from the bank:
-lensim.render.kernels; the bank itself (cached): lensim.render.bank_cache.
+lensim.render.kernels; the bank itself (cached): lensim.psf.bank.get_bank.
 """
 
 from __future__ import annotations

@@ -18,26 +18,36 @@ Relative illumination comes from lensim.optics.field_analysis.relative_illuminat
 (projected solid angle of the image-space beam, with vignetting, normalized on axis),
 evaluated per field and wavelength.
 
+Getting a bank: get_bank (one bank, or a grid of banks over shooting settings) and
+get_banks (many requests, BankRequest, computed together on one cluster) are the one public
+way. BankSettings, the one set of bank defaults, says how the bank samples the lens; the
+bank comes from its folder (given, or the cache), computed or finished when incomplete,
+here, on local Dask workers or on a Dask cluster by address. bank_lens gives the lens a
+bank was computed for, or checks that a given lens is that lens.
+
 On disk a bank is a directory: ``manifest.json`` (every setting that shapes the kernels,
 the lens as a native-format mapping, the spectral weights) and one ``field_XXXX.npz`` per
 field, each written atomically. Rerunning with the same settings skips the fields already
 on disk (resume after a kill); different settings are refused.
 
-Modules: types (BankField, PSFBank and its kernel lookup), store (manifest, field files,
-resume guard), compute (per-field work, plans of banks computed together as one job list,
-build_bank), settings (BankSettings: what a bank is asked for; field positions, the
-wavelength parser, kernel sizing), grid (GridBank: one bank per shooting setting under one
-manifest), grid_interp (the nearest setting, kernels blended between settings).
+Modules: request (get_bank, get_banks, BankRequest: the one way to get banks), settings
+(BankSettings: what a bank is asked for; field positions, the wavelength parser, kernel
+sizing), types (BankField, PSFBank and its kernel lookup), store (manifest, field files,
+resume guard), compute (private: per-field work, plans of banks computed together as one
+job list), grid (GridBank: one bank per shooting setting under one manifest), grid_interp
+(the nearest setting, kernels blended between settings), lens (bank_lens: the lens that
+goes with a bank).
 Kernel rotation lives in lensim.render.rotation, the bank's figures in lensim.plots.bank.
 
 Units: lengths mm, pixel pitch and PSF spacing um, wavelengths nm in the manifest and the
 API of this module (um inside the optics code), angles in degrees.
 """
 
-from lensim.psf.bank.compute import alias_free_pixels, build_bank, compute_bank, embed_centred
-from lensim.psf.bank.grid import GridAxes, GridBank, compute_grid
+from lensim.psf.bank.compute import alias_free_pixels, embed_centred
+from lensim.psf.bank.grid import GridAxes, GridBank
+from lensim.psf.bank.lens import bank_lens
+from lensim.psf.bank.request import BankRequest, get_bank, get_banks
 from lensim.psf.bank.settings import (
-    DEFAULT_FIELDS,
     BankSettings,
     default_fields,
     parse_wavelengths_nm,
@@ -47,23 +57,23 @@ from lensim.psf.bank.store import FORMAT, FORMAT_VERSION, MANIFEST, field_file, 
 from lensim.psf.bank.types import BankField, Progress, PSFBank
 
 __all__ = [
-    "DEFAULT_FIELDS",
     "FORMAT",
     "FORMAT_VERSION",
     "MANIFEST",
     "BankField",
+    "BankRequest",
     "BankSettings",
     "GridAxes",
     "GridBank",
     "PSFBank",
     "Progress",
-    "compute_grid",
     "alias_free_pixels",
-    "build_bank",
-    "compute_bank",
+    "bank_lens",
     "default_fields",
     "embed_centred",
     "field_file",
+    "get_bank",
+    "get_banks",
     "parse_wavelengths_nm",
     "read_manifest",
     "suggest_kernel_pixels",

@@ -1,7 +1,9 @@
-"""Computing a PSF bank: the per-field work (fine PSFs per wavelength, pixel integration,
-relative illumination, spectral weighting), run through lensim.workers.run_jobs (in this
-process, on a local Dask cluster or on a cluster given by address), each field written as
-it finishes."""
+"""Computing PSF banks (private: the one public way to get a bank is
+lensim.psf.bank.get_bank / get_banks): the per-field work (fine PSFs per wavelength, pixel
+integration, relative illumination, spectral weighting), the checked plan of one bank
+(_plan_bank) and the plans of many banks run as one list of field jobs through
+lensim.workers.run_jobs (in this process, on a local Dask cluster or on a cluster given by
+address; _compute_plans), each field written as it finishes."""
 
 from __future__ import annotations
 
@@ -10,17 +12,15 @@ import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import torch
 
 from lensim.errors import InputError, PupilSamplingError
-from lensim.io import folder_lock
 from lensim.optics.lens import Lens
 from lensim.optics.lens_file import lens_to_dict
 from lensim.optics.paraxial import ParaxialData, paraxial_data, paraxial_image_height
-from lensim.psf.bank.settings import BankSettings, default_fields
+from lensim.psf.bank.settings import BankSettings
 from lensim.psf.bank.store import (
     FORMAT,
     FORMAT_VERSION,
@@ -30,7 +30,7 @@ from lensim.psf.bank.store import (
     write_field,
 )
 from lensim.psf.bank.types import BankField, Progress, PSFBank
-from lensim.psf.compute import METHODS, PSFSamplingWarning, check_sampling, field_in_lens_units
+from lensim.psf.compute import PSFSamplingWarning, check_sampling, field_in_lens_units
 from lensim.psf.fourier import fft_psf, geometric_psf
 from lensim.psf.huygens import huygens_psf
 from lensim.psf.metrics import strehl_ratio
@@ -250,49 +250,26 @@ def compute_field_task(task: FieldTask) -> BankField:
         raise type(e)(e.source, f"{e.field} ({task.label})" if e.field else task.label, e.message) from None
 
 
-def _check_fields(lens: Lens, fields: list[float] | np.ndarray | None) -> np.ndarray:
-    f = default_fields() if fields is None else np.asarray(fields, dtype=np.float64).reshape(-1)
-    if f.size == 0:
-        raise InputError(lens.source, "fields", "expected at least one normalized field")
-    if not np.all(np.isfinite(f)) or f.min() < 0 or f.max() > 1 + 1e-9:
-        raise InputError(
-            lens.source, "fields", f"expected normalized fields between 0 and 1, got {f.min():g}..{f.max():g}"
-        )
-    if np.any(np.diff(f) <= 0):
-        raise InputError(lens.source, "fields", "expected strictly increasing normalized fields")
-    return f
-
-
-def _check_arguments(
-    lens: Lens, pixel_pitch_um: float, kernel_pixels: int, method: str, aiming: str, workers: int
-) -> None:
+def _check_pitch(lens: Lens, pixel_pitch_um: float) -> None:
     if not (pixel_pitch_um > 0 and math.isfinite(pixel_pitch_um)):
         raise InputError(lens.source, "pixel_pitch_um", f"expected a positive pitch (um), got {pixel_pitch_um}")
-    if kernel_pixels < 1 or kernel_pixels % 2 == 0:
-        raise InputError(lens.source, "kernel_pixels", f"expected an odd number of pixels, got {kernel_pixels}")
-    if method not in METHODS:
-        raise InputError(lens.source, "method", f"expected one of {', '.join(METHODS)}, got {method!r}")
-    if aiming not in ("real", "paraxial"):
-        raise InputError(lens.source, "aiming", f"expected real or paraxial, got {aiming!r}")
-    if workers < 1:
-        raise InputError(lens.source, "workers", f"expected at least 1 worker, got {workers}")
 
 
 def _response(
     lens: Lens,
-    wavelengths_nm: list[float] | np.ndarray | None,
+    wavelengths_nm: tuple[float, ...],
     response: str | Path | SpectralResponse | None,
     illuminant: str,
 ) -> SpectralResponse:
     """The spectral weights at the bank wavelengths (strictly increasing)."""
     if isinstance(response, SpectralResponse):
         resp = response
-        if wavelengths_nm is not None and not np.allclose(
+        if len(wavelengths_nm) != len(resp.wavelengths_nm) or not np.allclose(
             np.asarray(wavelengths_nm, dtype=np.float64), resp.wavelengths_nm
         ):
             raise InputError(lens.source, "wavelengths_nm", "expected the wavelengths of the given SpectralResponse")
     else:
-        resp = spectral_response(wavelengths_nm, response, illuminant)
+        resp = spectral_response(list(wavelengths_nm), response, illuminant)
     if np.any(np.diff(np.asarray(resp.wavelengths_nm, dtype=np.float64)) <= 0):
         raise InputError(lens.source, "wavelengths_nm", "expected strictly increasing wavelengths")
     return resp
@@ -327,7 +304,7 @@ def _manifest(job: _Job, fields: np.ndarray, resp: SpectralResponse, max_spacing
 
 
 class BankPlan:
-    """A bank to compute (plan_bank makes one, checked): its job, normalized fields,
+    """A bank to compute (_plan_bank makes one, checked): its job, normalized fields,
     manifest, the lens's paraxial data and the directory it is stored in (None: memory
     only). open() finds the fields already on disk; tasks() are the fields still to
     compute; finish(field) stores one computed field; result() is the whole bank. `label`
@@ -381,34 +358,33 @@ class BankPlan:
         return PSFBank(manifest, [self.done[i] for i in range(len(self.fields))], self.directory)
 
 
-def plan_bank(
+def _plan_bank(
     lens: Lens,
     pixel_pitch_um: float,
     kernel_pixels: int,
-    fields: list[float] | np.ndarray | None = None,
-    wavelengths_nm: list[float] | np.ndarray | None = None,
+    settings: BankSettings,
     response: str | Path | SpectralResponse | None = None,
-    method: str = "huygens",
-    pupil_samples: int = 64,
-    max_spacing_um: float | None = None,
-    aiming: str = "real",
     out_dir: str | Path | None = None,
-    illuminant: str = "E",
-    ri_samples: int = 32,
     label: str = "",
 ) -> BankPlan:
-    """The checked plan of the bank compute_bank computes (same arguments), nothing
-    computed and nothing written yet."""
-    _check_arguments(lens, pixel_pitch_um, kernel_pixels, method, aiming, 1)
-    flds = _check_fields(lens, fields)
-    resp = _response(lens, wavelengths_nm, response, illuminant)
+    """The checked plan of one bank (see lensim.psf.bank), nothing computed and nothing
+    written yet: this lens at this pixel pitch (um) with an odd kernel of kernel_pixels,
+    sampled as `settings` ask (fields, wavelengths, pupil samples, aiming, method, fine
+    spacing, illuminant, relative-illumination samples), weighted by `response` (a
+    colour-science camera name, a CSV path (wavelength_nm,r,g,b) or a SpectralResponse at
+    the settings' wavelengths; None: the measured Nikon 5100 (NPL) camera), stored in
+    out_dir (None: memory only); `label` names the bank in messages (a grid's setting)."""
+    _check_pitch(lens, pixel_pitch_um)
+    if kernel_pixels < 1 or kernel_pixels % 2 == 0:
+        raise InputError(lens.source, "kernel_pixels", f"expected an odd number of pixels, got {kernel_pixels}")
+    flds = settings.field_positions()
+    resp = _response(lens, settings.wavelengths_nm, response, settings.illuminant)
     wl_um = [float(w) / 1000.0 for w in np.asarray(resp.wavelengths_nm, dtype=np.float64)]
     para = paraxial_data(lens)
+    max_spacing_um = settings.max_spacing_um
     if max_spacing_um is None:
-        pf0 = pupil_field(lens, 0.0, min(wl_um), pupil_samples, aiming, para)
+        pf0 = pupil_field(lens, 0.0, min(wl_um), settings.pupil_samples, settings.aiming, para)
         max_spacing_um = 0.5 * 1.22 * min(wl_um) * pf0.working_fno()
-    if not (max_spacing_um > 0):
-        raise InputError(lens.source, "max_spacing_um", f"expected a positive spacing (um), got {max_spacing_um}")
     job = _Job(
         lens,
         wl_um,
@@ -417,17 +393,17 @@ def plan_bank(
         float(pixel_pitch_um),
         int(kernel_pixels),
         oversampling_factor(pixel_pitch_um, max_spacing_um),
-        method,
-        int(pupil_samples),
-        int(ri_samples),
-        aiming,
+        settings.method,
+        int(settings.pupil_samples),
+        int(settings.ri_samples),
+        settings.aiming,
     )
     return BankPlan(
         job, flds, _manifest(job, flds, resp, max_spacing_um), para, None if out_dir is None else Path(out_dir), label
     )
 
 
-def compute_banks(
+def _compute_plans(
     plans: list[BankPlan], workers: int = 1, scheduler: str | None = None, progress: Progress | None = None
 ) -> list[PSFBank]:
     """Compute several banks as one list of field jobs (lensim.workers.run_jobs: here, on
@@ -451,96 +427,3 @@ def compute_banks(
 
     run_jobs(compute_field_task, [t for b, p in enumerate(plans) for t in p.tasks(b)], workers, scheduler, finish)
     return [p.result() for p in plans]
-
-
-def compute_bank(
-    lens: Lens,
-    pixel_pitch_um: float,
-    kernel_pixels: int,
-    fields: list[float] | np.ndarray | None = None,
-    wavelengths_nm: list[float] | np.ndarray | None = None,
-    response: str | Path | SpectralResponse | None = None,
-    method: str = "huygens",
-    pupil_samples: int = 64,
-    max_spacing_um: float | None = None,
-    aiming: str = "real",
-    workers: int = 1,
-    out_dir: str | Path | None = None,
-    progress: Progress | None = None,
-    illuminant: str = "E",
-    ri_samples: int = 32,
-    scheduler: str | None = None,
-) -> PSFBank:
-    """Compute an RGB PSF bank (see lensim.psf.bank).
-
-    pixel_pitch_um: sensor pixel pitch (um); kernel_pixels: odd kernel size P (pixels);
-    fields: normalized radial fields 0..1, increasing (default 64, sqrt-spaced: denser
-    towards the edge); wavelengths_nm: default 400-700 nm every 10 nm, or those of the
-    response; response: a colour-science camera name, a CSV path (wavelength_nm,r,g,b) or
-    a SpectralResponse (default the measured Nikon 5100 (NPL) camera), with `illuminant`
-    ('E' equal energy, 'D65', ...); method: huygens, fft or geometric; pupil_samples:
-    pupil grid across; max_spacing_um: the largest fine PSF sample spacing (um), default
-    half the Airy radius 1.22 lambda_min N_w at the shortest wavelength (N_w the on-axis
-    working F-number); the fine spacing is pitch / k with k the smallest odd integer that
-    meets it; aiming: real or paraxial; workers: processes of a local Dask cluster (each
-    with one torch thread; started with the 'spawn' method, so a script that calls this
-    with workers > 1 needs the usual ``if __name__ == "__main__":`` guard; workers=1
-    computes in this process with one torch thread, restored afterwards); scheduler: the
-    address of a Dask cluster to compute the fields on instead (lensim.workers.run_jobs);
-    ri_samples: pupil samples of the relative-illumination calculation; out_dir: bank
-    directory (None: keep in memory only); progress(done, total): called once at the start
-    (done = fields already on disk) and after each field computed.
-
-    Raises InputError when out_dir holds a bank made with different settings, or when
-    another process is writing into out_dir (lensim.io.folder_lock, held while computing).
-    """
-    _check_arguments(lens, pixel_pitch_um, kernel_pixels, method, aiming, workers)
-    plan = plan_bank(
-        lens,
-        pixel_pitch_um,
-        kernel_pixels,
-        fields,
-        wavelengths_nm,
-        response,
-        method,
-        pupil_samples,
-        max_spacing_um,
-        aiming,
-        out_dir,
-        illuminant,
-        ri_samples,
-    )
-    if out_dir is None:
-        return compute_banks([plan], workers, scheduler, progress)[0]
-    with folder_lock(out_dir):
-        return compute_banks([plan], workers, scheduler, progress)[0]
-
-
-def build_bank(
-    lens: Lens,
-    pixel_pitch_um: float,
-    settings: BankSettings,
-    response: str | Path | None = None,
-    out_dir: str | Path | None = None,
-    workers: int = 1,
-    progress: Progress | None = None,
-    scheduler: str | None = None,
-    **options: Any,
-) -> PSFBank:
-    """The bank `settings` ask for, for this lens at this pixel pitch (um) and spectral
-    response (compute_bank's): the kernel sized by settings.kernel_size, the fields,
-    wavelengths, pupil samples and aiming from the settings; workers, scheduler: where
-    the fields are computed (compute_bank's). options: compute_bank's other keywords
-    (method, max_spacing_um, illuminant, ri_samples)."""
-    return compute_bank(
-        lens,
-        pixel_pitch_um,
-        settings.kernel_size(lens, pixel_pitch_um),
-        response=response,
-        workers=workers,
-        out_dir=out_dir,
-        progress=progress,
-        scheduler=scheduler,
-        **settings.compute_options(),
-        **options,
-    )

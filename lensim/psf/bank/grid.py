@@ -15,8 +15,8 @@ Every setting's bank shares the pixel pitch, kernel size (by default the largest
 setting's spots ask for), normalized fields, wavelengths and spectral response, so their
 kernels can be compared and blended; each bank is exactly the bank `lensim psf bank` makes
 for that one setting with that kernel size. The fields of every setting are computed as one
-list of jobs (lensim.psf.bank.compute.compute_banks, on Dask when asked), each written as it
-finishes, so a killed grid resumes where it stopped and a cluster computes the whole grid.
+list of jobs (lensim.psf.bank.get_bank, on Dask when asked), each written as it finishes, so
+a killed grid resumes where it stopped and a cluster computes the whole grid.
 
 Distances are in metres from the image plane (math.inf allowed; "inf" in JSON), F-numbers
 image-space at infinity. Interpolation between settings: lensim.psf.bank.grid_interp.
@@ -33,16 +33,17 @@ from pathlib import Path
 from typing import Any
 
 from lensim.errors import InputError
-from lensim.io import atomic_write_text, folder_lock
+from lensim.io import atomic_write_text
 from lensim.jsonable import from_strict, strict_json
 from lensim.optics.lens import Lens
 from lensim.optics.lens_file import lens_to_dict
 from lensim.optics.shooting import OPTIONS, ShootingSettings, describe, lens_at, record
-from lensim.psf.bank.compute import compute_banks, plan_bank
+from lensim.psf.bank.compute import BankPlan, _plan_bank
 from lensim.psf.bank.settings import BankSettings, suggest_kernel_pixels
 from lensim.psf.bank.store import FORMAT as BANK_FORMAT
 from lensim.psf.bank.store import MANIFEST, lensim_version, manifest_differences
-from lensim.psf.bank.types import Progress, PSFBank
+from lensim.psf.bank.types import PSFBank
+from lensim.sensor.spectral import SpectralResponse
 
 GRID_FORMAT = "lensim-psf-grid"
 GRID_FORMAT_VERSION = 1
@@ -197,7 +198,7 @@ def is_grid(directory: str | Path) -> bool:
     return read_grid_manifest(directory) is not None
 
 
-def _open_grid_directory(directory: Path, manifest: dict) -> None:
+def open_grid_directory(directory: Path, manifest: dict) -> None:
     """Write the grid's manifest, or check it against the one there: a folder holding a
     single bank, or a grid of other settings with banks already started, is refused."""
     p = directory / MANIFEST
@@ -232,57 +233,32 @@ def grid_kernel_pixels(lenses: Sequence[Lens], pitch_um: float, settings: BankSe
     return max(suggest_kernel_pixels(lens, pitch_um, settings.kernel_limit) for lens in lenses)
 
 
-def compute_grid(
+def _plan_grid(
     lens: Lens,
     pixel_pitch_um: float,
     axes: GridAxes,
     settings: BankSettings,
-    out_dir: str | Path,
-    response: str | Path | None = None,
-    workers: int = 1,
-    scheduler: str | None = None,
-    progress: Progress | None = None,
-    **options: Any,
-) -> GridBank:
-    """Compute (or finish, after a kill) the grid of banks `axes` spans for this lens at
-    this pixel pitch (um) into out_dir, with the bank options of `settings` (BankSettings;
-    its kernel size, when None, is the largest any setting asks for) and compute_bank's
-    other keywords in `options` (method, max_spacing_um, illuminant, ri_samples). Every
-    field of every setting is one job of lensim.workers.run_jobs (here, `workers` local
-    Dask processes, or the cluster at `scheduler`); progress(done, total) counts fields of
-    the whole grid. The folder is locked while computing (lensim.io.folder_lock).
+    response: str | Path | SpectralResponse | None,
+    out_dir: Path,
+) -> tuple[list[BankPlan], dict]:
+    """The plans of the grid of banks `axes` spans for this lens at this pixel pitch (um),
+    one per setting in out_dir/s000, s001, ... (their kernel size, when settings give none,
+    the largest any setting asks for), and the grid's manifest; nothing computed or written.
 
-    Raises InputError for settings the lens cannot take (naming the option), and for a
-    folder holding a single bank or a grid of other settings."""
+    Raises InputError for settings the lens cannot take, and for axes without a value."""
     if not axes.given:
-        raise InputError(
-            "<command line>", "--fno/--focus-m/--object-m/--config", "expected at least one setting list for a grid"
-        )
-    out = Path(out_dir)
+        raise InputError(None, "shooting", "expected at least one setting list for a grid")
     shots = axes.settings()
     lenses = [lens_at(lens, s) for s in shots]
     resolved = [describe(lens, s) for s in shots]
     kernel = grid_kernel_pixels(lenses, pixel_pitch_um, settings)
     plans = [
-        plan_bank(
-            at,
-            pixel_pitch_um,
-            kernel,
-            response=response,
-            out_dir=out / setting_dir(i),
-            label=setting_label(s),
-            **settings.compute_options(),
-            **options,
-        )
+        _plan_bank(at, pixel_pitch_um, kernel, settings, response, out_dir / setting_dir(i), setting_label(s))
         for i, (at, s) in enumerate(zip(lenses, shots, strict=True))
     ]
     for plan, s, r in zip(plans, shots, resolved, strict=True):
         plan.manifest["shooting"] = {"request": s.to_dict(), "resolved": record(r)}
-    manifest = _grid_manifest(lens, axes, shots, resolved, plans[0].manifest)
-    with folder_lock(out):
-        _open_grid_directory(out, manifest)
-        compute_banks(plans, workers, scheduler, progress)
-    return GridBank.load(out)
+    return plans, _grid_manifest(lens, axes, shots, resolved, plans[0].manifest)
 
 
 class GridBank:
@@ -376,37 +352,3 @@ class GridBank:
         from lensim.psf.bank.grid_interp import interpolate_bank
 
         return interpolate_bank(self, {"fno": fno, "focus_m": focus_m, "object_m": object_m, "config": config})
-
-
-def compute_setting_bank(
-    lens: Lens,
-    pixel_pitch_um: float,
-    shot: ShootingSettings,
-    settings: BankSettings,
-    out_dir: str | Path | None,
-    response: str | Path | None = None,
-    workers: int = 1,
-    scheduler: str | None = None,
-    progress: Progress | None = None,
-    **options: Any,
-) -> PSFBank:
-    """One ordinary bank of the lens at one setting (lens_at), its manifest describing the
-    setting ("shooting": request and resolved numbers); the same bank, field for field, as
-    that setting's bank in a grid with the same kernel size. Arguments as compute_grid's."""
-    at = lens_at(lens, shot)
-    kernel = grid_kernel_pixels([at], pixel_pitch_um, settings)
-    plan = plan_bank(
-        at,
-        pixel_pitch_um,
-        kernel,
-        response=response,
-        out_dir=out_dir,
-        label=setting_label(shot),
-        **settings.compute_options(),
-        **options,
-    )
-    plan.manifest["shooting"] = {"request": shot.to_dict(), "resolved": record(describe(lens, shot))}
-    if out_dir is None:
-        return compute_banks([plan], workers, scheduler, progress)[0]
-    with folder_lock(out_dir):
-        return compute_banks([plan], workers, scheduler, progress)[0]

@@ -1,11 +1,13 @@
 """What a PSF bank is asked for: BankSettings (fields, their spacing, wavelengths, pupil
-samples, ray aiming, kernel size, cache location), the one way every command and the demo
-ask for a bank, so the same request always names the same cached bank.
+samples, ray aiming, kernel size, PSF method, sampling, illuminant, cache location), the
+one set of bank defaults and the one way every command, the demo and the Python API
+(lensim.psf.bank.get_bank) ask for a bank, so the same request always names the same
+cached bank.
 
 Also the field positions (square-root spacing, denser towards the edge) and the one
 parser of wavelength lists typed on the command line.
 
-Units: wavelengths nm, normalized fields 0..1 (of the lens's maximum field).
+Units: wavelengths nm, normalized fields 0..1 (of the lens's maximum field), spacings um.
 """
 
 from __future__ import annotations
@@ -21,14 +23,13 @@ import numpy as np
 
 from lensim.errors import InputError
 from lensim.optics.lens import Lens
-from lensim.psf.defaults import BANK_FIELDS, BANK_PUPIL_SAMPLES, DEFAULT_WAVELENGTHS_TEXT
+from lensim.psf.defaults import BANK_FIELDS, BANK_PUPIL_SAMPLES, DEFAULT_WAVELENGTHS_TEXT, METHODS
 
-DEFAULT_FIELDS = 64
 FIELD_SPACINGS = ("sqrt", "linear")
 _SOURCE = "bank settings"
 
 
-def default_fields(n: int = DEFAULT_FIELDS) -> np.ndarray:
+def default_fields(n: int) -> np.ndarray:
     """n normalized radial fields 0..1 spaced as sqrt(t), t uniform: denser towards the
     edge, where the PSF changes fastest and where the image area per field is largest.
     One field is the axis alone."""
@@ -121,39 +122,53 @@ def suggest_kernel_pixels(lens: Lens, pitch_um: float, limit: int = 99) -> int:
 DEFAULT_WAVELENGTHS_NM = parse_wavelengths_nm(DEFAULT_WAVELENGTHS_TEXT)
 
 
+#: the settings that joined BankSettings later: in a cache key only when they differ from
+#: these defaults, so the banks cached before keep their folders
+_KEYED_WHEN_SET = {"method": "huygens", "max_spacing_um": None, "illuminant": "E", "ri_samples": 32}
+
+
 @dataclass(frozen=True)
 class BankSettings:
     """How a bank samples the lens, apart from the lens, the pixel pitch and the spectral
-    response: the one way the CLI commands, the demo and ensure_bank ask for a bank.
+    response: the one set of bank defaults, and the one way the CLI commands, the demo and
+    lensim.psf.bank.get_bank ask for a bank.
 
-    fields: number of normalized radial fields 0..1 (at least 2: the axis and the edge;
-    kernels are interpolated between them); field_spacing: 'sqrt' (denser towards the
-    edge) or 'linear'; wavelengths_nm: strictly increasing (nm); pupil_samples: pupil grid
-    across the diameter; aiming: 'real' or 'paraxial'; kernel_pixels: odd kernel size, or
-    None to size it from the lens's spots (suggest_kernel_pixels, at most kernel_limit);
-    cache_dir: the bank cache (None: $LENSIM_CACHE or ~/.cache/lensim).
+    fields: the number of normalized radial fields 0..1 (at least 2: the axis and the
+    edge; kernels are interpolated between them), spaced by field_spacing ('sqrt': denser
+    towards the edge, or 'linear'), or the normalized fields themselves (a strictly
+    increasing tuple in 0..1); wavelengths_nm: strictly increasing (nm); pupil_samples:
+    pupil grid across the diameter; aiming: 'real' or 'paraxial'; kernel_pixels: odd
+    kernel size, or None to size it from the lens's spots (suggest_kernel_pixels, at most
+    kernel_limit); method: 'huygens', 'fft' or 'geometric'; max_spacing_um: the largest
+    fine PSF sample spacing (um), None for half the Airy radius 1.22 lambda_min N_w at the
+    shortest wavelength (N_w the on-axis working F-number; the fine spacing is pitch / k
+    with k the smallest odd integer that meets it); illuminant: the light the spectral
+    response is weighted under ('E' equal energy, 'D65', ...); ri_samples: pupil samples
+    of the relative-illumination calculation; cache_dir: the bank cache (None:
+    $LENSIM_CACHE or ~/.cache/lensim).
 
-    The defaults, shared by `psf bank`, `simulate` and `dataset make`: 32 sqrt-spaced
-    fields, 400-700 nm every 20 nm, 128 pupil samples, real aiming, kernels sized from the
-    spots. At native sensor pitch 128 pupil samples keep the alias-free window as wide as
-    the kernel down to 400 nm (64 leave 29 of the Cooke triplet's 35 px on APS-C)."""
+    The defaults, shared by `psf bank`, `simulate`, `dataset make` and the Python API: 32
+    sqrt-spaced fields, 400-700 nm every 20 nm, 128 pupil samples, real aiming, kernels
+    sized from the spots, Huygens PSFs under equal-energy light. At native sensor pitch 128
+    pupil samples keep the alias-free window as wide as the kernel down to 400 nm (64 leave
+    29 of the Cooke triplet's 35 px on APS-C)."""
 
-    fields: int = BANK_FIELDS
+    fields: int | tuple[float, ...] = BANK_FIELDS
     field_spacing: str = "sqrt"
     wavelengths_nm: tuple[float, ...] = DEFAULT_WAVELENGTHS_NM
     pupil_samples: int = BANK_PUPIL_SAMPLES
     aiming: str = "real"
     kernel_pixels: int | None = None
     kernel_limit: int = 99
+    method: str = "huygens"
+    max_spacing_um: float | None = None
+    illuminant: str = "E"
+    ri_samples: int = 32
     cache_dir: Path | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "wavelengths_nm", tuple(float(w) for w in self.wavelengths_nm))
-        if self.fields < 2:
-            raise InputError(
-                _SOURCE, "fields", f"expected at least 2 fields (the axis and the edge of the field), got {self.fields}"
-            )
-        field_positions(2, self.field_spacing)  # checks the spacing's name
+        self._check_fields()
         wl = self.wavelengths_nm
         if not wl or not all(math.isfinite(w) and w > 0 for w in wl) or any(b <= a for a, b in zip(wl, wl[1:])):
             raise InputError(
@@ -163,6 +178,13 @@ class BankSettings:
             raise InputError(_SOURCE, "pupil_samples", f"expected at least 8 pupil samples, got {self.pupil_samples}")
         if self.aiming not in ("real", "paraxial"):
             raise InputError(_SOURCE, "aiming", f"expected real or paraxial, got {self.aiming!r}")
+        if self.method not in METHODS:
+            raise InputError(_SOURCE, "method", f"expected one of {', '.join(METHODS)}, got {self.method!r}")
+        spacing = self.max_spacing_um
+        if spacing is not None and not (math.isfinite(spacing) and spacing > 0):
+            raise InputError(_SOURCE, "max_spacing_um", f"expected a positive spacing (um), got {spacing}")
+        if self.ri_samples < 1:
+            raise InputError(_SOURCE, "ri_samples", f"expected at least 1 pupil sample, got {self.ri_samples}")
         for name in ("kernel_pixels", "kernel_limit"):
             value = getattr(self, name)
             if value is not None and (value < 1 or (name == "kernel_pixels" and value % 2 == 0)):
@@ -172,8 +194,32 @@ class BankSettings:
                     f"expected a positive{' odd' if name == 'kernel_pixels' else ''} number of pixels, got {value}",
                 )
 
+    def _check_fields(self) -> None:
+        """fields: a count of at least 2, or strictly increasing normalized fields 0..1."""
+        field_positions(2, self.field_spacing)  # checks the spacing's name
+        if isinstance(self.fields, (int, np.integer)):
+            if self.fields < 2:
+                raise InputError(
+                    _SOURCE,
+                    "fields",
+                    f"expected at least 2 fields (the axis and the edge of the field), got {self.fields}",
+                )
+            return
+        f = tuple(float(v) for v in self.fields)
+        object.__setattr__(self, "fields", f)
+        if not f:
+            raise InputError(_SOURCE, "fields", "expected at least one normalized field")
+        if not all(math.isfinite(v) for v in f) or min(f) < 0 or max(f) > 1 + 1e-9:
+            raise InputError(
+                _SOURCE, "fields", f"expected normalized fields between 0 and 1, got {min(f):g}..{max(f):g}"
+            )
+        if any(b <= a for a, b in zip(f, f[1:])):
+            raise InputError(_SOURCE, "fields", "expected strictly increasing normalized fields")
+
     def field_positions(self) -> np.ndarray:
         """(fields,) normalized field positions 0..1."""
+        if isinstance(self.fields, tuple):
+            return np.asarray(self.fields, dtype=np.float64)
         return field_positions(self.fields, self.field_spacing)
 
     def kernel_size(self, lens: Lens, pitch_um: float) -> int:
@@ -184,18 +230,22 @@ class BankSettings:
         """The bank cache folder."""
         return Path(self.cache_dir) if self.cache_dir is not None else default_cache_dir()
 
-    def compute_options(self) -> dict:
-        """The keyword arguments of compute_bank these settings fix."""
-        return {
+    def key_options(self) -> dict:
+        """The settings that shape the kernels, as a cache key holds them (the lens, pitch,
+        kernel size and response aside)."""
+        keyed = {
             "fields": [float(f) for f in self.field_positions()],
             "wavelengths_nm": list(self.wavelengths_nm),
             "pupil_samples": int(self.pupil_samples),
             "aiming": self.aiming,
         }
+        keyed.update({k: getattr(self, k) for k, v in _KEYED_WHEN_SET.items() if getattr(self, k) != v})
+        return keyed
 
-    def cache_key(self, lens: Lens, pitch_um: float, kernel_pixels: int, response: str | None) -> str:
+    def cache_key(self, lens: Lens, pitch_um: float, kernel_pixels: int, response: object) -> str:
         """A short hash naming the cached bank of this lens (as a native mapping) at this
-        pitch (um), kernel size and spectral response with these settings."""
+        pitch (um), kernel size and spectral response (a name, path or mapping; None for
+        the default camera) with these settings."""
         from lensim.optics.lens_file import lens_to_dict
 
         blob = json.dumps(
@@ -204,7 +254,7 @@ class BankSettings:
                 "pitch_um": round(pitch_um, 9),
                 "kernel": kernel_pixels,
                 "response": response,
-                **self.compute_options(),
+                **self.key_options(),
             },
             sort_keys=True,
             default=str,
