@@ -65,7 +65,7 @@ def main() -> int:
     # isort: on
 
     from lensim.optics.lens_file import load_lens
-    from lensim.psf.bank import compute_bank
+    from lensim.psf.bank import BankSettings, get_bank
     from lensim.sensor.profile import load_sensor
 
     torch.set_num_threads(1)
@@ -75,15 +75,13 @@ def main() -> int:
     profiler = cProfile.Profile()
     start = time.perf_counter()
     profiler.enable()
-    compute_bank(
-        lens,
-        sensor.pixel_pitch_um,
-        35,
-        fields=fields,
-        wavelengths_nm=list(range(400, 701, 25)),
-        response=sensor.spectral_response,
+    settings = BankSettings(
+        fields=tuple(fields),
+        wavelengths_nm=tuple(range(400, 701, 25)),
         pupil_samples=args.pupil_samples,
+        kernel_pixels=35,
     )
+    get_bank(lens, sensor.pixel_pitch_um, settings, response=sensor.spectral_response, memory_only=True)
     profiler.disable()
     total = time.perf_counter() - start
     stats = pstats.Stats(profiler)
