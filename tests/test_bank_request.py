@@ -150,7 +150,7 @@ def test_simulate_names_the_lens_option_for_a_bank_of_another_lens(batch, tmp_pa
     args = ["simulate", str(tmp_path / "x.png"), "--bank", str(one.directory), "-o", str(tmp_path / "s")]
     code, _, err = run_cli([*args, "--lens", "double_gauss"], capsys, monkeypatch)
     assert code == 2 and err.count("\n") == 1, err
-    assert err.startswith("--lens: double_gauss: not the lens the bank") and "or no --lens" in err, err
+    assert err.startswith("error: --lens: double_gauss: not the lens the bank") and "or no --lens" in err, err
     assert not (tmp_path / "s").exists()
 
 
