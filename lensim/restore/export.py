@@ -249,9 +249,9 @@ def export_model_bytes(model: nn.Module, info: dict[str, Any], opset: int = DEFA
         torch.onnx.export(
             graph,
             example,
-            buf,
+            buf,  # type: ignore[arg-type]
             dynamo=False,
-            opset_version=opset,  # type: ignore[arg-type]
+            opset_version=opset,
             input_names=names,
             output_names=["restored"],
             dynamic_axes=axes,
