@@ -44,3 +44,41 @@ class UnknownGlassError(InputError):
 
 class RayTraceError(LensimError):
     """A ray that must reach the image (a chief ray, an aiming ray) could not be traced."""
+
+
+class OutputError(InputError):
+    """A file lensim could not write (the disk is full, a quota is reached, a read-only
+    file system, ...): names the file, why, and what to do. The file itself is not left
+    half-written (lensim.io.atomic_writer)."""
+
+
+class OutOfMemory(InputError):
+    """Not enough memory for a step of the work. ``field`` names the parameter that sizes
+    it (the CLI names its option)."""
+
+
+class NonFiniteError(InputError):
+    """Training met a non-finite (NaN or infinite) loss or weights: ``field`` names the
+    step ("step N"); the run folder keeps its last good checkpoint."""
+
+
+class WorkerLostError(InputError):
+    """A job's worker processes died (killed, out of memory) more often than the cluster
+    retries a job: names the job."""
+
+
+def out_of_memory(error: BaseException) -> bool:
+    """Whether an exception is an allocation failure: MemoryError, or an engine's (PyTorch's
+    CPU allocator or CUDA, onnxruntime) error that says so."""
+    if isinstance(error, MemoryError):
+        return True
+    if isinstance(error, LensimError) or not isinstance(error, Exception):
+        return False
+    if type(error).__name__ == "OutOfMemoryError":  # torch.OutOfMemoryError (CUDA)
+        return True
+    text = str(error)
+    return any(k in text for k in _ALLOCATION_FAILED)
+
+
+#: what allocation failures say (PyTorch's CPU allocator, CUDA, onnxruntime, C++)
+_ALLOCATION_FAILED = ("DefaultCPUAllocator", "can't allocate memory", "out of memory", "allocate memory", "bad_alloc")

@@ -168,11 +168,22 @@ def _quantized(image: torch.Tensor, bits: int, block_rows: int = 256) -> np.ndar
     return q
 
 
+#: the creation date written into the sRGB ICC profile's header (ICC.1 7.2.8: year, month,
+#: day, hours, minutes, seconds as big-endian uInt16), fixed so that the same photo always
+#: gives the same file (LittleCMS writes the time it made the profile)
+_ICC_DATE = (2024, 1, 1, 0, 0, 0)
+
+
 def srgb_icc_profile() -> bytes:
-    """An sRGB ICC profile (LittleCMS's built-in sRGB, through Pillow's ImageCms)."""
+    """An sRGB ICC profile (LittleCMS's built-in sRGB, through Pillow's ImageCms), the
+    same bytes every time (its creation date set to _ICC_DATE; it carries no profile ID)."""
+    import struct
+
     from PIL import ImageCms
 
-    return ImageCms.ImageCmsProfile(ImageCms.createProfile("sRGB")).tobytes()
+    data = bytearray(ImageCms.ImageCmsProfile(ImageCms.createProfile("sRGB")).tobytes())
+    data[24:36] = struct.pack(">6H", *_ICC_DATE)
+    return bytes(data)
 
 
 def _with_png_srgb_chunk(data: bytes) -> bytes:

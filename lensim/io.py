@@ -5,7 +5,11 @@ temporary file in the destination folder, is flushed to disk (fsync), gets the u
 permissions (0666 minus the umask, not mkstemp's 0600) and is renamed over the
 destination (``os.replace``). Readers see the old file or the new one, never a partial
 one; a failed or killed write leaves at most a hidden ``.NAME.*`` temporary file, and a
-failure inside the ``with`` block removes it.
+failure inside the ``with`` block removes it (as does SIGTERM or Ctrl-C under the
+command line, which turns them into an exception). A write the file system refuses (no
+space left, a quota, a read-only file system) is one :class:`lensim.errors.OutputError`
+line naming the file (:func:`write_failure`): the file keeps its old contents. Logs that
+grow line by line use :func:`append_text`: a line is appended whole or not at all.
 
 One writer at a time per output folder: :func:`folder_lock` (an flock on
 FOLDER/.lensim.lock, the one file written in place, since a lock must keep its inode).
@@ -14,6 +18,7 @@ FOLDER/.lensim.lock, the one file written in place, since a lock must keep its i
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import os
 import socket
@@ -22,7 +27,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any
 
-from lensim.errors import InputError
+from lensim.errors import InputError, OutputError
 
 
 def _umask_mode() -> int:
@@ -46,16 +51,77 @@ def _fsync_dir(directory: Path) -> None:
         os.close(fd)
 
 
+#: errno values of a write refused for want of room
+NO_ROOM = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG}
+#: errno values of a write the environment refuses (not a bug of the program)
+ENVIRONMENT = NO_ROOM | {errno.EROFS, errno.EACCES, errno.EPERM, errno.EIO, errno.EMFILE, errno.ENFILE}
+
+
+def os_error_of(error: BaseException) -> OSError | None:
+    """The OSError behind an exception: itself, or one it was raised from or while handling
+    (torch.save reports its file's ENOSPC as a RuntimeError raised while handling it)."""
+    seen: set[int] = set()
+    e: BaseException | None = error
+    while e is not None and id(e) not in seen:
+        if isinstance(e, OSError):
+            return e
+        seen.add(id(e))
+        e = e.__cause__ if e.__cause__ is not None else (None if e.__suppress_context__ else e.__context__)
+    return None
+
+
+def _no_room(folder: Path) -> bool:
+    """Whether the file system of ``folder`` has less than 1 MiB left for this user."""
+    try:
+        st = os.statvfs(folder)
+    except OSError:
+        return False
+    return st.f_bavail * st.f_frsize < 1 << 20
+
+
+def why_not_written(error: OSError, folder: Path | None = None) -> str:
+    """A failed write's reason in a few words, with its errno name: an OSError without
+    one (numpy's short write) on a file system that is full reads as ENOSPC."""
+    code = error.errno
+    if code is None and folder is not None and _no_room(folder):
+        code = errno.ENOSPC
+    if code is None:
+        return str(error) or type(error).__name__
+    return f"{os.strerror(code).lower()} ({errno.errorcode.get(code, code)})"
+
+
+def write_failure(path: str | Path, error: BaseException) -> OutputError | None:
+    """The one-line OutputError for an exception raised while writing ``path``, or None
+    when no OSError is behind it (a bug or a bad value, to be raised as it is)."""
+    os_error = os_error_of(error)
+    if os_error is None:
+        return None
+    path = Path(path)
+    reason = why_not_written(os_error, path.parent)
+    if os_error.errno in NO_ROOM or reason.endswith("(ENOSPC)"):
+        expected = (
+            "expected room for it on its file system: free some space and run the command "
+            "again (the work finished so far is kept)"
+        )
+    else:
+        expected = "expected a place lensim can write to"
+    return OutputError(str(path), None, f"could not be written: {reason}; {expected}")
+
+
 @contextlib.contextmanager
 def atomic_writer(path: str | Path, suffix: str = "") -> Iterator[IO[bytes]]:
     """Open a binary file handle whose contents replace ``path`` when the block ends
     without an error. The parent folder is created when missing. ``suffix`` is appended to
     the temporary name (some writers pick a format from it). The handle is opened for
     reading too (``w+b``; writers such as tifffile seek back and read) and its ``name`` is
-    the temporary file's path."""
+    the temporary file's path. A failed write (an OSError in the block, or behind its
+    exception) raises :func:`write_failure`'s OutputError; ``path`` is left as it was."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent)
+    except OSError as e:
+        raise write_failure(path, e) from None  # type: ignore[misc]  # an OSError always gives one
     os.close(fd)
     try:
         os.chmod(tmp, _umask_mode())
@@ -64,11 +130,41 @@ def atomic_writer(path: str | Path, suffix: str = "") -> Iterator[IO[bytes]]:
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
+    except BaseException as e:
+        failure = None if isinstance(e, InputError) else write_failure(path, e)
+        with contextlib.suppress(OSError):
             os.unlink(tmp)
+        if failure is not None:
+            raise failure from None
         raise
     _fsync_dir(path.parent)
+
+
+def append_text(path: str | Path, text: str) -> None:
+    """Append UTF-8 ``text`` to a file (made when missing), whole or not at all: a write
+    that fails part-way is cut back off (the file truncated to its old length) and raised
+    as :func:`write_failure`'s OutputError."""
+    path = Path(path)
+    data = text.encode("utf-8")
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, _umask_mode())
+    except OSError as e:
+        raise write_failure(path, e) from None  # type: ignore[misc]
+    try:
+        size = os.fstat(fd).st_size
+        try:
+            view = memoryview(data)
+            while view:
+                view = view[os.write(fd, view) :]
+        except BaseException as e:
+            with contextlib.suppress(OSError):
+                os.ftruncate(fd, size)
+            failure = write_failure(path, e)
+            if failure is not None:
+                raise failure from None
+            raise
+    finally:
+        os.close(fd)
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:
@@ -251,6 +347,7 @@ def folder_lock(folder: str | Path) -> Iterator[Path]:
 
 __all__ = [
     "LOCK_NAME",
+    "append_text",
     "atomic_write_bytes",
     "atomic_write_json",
     "atomic_write_text",
@@ -260,4 +357,5 @@ __all__ = [
     "read_bytes",
     "read_json",
     "read_text",
+    "write_failure",
 ]

@@ -16,14 +16,20 @@ watches the parent pid (a dead parent's children are re-parented, so ``os.getppi
 changes). Linux's ``PR_SET_PDEATHSIG`` is not used: it fires when the *thread* that
 started the worker ends. tests/test_kill_resume.py checks each command. Workers of a
 cluster given by address belong to that cluster and are left alone.
+
+A worker that dies in the middle of a job (killed, out of memory) is replaced by Dask's
+nanny and the job computed again elsewhere; a job on which workers died more often than
+the scheduler allows (distributed.scheduler.allowed-failures, 3) is a one-line
+:class:`lensim.errors.WorkerLostError` naming it (tests/test_faults_workers.py).
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any, TypeVar
 
 J = TypeVar("J")
@@ -149,6 +155,24 @@ def _client(client_type: Any, address: Any) -> Any:
         ) from None
 
 
+@contextlib.contextmanager
+def _workers_ignore_sigint() -> Iterator[None]:
+    """Worker processes started in the block ignore SIGINT, a disposition they inherit: a
+    terminal's Ctrl-C reaches the whole process group, and only the parent is to stop (its
+    workers end with it, without a traceback each). This process ignores SIGINT meanwhile
+    (while the cluster starts); off the main thread nothing changes."""
+    import signal
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    before = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, before)
+
+
 def _local_cluster(workers: int) -> Any:
     """A local Dask cluster of ``workers`` processes, one thread each, on no fixed port,
     logging errors only (no warnings of cancelled jobs). Its workers keep glibc's own
@@ -162,10 +186,50 @@ def _local_cluster(workers: int) -> Any:
     import dask
     from distributed import LocalCluster
 
-    with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
-        return LocalCluster(
-            n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0", silence_logs=logging.ERROR
-        )
+    from lensim.errors import WorkerLostError
+
+    try:
+        with (
+            dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}),
+            _workers_ignore_sigint(),
+        ):
+            return LocalCluster(
+                n_workers=workers,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=":0",
+                silence_logs=logging.ERROR,
+            )
+    except (RuntimeError, OSError) as e:  # a worker process died while starting ("Nanny failed to start")
+        raise WorkerLostError(
+            None,
+            "workers",
+            f"a local Dask cluster of {workers} worker processes did not start ({str(e).splitlines()[0][:120]}); "
+            "expected worker processes that start and stay up: run the command again, with fewer workers if "
+            "memory is short",
+        ) from None
+
+
+def _job_name(job: Any, k: int, n: int) -> str:
+    """A job in an error message: the file it works on when it names one, else its place."""
+    for owner in (job, getattr(job, "job", None)):
+        for attr in ("path", "source"):
+            value = getattr(owner, attr, None)
+            if isinstance(value, (str, os.PathLike)):
+                return str(value)
+    return f"job {k + 1} of {n}"
+
+
+def _lost(job: Any, k: int, n: int) -> Exception:
+    from lensim.errors import WorkerLostError
+
+    return WorkerLostError(
+        _job_name(job, k, n),
+        None,
+        "the Dask worker processes running it died over and over (killed, or out of "
+        "memory); expected workers that stay up: run the command again (the work finished "
+        "so far is kept), with fewer workers if memory is short",
+    )
 
 
 def _run_on_dask(
@@ -182,20 +246,30 @@ def _run_on_dask(
     try:
         with _client(Client, scheduler or cluster) as client:
             futures = client.map(_in_worker, [fn] * len(jobs), list(jobs), parent_pid=parent, pure=False)
-            job_of = {f.key: job for f, job in zip(futures, jobs, strict=True)}
+            job_of = {f.key: (k, job) for k, (f, job) in enumerate(zip(futures, jobs, strict=True))}
             try:
                 for fut in as_completed(futures):
-                    result = fut.result()
+                    result = _result(fut, job_of, len(jobs))
                     if isinstance(result, _Failed):
                         raise result.error
                     if on_result is not None:
-                        on_result(job_of[fut.key], result)
+                        on_result(job_of[fut.key][1], result)
             except BaseException:
                 client.cancel(futures)
                 raise
     finally:
         if cluster is not None:
             cluster.close()
+
+
+def _result(fut: Any, job_of: dict[Any, tuple[int, Any]], n: int) -> Any:
+    """A finished future's result; Dask's KilledWorker is a one-line WorkerLostError."""
+    from distributed import KilledWorker
+
+    try:
+        return fut.result()
+    except KilledWorker:
+        raise _lost(job_of[fut.key][1], job_of[fut.key][0], n) from None
 
 
 __all__ = ["available_cores", "exit_with_parent", "run_jobs"]

@@ -30,3 +30,11 @@ def one_torch_thread():
     torch.set_num_threads(1)
     yield
     torch.set_num_threads(n)
+
+
+@pytest.fixture(scope="session")
+def fault_world(tmp_path_factory):
+    """The fault suite's jobs and their uninterrupted outputs (tests/fault_world.py), made once."""
+    from fault_world import build_fault_world
+
+    return build_fault_world(tmp_path_factory.mktemp("fault-world"))

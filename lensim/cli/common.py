@@ -1,9 +1,11 @@
-"""Shared CLI helpers: consoles, one-line error handling, JSON output."""
+"""Shared CLI helpers: consoles, one-line error handling (bad input, and the faults of a
+long run: a full disk, too little memory, SIGTERM or Ctrl-C), JSON output."""
 
 from __future__ import annotations
 
 import contextlib
 import json
+import signal
 import sys
 import time
 import warnings
@@ -47,13 +49,81 @@ def _usage_error_line(e: typer.TyperException) -> str:
     return f"{where}: {e.format_message()} (see {where} --help)"
 
 
+class Stopped(BaseException):
+    """SIGTERM or SIGINT (Ctrl-C), raised in the main thread so that every ``finally`` and
+    ``with`` on the way out runs: Dask clusters close, locks are released, a temporary file
+    being written is removed. Not an Exception: no handler of errors catches it."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _stop(signum: int, frame: object) -> None:
+    """The handler of SIGTERM and SIGINT: a second one ends the process at once."""
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    raise Stopped(signum)
+
+
+@contextlib.contextmanager
+def _stopped_by_signals() -> Iterator[None]:
+    """SIGTERM and SIGINT raise Stopped in the block (the handlers before are put back)."""
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    saved = {s: signal.getsignal(s) for s in (signal.SIGTERM, signal.SIGINT)}
+    for s in saved:
+        signal.signal(s, _stop)
+    try:
+        yield
+    finally:
+        for s, handler in saved.items():
+            signal.signal(s, handler)
+
+
+#: what sizes each command's memory, for the line an allocation failure prints
+_MEMORY_OPTIONS = {
+    "restore": "a smaller --tile, or fewer --workers",
+    "train": "a smaller --batch-size or --crop",
+    "dataset": "fewer --workers, or smaller photos",
+    "psf": "fewer --workers, or fewer --pupil-samples",
+    "simulate": "fewer --workers",
+}
+
+
+def fault_line(error: BaseException) -> str | None:
+    """The one line for a fault of the environment that no lensim code turned into a
+    LensimError (a file system that refuses a write, an allocation that fails), or None
+    for any other exception (a bug: its traceback is shown)."""
+    from lensim.errors import out_of_memory
+    from lensim.io import ENVIRONMENT, NO_ROOM, why_not_written
+
+    if out_of_memory(error):
+        command = next((a for a in sys.argv[1:] if not a.startswith("-")), "")
+        what = _MEMORY_OPTIONS.get(command, "a smaller job")
+        return f"out of memory ({plain_line(error)[:160]}); expected more free memory, or {what}"
+    if isinstance(error, OSError) and error.errno in ENVIRONMENT:
+        where = f"{error.filename}: " if error.filename else ""
+        if error.errno in NO_ROOM:
+            return f"{where}{why_not_written(error)}; expected room on the file system: free some and run again"
+        return f"{where}{why_not_written(error)}; expected a file lensim may read and write"
+    return None
+
+
 def run_guarded(app: typer.Typer) -> None:
     """Run a Typer app; lensim errors and command-line usage errors become one line on
     stderr and exit status 2 (usage errors keep click's status); a command's help
-    (asked for, or shown for a group given no command) is printed as usual."""
+    (asked for, or shown for a group given no command) is printed as usual. The faults
+    of a long run are one line too: SIGTERM and Ctrl-C stop it cleanly (exit status 128
+    plus the signal), a full disk or an allocation failure exit with status 2
+    (:func:`fault_line`)."""
     warnings.showwarning = _show_warning
     try:
-        code = app(standalone_mode=False, prog_name="lensim")
+        with _stopped_by_signals():
+            code = app(standalone_mode=False, prog_name="lensim")
     except typer.TyperException as e:  # click's errors (typer vendors click)
         ctx = getattr(e, "ctx", None)
         if type(e).__name__ == "NoArgsIsHelpError" and ctx is not None:
@@ -64,8 +134,23 @@ def run_guarded(app: typer.Typer) -> None:
     except typer.Abort:
         print_error_line("error", "red", "aborted")
         sys.exit(1)
+    except Stopped as e:
+        name = signal.Signals(e.signum).name
+        print_error_line(
+            "error",
+            "red",
+            f"stopped by {name}; the work finished so far is kept: run the same command "
+            "again to resume it (train: with --resume)",
+        )
+        sys.exit(128 + e.signum)
     except LensimError as e:
         print_error_line("error", "red", e)
+        sys.exit(2)
+    except Exception as e:
+        line = fault_line(e)
+        if line is None:
+            raise
+        print_error_line("error", "red", line)
         sys.exit(2)
     sys.exit(code if isinstance(code, int) else 0)
 

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from lensim.data.manifest import SPLIT
-from lensim.io import atomic_write_json, atomic_write_text
+from lensim.io import append_text, atomic_write_json, atomic_write_text
 
 LOG_FIELDS = ("epoch", "step", "loss", "val_psnr", "val_ssim", "lr", "seconds")
 STEP_FIELDS = ("epoch", "step", "loss", "lr", "seconds")
@@ -35,8 +35,9 @@ def _cell(value: Any) -> Any:
 
 class CsvLog:
     """Append-only CSV that, on resume, drops rows newer than the checkpoint's step. The
-    header and the rows kept are written atomically; each new row is appended (a log
-    grows by one line per step, and a crash loses at most the line being written)."""
+    header and the rows kept are written atomically; each new row is appended whole or
+    not at all (a log grows by one line per step; a crash or a full disk loses at most
+    the line being written, never leaves half of it)."""
 
     def __init__(self, path: Path, fields: tuple[str, ...], keep_until_step: int | None) -> None:
         self.path = path
@@ -54,8 +55,10 @@ class CsvLog:
         atomic_write_text(path, text.getvalue())
 
     def write(self, row: dict[str, Any]) -> None:
-        with open(self.path, "a", newline="") as fh:
-            csv.DictWriter(fh, fieldnames=self.fields).writerow({k: _cell(row.get(k)) for k in self.fields})
+        """Append one row, whole or not at all (lensim.io.append_text)."""
+        text = io.StringIO(newline="")
+        csv.DictWriter(text, fieldnames=self.fields).writerow({k: _cell(row.get(k)) for k in self.fields})
+        append_text(self.path, text.getvalue())
 
 
 def read_csv(path: str | Path) -> list[dict[str, float]]:
@@ -79,13 +82,21 @@ class RunLog:
         run.mkdir(parents=True, exist_ok=True)
         atomic_write_json(run / "config.json", config)
         atomic_write_json(run / SPLIT, split)
-        self.steps = CsvLog(run / "steps.csv", STEP_FIELDS, resumed_at_step)
-        self.epochs = CsvLog(run / "log.csv", LOG_FIELDS, resumed_at_step)
+        self.run = run
         self.tensorboard: Any = None
+        self.rewind(resumed_at_step)
+
+    def rewind(self, step: int | None) -> None:
+        """Drop the rows (and TensorBoard events) newer than ``step`` (None: a new run, all
+        of them): after a resume, or a rollback to the checkpoint of that step."""
+        self.steps = CsvLog(self.run / "steps.csv", STEP_FIELDS, step)
+        self.epochs = CsvLog(self.run / "log.csv", LOG_FIELDS, step)
+        if self.tensorboard is not None:
+            self.tensorboard.close()
         try:
             from torch.utils.tensorboard import SummaryWriter
 
-            self.tensorboard = SummaryWriter(str(run / "tb"), purge_step=resumed_at_step)
+            self.tensorboard = SummaryWriter(str(self.run / "tb"), purge_step=step)
         except Exception:  # tensorboard is optional
             self.tensorboard = None
 
