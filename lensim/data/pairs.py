@@ -23,7 +23,8 @@ colour temperature and the noise levels are drawn per capture already
 
 Determinism: image i's random stream is seeded from (seed, i, file name); results do not
 depend on worker count or order. Resumability: an image is done when its JSON record
-exists and reads back as this image's (a corrupt record is recomputed); it is written
+exists and reads back as this image's and its crop files are whole (a corrupt record, or a
+crop removed or cut short, is recomputed with its photo); the record is written
 last, atomically, after its PNGs (also atomic), so a killed job is re-run from the first
 unfinished image. The manifest (settings + every record) is rewritten at the end. One
 writer at a time: the folder is locked (lensim.io.folder_lock) while pairs are made.
@@ -38,6 +39,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import math
+import os
 import random
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -365,7 +367,26 @@ def _read_record(job: PairJob) -> dict | None:
         and record.get("seed") == job.seed
         and isinstance(record.get("crops"), list)
     )
-    return record if ok else None
+    return record if ok and _crops_whole(Path(job.out_dir), record["crops"]) else None
+
+
+_PNG_END = b"\x00\x00\x00\x00IEND\xaeB`\x82"  # a PNG file's last chunk, IEND (PNG spec 11.2.5)
+
+
+def _crops_whole(out: Path, crops: list) -> bool:
+    """Whether every crop file of a record is there and ends as a whole PNG does (a crop
+    removed, emptied or cut short since is made again with its photo); no decoding."""
+    for crop in crops:
+        for key in ("input", "target"):
+            name = crop.get(key) if isinstance(crop, dict) else None
+            try:
+                with open(out / str(name), "rb") as fh:
+                    fh.seek(-len(_PNG_END), os.SEEK_END)
+                    if fh.read() != _PNG_END:
+                        return False
+            except (OSError, TypeError):
+                return False
+    return True
 
 
 def check_photos(files: list[Path], size: int) -> None:

@@ -27,6 +27,7 @@ from lensim.psf.bank.store import (
     lensim_version,
     open_bank_directory,
     read_manifest,
+    release_bank_directory,
     write_field,
 )
 from lensim.psf.bank.types import BankField, Progress, PSFBank
@@ -425,5 +426,11 @@ def _compute_plans(
         if progress is not None:
             progress(count, total)
 
-    run_jobs(compute_field_task, [t for b, p in enumerate(plans) for t in p.tasks(b)], workers, scheduler, finish)
+    try:
+        run_jobs(compute_field_task, [t for b, p in enumerate(plans) for t in p.tasks(b)], workers, scheduler, finish)
+    except BaseException:
+        for p in plans:
+            if p.directory is not None:
+                release_bank_directory(p.directory)  # a bank with no field computed leaves nothing
+        raise
     return [p.result() for p in plans]

@@ -44,7 +44,7 @@ from lensim.psf.bank.grid import (
     setting_label,
 )
 from lensim.psf.bank.settings import BankSettings
-from lensim.psf.bank.store import manifest_differences
+from lensim.psf.bank.store import drop_damaged_manifests, manifest_differences, release_bank_directory
 from lensim.psf.bank.types import Progress, PSFBank
 from lensim.sensor.spectral import SpectralResponse
 
@@ -82,6 +82,7 @@ class _Prepared:
     directory: Path | None
     plans: list[BankPlan]
     grid_manifest: dict | None = None
+    cached: bool = False  # the folder is a bank cache entry (damaged manifests there are recomputed)
 
     def result(self) -> PSFBank | GridBank:
         if self.grid_manifest is not None:
@@ -116,7 +117,7 @@ def _prepare_grid(req: BankRequest, axes: GridAxes) -> _Prepared:
         blob = key + json.dumps(axes.to_dict(), sort_keys=True)
         out = settings.cache_root() / f"grid-{hashlib.sha256(blob.encode()).hexdigest()[:16]}"
     plans, manifest = _plan_grid(req.lens, req.pixel_pitch_um, axes, settings, req.response, out)
-    return _Prepared(out, plans, manifest)
+    return _Prepared(out, plans, manifest, cached=req.out_dir is None)
 
 
 def _prepare(req: BankRequest) -> _Prepared:
@@ -139,7 +140,7 @@ def _prepare(req: BankRequest) -> _Prepared:
     plan = _plan_bank(lens, pitch, kernel, req.settings, req.response, directory, label)
     if shot is not None:
         plan.manifest["shooting"] = {"request": shot.to_dict(), "resolved": record(describe(req.lens, shot))}
-    return _Prepared(directory, [plan])
+    return _Prepared(directory, [plan], cached=req.out_dir is None and directory is not None)
 
 
 def _distinct(prepared: list[_Prepared]) -> list[_Prepared]:
@@ -195,9 +196,17 @@ def get_banks(
             if p.directory is not None:
                 stack.enter_context(folder_lock(p.directory))
         for p in todo:
+            if p.cached and p.directory is not None:
+                drop_damaged_manifests(p.directory)
             if p.grid_manifest is not None and p.directory is not None:
                 open_grid_directory(p.directory, p.grid_manifest)
-        _compute_plans([plan for p in todo for plan in p.plans], workers, scheduler, progress)
+        try:
+            _compute_plans([plan for p in todo for plan in p.plans], workers, scheduler, progress)
+        except BaseException:
+            for p in todo:  # a grid that computed no field leaves no manifest (its banks' go in _compute_plans)
+                if p.grid_manifest is not None and p.directory is not None:
+                    release_bank_directory(p.directory, "s[0-9][0-9][0-9]/field_*.npz")
+            raise
     return [p.result() for p in prepared]
 
 

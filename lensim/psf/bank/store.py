@@ -5,8 +5,10 @@ disk (resume after a kill); a bank made with different settings is refused."""
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -132,6 +134,36 @@ def open_bank_directory(directory: Path, manifest: dict, fields: np.ndarray) -> 
             except InputError:
                 continue  # unreadable or foreign: recompute
     return done
+
+
+def release_bank_directory(directory: Path, fields: str = "field_*.npz") -> None:
+    """Undo open_bank_directory's (or a grid's) claim when no field was computed (no file
+    matches ``fields``): the manifest goes, and the folder when that leaves it empty (a
+    failed first run leaves nothing behind)."""
+    if any(directory.glob(fields)):
+        return
+    (directory / MANIFEST).unlink(missing_ok=True)
+    with contextlib.suppress(OSError):
+        directory.rmdir()  # only when empty
+
+
+def drop_damaged_manifests(entry: Path) -> None:
+    """Remove the manifests of a bank cache entry (a bank, or a grid and its banks) that do
+    not read as a bank's or a grid's (damaged on disk): the entry is then recomputed,
+    keeping the field files that still read and match its settings. A warning names each.
+    Only for cache entries: a folder the user named keeps its manifest (read_manifest's
+    one-line error names it)."""
+    for path in (entry / MANIFEST, *sorted(entry.glob(f"s[0-9][0-9][0-9]/{MANIFEST}"))):
+        try:
+            m = json.loads(path.read_text(encoding="utf-8"))
+            damaged = not (isinstance(m, dict) and m.get("format") in (FORMAT, "lensim-psf-grid"))
+        except FileNotFoundError:
+            continue
+        except (OSError, UnicodeDecodeError, ValueError):
+            damaged = True
+        if damaged:
+            warnings.warn(f"{path}: a damaged bank cache entry; recomputing it", UserWarning, stacklevel=4)
+            path.unlink(missing_ok=True)
 
 
 def write_field(directory: Path, bank_field: BankField, manifest: dict) -> None:
