@@ -142,6 +142,12 @@ def train_command(
         "settings; options given change those that may change (--epochs, --time-budget-s, "
         "--device, --no-amp, checkpoint intervals), others must match.",
     ),
+    on_nan: str = typer.Option(
+        _D.on_nan,
+        "--on-nan",
+        help="A NaN or infinite loss: rollback (to the last good checkpoint, skipping the "
+        "batch; stops after 3 in a row) or stop (one line naming the step).",
+    ),
     seed: int = typer.Option(_D.seed, "--seed", help="Seed of initialisation, data order, crops and augmentation."),
     device: str = typer.Option(_D.device, "--device", help="cpu, cuda or cuda:N (mixed precision on CUDA)."),
     no_amp: bool = typer.Option(not _D.amp, "--no-amp", help="Full float32 on CUDA."),
@@ -158,6 +164,7 @@ def train_command(
     """
     import torch
 
+    from lensim.restore.divergence import ON_NAN
     from lensim.restore.losses import LOSSES
     from lensim.restore.train import train
 
@@ -175,6 +182,7 @@ def train_command(
         deformable,
     )
     choice(loss, tuple(LOSSES), "--loss")
+    choice(on_nan, ON_NAN, "--on-nan")
     at_least(threads, 0, "--threads", what="a number of threads (0: PyTorch's default)")
     at_least(checkpoint_every_s, 0.0, "--checkpoint-every-s", "s", "an interval (0: at epoch ends only)")
     at_least(checkpoint_every_steps, 0, "--checkpoint-every-steps", what="a number of steps (0: off)")
@@ -212,13 +220,14 @@ def train_command(
         "checkpoint_every_s": checkpoint_every_s if checkpoint_every_s > 0 else None,
         "checkpoint_every_steps": checkpoint_every_steps or None,
         "use_settings": not no_settings,
+        "on_nan": on_nan,
     }
     if resume:  # the checkpoint's settings, changed only where an option is given
         overrides = {k: v for k, v in overrides.items() if _given(ctx, _OPTION_OF.get(k, k))}
     prog, callback = _progress(epochs, show=not quiet and not json_out)
     new_run = not output.exists()
     try:
-        result = train(dataset, output, TrainConfig(), resume=resume, progress=callback, **overrides)
+        result = _train(train, dataset, output, resume, callback, overrides)
     except BaseException:
         if new_run and not any(output.glob("*.pt")) and not (output / LOCK_NAME).exists():  # not another's run
             shutil.rmtree(output, ignore_errors=True)  # no checkpoint: leave no half-made run behind
@@ -227,6 +236,23 @@ def train_command(
         if prog is not None:
             prog.stop()
     _report(result, quiet, json_out)
+
+
+def _train(
+    train: Callable[..., TrainResult], dataset: Path, output: Path, resume: bool, callback, overrides
+) -> TrainResult:
+    """lensim.restore.train.train with a divergence's line naming the options that help."""
+    from lensim.errors import NonFiniteError
+
+    try:
+        return train(dataset, output, TrainConfig(), resume=resume, progress=callback, **overrides)
+    except NonFiniteError as e:
+        skip = "" if "rollbacks" in e.message else " (or --on-nan rollback to skip a bad batch)"
+        raise NonFiniteError(
+            e.source,
+            e.field,
+            f"{e.message}; expected a finite loss: give a lower --lr{skip}, then train again with --resume",
+        ) from None
 
 
 def _check_recipe(

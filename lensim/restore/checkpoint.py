@@ -8,6 +8,8 @@ A checkpoint is a ``torch.save`` of a dict, loadable with ``weights_only=True``:
     optimizer, scheduler, scaler  Adam, StepLR and grad-scaler states (scaler None when off)
     epoch, batch_in_epoch, step   epochs completed, batches done in the current epoch,
                               optimizer steps done
+    skipped_batches          [epoch, batch] of each batch skipped after a non-finite loss
+                              (lensim.restore.divergence; absent before it: none)
     rng                      torch (CPU, CUDA), Python and NumPy random states
     train_seconds            seconds the run has trained in all, resumes included
     train_config, split      the training settings and the train/validation source photos
@@ -22,6 +24,8 @@ Inference needs only format, model_config and model_state (:data:`REQUIRED_KEYS`
 
 Saving goes through lensim.io.atomic_writer (temporary file in the run folder, fsync,
 rename): a crash never leaves a partial file, and readers see the old checkpoint or the new.
+A training state whose weights are not all finite is never saved (TrainingState.save
+raises lensim.restore.divergence.NonFinite instead).
 """
 
 from __future__ import annotations
@@ -31,7 +35,7 @@ import math
 import pickle
 import random
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -228,7 +232,8 @@ class TrainingState:
 
     epoch: epochs completed; batch_in_epoch: batches done in the current epoch; step:
     optimizer steps done; best_val_psnr: best validation PSNR so far in dB (-inf before
-    any); train_seconds: seconds trained by the calls before this one (resumes)."""
+    any); train_seconds: seconds trained by the calls before this one (resumes); skipped:
+    the (epoch, batch) of each batch skipped after a non-finite loss."""
 
     model: torch.nn.Module
     optimizer: torch.optim.Optimizer
@@ -239,6 +244,7 @@ class TrainingState:
     step: int = 0
     best_val_psnr: float = -math.inf
     train_seconds: float = 0.0
+    skipped: set[tuple[int, int]] = field(default_factory=set)
 
     def checkpoint(self, train_seconds: float, context: dict[str, Any]) -> dict[str, Any]:
         """The checkpoint dict (module docstring). train_seconds: the run's seconds so far;
@@ -256,6 +262,7 @@ class TrainingState:
             "epoch": self.epoch,
             "batch_in_epoch": self.batch_in_epoch,
             "step": self.step,
+            "skipped_batches": [list(b) for b in sorted(self.skipped)],
             "rng": rng_state(),
             "train_seconds": train_seconds,
             "train_config": context["train_config"],
@@ -271,7 +278,11 @@ class TrainingState:
         }
 
     def save(self, run: Path, train_seconds: float, context: dict[str, Any], best: bool) -> None:
-        """Write RUN/last.pt (and RUN/best.pt when ``best``) atomically."""
+        """Write RUN/last.pt (and RUN/best.pt when ``best``) atomically; weights that are
+        not all finite are never written (lensim.restore.divergence.NonFinite)."""
+        from lensim.restore.divergence import check_weights
+
+        check_weights(self.model)
         state = self.checkpoint(train_seconds, context)
         atomic_torch_save(state, run / LAST)
         if best:
@@ -294,6 +305,7 @@ class TrainingState:
         self.epoch, self.batch_in_epoch, self.step = int(ckpt["epoch"]), int(ckpt["batch_in_epoch"]), int(ckpt["step"])
         self.best_val_psnr = float(ckpt.get("best_val_psnr") or -math.inf)
         self.train_seconds = float(ckpt.get("train_seconds") or 0.0)
+        self.skipped = {(int(e), int(b)) for e, b in ckpt.get("skipped_batches") or []}
         set_rng_state(ckpt["rng"])
 
 

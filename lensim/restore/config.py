@@ -75,6 +75,10 @@ class TrainConfig:
         records become its inputs). False trains an unconditioned network on the same
         pairs; the ranges are still recorded (and checked when restoring). No effect on
         pairs without settings.
+    on_nan: what a NaN or infinite loss (or weights) does: "rollback" (back to the last
+        good checkpoint, the bad batch skipped from then on; stopped after repeated
+        rollbacks) or "stop" (the run ends with a NonFiniteError, its last good checkpoint
+        kept); lensim.restore.divergence.
     conditioning: what the run is conditioned on, Conditioning.to_dict() ({"keys": the
         inputs in vector order, "ranges": {key: [smallest, largest]} over the training
         records}); None: derived from the training records when the run starts (and
@@ -109,6 +113,7 @@ class TrainConfig:
     checkpoint_every_s: float | None = 300.0
     checkpoint_every_steps: int | None = None
     use_settings: bool = True
+    on_nan: str = "rollback"
     conditioning: dict[str, Any] | None = None
 
     def resolved(self) -> TrainConfig:

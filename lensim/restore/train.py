@@ -22,7 +22,9 @@ Run folder:
                       every TrainConfig.checkpoint_every_s seconds / _steps steps)
     RUN/best.pt       checkpoint with the best validation PSNR so far
 Checkpoints (format, atomic writes, resume): lensim.restore.checkpoint. Learning-rate
-schedules and the time budget's clock: lensim.restore.schedule.
+schedules and the time budget's clock: lensim.restore.schedule. NaN or Inf (a poisoned
+batch, an exploding learning rate): detected at the step, never checkpointed, rolled back
+or stopped by TrainConfig.on_nan (lensim.restore.divergence).
 
 Determinism and resume: the data order of epoch e is a permutation drawn from (seed, e)
 and each item's random draws from (seed, e, index) (lensim.restore.dataset), so a run
@@ -40,7 +42,7 @@ from __future__ import annotations
 import contextlib
 import math
 import os
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -50,8 +52,8 @@ from torch.utils.data import DataLoader
 
 from lensim.data.manifest import read_pairs_manifest
 from lensim.errors import InputError
-from lensim.evaluate.metrics import psnr_batch, ssim_batch
 from lensim.io import folder_lock
+from lensim.restore.batches import collate, epoch_batches, epoch_order, evaluate_pairs, model_inputs
 from lensim.restore.checkpoint import (
     BEST,
     LAST,
@@ -72,6 +74,7 @@ from lensim.restore.distributed import (
     shutdown,
     wrap_model,
 )
+from lensim.restore.divergence import ON_NAN, NonFinite, Rollbacks, check_loss, roll_back
 from lensim.restore.losses import LOSSES, restoration_loss
 from lensim.restore.models import ARCHS, build_model
 from lensim.restore.run_log import RunLog
@@ -150,73 +153,6 @@ def budget_progress(
     return lambda p: report(min(p.seconds, budget_s), budget_s)
 
 
-# ----------------------------------------------------------------------------- data order
-
-
-def epoch_order(n: int, seed: int, epoch: int) -> list[int]:
-    """The permutation of item indices for one epoch (depends only on n, seed, epoch)."""
-    gen = torch.Generator().manual_seed((seed * 1_000_003 + epoch * 7919 + 12345) % (2**63))
-    return torch.randperm(n, generator=gen).tolist()
-
-
-def epoch_batches(
-    n: int, batch_size: int, seed: int, epoch: int, rank: int = 0, world: int = 1, max_batches: int | None = None
-) -> list[list[int]]:
-    """Batches of one epoch for one rank: the epoch's permutation, padded (by wrapping) to
-    a multiple of world so ranks get equal shares, strided by rank, cut into batches;
-    a last partial batch is dropped unless it is the only one."""
-    order = epoch_order(n, seed, epoch)
-    if world > 1:
-        pad = (-len(order)) % world
-        order = (order + order[:pad])[rank::world]
-    nb = max(1, len(order) // batch_size)
-    batches = [order[i * batch_size : (i + 1) * batch_size] for i in range(nb)]
-    return batches[:max_batches] if max_batches else batches
-
-
-def model_inputs(batch: dict[str, torch.Tensor], device: torch.device) -> tuple[torch.Tensor, ...]:
-    """A batch's network arguments on ``device``: (input, fov) or, when the batch carries
-    settings vectors, (input, fov, settings)."""
-    args: tuple[torch.Tensor, ...] = (
-        batch["input"].to(device, non_blocking=True),
-        batch["fov"].to(device, non_blocking=True),
-    )
-    if "settings" in batch:
-        args += (batch["settings"].to(device, non_blocking=True),)
-    return args
-
-
-def _collate(items: list[dict[str, Any]]) -> dict[str, torch.Tensor]:
-    return {
-        k: torch.stack([it[k] for it in items]) if k != "index" else torch.tensor([it[k] for it in items])
-        for k in items[0]
-    }
-
-
-@torch.no_grad()
-def evaluate_pairs(
-    model: torch.nn.Module, loader: Iterator[dict[str, torch.Tensor]] | DataLoader, device: torch.device
-) -> dict[str, float]:
-    """Mean PSNR (dB) and SSIM over crops of the restored output and of the input itself
-    (outputs clamped to [0, 1] as when written to a file)."""
-    was_training = model.training
-    model.eval()
-    tot = {"psnr": 0.0, "ssim": 0.0, "input_psnr": 0.0, "input_ssim": 0.0}
-    n = 0
-    for batch in loader:
-        args = model_inputs(batch, device)
-        inp = args[0]
-        tgt = batch["target"].to(device)
-        out = model(*args).float().clamp(0, 1)
-        tot["psnr"] += float(psnr_batch(out, tgt).clamp(max=100.0).sum())
-        tot["ssim"] += float(ssim_batch(out, tgt).sum())
-        tot["input_psnr"] += float(psnr_batch(inp, tgt).clamp(max=100.0).sum())
-        tot["input_ssim"] += float(ssim_batch(inp, tgt).sum())
-        n += inp.shape[0]
-    model.train(was_training)
-    return {k: v / n for k, v in tot.items()} if n else {k: math.nan for k in tot}
-
-
 # ----------------------------------------------------------------------------- set-up
 
 
@@ -257,6 +193,8 @@ def _resolve_config(
         raise InputError(None, "loss", f"expected one of {', '.join(LOSSES)}, got {cfg.loss!r}")
     if cfg.arch not in ARCHS:
         raise InputError(None, "arch", f"expected one of {', '.join(ARCHS)}, got {cfg.arch!r}")
+    if cfg.on_nan not in ON_NAN:
+        raise InputError(None, "on_nan", f"expected one of {', '.join(ON_NAN)}, got {cfg.on_nan!r}")
     return cfg.resolved()
 
 
@@ -373,6 +311,7 @@ class _Loop:
     progress: Callable[[TrainProgress], None] | None
     run: Path
     context: dict[str, Any]  # what checkpoints record besides the training state
+    rollbacks: Rollbacks
     last_loss: float = math.nan
     checkpoint_s: float = 0.0  # clock.call_s() at the last checkpoint
     checkpoint_step: int = 0  # the optimizer step of the last checkpoint
@@ -400,6 +339,7 @@ def _save_checkpoint(loop: _Loop, best: bool) -> None:
         best=best,
     )
     loop.checkpoint_s, loop.checkpoint_step = loop.clock.call_s(), loop.state.step
+    loop.rollbacks.checkpoint_written(loop.state.step)
 
 
 def _optimizer_step(loop: _Loop, batch: dict[str, torch.Tensor]) -> float:
@@ -414,6 +354,8 @@ def _optimizer_step(loop: _Loop, batch: dict[str, torch.Tensor]) -> float:
         loss = restoration_loss(loop.cfg.loss, out.float(), tgt)
     else:
         loss = restoration_loss(loop.cfg.loss, loop.net(*args), tgt)
+    ranks = loop.ranks
+    check_loss(loss, (lambda bad: mean_over_ranks(float(bad), ranks, device) > 0) if ranks.world > 1 else None)
     state.scaler.scale(loss).backward()
     state.scaler.step(state.optimizer)
     state.scaler.update()
@@ -425,9 +367,11 @@ def _train_epoch(loop: _Loop, batches: list[list[int]]) -> tuple[bool, float]:
     stopped the epoch, mean loss of its steps in this call)."""
     cfg, state = loop.cfg, loop.state
     loop.data.train.set_epoch(state.epoch)
-    loader = DataLoader(loop.data.train, batch_sampler=batches[state.batch_in_epoch :], collate_fn=_collate)
+    todo = [b for b in range(state.batch_in_epoch, len(batches)) if (state.epoch, b) not in state.skipped]
+    loader = DataLoader(loop.data.train, batch_sampler=[batches[b] for b in todo], collate_fn=collate)
     losses: list[float] = []
-    for batch in loader:
+    for b, batch in zip(todo, loader, strict=True):
+        state.batch_in_epoch = b  # past the batches skipped after a non-finite loss
         loop.lr.before_step(loop.clock, state.epoch, state.batch_in_epoch, len(batches))
         loop.last_loss = _optimizer_step(loop, batch)
         state.step += 1
@@ -481,6 +425,39 @@ def _validate(loop: _Loop, mean_loss: float, epoch_lr: float) -> tuple[dict[str,
     loop.val_metrics = metrics
     _save_checkpoint(loop, best=improved or not (loop.run / BEST).exists())
     return row, metrics
+
+
+def _epoch(loop: _Loop, batches: list[list[int]]) -> tuple[bool, dict[str, Any] | None, dict[str, float]]:
+    """Train the epoch's remaining batches (_train_epoch), then on rank 0 validate and
+    checkpoint (_validate) and report progress; (whether the time budget stopped it, the
+    log row or None off rank 0, the validation metrics)."""
+    state, cfg = loop.state, loop.cfg
+    epoch_lr = loop.lr.lr
+    stopped, mean_loss = _train_epoch(loop, batches)
+    if not stopped:
+        state.epoch += 1
+        state.batch_in_epoch = 0
+        loop.lr.after_epoch()
+    if not loop.ranks.main:
+        return stopped, None, {}
+    row, metrics = _validate(loop, mean_loss, epoch_lr)
+    if loop.progress is not None:
+        loop.progress(
+            TrainProgress(
+                "stop" if stopped else "epoch",
+                state.epoch - (0 if stopped else 1),
+                cfg.epochs,
+                state.step,
+                state.batch_in_epoch,
+                len(batches),
+                mean_loss,
+                epoch_lr,
+                loop.clock.call_s(),
+                metrics.get("psnr"),
+                metrics.get("ssim"),
+            )
+        )
+    return stopped, row, metrics
 
 
 # ----------------------------------------------------------------------------- train
@@ -552,7 +529,7 @@ def _train(
         log = RunLog(
             run, {**asdict(cfg), "dataset": context["dataset"]}, data.split, state.step if ckpt is not None else None
         )
-    val_loader = DataLoader(data.val, batch_size=cfg.val_batch_size, shuffle=False, collate_fn=_collate)
+    val_loader = DataLoader(data.val, batch_size=cfg.val_batch_size, shuffle=False, collate_fn=collate)
     loop = _Loop(
         cfg,
         state,
@@ -568,6 +545,7 @@ def _train(
         progress,
         run,
         context,
+        Rollbacks.start(run, state.checkpoint(state.train_seconds, context) if ranks.main else None),
         checkpoint_step=state.step,
     )
     history: list[dict[str, Any]] = []
@@ -578,31 +556,13 @@ def _train(
         batches = epoch_batches(
             len(data.train), cfg.batch_size, cfg.seed, state.epoch, ranks.rank, ranks.world, cfg.max_steps_per_epoch
         )
-        epoch_lr = lr.lr
-        stopped, mean_loss = _train_epoch(loop, batches)
-        if not stopped:
-            state.epoch += 1
-            state.batch_in_epoch = 0
-            lr.after_epoch()
-        if ranks.main:
-            row, metrics = _validate(loop, mean_loss, epoch_lr)
+        try:
+            stopped, row, metrics = _epoch(loop, batches)
+        except NonFinite as bad:
+            roll_back(loop, bad, len(batches), history)
+            continue
+        if row is not None:
             history.append(row)
-            if progress is not None:
-                progress(
-                    TrainProgress(
-                        "stop" if stopped else "epoch",
-                        state.epoch - (0 if stopped else 1),
-                        cfg.epochs,
-                        state.step,
-                        state.batch_in_epoch,
-                        len(batches),
-                        mean_loss,
-                        epoch_lr,
-                        loop.clock.call_s(),
-                        metrics.get("psnr"),
-                        metrics.get("ssim"),
-                    )
-                )
         barrier(ranks)
         stopped = stopped or (loop.clock.spent() and state.epoch < cfg.epochs)
     if log is not None:
