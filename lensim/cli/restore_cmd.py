@@ -6,7 +6,9 @@ Register in lensim/cli/__init__.py with
 
 from __future__ import annotations
 
+import contextlib
 import warnings
+from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -16,7 +18,7 @@ from lensim.cli.bank_options import scheduler_option
 from lensim.cli.common import console, print_json, progress_bar
 from lensim.cli.validate import at_least, choice, distinct_outputs, output_folder, scheduler_address
 from lensim.cli.validate import device as check_device
-from lensim.errors import InputError
+from lensim.errors import InputError, OutOfMemory
 from lensim.io import folder_lock
 
 if TYPE_CHECKING:
@@ -178,7 +180,7 @@ def restore_command(
     _check_photos(photos, offset, (sensor_w, sensor_h))
     photo_settings = _photo_settings(photos, shooting, info)
     written = []
-    with folder_lock(output):  # one writer at a time
+    with folder_lock(output), _tile_memory(workers):  # one writer at a time
         if raws:
             from lensim.raw.restore import RestoreSettings
 
@@ -211,6 +213,23 @@ def restore_command(
             )
     if json_out:
         print_json({"checkpoint": info["path"], "engine": engine, "images": written})
+
+
+@contextlib.contextmanager
+def _tile_memory(workers: int) -> Iterator[None]:
+    """A tile that no memory holds (lensim.errors.OutOfMemory of restore_image's "tile")
+    as the line naming the options that size it."""
+    try:
+        yield
+    except OutOfMemory as e:
+        if e.field != "tile":
+            raise
+        more = ", or fewer --workers" if workers > 1 else ""
+        raise OutOfMemory(
+            e.source,
+            "--tile",
+            f"{e.message}; expected more free memory, or a smaller --overlap with a smaller --tile{more}",
+        ) from None
 
 
 def _check_options(
@@ -375,9 +394,12 @@ def _restore_photo(
         _check_offset(path, offset, (w, h), sensor_wh)
     top_left, size = image_sensor_geometry(h, w, (sensor_w, sensor_h), offset)
     with progress_bar(f"restoring {path.name}", "tiles", quiet) as tiles_done:
-        out = restore_image(
-            model, img, top_left, size, tile=tile, overlap=overlap, progress=tiles_done, settings=settings
-        )
+        try:
+            out = restore_image(
+                model, img, top_left, size, tile=tile, overlap=overlap, progress=tiles_done, settings=settings
+            )
+        except OutOfMemory as e:
+            raise OutOfMemory(str(path), e.field, e.message) from None
     del img  # bound peak memory: only the output lives while it is encoded
     out.clamp_(0, 1)
     dest = output / _photo_output_name(path)

@@ -40,7 +40,7 @@ from typing import Any
 
 import torch
 
-from lensim.errors import InputError
+from lensim.errors import InputError, OutOfMemory
 from lensim.jsonable import strict_json
 from lensim.sensor.profile import SensorProfile, sensor_from_dict
 
@@ -267,9 +267,12 @@ def restore_raw(
     vec = settings_vector(raw, settings, warn=False)  # validate() warned
     img, params = develop_raw(raw, sensor, orient=False)
     top_left, size = raw_geometry(raw, sensor, placement, native)
-    out = restore_image(
-        model, img, top_left, size, tile=settings.tile, overlap=settings.overlap, progress=progress, settings=vec
-    )
+    try:
+        out = restore_image(
+            model, img, top_left, size, tile=settings.tile, overlap=settings.overlap, progress=progress, settings=vec
+        )
+    except OutOfMemory as e:
+        raise OutOfMemory(str(job.source), e.field, e.message) from None
     del img  # bound peak memory
     out.clamp_(0.0, 1.0)
     if job.dng is not None:

@@ -20,7 +20,10 @@ pads there exactly as a border tile does). When ``margin`` exceeds the receptive
 radius (about 58 px for the paper's UNet with zero offsets, plus what learned offsets
 add) the result equals whole-image inference up to float rounding.
 
-Memory: the input, the (3, H, W) float32 output and one tile's activations. Measured on
+Memory: the input, the (3, H, W) float32 output and one tile's activations. A tile the
+memory cannot hold (an allocation fails: lensim.errors.out_of_memory) makes
+:func:`restore_image` start again with tiles of half the side, as long as they stay larger
+than the overlap, with a warning; below that an OutOfMemory names the tile. Measured on
 CPU: a 512-pixel tile of the paper's UNet peaks at about 1.3 GB (the full-resolution
 deformable conv lays its 9 samples out as a (C, 3H, 3W) image), a width-8 network at about
 0.4 GB; a 24-megapixel image takes 0.29 GB each for input and output. Smaller tiles cut
@@ -35,11 +38,13 @@ is given (then it is at the sensor's native pixel scale, like lensim.render.mapp
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from typing import Protocol, runtime_checkable
 
 import torch
 
+from lensim.errors import OutOfMemory, out_of_memory
 from lensim.restore.conditioning import batch_settings
 from lensim.restore.fov import fov_channels
 
@@ -178,6 +183,13 @@ def _axis_weights(length: int, starts: list[int], tile: int, overlap: int, margi
 # ----------------------------------------------------------------------------- restore
 
 
+def smaller_tile(tile: int, overlap: int, multiple: int) -> int | None:
+    """The next tile side to try after ``tile`` ran out of memory: half of it (a multiple
+    of ``multiple``), or None when that would not exceed the overlap."""
+    half = (tile // 2) // multiple * multiple
+    return half if half > overlap and half >= multiple else None
+
+
 @torch.no_grad()
 def restore_image(
     model: torch.nn.Module | Engine,
@@ -200,7 +212,8 @@ def restore_image(
         sensor_top_left: (top, left) of the image's top-left pixel on the sensor, in image
             pixels (image_sensor_geometry).
         sensor_size: (height, width) of the sensor in image pixels.
-        tile: largest tile side in pixels (rounded down to a multiple of model.size_multiple).
+        tile: largest tile side in pixels (rounded down to a multiple of model.size_multiple);
+            halved while a tile runs out of memory (smaller_tile; a UserWarning says so).
         overlap: least overlap of neighbouring tiles in pixels (< tile).
         margin: pixels next to an inner tile edge given weight 0 (default
             (overlap - overlap // 4) // 2, i.e. a linear ramp over the middle quarter).
@@ -211,6 +224,10 @@ def restore_image(
 
     Returns:
         (3, H, W) float32 restored image on the CPU (not clamped).
+
+    Raises:
+        lensim.errors.OutOfMemory (field "tile") when even the smallest tile the overlap
+        allows runs out of memory.
     """
     if image.dim() != 3 or image.shape[0] != 3:
         raise ValueError(f"image must be (3, H, W), got {tuple(image.shape)}")
@@ -224,14 +241,52 @@ def restore_image(
     if overlap - 2 * margin < 1 and overlap > 0:
         raise ValueError(f"overlap ({overlap}) must exceed 2 * margin ({margin})")
     overlap_eff = max(overlap, 2 * margin + 1)
+    out = torch.zeros(3, *image.shape[1:], dtype=torch.float32)
+    while True:
+        try:
+            return _restore_tiles(
+                engine, image, out, (sensor_top_left, sensor_size), (tile, overlap_eff, margin), progress, settings
+            )
+        except Exception as e:  # noqa: BLE001  (PyTorch's and onnxruntime's allocation failures)
+            if not out_of_memory(e):
+                raise
+            smaller = smaller_tile(tile, overlap_eff, m)
+            if smaller is None:
+                raise OutOfMemory(
+                    None,
+                    "tile",
+                    f"not enough memory for tiles of {tile} pixels, the smallest that an overlap of "
+                    f"{overlap_eff} pixels allows",
+                ) from None
+            warnings.warn(
+                f"not enough memory for tiles of {tile} pixels; restoring with tiles of {smaller} pixels",
+                UserWarning,
+                stacklevel=2,
+            )
+            tile = smaller
+            out.zero_()
+
+
+def _restore_tiles(
+    engine: Engine,
+    image: torch.Tensor,
+    out: torch.Tensor,
+    geometry: tuple[tuple[float, float], tuple[float, float]],
+    tiling: tuple[int, int, int],
+    progress: Callable[[int, int], None] | None,
+    settings: torch.Tensor | None,
+) -> torch.Tensor:
+    """restore_image's pass over its tiles, accumulated into ``out`` (zeros, (3, H, W));
+    geometry: (sensor top-left, sensor size); tiling: (tile, overlap, margin)."""
+    top, left = (float(v) for v in geometry[0])
+    sh, sw = (float(v) for v in geometry[1])
+    tile, overlap, margin = tiling
+    m = engine.size_multiple
     _, h, w = image.shape
-    ys = tile_starts(h, tile, overlap_eff, m)
-    xs = tile_starts(w, tile, overlap_eff, m)
-    wy = _axis_weights(h, ys, tile, overlap_eff, margin)
-    wx = _axis_weights(w, xs, tile, overlap_eff, margin)
-    out = torch.zeros(3, h, w, dtype=torch.float32)
-    top, left = float(sensor_top_left[0]), float(sensor_top_left[1])
-    sh, sw = float(sensor_size[0]), float(sensor_size[1])
+    ys = tile_starts(h, tile, overlap, m)
+    xs = tile_starts(w, tile, overlap, m)
+    wy = _axis_weights(h, ys, tile, overlap, margin)
+    wx = _axis_weights(w, xs, tile, overlap, margin)
     total, done = len(ys) * len(xs), 0
     device, dtype = engine.device, engine.dtype
     vec = batch_settings(settings, 1, engine.settings_dim, torch.empty(0, device=device, dtype=dtype))
@@ -260,5 +315,6 @@ __all__ = [
     "default_margin",
     "image_sensor_geometry",
     "restore_image",
+    "smaller_tile",
     "tile_starts",
 ]
