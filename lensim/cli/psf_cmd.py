@@ -33,6 +33,7 @@ from lensim.cli.validate import (
     input_folder,
     output_file,
     output_folder,
+    pixel_pitch_um,
     positive,
     scheduler_address,
 )
@@ -286,7 +287,7 @@ def _check_bank_options(
 ) -> None:
     """psf bank's numbers, method and output folder, before any work."""
     if pixel_um is not None:
-        positive(pixel_um, "--pixel-um", "um", "a pixel pitch")
+        pixel_pitch_um(pixel_um)
     if kernel:
         at_least(kernel, 1, "--kernel", "px", "a kernel size")
     choice(method, METHODS, "--method")

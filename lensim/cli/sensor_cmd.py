@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from lensim.cli.common import console, print_json
-from lensim.cli.validate import output_file, positive
+from lensim.cli.validate import output_file, pixel_pitch_um
 
 sensor_app = typer.Typer(help="Sensor profiles for real cameras.", no_args_is_help=True)
 
@@ -50,7 +50,7 @@ def from_raw(
         raise InputError(str(output), None, "expected a .yaml, .yml or .json file name for the profile")
     output_file(output)
     if pixel_um is not None:
-        positive(pixel_um, "--pixel-um", "um", "a pixel pitch")
+        pixel_pitch_um(pixel_um)
     raw = read_raw(file)
     noise = noise_from_frames(raw, read_raw(dark) if dark else None, [read_raw(f) for f in flat or []])
     data = profile_dict_from_raw(raw, pixel_um, noise, name)

@@ -168,6 +168,17 @@ def wavelength_nm(value: float, option: str = "--wavelength-nm") -> float:
     return in_range(value, low, high, option, "nm", "a wavelength")
 
 
+def pixel_pitch_um(value: float, option: str = "--pixel-um") -> float:
+    """A sensor pixel pitch in micrometres within lensim.sensor.profile.PIXEL_PITCH_RANGE_UM."""
+    from lensim.sensor.profile import PIXEL_PITCH_RANGE_UM, pitch_out_of_range
+
+    finite(value, option, "um")
+    low, high = PIXEL_PITCH_RANGE_UM
+    if not low <= value <= high:
+        raise InputError(option, None, pitch_out_of_range(value))
+    return value
+
+
 # ---------------------------------------------------------------- names
 
 
@@ -243,6 +254,7 @@ __all__ = [
     "input_folder",
     "output_file",
     "output_folder",
+    "pixel_pitch_um",
     "positive",
     "scheduler_address",
     "wavelength_nm",

@@ -20,6 +20,9 @@ ApertureType = Literal["epd", "fno", "stop_semi_diameter"]
 FieldType = Literal["angle", "object_height", "paraxial_image_height", "real_image_height"]
 APERTURE_TYPES = ("epd", "fno", "stop_semi_diameter")
 FIELD_TYPES = ("angle", "object_height", "paraxial_image_height", "real_image_height")
+#: the largest gap between two surfaces (mm): 1 km, far beyond any lens or telescope; a
+#: larger thickness is a typo (1e9 for 1e1) that would otherwise show as a failed ray
+MAX_THICKNESS_MM = 1e6
 
 
 @dataclass
@@ -134,6 +137,11 @@ class Lens:
         apertures and aspheric powers in range. medium, direction: after the surface."""
         if not math.isfinite(s.thickness):
             raise self._err(f"surfaces[{i}].thickness", f"expected a finite number, got {s.thickness}")
+        if abs(s.thickness) > MAX_THICKNESS_MM:
+            raise self._err(
+                f"surfaces[{i}].thickness",
+                f"expected at most {MAX_THICKNESS_MM:g} mm (1 km) between two surfaces, got {s.thickness:g} mm",
+            )
         if not math.isfinite(s.curvature) or not math.isfinite(s.conic):
             raise self._err(f"surfaces[{i}]", "expected finite curvature and conic")
         if not isinstance(medium, Air) and s.thickness * direction < 0:

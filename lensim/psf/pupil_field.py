@@ -24,7 +24,7 @@ from lensim.optics.aiming import Aiming, generate_rays, object_field, trace_chie
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import ParaxialData, paraxial_data
 from lensim.optics.pupil import square_grid_full
-from lensim.optics.trace import DTYPE, trace
+from lensim.optics.trace import DTYPE, MISSED, OK, TIR, VIGNETTED, trace
 
 
 @dataclass
@@ -130,6 +130,8 @@ class _ImageRays:
     n_img: float
     samples: int
     aim: torch.Tensor | None
+    status: torch.Tensor  # (N,) each ray's trace status (lensim.optics.trace: OK, MISSED, ...)
+    failed_at: torch.Tensor  # (N,) the surface where a failed ray failed
 
     def moved(self, dz: float) -> _ImageRays:
         """The same rays on a plane dz (mm, along +z) from the image plane: each ray carried
@@ -162,7 +164,8 @@ def _trace_grid(
     rays, wl = generate_rays(lens, [launch], all_pts, [wavelength_um], aiming, para, start)
     start_pos, start_dir = rays.position[0, 0, 1:].clone(), rays.direction[0, 0, 1:].clone()
     ref = trace_chief_rays(lens, rays.select(0), wl, [launch], aiming, para).rays
-    out = trace(lens, rays.select(slice(1, None)), wl).rays
+    traced = trace(lens, rays.select(slice(1, None)), wl)
+    out = traced.rays
     return _ImageRays(
         pts=pts,
         inside=inside,
@@ -178,6 +181,8 @@ def _trace_grid(
         n_img=float(lens.indices([wavelength_um])[-1, 0]),
         samples=samples,
         aim=rays.entrance_xy,
+        status=traced.status[0, 0],
+        failed_at=traced.failed_at[0, 0],
     )
 
 
@@ -218,11 +223,50 @@ def pupil_fields_through_focus(
     return [_on_sphere(lens, traced.moved(direction * dz), field, wavelength_um, para) for dz in shifts_mm]
 
 
+#: the fewest pupil rays that must reach the image (and the reference sphere) for a PSF
+MIN_RAYS = 16
+#: what happened to the rays lost, by trace status
+_LOST = {
+    MISSED: "miss the surface",
+    TIR: "are totally internally reflected",
+    VIGNETTED: "are vignetted by its aperture",
+}
+
+
+def _too_few_rays(
+    lens: Lens, tr: _ImageRays, reached: torch.Tensor, field: float, wavelength_um: float
+) -> RayTraceError:
+    """The one line for a pupil whose rays (nearly) all fail: how many reach the image and
+    the surface that stops most of the others, with its clear semi-diameter (a stop or a
+    surface with a tiny clear aperture is named, not the pupil sampling)."""
+    n, k = int(tr.inside.sum()), int(reached.sum())
+    lost = tr.inside & ~reached & (tr.status != OK)
+    what = f"only {k} of the {n} pupil rays of field {field:g} at {wavelength_um * 1e3:g} nm reach the image"
+    if not bool(lost.any()):
+        return RayTraceError(f"{lens.source}: fields: {what}; expected at least {MIN_RAYS} (raise the pupil samples)")
+    at = tr.failed_at[lost].long()
+    surf = int(torch.bincount(at).argmax())
+    status = int(torch.bincount(tr.status[lost].long()[at == surf]).argmax())
+    others = f"the others {_LOST.get(status, 'fail')}"
+    if surf >= lens.num_surfaces:
+        return RayTraceError(f"{lens.source}: image: {what}, {others}; expected the beam to reach the image plane")
+    s = lens.surfaces[surf]
+    name = "the stop, " if s.is_stop else ""
+    aperture = "no clear semi-diameter" if s.clear_radius is None else f"clear semi-diameter {s.clear_radius:g} mm"
+    return RayTraceError(
+        f"{lens.source}: surfaces[{surf}] ({name}surface {surf + 1} in lens info, {aperture}): {what}, "
+        f"{others} there; expected a clear aperture that passes the beam of the lens's aperture "
+        f"({lens.aperture_type} {lens.aperture_value:g})"
+    )
+
+
 def _on_sphere(lens: Lens, tr: _ImageRays, field: float, wavelength_um: float, para: ParaxialData) -> PupilField:
     """The traced grid carried to the exit-pupil reference sphere (the module docstring)."""
     pts, inside, n_img = tr.pts, tr.inside, tr.n_img
     chief, chief_dir, chief_opl = tr.chief, tr.chief_dir, tr.chief_opl
     pos, dirs, opl, valid = tr.pos, tr.dirs, tr.opl, tr.valid
+    if int(valid.sum()) < MIN_RAYS:
+        raise _too_few_rays(lens, tr, valid, field, wavelength_um)
     start_pos, start_dir = tr.start_pos, tr.start_dir
     # reference sphere: centre at the chief-ray image point, through the chief ray's
     # crossing of the paraxial exit-pupil plane
@@ -262,11 +306,8 @@ def _on_sphere(lens: Lens, tr: _ImageRays, field: float, wavelength_um: float, p
     area = _fill(area, ok_grid).reshape(-1)
     sel = valid
     transmission = float(power[sel].sum())
-    if int(sel.sum()) < 16:
-        raise RayTraceError(
-            f"{lens.source}: fields: fewer than 16 rays of field {field:g} reach the image; "
-            "expected an unvignetted pupil (or raise the pupil samples)"
-        )
+    if int(sel.sum()) < MIN_RAYS:
+        raise _too_few_rays(lens, tr, sel, field, wavelength_um)
     return PupilField(
         points=q[sel],
         directions=dirs[sel],

@@ -245,6 +245,20 @@ class SensorProfile:
 # ---------------------------------------------------------------- validation helpers
 
 
+#: the pixel pitches (um) a sensor may have: camera and phone sensors span about 0.5 to 10
+#: um; a pitch far below the wavelength no lens resolves (1e-6 is a pitch in metres typed
+#: as micrometres), and one of 100 um is a coarse thermal sensor's
+PIXEL_PITCH_RANGE_UM = (0.1, 100.0)
+
+
+def pitch_out_of_range(pitch_um: float) -> str:
+    """What a pixel pitch outside PIXEL_PITCH_RANGE_UM is told (the message of the error
+    naming the file's pixel_pitch_um or the --pixel-um option)."""
+    low, high = PIXEL_PITCH_RANGE_UM
+    hint = f" (in micrometres: {pitch_um:g} m would be {pitch_um * 1e6:g} um)" if pitch_um < 1e-3 else ""
+    return f"expected a pixel pitch between {low:g} and {high:g} um, got {pitch_um:g} um{hint}"
+
+
 def _number(src: str | None, fld: str, value: Any, positive: bool = False, nonneg: bool = False) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise InputError(src, fld, f"expected a number, got {value!r}")
@@ -452,6 +466,9 @@ def sensor_from_dict(data: Any, source: str | None = None) -> SensorProfile:
             raise InputError(src, k, f"expected text, got {type(data[k]).__name__}")
 
     pitch = _number(src, "pixel_pitch_um", data["pixel_pitch_um"], positive=True)
+    low, high = PIXEL_PITCH_RANGE_UM
+    if not low <= pitch <= high:
+        raise InputError(src, "pixel_pitch_um", pitch_out_of_range(pitch))
     res = data["resolution"]
     if not isinstance(res, (list, tuple)) or len(res) != 2:
         raise InputError(src, "resolution", f"expected [width, height] in pixels, got {res!r}")
