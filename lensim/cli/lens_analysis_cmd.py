@@ -53,6 +53,13 @@ ZERNIKE_MAX_TERMS = {"noll": 231, "fringe": 37}
 FIELD_OPTION = typer.Option(None, "--field", help=FIELD_HELP)
 FIELD_DEG_OPTION = typer.Option(None, "--field-deg", help=FIELD_DEG_HELP)
 IMAGE_HEIGHT_OPTION = typer.Option(None, "--image-height-mm", help=IMAGE_HEIGHT_HELP)
+ONE_FIELD_OPTION = typer.Option(
+    None, "--field", help="Normalized field, 0..1 of the lens's maximum field along +y (one field; default 0, on axis)."
+)
+ONE_FIELD_DEG_OPTION = typer.Option(None, "--field-deg", help="The field as an object-space angle (deg, below 90).")
+ONE_IMAGE_HEIGHT_OPTION = typer.Option(
+    None, "--image-height-mm", help="The field as the real chief ray's image height (mm)."
+)
 CURVES_FIELD_HELP = FIELD_HELP.replace("Default: the lens's own fields.", "Default: 21 fields from 0 to the maximum.")
 CURVES_FIELD_OPTION = typer.Option(None, "--field", help=CURVES_FIELD_HELP)
 
@@ -219,9 +226,9 @@ def wavefront_command(
     json_out: bool = typer.Option(
         False, "--json", help="Print RMS, PV, Strehl (piston and tilt removed) and the Zernike coefficients as JSON."
     ),
-    field: list[float] | None = FIELD_OPTION,
-    field_deg: list[float] | None = FIELD_DEG_OPTION,
-    image_height_mm: list[float] | None = IMAGE_HEIGHT_OPTION,
+    field: list[float] | None = ONE_FIELD_OPTION,
+    field_deg: list[float] | None = ONE_FIELD_DEG_OPTION,
+    image_height_mm: list[float] | None = ONE_IMAGE_HEIGHT_OPTION,
     wavelength: float | None = typer.Option(None, "--wavelength-nm", help="Wavelength in nm (default: the primary)."),
     zernike: str = typer.Option(
         "noll",
