@@ -40,7 +40,15 @@ DAMAGE: dict[str, Callable[[Path], None]] = {
 }
 
 
-@pytest.mark.parametrize("damage", list(DAMAGE))
+def _quick(values: list, quick: set) -> list:
+    """The values as parameters, those outside ``quick`` under -m slow (the default run keeps a few)."""
+    return [
+        v if v in quick else pytest.param(*(v if isinstance(v, tuple) else (v,)), marks=pytest.mark.slow)
+        for v in values
+    ]
+
+
+@pytest.mark.parametrize("damage", _quick(list(DAMAGE), {"flipped byte"}))
 def test_a_damaged_field_of_a_bank_is_recomputed(fault_world, tmp_path, damage):
     out = tmp_path / "bank"
     shutil.copytree(fault_world.bank, out)
@@ -63,7 +71,10 @@ def cached(tmp_path_factory):
 
 @pytest.mark.parametrize(
     ("entry", "damage"),
-    [("field_0001.npz", d) for d in DAMAGE] + [("manifest.json", "garbage"), ("manifest.json", "truncated")],
+    _quick(
+        [("field_0001.npz", d) for d in DAMAGE] + [("manifest.json", "garbage"), ("manifest.json", "truncated")],
+        {("field_0001.npz", "truncated"), ("manifest.json", "garbage")},
+    ),
 )
 def test_a_damaged_bank_cache_entry_is_recomputed(cached, entry, damage):
     import numpy as np
@@ -83,7 +94,10 @@ def test_a_damaged_bank_cache_entry_is_recomputed(cached, entry, damage):
 
 @pytest.mark.parametrize(
     "damage",
-    ["garbage record", "empty record", "truncated record", "crop gone", "empty crop", "truncated crop"],
+    _quick(
+        ["garbage record", "empty record", "truncated record", "crop gone", "empty crop", "truncated crop"],
+        {"garbage record", "truncated crop"},
+    ),
 )
 def test_a_damaged_photo_record_of_a_dataset_is_recomputed(fault_world, tmp_path, damage):
     out = tmp_path / "pairs"

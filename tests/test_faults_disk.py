@@ -40,7 +40,7 @@ def _check_failure(world, job: str, out: Path, before: dict[str, bytes], code: i
     assert all(after.get(k) == v for k, v in before.items()), "a file that was there before changed"
 
 
-@pytest.mark.parametrize("job", JOBS)
+@pytest.mark.parametrize("job", [j if j != "grid" else pytest.param(j, marks=pytest.mark.slow) for j in JOBS])
 def test_disk_full_fails_in_one_line_and_the_rerun_finishes_the_job(fault_world, tmp_path, capsys, monkeypatch, job):
     out = tmp_path / "out"
     before = _start(out)
