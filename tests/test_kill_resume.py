@@ -5,11 +5,8 @@ an uninterrupted one. The jobs run as `lensim` subprocesses on small sizes."""
 from __future__ import annotations
 
 import json
-import os
 import random
 import signal
-import subprocess
-import sys
 import time
 import warnings
 from pathlib import Path
@@ -18,73 +15,12 @@ import numpy as np
 import pytest
 import torch
 
-import lensim
 from cli_runner import run_cli
+from faults import alive, lensim_process, wait_for, workers_of
 from lensim.assets.images import sample_image_path
 from lensim.images import read_image, write_image
 from lensim.restore.run_log import read_csv
 from test_train import make_pairs
-
-ROOT = Path(lensim.__file__).resolve().parents[1]  # the lensim the subprocesses run
-
-
-def lensim_process(args: list[str], **kw) -> subprocess.Popen:
-    """`python -m lensim ARGS` in a subprocess (the lensim under test, output captured)."""
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1"}
-    return subprocess.Popen(
-        [sys.executable, "-m", "lensim", *args],
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        **kw,
-    )
-
-
-def children(pid: int) -> list[int]:
-    """The live (not zombie) child processes of ``pid`` (from /proc)."""
-    found = []
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            text = stat.read_text()
-        except OSError:
-            continue
-        fields = text[text.rindex(")") + 2 :].split()  # after "pid (comm) ": state, ppid, ...
-        if fields[0] != "Z" and int(fields[1]) == pid:
-            found.append(int(stat.parent.name))
-    return found
-
-
-def alive(pid: int) -> bool:
-    """Whether ``pid`` runs (a zombie waiting for its new parent to reap it does not)."""
-    try:
-        text = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return False
-    return text[text.rindex(")") + 2] != "Z"
-
-
-def wait_for(condition, timeout_s: float, poll_s: float = 0.05) -> bool:
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        if condition():
-            return True
-        time.sleep(poll_s)
-    return condition()
-
-
-def workers_of(pid: int, marker: str) -> list[int]:
-    """Children of ``pid`` whose command line holds ``marker``."""
-    out = []
-    for child in children(pid):
-        try:
-            cmd = Path(f"/proc/{child}/cmdline").read_bytes().replace(b"\0", b" ").decode()
-        except OSError:
-            continue
-        if marker in cmd:
-            out.append(child)
-    return out
-
 
 # a bank whose fields take several seconds each (61 wavelengths): a worker that outlived
 # its parent would still be computing long after the kill
