@@ -87,7 +87,8 @@ def test_many_banks_and_a_grid_on_one_cluster_are_the_banks_computed_here(schedu
     axes = GridAxes(fno=(5.6, 8.0))
     requests = [
         BankRequest(lens, 4.0, settings, out_dir=tmp_path / "a"),
-        BankRequest(lens.with_changes(aperture_value=5.0), 4.0, settings, out_dir=tmp_path / "b"),  # a second lens (F/10)
+        # a second lens: the Cooke triplet at F/10
+        BankRequest(lens.with_changes(aperture_value=5.0), 4.0, settings, out_dir=tmp_path / "b"),
         BankRequest(lens, 4.0, settings, shooting=axes, out_dir=tmp_path / "g"),
     ]
     with warnings.catch_warnings():
