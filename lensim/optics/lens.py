@@ -42,6 +42,10 @@ class Lens:
     changes (a focus group), or None for unit focusing (the image plane moves);
     focus_compensator: another air gap that changes by the opposite amount, so the group
     moves between the two (None: only focus_thickness changes). lensim.optics.shooting.
+    image_tilt: the sensor's tilt (deg) about x and y at the image point on the axis
+    (lensim.optics.pose; surfaces carry their own decentre and tilt in Surface.pose).
+    as_built: the record of a toleranced draw or a calibration (parameters, values and
+    uncertainties; lensim.calibrate), kept with the lens file.
     """
 
     surfaces: list[Surface]
@@ -62,6 +66,8 @@ class Lens:
     configurations: dict[str, dict[int, float]] = field(default_factory=dict)
     focus_thickness: int | None = None
     focus_compensator: int | None = None
+    image_tilt: tuple[float, float] = (0.0, 0.0)
+    as_built: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.wavelength_weights is None:
@@ -266,6 +272,12 @@ class Lens:
     @property
     def infinite_object(self) -> bool:
         return math.isinf(self.object_distance)
+
+    @property
+    def has_poses(self) -> bool:
+        """True when a surface or the image plane is decentred or tilted: the lens is no
+        longer rotationally symmetric (fields still lie along +y)."""
+        return any(s.has_pose for s in self.surfaces) or any(v != 0.0 for v in self.image_tilt)
 
     @property
     def stop_index(self) -> int:

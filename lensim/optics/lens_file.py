@@ -13,7 +13,7 @@
       - {radius: 20.29192, thickness: 4.75041, stop: true}
       - {radius: 5.6, conic: -0.8, asphere: {r4: 1.1e-5, r6: 1.8e-7}, clear_semi_diameter: 3.2}
       - {radius: -120, thickness: -30, mirror: true, obscuration: 5}
-    image: {defocus: 0.0}
+    image: {defocus: 0.0}          # optional tilt: [x, y] (deg), a tilted sensor
     configurations:                # optional: zoom/focus positions, chosen by name or 1-based number
       wide: {thicknesses: {1: 6.0, 4: 40.2}}   # 0-based surface index: thickness (mm)
       tele: {thicknesses: {1: 0.8, 4: 52.7}}
@@ -25,7 +25,10 @@ or dummy surface behind the next vertex, as in Zemax), material (glass name,
 name@Catalog, air, {nd, vd[, dpgf]} model glass or {n} constant index), conic, asphere
 ({r1..r20: coefficient}; even powers only: an even asphere, any odd power: an odd
 asphere), clear_semi_diameter (vignetting), obscuration (central
-obscuration radius), semi_diameter (drawing only), stop, mirror, comment.
+obscuration radius), semi_diameter (drawing only), stop, mirror, comment, and for an
+as-built or toleranced lens decentre ([x, y] mm) and tilt ([x, y] deg about the vertex;
+lensim.optics.pose). as_built: the record of a tolerance draw or a calibration (free form,
+kept with the lens).
 """
 
 from __future__ import annotations
@@ -57,6 +60,7 @@ TOP_KEYS = {
     "source",
     "configurations",
     "focus",
+    "as_built",
 }
 FOCUS_KEYS = {"thickness", "compensator"}
 CONFIGURATION_KEYS = {"thicknesses"}
@@ -73,6 +77,8 @@ SURFACE_KEYS = {
     "stop",
     "mirror",
     "comment",
+    "decentre",
+    "tilt",
 }
 
 
@@ -146,7 +152,10 @@ def lens_from_dict(data: dict, source: str = "<lens>") -> Lens:
         raise InputError(src, "surfaces", "expected a non-empty list of surfaces")
     notes: list[str] = list(data.get("notes", []))
     surfaces = [_surface_from_data(src, i, sd, notes) for i, sd in enumerate(surfaces_data)]
-    image = _check_keys(src, "image", data.get("image", {}) or {}, {"defocus", "clear_semi_diameter"})
+    image = _check_keys(src, "image", data.get("image", {}) or {}, {"defocus", "clear_semi_diameter", "tilt"})
+    as_built = data.get("as_built", {}) or {}
+    if not isinstance(as_built, dict):
+        raise InputError(src, "as_built", f"expected a mapping, got {type(as_built).__name__}")
     lens = Lens(
         surfaces=surfaces,
         aperture_type=str(ap.get("type", "epd")),
@@ -169,8 +178,25 @@ def lens_from_dict(data: dict, source: str = "<lens>") -> Lens:
         notes=notes,
         configurations=_configurations_from_data(src, data.get("configurations", {})),
         **_focus_from_data(src, data.get("focus")),
+        image_tilt=_pair(src, "image.tilt", image.get("tilt", [0.0, 0.0])),
+        as_built=as_built,
     )
     return lens
+
+
+def _pair(src: str, field: str, value: Any) -> tuple[float, float]:
+    """An [x, y] pair of numbers (a decentre in mm or a tilt in degrees)."""
+    if not isinstance(value, list | tuple) or len(value) != 2:
+        raise InputError(src, field, f"expected a pair [x, y] of numbers, got {value!r}")
+    x, y = (_number(src, f"{field}[{i}]", v) for i, v in enumerate(value))
+    if abs(x) > MAX_POSE or abs(y) > MAX_POSE:
+        raise InputError(src, field, f"expected values within +-{MAX_POSE:g} (mm or deg), got [{x:g}, {y:g}]")
+    return x, y
+
+
+#: the largest decentre (mm) or tilt (deg) a lens file may give: beyond it the "as-built"
+#: lens is another lens (and a tilt near 90 deg would turn a surface edge-on)
+MAX_POSE = 45.0
 
 
 def _wavelengths_from_data(src: str, data: Any) -> tuple[list[float], list, int]:
@@ -252,6 +278,10 @@ def _surface_from_data(src: str, i: int, sd: Any, notes: list[str]) -> Surface:
         is_stop=bool(sd.get("stop", False)),
         is_mirror=bool(sd.get("mirror", False)),
         comment=str(sd.get("comment", "")),
+        pose=(
+            *_pair(src, f + ".decentre", sd.get("decentre", [0.0, 0.0])),
+            *_pair(src, f + ".tilt", sd.get("tilt", [0.0, 0.0])),
+        ),
         **opt,
     )
 
@@ -333,6 +363,10 @@ def _surface_to_dict(s: Surface) -> dict[str, Any]:
     d.update({key: True for key, on in (("stop", s.is_stop), ("mirror", s.is_mirror)) if on})
     if s.comment:
         d["comment"] = s.comment
+    if s.pose[:2] != (0.0, 0.0):
+        d["decentre"] = [float(v) for v in s.pose[:2]]
+    if s.pose[2:] != (0.0, 0.0):
+        d["tilt"] = [float(v) for v in s.pose[2:]]
     return d
 
 
@@ -357,6 +391,10 @@ def lens_to_dict(lens: Lens) -> dict:
         out["object"]["material"] = _material_spec(lens.object_material)
     if lens.image_clear_radius is not None:
         out["image"]["clear_semi_diameter"] = lens.image_clear_radius
+    if any(lens.image_tilt):
+        out["image"]["tilt"] = [float(v) for v in lens.image_tilt]
+    if lens.as_built:
+        out["as_built"] = lens.as_built
     if lens.notes:
         out["notes"] = list(lens.notes)
     if lens.configurations:

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import torch
 
 from lensim.optics.materials import Air, Material
+from lensim.optics.pose import NO_POSE, Pose
 
 NEWTON_MAX_ITER = 30
 NEWTON_TOL_MM = 1e-12
@@ -71,6 +72,8 @@ class Surface:
     any odd power: an odd asphere. clear_radius: semi-diameter of
     the clear aperture that vignettes rays (None: unlimited). obscuration_radius: central
     obscuration (rays with r below it are blocked). semi_diameter: drawn size only.
+    pose: (decentre x, decentre y mm, tilt x, tilt y deg) of an as-built or toleranced
+    surface (lensim.optics.pose); the nominal (0, 0, 0, 0) keeps the lens symmetric.
     """
 
     curvature: float = 0.0
@@ -84,6 +87,12 @@ class Surface:
     is_stop: bool = False
     is_mirror: bool = False
     comment: str = ""
+    pose: Pose = NO_POSE
+
+    @property
+    def has_pose(self) -> bool:
+        """True when the surface is decentred or tilted (lensim.optics.pose)."""
+        return any(v != 0.0 for v in self.pose)
 
     @property
     def radius(self) -> float:

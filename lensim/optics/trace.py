@@ -20,6 +20,7 @@ import numpy as np
 import torch
 
 from lensim.optics.lens import Lens
+from lensim.optics.pose import to_global, to_local
 from lensim.optics.surfaces import Surface, sqrt_nonneg
 
 DTYPE = torch.float64
@@ -120,11 +121,14 @@ def trace_surface(
     Returns (new rays, status code for rays that failed here (OK otherwise)).
     """
     pos, d = rays.position, rays.direction
+    if surf.has_pose:
+        local, d = to_local(surf.pose, z_vertex, pos, d)
+    else:
+        local = pos.clone()
+        local[..., 2] = local[..., 2] - z_vertex
     dz = d[..., 2]
     ok_dir = dz.abs() > 1e-12
     safe_dz = torch.where(ok_dir, dz, torch.ones_like(dz))
-    local = pos.clone()
-    local[..., 2] = local[..., 2] - z_vertex
     t0 = -local[..., 2] / safe_dz
     p1 = local + t0.unsqueeze(-1) * d
     t1, hit = surf.intersect(p1, d)
@@ -151,11 +155,14 @@ def trace_surface(
             valid = valid & ~tir
     else:
         new_d = d
-    new_pos = new_local.clone()
-    new_pos[..., 2] = new_pos[..., 2] + z_vertex
+    if surf.has_pose:
+        new_pos, new_d = to_global(surf.pose, z_vertex, new_local, new_d)
+    else:
+        new_pos = new_local.clone()
+        new_pos[..., 2] = new_pos[..., 2] + z_vertex
     # keep invalid rays finite and inert
     new_pos = torch.where(valid.unsqueeze(-1), new_pos, pos)
-    new_d = torch.where(valid.unsqueeze(-1), new_d, d)
+    new_d = torch.where(valid.unsqueeze(-1), new_d, rays.direction)
     opl = torch.where(valid, opl, rays.opl)
     return Rays(new_pos, new_d, opl, valid), status
 
@@ -197,7 +204,7 @@ def trace_reference(
         if record:
             positions.append(rays.position)
     if to_image and end == lens.num_surfaces:
-        image = Surface(clear_radius=lens.image_clear_radius)
+        image = Surface(clear_radius=lens.image_clear_radius, pose=(0.0, 0.0, *lens.image_tilt))
         rays, st = trace_surface(
             image,
             float(zv[-1]),
@@ -564,10 +571,11 @@ def trace(
     and stop: one that misses a surface keeps its state from before that surface, one that
     is vignetted or totally internally reflected stops on the surface (direction unchanged).
     Runs the chunked fast path below; trace_reference() is the plain one (same results for
-    valid rays to rounding) and is used when an input requires gradients.
+    valid rays to rounding) and is used when an input requires gradients or a surface or the
+    image plane is decentred or tilted (lensim.optics.pose).
     """
     end = lens.num_surfaces if end is None else end
-    if any(t.requires_grad for t in (rays.position, rays.direction, rays.opl)):
+    if lens.has_poses or any(t.requires_grad for t in (rays.position, rays.direction, rays.opl)):
         return trace_reference(lens, rays, wavelength_um, start, end, to_image, record, apertures, indices)
     n = media_indices(lens, wavelength_um) if indices is None else indices
     zv = lens.vertex_z()

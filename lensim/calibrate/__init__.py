@@ -1,0 +1,1 @@
+"""Calibration and tolerancing: tolerance draws, perturbed lenses, as-built fitting."""

@@ -1,0 +1,157 @@
+"""Decentred and tilted surfaces (analytic truth), tolerance files and seeded draws."""
+
+import dataclasses
+import math
+
+import pytest
+import torch
+
+from lensim.calibrate.tolerances import (
+    draw,
+    drawn_lens,
+    elements,
+    perturbed_lens,
+    tolerances_from_dict,
+)
+from lensim.errors import InputError
+from lensim.optics.lens import Lens
+from lensim.optics.lens_file import lens_from_dict, lens_to_dict, load_lens
+from lensim.optics.materials import ConstantIndex
+from lensim.optics.pose import rotation
+from lensim.optics.surfaces import Surface
+from lensim.optics.trace import Rays, trace, trace_reference
+
+TOL = {
+    "elements": {"all": {"decentre_mm": 0.02, "tilt_deg": 0.05, "spacing_mm": 0.01}, "2": {"decentre_mm": 0.05}},
+    "image": {"focus_mm": 0.02, "tilt_deg": 0.03},
+}
+
+
+def _rays(xy: torch.Tensor, z0: float = -5.0) -> Rays:
+    n = xy.shape[0]
+    pos = torch.cat([xy, torch.full((n, 1), z0, dtype=torch.float64)], dim=1)
+    d = torch.zeros(n, 3, dtype=torch.float64)
+    d[:, 2] = 1.0
+    return Rays(pos, d, torch.zeros(n, dtype=torch.float64), torch.ones(n, dtype=torch.bool))
+
+
+def _wl(n: int) -> torch.Tensor:
+    return torch.full((n,), 0.5876, dtype=torch.float64)
+
+
+def test_decentring_every_surface_shifts_the_image_rigidly():
+    # translation equivariance: the whole lens moved by (dx, dy) with rays moved by the same
+    lens = load_lens("cooke_triplet", warn=False)
+    dx, dy = 0.031, -0.017
+    moved = lens.with_changes(surfaces=[dataclasses.replace(s, pose=(dx, dy, 0.0, 0.0)) for s in lens.surfaces])
+    xy = torch.tensor([[0.0, 0.0], [1.0, 2.0], [-3.0, 0.5], [2.5, -2.5]], dtype=torch.float64)
+    a = trace(lens, _rays(xy), _wl(4))
+    b = trace(moved, _rays(xy + torch.tensor([dx, dy], dtype=torch.float64)), _wl(4))
+    assert bool(b.rays.valid.all())
+    shift = b.rays.position[:, :2] - a.rays.position[:, :2]
+    assert torch.allclose(shift, torch.tensor([dx, dy], dtype=torch.float64).expand(4, 2), atol=1e-11)
+    assert torch.allclose(b.rays.direction, a.rays.direction, atol=1e-13)
+    assert torch.allclose(b.rays.opl, a.rays.opl, atol=1e-11)
+
+
+def test_tilted_plate_displaces_a_ray_by_the_textbook_amount():
+    # both faces tilted by theta about their own vertices: parallel faces t cos(theta) apart;
+    # a ray along z leaves parallel, displaced by t' sin(theta) (1 - cos(theta) / sqrt(n^2 - sin^2))
+    n, t, theta = 1.6, 8.0, 7.0
+    plate = [
+        Surface(0.0, t, ConstantIndex(n), is_stop=True, pose=(0.0, 0.0, theta, 0.0)),
+        Surface(0.0, 20.0, pose=(0.0, 0.0, theta, 0.0)),
+    ]
+    lens = Lens(plate, aperture_value=2.0, wavelengths_um=[0.5876])
+    res = trace_reference(lens, _rays(torch.zeros(1, 2, dtype=torch.float64)), _wl(1))
+    th = math.radians(theta)
+    expected = t * math.cos(th) * math.sin(th) * (1.0 - math.cos(th) / math.sqrt(n * n - math.sin(th) ** 2))
+    assert abs(res.rays.position[0, 1].item()) == pytest.approx(expected, rel=1e-12)
+    assert torch.allclose(res.rays.direction[0], torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64), atol=1e-14)
+
+
+def test_tilted_image_plane_is_where_rays_stop():
+    lens = load_lens("cooke_triplet", warn=False).with_changes(image_tilt=(0.4, -0.3))
+    xy = torch.tensor([[0.0, 3.0], [2.0, -1.0], [-4.0, 1.0]], dtype=torch.float64)
+    res = trace(lens, _rays(xy), _wl(3))
+    normal = rotation(0.4, -0.3)[:, 2]
+    vertex = torch.tensor([0.0, 0.0, float(lens.vertex_z()[-1])], dtype=torch.float64)
+    assert torch.allclose((res.rays.position - vertex) @ normal, torch.zeros(3, dtype=torch.float64), atol=1e-12)
+    # the same rays as through the nominal lens, stopped on the tilted plane along their path
+    nominal = trace(load_lens("cooke_triplet", warn=False), _rays(xy), _wl(3)).rays
+    step = res.rays.position - nominal.position
+    assert torch.allclose(
+        torch.linalg.cross(step, nominal.direction), torch.zeros(3, 3, dtype=torch.float64), atol=1e-12
+    )
+    assert float(step.norm(dim=1).max()) > 1e-7
+
+
+def test_elements_of_the_cooke_triplet_and_double_gauss():
+    assert elements(load_lens("cooke_triplet", warn=False)) == [[0, 1], [2, 3], [4, 5]]
+    dg = load_lens("double_gauss", warn=False)
+    groups = elements(dg)
+    assert all(i not in sum(groups, []) for i, s in enumerate(dg.surfaces) if s.is_stop)
+    assert len(groups) == 4  # two singlets and two cemented doublets
+
+
+def test_draws_are_reproducible_by_seed_and_index():
+    lens = load_lens("cooke_triplet", warn=False)
+    tol = tolerances_from_dict(TOL, lens)
+    a, b = draw(tol, 7, 3), draw(tol, 7, 3)
+    assert a.values == b.values
+    assert draw(tol, 8, 3).values != a.values
+    assert draw(tol, 7, 4).values != a.values
+    assert set(a.values) == set(tol.parameters())
+    for name, v in a.values.items():
+        assert abs(v) <= tol.parameters()[name]
+    assert tol.parameters()["e2.decentre_x"] == 0.05 and tol.parameters()["e1.decentre_x"] == 0.02
+    normal = tolerances_from_dict({**TOL, "distribution": "normal"}, lens)
+    vals = [v for k in range(200) for n, v in draw(normal, 1, k).values.items() if n == "e1.decentre_x"]
+    assert max(abs(v) for v in vals) <= 0.02 and 0.004 < float(torch.tensor(vals).std()) < 0.012
+
+
+def test_drawn_lens_round_trips_through_the_lens_file(tmp_path):
+    lens = load_lens("cooke_triplet", warn=False)
+    tol = tolerances_from_dict(TOL, lens)
+    out = drawn_lens(lens, tol, 5, 2)
+    assert out.has_poses and not lens.has_poses
+    assert out.as_built["seed"] == 5 and out.as_built["draw"] == 2
+    back = lens_from_dict(lens_to_dict(out), "x")
+    assert [v for s in back.surfaces for v in s.pose] == pytest.approx([v for s in out.surfaces for v in s.pose])
+    assert back.image_tilt == pytest.approx(out.image_tilt) and back.as_built == out.as_built
+    assert back.image_defocus == pytest.approx(out.image_defocus)
+
+
+def test_element_tilt_is_rigid_about_its_centre():
+    lens = load_lens("cooke_triplet", warn=False)
+    out = perturbed_lens(lens, {"e2.tilt_x": 0.1, "e1.spacing": 0.01})
+    p2, p3 = out.surfaces[2].pose, out.surfaces[3].pose
+    assert p2[2] == p3[2] == 0.1
+    assert p2[1] == pytest.approx(-p3[1]) and p2[1] != 0.0  # the vertices move opposite ways about the centre
+    assert out.surfaces[1].thickness == pytest.approx(lens.surfaces[1].thickness + 0.01)
+
+
+@pytest.mark.parametrize(
+    "data, field",
+    [
+        ({"elements": {"all": {"decenter_mm": 0.1}}}, "elements.all.decenter_mm"),
+        ({"elements": {"9": {"tilt_deg": 0.1}}}, "elements.9"),
+        ({"image": {"tilt_deg": -1}}, "image.tilt_deg"),
+        ({"shape": 1}, "tolerances.shape"),
+        ({"elements": {"1-2": {}, "2": {}}}, "elements.2"),
+    ],
+)
+def test_bad_tolerances_name_the_key(data, field):
+    lens = load_lens("cooke_triplet", warn=False)
+    with pytest.raises(InputError) as e:
+        tolerances_from_dict(data, lens, "tol.yaml")
+    assert e.value.field == field and str(e.value).startswith("tol.yaml: ")
+    if "decenter" in field:
+        assert "decentre_mm" in str(e.value)
+
+
+def test_lens_file_pose_errors():
+    data = lens_to_dict(load_lens("cooke_triplet", warn=False))
+    data["surfaces"][0]["tilt"] = [0.1]
+    with pytest.raises(InputError, match=r"surfaces\[0\]\.tilt: expected a pair"):
+        lens_from_dict(data, "lens.yaml")
