@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import typer
 from rich.table import Table
 
-from lensim.cli.common import console, print_json
-from lensim.cli.validate import choice
+from lensim.cli.bank_options import scheduler_option, workers_option
+from lensim.cli.common import console, print_json, progress_bar
+from lensim.cli.validate import at_least, choice, scheduler_address
+from lensim.errors import InputError
 
 library_app = typer.Typer(
     help="The lens library: published prescriptions for training and evaluation.", no_args_is_help=True
@@ -51,3 +55,101 @@ def list_command(
             "yes" if e.holdout else "",
         )
     console.print(t)
+
+
+@library_app.command("banks")
+def banks_command(
+    output: Path = typer.Option(..., "-o", "--output", help="The library's folder (plan.json, banks/, sensors/)."),
+    workers: int = workers_option(),
+    scheduler: str = scheduler_option(),
+    limit: int = typer.Option(None, "--limit", help="Compute at most this many banks in this run (default: all)."),
+    split: str = typer.Option("all", "--split", help="Which lenses: all, train or holdout."),
+    quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
+    json_out: bool = typer.Option(False, "--json", help="Print a summary as JSON (no progress output)."),
+) -> None:
+    """Compute the library's PSF banks: every lens wide open and two stops down, focused at
+    infinity and near, on two pixel pitches of its format (352 banks; lensim.data.library_banks).
+
+    Resumable: a rerun skips the banks already done (and those the lens cannot give,
+    listed in failed/) and finishes the rest. The fields are computed here (--workers 1),
+    on a local Dask cluster (--workers N) or on an existing one (--scheduler ADDRESS).
+
+    Example: lensim library banks -o library/ --workers 2
+    """
+    from lensim.assets.library import list_lenses
+    from lensim.data.library_banks import bank_plan, compute_library_banks
+
+    split = choice(split, SPLITS, "--split")
+    at_least(workers, 1, "--workers", what="a number of processes")
+    if limit is not None:
+        at_least(limit, 0, "--limit", what="a number of banks")
+    scheduler_address(scheduler)
+    holdout = {"all": None, "train": False, "holdout": True}[split]
+    plan = bank_plan(list_lenses(holdout=holdout))
+    with progress_bar("library banks", "banks", quiet or json_out) as report:
+        result = compute_library_banks(output, plan, workers=workers, scheduler=scheduler, limit=limit, progress=report)
+    summary = {"output": str(output), "banks": len(plan), **result.__dict__}
+    if json_out:
+        print_json(summary)
+        return
+    console.print(
+        f"{output}: {result.done + result.computed} of {len(plan)} banks done "
+        f"({result.computed} computed now, {result.failed} the lenses cannot give, {result.todo} left)",
+        highlight=False,
+    )
+
+
+@library_app.command("pairs")
+def pairs_command(
+    library: Path = typer.Argument(..., help="The library's folder (made by `lensim library banks`)."),
+    output: Path = typer.Option(..., "-o", "--output", help="The pairs' folder (photos/, pairs/<bank>/)."),
+    split: str = typer.Option("train", "--split", help="Whose banks: train (default) or holdout (evaluation pairs)."),
+    photos_per_bank: int = typer.Option(2, "--photos-per-bank", help="Training photos simulated per bank."),
+    placements: int = typer.Option(3, "--placements", help="Sensor positions per photo (centre, middle, edge)."),
+    crops: int = typer.Option(1, "--crops", help="Crops per placement."),
+    size: int = typer.Option(128, "--size", help="Crop size (pixels, even)."),
+    photo_size: int = typer.Option(384, "--photo-size", help="The photos' centre crop (pixels)."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the photo draw and the captures."),
+    limit: int = typer.Option(None, "--limit", help="Make at most this many banks' pairs in this run."),
+    workers: int = workers_option(),
+    scheduler: str = scheduler_option(),
+    quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
+    json_out: bool = typer.Option(False, "--json", help="Print a summary as JSON (no progress output)."),
+) -> None:
+    """Make training pairs from the library's banks: a few crops per bank from the built-in
+    training photos (never the unseen test photos), one pairs folder per bank.
+
+    Resumable: a rerun skips the banks whose pairs are complete and adds banks computed since.
+
+    Example: lensim library pairs library/ -o library-pairs/
+    """
+    from lensim.data.library_pairs import LibraryPairsSettings, make_library_pairs
+
+    split = choice(split, ("train", "holdout"), "--split")
+    for value, option in ((photos_per_bank, "--photos-per-bank"), (placements, "--placements"), (crops, "--crops")):
+        at_least(value, 1, option, what="a count")
+    at_least(size, 16, "--size", unit="pixels")
+    at_least(photo_size, size, "--photo-size", unit="pixels")
+    if size % 2:
+        raise InputError("<command line>", "--size", f"expected an even crop size, got {size}")
+    at_least(workers, 1, "--workers", what="a number of processes")
+    scheduler_address(scheduler)
+    settings = LibraryPairsSettings(photos_per_bank, placements, crops, size, photo_size, seed)
+    with progress_bar("library pairs", "banks", quiet or json_out) as report:
+        result = make_library_pairs(
+            library,
+            output,
+            settings,
+            holdout=split == "holdout",
+            limit=limit,
+            workers=workers,
+            scheduler=scheduler,
+            progress=report,
+        )
+    if json_out:
+        print_json({"output": str(output), **result.__dict__})
+        return
+    console.print(
+        f"{output}: pairs of {result.done + result.made} banks ({result.made} made now, {result.pairs} crops)",
+        highlight=False,
+    )

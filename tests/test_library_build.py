@@ -1,0 +1,113 @@
+"""The lens library's bank plan, bank build and pairs (lensim.data.library_banks,
+lensim.data.library_pairs): the plan's size and hold-outs, a resumed build that skips what is
+done, a bank the lens cannot give recorded and skipped, pairs that never use a held-out lens.
+
+The banks here are tiny (2 fields, one wavelength, 16 pupil samples) so that the build runs in
+seconds; the library's own settings are measured by benchmarks/library_banks.py.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import pytest
+
+import lensim.data.library_banks as lb
+from lensim.assets.library import library_entry, list_lenses
+from lensim.data.library_pairs import LibraryPairsSettings, make_library_pairs
+from lensim.errors import InputError
+from lensim.psf.bank import BankSettings, PSFBank
+from lensim.sensor.profile import load_sensor
+
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
+TINY = BankSettings(fields=2, wavelengths_nm=(550.0,), pupil_samples=16, kernel_pixels=7, ri_samples=2)
+
+
+def test_plan_has_300_banks_two_pitches_and_holdouts():
+    plan = lb.bank_plan()
+    assert len(plan) >= 300
+    assert len({b.id for b in plan}) == len(plan)
+    held = {b.lens for b in plan if b.holdout}
+    assert held == {e.name for e in list_lenses(holdout=True)}
+    assert len({library_entry(n).family for n in held}) >= 5  # lenses of different families are held out
+    for e in list_lenses():
+        mine = [b for b in plan if b.lens == e.name]
+        assert len({b.pitch_um for b in mine}) == 2
+        assert len({b.fno for b in mine}) == 2 and len({b.focus_m for b in mine}) == 2
+    # rounds: the first len(lenses) banks are one per lens
+    assert len({b.lens for b in plan[: len(list_lenses())]}) == len(list_lenses())
+
+
+def test_build_resumes_and_records_what_the_lens_cannot_give(tmp_path, monkeypatch):
+    monkeypatch.setattr(lb, "LIBRARY_BANK_SETTINGS", TINY)
+    entry = library_entry("cooke_triplet")
+    good = lb.bank_plan([entry])[0]
+    bad = dataclasses.replace(good, id="cooke_too_fast", fno=1.0)  # faster than the lens opens
+    plan = [good, bad]
+    seen = []
+    r = lb.compute_library_banks(tmp_path, plan, progress=lambda d, t: seen.append((d, t)))
+    assert (r.computed, r.failed, r.todo) == (1, 1, 0)
+    assert seen[0] == (0, 2) and seen[-1] == (2, 2)
+    assert lb.bank_state(tmp_path, good.id) == "done" and lb.bank_state(tmp_path, bad.id) == "failed"
+    assert (
+        "fno" in (tmp_path / "failed" / "cooke_too_fast.json").read_text()
+        or "F-number" in (tmp_path / "failed" / "cooke_too_fast.json").read_text()
+    )
+    sensor = load_sensor(lb.sensor_file(tmp_path, good.id))
+    bank = PSFBank.load(lb.bank_dir(tmp_path, good.id))
+    assert sensor.pixel_pitch_um == good.pitch_um == bank.pixel_pitch_um
+    assert sensor.half_diagonal_mm <= bank.radii_mm[-1]
+    # a rerun computes nothing
+    again = lb.compute_library_banks(tmp_path, plan)
+    assert (again.done, again.computed, again.failed) == (1, 0, 1)
+    assert [b.id for b, _, _ in lb.library_banks(tmp_path)] == [good.id]
+
+
+def test_build_after_a_kill_keeps_finished_fields(tmp_path, monkeypatch):
+    monkeypatch.setattr(lb, "LIBRARY_BANK_SETTINGS", TINY)
+    planned = lb.bank_plan([library_entry("cooke_triplet")])[0]
+    lb.compute_library_banks(tmp_path, [planned])
+    sensor = lb.sensor_file(tmp_path, planned.id)
+    sensor.unlink()  # as if killed after the bank's fields and before its sensor file
+    field = lb.bank_dir(tmp_path, planned.id) / "field_0000.npz"
+    before = field.stat().st_mtime_ns
+    r = lb.compute_library_banks(tmp_path, [planned])
+    assert r.computed == 1 and sensor.exists()
+    assert field.stat().st_mtime_ns == before  # not recomputed
+
+
+def test_plan_of_other_settings_is_refused(tmp_path, monkeypatch):
+    monkeypatch.setattr(lb, "LIBRARY_BANK_SETTINGS", TINY)
+    lb.write_plan(tmp_path, [])
+    monkeypatch.setattr(lb, "LIBRARY_BANK_SETTINGS", dataclasses.replace(TINY, pupil_samples=32))
+    with pytest.raises(InputError, match="other bank settings"):
+        lb.write_plan(tmp_path, [])
+
+
+def test_near_focus_and_pitches_are_physical():
+    e = library_entry("cooke_triplet")
+    assert lb.near_focus_m(e) == pytest.approx(1.0)
+    (w1, p1), (w2, p2) = lb.plan_pitches(e)
+    assert p2 / p1 == pytest.approx(w1 / w2, rel=0.01)
+    assert not math.isinf(lb.bank_plan([e])[-1].focus_m)
+
+
+def test_pairs_use_trainable_banks_only(tmp_path, monkeypatch):
+    monkeypatch.setattr(lb, "LIBRARY_BANK_SETTINGS", TINY)
+    train = lb.bank_plan([library_entry("cooke_triplet")])[0]
+    held = lb.bank_plan([library_entry("smith_tessar_f3.5")])[0]
+    held = dataclasses.replace(held, fno=16.0, id="held")  # stopped down: its spot fits the tiny banks
+    assert held.holdout and not train.holdout
+    lib = tmp_path / "lib"
+    lb.compute_library_banks(lib, [train, held])
+    settings = LibraryPairsSettings(photos_per_bank=1, placements=1, crops=1, size=32, photo_size=64)
+    out = tmp_path / "pairs"
+    r = make_library_pairs(lib, out, settings)
+    assert (r.made, r.pairs) == (1, 1)
+    assert sorted(p.name for p in (out / "pairs").iterdir()) == [train.id]
+    again = make_library_pairs(lib, out, settings)
+    assert (again.done, again.made) == (1, 0)
+    r = make_library_pairs(lib, out, settings, holdout=True)
+    assert r.made == 1 and (out / "pairs" / held.id / "manifest.json").exists()
