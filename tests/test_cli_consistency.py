@@ -28,6 +28,7 @@ TOP = {
     "sensor",
     "export",
     "library",
+    "chart",
 }
 # other spellings of the common options that must not appear anywhere
 FORBIDDEN = {
@@ -90,7 +91,9 @@ def test_common_options_are_spelled_one_way(path: tuple[str, ...], cmd: Any) -> 
     assert "Example:" in (cmd.help or ""), f"{' '.join(path)}: --help has no example"
 
 
-@pytest.mark.parametrize("path", [("simulate",), ("dataset", "make"), ("psf", "bank"), ("restore",)])
+@pytest.mark.parametrize(
+    "path", [("simulate",), ("dataset", "make"), ("psf", "bank"), ("restore",), ("chart", "make"), ("chart", "compare")]
+)
 def test_lens_and_sensor_options_where_a_camera_is_chosen(path: tuple[str, ...]) -> None:
     cmd = dict(LEAVES)[path]
     opts = {o for p in cmd.params if _is_option(p) for o in p.opts}

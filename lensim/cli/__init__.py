@@ -8,6 +8,7 @@ from lensim.cli import lens_analysis_cmd  # noqa: F401  (registers lens mtf, wav
 from lensim.cli.ablation_cmd import ablation_command
 from lensim.cli.allocator import keep_freed_memory
 from lensim.cli.assets_cmd import assets_command
+from lensim.cli.chart_cmd import chart_app
 from lensim.cli.common import run_guarded
 from lensim.cli.dataset_cmd import dataset_app
 from lensim.cli.demo_cmd import demo_command, report_command
@@ -35,6 +36,7 @@ app.add_typer(library_app, name="library")
 app.add_typer(psf_app, name="psf")
 app.add_typer(raw_app, name="raw")
 app.add_typer(sensor_app, name="sensor")
+app.add_typer(chart_app, name="chart")
 app.command("assets")(assets_command)
 app.command("simulate")(simulate_command)
 app.add_typer(dataset_app, name="dataset")
