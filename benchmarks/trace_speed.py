@@ -3,6 +3,7 @@
 Run by hand from the repository root (optiland is a test-only dependency):
 
     .venv/bin/python benchmarks/trace_speed.py [--rays 100000 1000000] [--repeats 5]
+    .venv/bin/python benchmarks/trace_speed.py --baseline ../old-checkout [--lens double_gauss phone_wide]
 
 Lens: the built-in double Gauss (f = 100 mm, F/2, from tests/data/lenses/ag_dblgauss.seq),
 one field at 10 deg, primary wavelength 587.6 nm, a square grid of pupil points inside
@@ -11,14 +12,27 @@ the rays are identical). Each timing is the median of the repeats and covers gen
 the rays for the pupil grid and tracing them to the image plane. optiland traces with
 `record=False` (no per-surface history) and lensim's glass data, so that both do the
 same work; the image-plane intercepts are compared to show it.
+
+With --baseline DIR the same rays are traced by this tree's trace() and by the one of the
+lensim checkout DIR (say `git worktree add ../old-checkout main`), old against new: each
+tree runs in a worker process of its own (this file with --serve, DIR first on the Python
+path for the baseline) that loads the rays the parent saved; the parent alternates the
+two, --repeats times each, after two warm-up runs, and reports the median of the
+per-run ratios old / new (above 1: this tree is faster), of wall-clock and of CPU time (the
+steadier one on a shared machine, with --threads 1), and whether both trees give
+bit-identical rays (positions, directions, optical paths, validity, status). The field is
+the double Gauss's 10 deg for the default lens, else 0.7 of the lens's maximum field.
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import os
 import statistics
+import subprocess
 import sys
+import tempfile
 import time
 import warnings
 from pathlib import Path
@@ -26,11 +40,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from lensim.optics.aiming import generate_rays
 from lensim.optics.lens import Lens
 from lensim.optics.lens_file import load_lens
 from lensim.optics.paraxial import paraxial_data
-from lensim.optics.trace import trace
+from lensim.optics.trace import Rays, trace
 
 # the optiland model is built as the tests build theirs (tests/optiland_models.py, which
 # imports optiland only when a model is built)
@@ -68,6 +81,8 @@ def optiland_model(lens: Lens):
 
 def lensim_runner(lens: Lens, pupil: np.ndarray):
     """A function that generates and traces the rays once; returns (image xy or NaN)."""
+    from lensim.optics.aiming import generate_rays
+
     para = paraxial_data(lens)
     pts = torch.as_tensor(pupil, dtype=torch.float64)
     wl = lens.primary_wavelength_um
@@ -102,15 +117,111 @@ def timed(fn):
     return time.perf_counter() - t0, out
 
 
+def serve() -> None:
+    """Worker of --baseline: 'load FILE LENS' loads saved rays, 'run' answers the wall and
+    CPU seconds of one trace(), 'digest' a hash of its results, 'quit' ends."""
+    lens = saved = None
+    for line in sys.stdin:
+        cmd, *arg = line.split()
+        if cmd == "load":
+            saved = torch.load(arg[0])
+            lens = load_lens(arg[1], warn=False) if arg[1] != "-" else load_benchmark_lens()
+            reply = "ok"
+        elif cmd in ("run", "digest"):
+            rays = Rays(saved["position"], saved["direction"], saved["opl"], saved["valid"])
+            t0, c0 = time.perf_counter(), time.process_time()
+            res = trace(lens, rays, saved["wavelength"])
+            reply = f"{time.perf_counter() - t0} {time.process_time() - c0}"
+            if cmd == "digest":
+                out = (res.rays.position, res.rays.direction, res.rays.opl, res.rays.valid, res.status, res.failed_at)
+                reply = hashlib.sha256(b"".join(t.contiguous().numpy().tobytes() for t in out)).hexdigest()
+        else:
+            return
+        print(reply, flush=True)
+
+
+class _Worker:
+    """A --serve process with lensim from `tree` first on its path."""
+
+    def __init__(self, tree: Path, threads: int | None) -> None:
+        env = dict(os.environ, PYTHONPATH=str(tree))
+        cmd = [sys.executable, __file__, "--serve"] + (["--threads", str(threads)] if threads else [])
+        self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
+
+    def ask(self, line: str) -> str:
+        assert self.proc.stdin is not None and self.proc.stdout is not None
+        self.proc.stdin.write(line + "\n")
+        self.proc.stdin.flush()
+        return self.proc.stdout.readline().strip()
+
+    def close(self) -> None:
+        self.ask("quit")
+        self.proc.wait()
+
+
+def compare_trees(baseline: Path, lens_names: list[str], sizes: list[int], repeats: int, threads: int | None) -> None:
+    """Old (baseline checkout) against new (this tree): trace() on the same saved rays."""
+    from lensim.optics.aiming import generate_rays
+
+    here = Path(__file__).resolve().parents[1]
+    old, new = _Worker(baseline.resolve(), threads), _Worker(here, threads)
+    print(f"old: {baseline.resolve()}, new: {here}; median of {repeats} interleaved runs of trace() each")
+    print("| lens | field | rays | traced | old (s) | new (s) | old / new | old / new, CPU time | bit-identical |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |")
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in lens_names:
+            lens = load_lens(name, warn=False) if name != "-" else load_benchmark_lens()
+            field = FIELD_DEG if name == "-" else 0.7 * lens.max_field  # rays that reach the image
+            for n in sizes:
+                rays, wl = generate_rays(
+                    lens,
+                    [field],
+                    torch.as_tensor(pupil_grid(n)),
+                    [lens.primary_wavelength_um],
+                    "paraxial",
+                )
+                path = Path(tmp) / "rays.pt"
+                torch.save(
+                    dict(
+                        position=rays.position, direction=rays.direction, opl=rays.opl, valid=rays.valid, wavelength=wl
+                    ),
+                    path,
+                )
+                for w in (old, new):
+                    w.ask(f"load {path} {name}")
+                    w.ask("run"), w.ask("run")  # warm up
+                t_old, t_new = [], []  # (wall, CPU) seconds per run
+                for k in range(repeats):  # alternate which goes first
+                    for w, times in ((old, t_old), (new, t_new)) if k % 2 == 0 else ((new, t_new), (old, t_old)):
+                        times.append(tuple(float(v) for v in w.ask("run").split()))
+                ratio, cpu_ratio = (statistics.median(o[i] / m[i] for o, m in zip(t_old, t_new)) for i in (0, 1))
+                same = old.ask("digest") == new.ask("digest")
+                traced = float(trace(lens, rays, wl).rays.valid.double().mean())
+                print(
+                    f"| {lens.name or name} | {field:.3g} {lens.field_type} | {rays.opl.numel():,} | {traced:.0%} "
+                    f"| {statistics.median(t[0] for t in t_old):.4f} | {statistics.median(t[0] for t in t_new):.4f} "
+                    f"| {ratio:.3f} | {cpu_ratio:.3f} | {'yes' if same else 'NO'} |",
+                    flush=True,
+                )
+    old.close(), new.close()
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rays", type=int, nargs="+", default=[100_000, 1_000_000])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--threads", type=int, default=None, help="torch threads for lensim (default: torch's)")
+    ap.add_argument("--baseline", type=Path, default=None, help="a lensim checkout to compare trace() against")
+    ap.add_argument("--lens", nargs="+", default=["-"], help="lenses for --baseline (default: the double Gauss)")
+    ap.add_argument("--serve", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     warnings.filterwarnings("ignore")
     if args.threads:
         torch.set_num_threads(args.threads)
+    if args.serve:
+        return serve()
+    if args.baseline is not None:
+        return compare_trees(args.baseline, args.lens, args.rays, args.repeats, args.threads)
     lens = load_benchmark_lens()
     op = optiland_model(lens)
     rows = []

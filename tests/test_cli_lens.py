@@ -141,7 +141,7 @@ def test_layout_rays_follow_the_trace_and_end_at_the_image():
     # every intermediate point lies on its surface: z = vertex + sag(y^2)
     for i, s in enumerate(lens.surfaces):
         y = paths.points[..., i + 1, 1]
-        sag = s.sag(torch.as_tensor(y * y)).numpy()
+        sag = s.geometry.sag(torch.as_tensor(y * y)).numpy()
         assert np.allclose(paths.points[..., i + 1, 0], zv[i] + sag, atol=1e-9)
 
 

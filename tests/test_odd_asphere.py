@@ -39,19 +39,19 @@ def test_sag_and_normal_against_the_formula(lens):
     r = np.linspace(0.0, 5.0, 51)
     c, k = s.curvature, s.conic
     z = c * r**2 / (1 + np.sqrt(1 - (1 + k) * c**2 * r**2)) + sum(a * r**p for p, a in FRONT.items())
-    ours = s.sag(torch.tensor(r * r, dtype=DTYPE)).numpy()
+    ours = s.geometry.sag(torch.tensor(r * r, dtype=DTYPE)).numpy()
     assert np.abs(ours - z).max() < 1e-14
     # dz/dr by central differences against slope_over_r * r (away from the cone tip at r = 0)
     h = 1e-6
     rr = r[1:]
 
     def sag(r):
-        return s.sag(torch.tensor(r * r, dtype=DTYPE)).numpy()
+        return s.geometry.sag(torch.tensor(r * r, dtype=DTYPE)).numpy()
 
     dz = (sag(rr + h) - sag(rr - h)) / (2 * h)
-    assert np.abs(s.sag_slope_over_r(torch.tensor(rr * rr, dtype=DTYPE)).numpy() * rr - dz).max() < 1e-8
+    assert np.abs(s.geometry.sag_slope_over_r(torch.tensor(rr * rr, dtype=DTYPE)).numpy() * rr - dz).max() < 1e-8
     # on the axis the r^1 cone has no normal; lensim gives the axis (finite, no NaN)
-    n = s.normal(torch.zeros(1, dtype=DTYPE), torch.zeros(1, dtype=DTYPE))
+    n = s.geometry.normal(torch.zeros(1, dtype=DTYPE), torch.zeros(1, dtype=DTYPE))
     assert torch.equal(n, torch.tensor([[0.0, 0.0, 1.0]], dtype=DTYPE))
 
 

@@ -63,7 +63,7 @@ def test_asphere_newton_intersection_on_surface():
     rays, wl = generate_rays(lens, [0.0, 10.0], square_grid(15), [0.55])
     res = trace(lens, rays, wl, end=1, to_image=False)
     p = res.rays.position[res.rays.valid]
-    z_surface = s.sag(p[:, 0] ** 2 + p[:, 1] ** 2)
+    z_surface = s.geometry.sag(p[:, 0] ** 2 + p[:, 1] ** 2)
     assert (p[:, 2] - z_surface).abs().max().item() < 1e-11
 
 
@@ -74,7 +74,7 @@ def test_snell_law_holds_at_each_refraction():
     res = trace(lens, rays, wl, end=1, to_image=False)
     s = lens.surfaces[0]
     p = res.rays.position
-    nrm = s.normal(p[..., 0], p[..., 1])
+    nrm = s.geometry.normal(p[..., 0], p[..., 1])
     sin_i = torch.linalg.norm(torch.cross(d_in, nrm, dim=-1), dim=-1)
     sin_t = torch.linalg.norm(torch.cross(res.rays.direction, nrm, dim=-1), dim=-1)
     assert torch.allclose(1.0 * sin_i, 1.7 * sin_t, atol=1e-13)

@@ -168,11 +168,10 @@ def _first_surface_reach(lens: Lens, para: ParaxialData) -> float:
     searched for chief rays: its size when the file gives one, else a generous multiple
     of the pupil and track, never beyond where the conic is defined."""
     s = lens.surfaces[0]
-    q = (1.0 + s.conic) * s.curvature**2
-    domain = 1.0 / math.sqrt(q) if q > 0 else math.inf
+    domain = s.geometry.max_radius
     generous = max(4.0 * para.epd_mm, 4.0 * para.stop_semi_diameter_mm, abs(lens.total_track))
     rim = min(max(s.clear_radius or 0.0, s.semi_diameter or 0.0, generous), domain * (1.0 - 1e-9))
-    sag = float(s.sag(torch.tensor([rim * rim], dtype=DTYPE))[0])
+    sag = s.geometry.sag_at(rim)
     return math.hypot(rim, sag)
 
 

@@ -19,9 +19,10 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from lensim.optics.geometry import Geometry, sqrt_nonneg
 from lensim.optics.lens import Lens
 from lensim.optics.pose import to_global, to_local
-from lensim.optics.surfaces import Surface, sqrt_nonneg
+from lensim.optics.surfaces import Surface
 
 DTYPE = torch.float64
 
@@ -131,7 +132,8 @@ def trace_surface(
     safe_dz = torch.where(ok_dir, dz, torch.ones_like(dz))
     t0 = -local[..., 2] / safe_dz
     p1 = local + t0.unsqueeze(-1) * d
-    t1, hit = surf.intersect(p1, d)
+    geometry = surf.geometry
+    t1, hit = geometry.intersect(p1, d)
     t = torch.where(ok_dir & hit, t0 + t1, torch.zeros_like(t0))
     hit = hit & ok_dir
     if not allow_backwards:
@@ -146,7 +148,7 @@ def trace_surface(
         valid = valid & inside
     opl = rays.opl + n_before * t
     if interact:
-        normal = surf.normal(x, y)
+        normal = geometry.normal(x, y)
         if surf.is_mirror:
             new_d = _reflect(d, normal)
         else:
@@ -230,8 +232,8 @@ def trace_reference(
 # operations, so its working set stays in cache and no large temporaries are allocated.
 # Chunks are smaller than torch's intra-op grain size, so each operation runs on one core,
 # and the chunks run in parallel threads (torch releases the GIL inside its kernels), one
-# per torch thread. Surfaces of each kind use their shortest exact formulas: planes a
-# transfer, spheres and conics a closed-form root and an analytic normal, aspheres Newton.
+# per torch thread. Each surface's geometry (lensim.optics.geometry) meets and bends the
+# rays with its kind's shortest exact formulas (its chunk methods).
 # Per-ray failures are recorded as (surface index + 1) * 4 + status code.
 
 CHUNK_RAYS = 32767  # just below torch's GRAIN_SIZE (32768): each operation stays on one core
@@ -244,20 +246,12 @@ class _Step:
 
     index: int  # surface index; lens.num_surfaces for the image plane
     shift: float  # mm from the previous vertex (subtracted from the local z)
-    kind: str  # 'plane', 'sphere', 'conic' or 'asphere'
+    geometry: Geometry
     surface: Surface
     r2_max: float | None
     r2_min: float | None
     interact: bool
     backwards_ok: bool  # the first step (rays start anywhere) and virtual steps (Lens.virtual_steps)
-
-
-def _kind(s: Surface) -> str:
-    if s.is_aspheric:
-        return "asphere"
-    if s.curvature == 0.0:
-        return "plane"
-    return "sphere" if s.conic == 0.0 else "conic"
 
 
 def _steps(lens: Lens, start: int, end: int, to_image: bool, apertures: bool) -> list[_Step]:
@@ -271,85 +265,8 @@ def _steps(lens: Lens, start: int, end: int, to_image: bool, apertures: bool) ->
         r2_max = s.clear_radius**2 * (1 + 1e-12) if (apertures and s.clear_radius is not None) else None
         r2_min = s.obscuration_radius**2 if (apertures and s.obscuration_radius is not None) else None
         shift = 0.0 if j == 0 else float(zv[i] - zv[surfaces[j - 1][0]])
-        steps.append(_Step(i, shift, _kind(s), s, r2_max, r2_min, interact, j == 0 or bool(virtual[i])))
+        steps.append(_Step(i, shift, s.geometry, s, r2_max, r2_min, interact, j == 0 or bool(virtual[i])))
     return steps
-
-
-def _intersect(st: _Step, x, y, z, L, M, N, valid):
-    """Path length t (mm) from the current point (z local to this surface's vertex) to the
-    surface, and the hit mask (before the backwards test)."""
-    s = st.surface
-    t = torch.div(z, N).neg_()  # to the vertex plane
-    ok_dir = N.abs() > 1e-12
-    if st.kind == "plane":
-        return t, ok_dir
-    c, k = s.curvature, s.conic
-    x1 = torch.addcmul(x, t, L)
-    y1 = torch.addcmul(y, t, M)
-    r2 = x1 * x1
-    r2.addcmul_(y1, y1)
-    b = x1 * L
-    b.addcmul_(y1, M).mul_(c).sub_(N)
-    disc = b * b
-    if k == 0.0:
-        disc.add_(r2, alpha=-c * c)
-    else:
-        a = N * N
-        a.mul_(c * k).add_(c)
-        disc.addcmul_(a, r2, value=-c)
-    hit = disc >= 0.0
-    hit &= ok_dir
-    denom = sqrt_nonneg(disc.clamp_(min=0.0)).copysign_(b).add_(b)
-    t1 = r2.mul_(-c).div_(denom)  # conic root measured from the vertex plane
-    if st.kind == "asphere":
-        from lensim.optics.surfaces import NEWTON_MAX_ITER, NEWTON_TOL_MM
-
-        t1 = torch.where(torch.isfinite(t1), t1, torch.zeros_like(t1))
-        live = valid & hit
-        for _ in range(NEWTON_MAX_ITER):
-            xx = torch.addcmul(x1, t1, L)
-            yy = torch.addcmul(y1, t1, M)
-            rr = xx * xx
-            rr.addcmul_(yy, yy)
-            f = t1 * N
-            f.sub_(s.sag(rr))
-            fp = xx.mul_(L).addcmul_(yy, M).mul_(s.sag_slope_over_r(rr)).neg_().add_(N)
-            fp_ok = fp.abs() > 1e-12
-            step = f.div_(torch.where(fp_ok, fp, torch.ones_like(fp)))
-            t1 = t1 - step
-            converged = step.abs() < NEWTON_TOL_MM
-            if bool(converged[live].all()):
-                break
-        hit &= converged & fp_ok
-    t.add_(t1)
-    hit &= torch.isfinite(t)
-    if st.kind != "sphere" and (k > -1.0 or st.kind == "asphere"):
-        xn = torch.addcmul(x, t, L)
-        yn = torch.addcmul(y, t, M)
-        rn = xn * xn
-        rn.addcmul_(yn, yn)
-        hit &= s.in_domain(rn)
-    return t, hit
-
-
-def _normal(st: _Step, x, y, z):
-    """Unit normal (nx, ny, nz) pointing along +z at the vertex; None for a plane."""
-    s = st.surface
-    if st.kind == "plane":
-        return None
-    c, k = s.curvature, s.conic
-    if st.kind == "sphere":  # on the sphere (-c x, -c y, 1 - c z) is a unit vector
-        return x * -c, y * -c, torch.mul(z, -c).add_(1.0)
-    if st.kind == "conic":
-        nx, ny, nz = x * -c, y * -c, torch.mul(z, -c * (1.0 + k)).add_(1.0)
-    else:
-        r2 = x * x
-        r2.addcmul_(y, y)
-        g = s.sag_slope_over_r(r2)
-        nx, ny, nz = (x * g).neg_(), (y * g).neg_(), torch.ones_like(x)
-    inv = nx * nx
-    inv.addcmul_(ny, ny).addcmul_(nz, nz).rsqrt_()
-    return nx.mul_(inv), ny.mul_(inv), nz.mul_(inv)
 
 
 def _trace_chunk(
@@ -395,7 +312,7 @@ def _move_chunk_to_surface(
     x, y, z, L, M, N, opl, valid = comps
     if st.shift:
         z.sub_(st.shift)
-    t, hit = _intersect(st, x, y, z, L, M, N, valid)
+    t, hit = st.geometry.hit_chunk(x, y, z, L, M, N, valid)
     if not st.backwards_ok:
         hit &= t > -1e-9
     if not (all_valid and bool(hit.all())):
@@ -425,7 +342,7 @@ def _reflect_chunk(st: _Step, comps: list[torch.Tensor], all_valid: bool) -> Non
     """Mirror reflection of the chunk's directions at surface st (in place); invalid
     rays keep their direction."""
     x, y, z, L, M, N, _, valid = comps
-    nrm = _normal(st, x, y, z)
+    nrm = st.geometry.normal_chunk(x, y, z)
     if nrm is None:
         if all_valid:
             N.neg_()
@@ -459,15 +376,7 @@ def _refract_chunk(
     if scalar and n1 == n2:
         return all_valid  # no refraction (air to air, a dummy or stop surface)
     mu = n1 / n2
-    c = st.surface.curvature
-    if st.kind == "sphere":
-        # the unit normal on a sphere is (-c x, -c y, 1 - c z): never stored
-        nrm = None
-        cos_i = x * L
-        cos_i.addcmul_(y, M).addcmul_(z, N).mul_(-c).add_(N)
-    else:
-        nrm = _normal(st, x, y, z)
-        cos_i = N.clone() if nrm is None else torch.mul(L, nrm[0]).addcmul_(M, nrm[1]).addcmul_(N, nrm[2])
+    cos_i, nrm = st.geometry.cos_incidence_chunk(x, y, z, L, M, N)
     ct = cos_i * cos_i
     if scalar:
         ct.mul_(mu * mu).add_(1.0 - mu * mu)
@@ -488,16 +397,7 @@ def _refract_chunk(
     L.mul_(scale)
     M.mul_(scale)
     N.mul_(scale)
-    if st.kind == "sphere":
-        L.addcmul_(kk, x, value=-c)
-        M.addcmul_(kk, y, value=-c)
-        N.add_(kk).addcmul_(kk, z, value=-c)
-    elif nrm is None:
-        N.add_(kk)
-    else:
-        L.addcmul_(kk, nrm[0])
-        M.addcmul_(kk, nrm[1])
-        N.addcmul_(kk, nrm[2])
+    st.geometry.bend_chunk(kk, nrm, x, y, z, L, M, N)
     return all_valid
 
 

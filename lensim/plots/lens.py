@@ -175,18 +175,8 @@ def trace_ray_paths(
 def _profile(surf: Surface, z0: float, sd: float, num: int = 161) -> tuple[np.ndarray, np.ndarray]:
     """(z, y) of a surface's meridional profile from -sd to +sd (mm)."""
     y = np.linspace(-sd, sd, num)
-    z = z0 + surf.sag(torch.as_tensor(y * y, dtype=DTYPE)).numpy()
+    z = z0 + surf.geometry.sag(torch.as_tensor(y * y, dtype=DTYPE)).numpy()
     return z, y
-
-
-def _domain_limit(surf: Surface) -> float:
-    """Largest radius (mm) where the conic sag is defined."""
-    q = (1.0 + surf.conic) * surf.curvature**2
-    return math.inf if q <= 0 else 1.0 / math.sqrt(q)
-
-
-def _sag_at(surf: Surface, r: float) -> float:
-    return float(surf.sag(torch.tensor([r * r], dtype=DTYPE))[0])
 
 
 def plot_layout(
@@ -226,7 +216,7 @@ def plot_layout(
     sizes = _LayoutSizes(lens, paths, para)
 
     # where rays are drawn from
-    z_surf = [float(zv[i]) + _sag_at(s, sizes.sds[i]) for i, s in enumerate(lens.surfaces)] + list(zv)
+    z_surf = [float(zv[i]) + s.geometry.sag_at(sizes.sds[i]) for i, s in enumerate(lens.surfaces)] + list(zv)
     z_lo, z_hi = min(z_surf), max(z_surf)
     extent = max(z_hi - z_lo, 2 * sizes.ymax)
     z_start: float | None = z_lo - 0.15 * extent
@@ -309,7 +299,7 @@ class _LayoutSizes:
             if sd is None:
                 sd = 1.05 * max(heights[i], stop_r if s.is_stop else 0.0)
                 sd = sd if sd > 0 else 0.05 * max(1.0, float(np.max(heights)))
-            sds.append(min(sd, _domain_limit(s) * (1 - 1e-9)))
+            sds.append(min(sd, s.geometry.max_radius * (1 - 1e-9)))
         self.sds, self.stop_r = sds, stop_r
         self.image_h = lens.image_clear_radius or 1.05 * heights[S]
         self.ymax = max(max(sds), self.image_h, 1e-3)
@@ -381,7 +371,7 @@ def _draw_glass_edges(ax, lens: Lens, sds: list[float]) -> None:
         edge = max(sds[k] for k in group)
         ends = []
         for k in group:
-            zk = float(zv[k]) + _sag_at(lens.surfaces[k], sds[k])
+            zk = float(zv[k]) + lens.surfaces[k].geometry.sag_at(sds[k])
             if sds[k] < edge:
                 for sgn in (1, -1):
                     ax.plot([zk, zk], [sgn * sds[k], sgn * edge], color="black", lw=1.2, zorder=3)
@@ -397,7 +387,7 @@ def _draw_stop_and_image(ax, lens: Lens, sizes: _LayoutSizes) -> None:
     zv = lens.vertex_z()
     stop_r, ymax, image_h = sizes.stop_r, sizes.ymax, sizes.image_h
     s = lens.surfaces[lens.stop_index]
-    zs = float(zv[lens.stop_index]) + _sag_at(s, min(stop_r, _domain_limit(s) * (1 - 1e-9)))
+    zs = float(zv[lens.stop_index]) + s.geometry.sag_at(min(stop_r, s.geometry.max_radius * (1 - 1e-9)))
     outer = stop_r + max(0.25 * stop_r, 0.08 * ymax)
     for sgn in (1, -1):
         ax.plot([zs, zs], [sgn * stop_r, sgn * outer], color="black", lw=3.0, zorder=5, solid_capstyle="butt")
