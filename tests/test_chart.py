@@ -12,6 +12,7 @@ import pytest
 import torch
 from scipy.ndimage import gaussian_filter
 
+from cli_runner import run_cli
 from lensim.calibrate.chart import ChartLayout, chart_from_dict, chart_to_dict, design_chart
 from lensim.calibrate.chart_detect import check_coverage, detect_chart, estimate_pose
 from lensim.calibrate.chart_draw import project, render_view
@@ -179,7 +180,8 @@ def test_mtf_area_of_a_gaussian_blur_matches_the_analytic_mtf():
 def camera(tmp_path_factory):
     """The phone camera at 1 m: its bank (cached in a folder the CLI test reuses), the
     chart for it, and a photo of the chart simulated by lensim itself (perspective, noise,
-    relative illumination, AHD), written as a 16-bit PNG with its sidecar."""
+    relative illumination, AHD), written as a 16-bit PNG and as the CFA DNG of its raw
+    mosaic, with the chart's sidecar."""
     from lensim.images import write_image
     from lensim.io import atomic_write_json
     from lensim.optics.lens_file import load_lens
@@ -203,7 +205,7 @@ def camera(tmp_path_factory):
     h = _frontal(layout)
     lin = render_view(layout, h, (0, 0, ROWS, COLS), levels=(np.full(3, 0.04), np.full(3, 0.8)))
     photo, _ = simulate(torch.from_numpy(_srgb(lin)).float(), bank, sensor, torch.Generator().manual_seed(3),
-                        mapping=mapping, bits=16, kelvin=5000.0)  # fmt: skip
+                        mapping=mapping, bits=16, kelvin=5000.0, raw_path=folder / "photo.dng")  # fmt: skip
     write_image(folder / "photo.png", photo, 16)
     atomic_write_json(folder / "chart.json", chart_to_dict(layout))
     return {"folder": folder, "layout": layout, "bank": bank, "sensor": sensor, "mapping": mapping,
@@ -233,3 +235,117 @@ def test_compare_sees_a_camera_blurrier_than_its_simulation(camera):
     cmp = compare_chart(photo, layout, det, camera["bank"], camera["sensor"], camera["mapping"], seed=5)
     assert len(cmp.zones) == len(ZONES)
     assert all(z.mtf_area_ratio > 1.1 for z in cmp.zones), [z.mtf_area_ratio for z in cmp.zones]
+
+
+# ----------------------------------------------------------------------------- command line
+
+
+def test_cli_chart_make_writes_the_page_at_print_size_and_its_sidecar(tmp_path, capsys, monkeypatch):
+    from lensim.calibrate.chart import load_chart
+
+    args = ["chart", "make", "--lens", LENS, "--sensor", SENSOR, "--distance-m", "1", "--print-width-mm", "1200"]
+    code, out, _ = run_cli([*args, "--dpi", "60", "-o", str(tmp_path / "chart.pdf"), "--json"], capsys, monkeypatch)
+    assert code == 0, out
+    layout = load_chart(tmp_path / "chart.json")
+    assert layout.width_mm == 1200.0 and layout.design["distance_m"] == 1.0
+    pdf = (tmp_path / "chart.pdf").read_bytes()
+    assert pdf.startswith(b"%PDF")
+    points = f"{1200 / 25.4 * 72:.0f}".encode()  # the page is 1200 mm wide: 3402 points
+    assert points in pdf
+    code, _, _ = run_cli([*args, "--dpi", "60", "-o", str(tmp_path / "chart.png"), "--quiet"], capsys, monkeypatch)
+    from PIL import Image
+
+    with Image.open(tmp_path / "chart.png") as im:
+        assert im.size[0] == round(1200 / 25.4 * 60) and round(im.info["dpi"][0]) == 60
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--print-width-mm", "500"], "--print-width-mm: the frame spans 1086 x 816 mm at this distance"),
+        (["--print-width-mm", "-3"], "--print-width-mm: expected a width above 0 mm"),
+        (
+            ["--print-width-mm", "1200", "-o", "chart.svg"],
+            "chart.svg: --output: expected a file name ending in .pdf or .png",
+        ),
+    ],
+)
+def test_cli_chart_make_errors_are_one_line(tmp_path, capsys, monkeypatch, args, message):
+    monkeypatch.chdir(tmp_path)
+    base = ["chart", "make", "--lens", LENS, "--sensor", SENSOR, "--distance-m", "1"]
+    out = ["-o", "chart.pdf"] if "-o" not in args else []
+    code, _, err = run_cli([*base, *args, *out], capsys, monkeypatch)
+    assert code == 2 and message in err and len(err.strip().splitlines()) == 1, err
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["photo.png", "photo.dng"])
+def test_cli_chart_compare_on_a_simulated_photo(camera, capsys, monkeypatch, name):
+    # the developed photo and its raw file (developed by lensim's own chain, as-shot white
+    # balance): ratios within 4 % of 1 at every zone (the DNG case runs by default, below)
+    _compare_cli(camera, capsys, monkeypatch, name)
+
+
+def test_cli_chart_compare_on_a_simulated_raw_photo(camera, capsys, monkeypatch):
+    record = _compare_cli(camera, capsys, monkeypatch, "photo.dng")
+    assert record["path"] == "raw"
+
+
+def _compare_cli(camera, capsys, monkeypatch, name: str) -> dict:
+    folder = camera["folder"]
+    bank_args = [
+        "--fields",
+        "5",
+        "--wavelengths-nm",
+        "450,550,650",
+        "--pupil-samples",
+        "64",
+        "--cache",
+        str(folder / "cache"),
+    ]
+    args = ["chart", "compare", str(folder / name), "--chart", str(folder / "chart.json"), "--lens", LENS,
+            "--sensor", SENSOR, "--object-m", "1", "--focus-m", "1", *bank_args]  # fmt: skip
+    args += ["-o", str(folder / "out"), "--json"]
+    code, out, err = run_cli(args, capsys, monkeypatch)
+    assert code == 0, err
+    import json
+
+    record = json.loads(out)
+    assert record["pose"]["distance_m"] == pytest.approx(1.0 / 0.97, rel=0.02)
+    assert [z["zone"] for z in record["zones"]] == list(ZONES)
+    assert all(0.96 <= z["mtf_area_ratio"] <= 1.04 for z in record["zones"]), [
+        z["mtf_area_ratio"] for z in record["zones"]
+    ]
+    for written in ("photo_chart.json", "photo_chart.png", "photo_sim.png"):
+        assert (folder / "out" / written).is_file()
+    return record
+
+
+def _png(path, image: np.ndarray) -> None:
+    from lensim.images import write_image
+
+    write_image(path, torch.from_numpy(np.clip(image, 0, 1)).float(), 8)
+
+
+@pytest.mark.parametrize("case", ["no chart", "too small", "bad raw"])
+def test_cli_chart_compare_errors_are_one_line(camera, tmp_path, capsys, monkeypatch, case):
+    layout = camera["layout"]
+    if case == "no chart":
+        photo, message = tmp_path / "wall.png", "wall.png: chart: no chart markers found"
+        _png(photo, gaussian_filter(np.random.default_rng(2).random((3, ROWS, COLS)), (0, 2, 2)))
+    elif case == "too small":
+        photo, message = tmp_path / "far.png", "far.png: chart: too small in the frame"
+        s = COLS / layout.frame_mm[0] * 0.42
+        h = np.array([[s, 0, (COLS - 1) / 2], [0, s, (ROWS - 1) / 2], [0, 0, 1.0]])
+        _png(photo, _srgb(render_view(layout, h, (0, 0, ROWS, COLS), levels=(np.full(3, 0.05), np.full(3, 0.8)))))
+    else:
+        photo, message = tmp_path / "broken.dng", "broken.dng"
+        photo.write_bytes(b"II*\x00" + bytes(range(256)) * 8)
+    out = tmp_path / "out"
+    args = ["chart", "compare", str(photo), "--chart", str(camera["folder"] / "chart.json"), "--lens", LENS,
+            "--sensor", SENSOR, "-o", str(out)]  # fmt: skip
+    code, _, err = run_cli(args, capsys, monkeypatch)
+    assert code == 2 and message in err and len(err.strip().splitlines()) == 1, err
+    assert "Traceback" not in err
+    assert not out.exists() or list(out.iterdir()) == []
