@@ -37,6 +37,7 @@ import numpy as np
 
 from lensim.errors import InputError
 from lensim.io import atomic_writer
+from lensim.sensor.cfa import CfaPattern, cfa_pattern
 
 if TYPE_CHECKING:
     from lensim.render.mapping import SensorMapping
@@ -179,13 +180,8 @@ def _rationals(values: Sequence[float] | np.ndarray, signed: bool = False) -> tu
     return tuple(out)
 
 
-def _cfa_codes(pattern: str) -> bytes:
-    p = str(pattern).upper()
-    if len(p) != 4 or set(p) - set(CFA_CODES) or set(p) != set(CFA_CODES):
-        raise InputError(
-            None, "cfa_pattern", f"expected a Bayer pattern such as RGGB, BGGR, GRBG, GBRG, got {pattern!r}"
-        )
-    return bytes(CFA_CODES[c] for c in p)
+def _cfa_codes(pattern: CfaPattern) -> bytes:
+    return bytes(CFA_CODES[c] for c in cfa_pattern(pattern, field="cfa_pattern"))
 
 
 def _check_orientation(orientation: int) -> int:
@@ -326,7 +322,7 @@ def _black_level_tag(black_level: float | Sequence[float], white_level: int) -> 
 def write_cfa_dng(
     path: str | Path,
     mosaic: np.ndarray,
-    cfa_pattern: str,
+    cfa_pattern: CfaPattern,
     black_level: float | Sequence[float],
     white_level: int,
     colour: DngColour,

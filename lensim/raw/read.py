@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from lensim.errors import InputError
+from lensim.sensor.cfa import BAYER_PATTERNS, CfaPattern, cfa_pattern
 
 RAW_SUFFIXES = (
     ".dng",
@@ -124,7 +125,7 @@ class RawImage:
 
     path: str
     mosaic: np.ndarray
-    cfa_pattern: str
+    cfa_pattern: CfaPattern
     black_level: tuple[float, float, float, float]
     white_level: float
     as_shot_wb_gains: tuple[float, float, float] | None
@@ -386,12 +387,12 @@ def _cfa_indices(src: str, rp: Any) -> np.ndarray:
     return quad.ravel()
 
 
-def _pattern_name(src: str, rp: Any, indices: np.ndarray) -> str:
+def _pattern_name(src: str, rp: Any, indices: np.ndarray) -> CfaPattern:
     desc = rp.color_desc.decode("ascii", "replace")
     name = "".join(desc[int(i)] for i in indices)
-    if name not in ("RGGB", "BGGR", "GRBG", "GBRG"):
+    if name not in BAYER_PATTERNS:
         raise InputError(src, "cfa", f"found the 2x2 pattern {name!r}; expected RGGB, BGGR, GRBG or GBRG")
-    return name
+    return cfa_pattern(name, src, "cfa")
 
 
 def _as_shot_gains(rp: Any, tags: dict[str, Any], desc: str) -> tuple[float, float, float] | None:

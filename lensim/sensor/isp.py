@@ -52,7 +52,8 @@ import torch.nn.functional as F
 
 from lensim.errors import InputError
 from lensim.sensor.calibration import SRGB_TO_XYZ
-from lensim.sensor.profile import BAYER_PATTERNS, SensorProfile
+from lensim.sensor.cfa import CfaPattern, cfa_pattern
+from lensim.sensor.profile import SensorProfile
 
 EPS = 1e-8
 DEMOSAIC_METHODS = ("ahd", "malvar", "menon", "bilinear")
@@ -123,7 +124,7 @@ class CaptureParams:
     r_gain: float
     b_gain: float
     ccm: list[list[float]]
-    bayer_pattern: str = "RGGB"
+    bayer_pattern: CfaPattern = "RGGB"
     shot: float | None = None
     read: float | None = None
     extra: dict[str, Any] = field(default_factory=dict)
@@ -173,13 +174,6 @@ def srgb_to_camera(img: torch.Tensor, ccm: Any, r_gain: float, b_gain: float) ->
 # ---------------------------------------------------------------- 3. mosaic and noise
 
 
-def _check_pattern(pattern: str) -> str:
-    p = str(pattern).upper()
-    if p not in BAYER_PATTERNS:
-        raise InputError(None, "bayer_pattern", f"expected one of {', '.join(BAYER_PATTERNS)}, got {pattern!r}")
-    return p
-
-
 def _check_rgb(img: torch.Tensor) -> None:
     if not isinstance(img, torch.Tensor) or img.dim() < 3 or img.shape[-3] != 3:
         raise InputError(
@@ -193,21 +187,25 @@ def _check_size(h: int, w: int) -> None:
 
 
 def bayer_masks(
-    pattern: str, height: int, width: int, device: torch.device | str | None = None, dtype: torch.dtype = torch.float32
+    pattern: CfaPattern,
+    height: int,
+    width: int,
+    device: torch.device | str | None = None,
+    dtype: torch.dtype = torch.float32,
 ) -> torch.Tensor:
     """(3, H, W) masks, 1 where the pixel has the R, G or B filter, 0 elsewhere."""
-    p = _check_pattern(pattern)
+    p = cfa_pattern(pattern)
     masks = torch.zeros(3, height, width, dtype=dtype, device=device)
     for k, (dy, dx) in enumerate(((0, 0), (0, 1), (1, 0), (1, 1))):
         masks[_CHANNEL[p[k]], dy::2, dx::2] = 1
     return masks
 
 
-def mosaic(rgb: torch.Tensor, pattern: str = "RGGB") -> torch.Tensor:
+def mosaic(rgb: torch.Tensor, pattern: CfaPattern = "RGGB") -> torch.Tensor:
     """Bayer mosaic: (..., 3, H, W) -> (..., H, W), keeping at each pixel the colour of its
     filter (pattern as in the module docstring)."""
     _check_rgb(rgb)
-    p = _check_pattern(pattern)
+    p = cfa_pattern(pattern)
     h, w = rgb.shape[-2:]
     _check_size(h, w)
     out = torch.empty(rgb.shape[:-3] + (h, w), dtype=rgb.dtype, device=rgb.device)
@@ -246,7 +244,7 @@ def digital_numbers(raw: torch.Tensor, profile: SensorProfile) -> torch.Tensor:
     return torch.round(profile.black_level + raw * scale).clamp(0.0, profile.white_level)
 
 
-def white_balance_mosaic(raw: torch.Tensor, pattern: str, r_gain: float, b_gain: float) -> torch.Tensor:
+def white_balance_mosaic(raw: torch.Tensor, pattern: CfaPattern, r_gain: float, b_gain: float) -> torch.Tensor:
     """White balance a raw mosaic (..., H, W): R pixels times r_gain, B pixels times
     b_gain (what a camera does before demosaicing)."""
     h, w = raw.shape[-2:]
@@ -290,7 +288,7 @@ def _interp_g(sparse: torch.Tensor) -> torch.Tensor:
     )
 
 
-def demosaic_bilinear(raw: torch.Tensor, pattern: str) -> torch.Tensor:
+def demosaic_bilinear(raw: torch.Tensor, pattern: CfaPattern) -> torch.Tensor:
     """Bilinear demosaicing: (H, W) -> (3, H, W). Each missing value is the mean of the
     nearest 2 or 4 samples of its colour."""
     h, w = raw.shape
@@ -414,7 +412,7 @@ def _ahd_block(x: torch.Tensor, m: torch.Tensor, to_xyz: list[list[float]], medi
 
 def demosaic_ahd(
     raw: torch.Tensor,
-    pattern: str,
+    pattern: CfaPattern,
     rgb_to_xyz: torch.Tensor | Any | None = None,
     median_passes: int = 1,
     block_rows: int = 256,
@@ -451,7 +449,7 @@ def demosaic_ahd(
     on return (the workers set it to 1 for themselves)."""
     h, w = raw.shape
     _check_size(h, w)
-    p = _check_pattern(pattern)
+    p = cfa_pattern(pattern)
     passes = max(0, int(median_passes))
     to_xyz = SRGB_TO_XYZ.tolist() if rgb_to_xyz is None else torch.as_tensor(rgb_to_xyz, dtype=torch.float64).tolist()
     halo = 2 * ((6 + 2 * passes + 1) // 2)  # even, more than the reach: 2 + 1 + 1 + 1 + 2 per pass
@@ -488,7 +486,7 @@ def demosaic_ahd(
 _LIB_PAD = 8  # even: keeps the Bayer phase
 
 
-def _demosaic_colour(raw: torch.Tensor, pattern: str, method: str) -> torch.Tensor:
+def _demosaic_colour(raw: torch.Tensor, pattern: CfaPattern, method: str) -> torch.Tensor:
     try:
         import colour_demosaicing as cd
     except ImportError:  # pragma: no cover - depends on the environment
@@ -507,7 +505,7 @@ def _demosaic_colour(raw: torch.Tensor, pattern: str, method: str) -> torch.Tens
     return torch.from_numpy(np.ascontiguousarray(np.moveaxis(out, -1, 0))).to(raw.dtype).to(raw.device)
 
 
-def demosaic(raw: torch.Tensor, pattern: str = "RGGB", method: str = "ahd", **kwargs: Any) -> torch.Tensor:
+def demosaic(raw: torch.Tensor, pattern: CfaPattern = "RGGB", method: str = "ahd", **kwargs: Any) -> torch.Tensor:
     """Demosaic a Bayer mosaic (..., H, W) -> (..., 3, H, W), float32 linear values.
 
     method: 'ahd' (Hirakawa & Parks 2005, :func:`demosaic_ahd`, the default; kwargs go
@@ -515,7 +513,7 @@ def demosaic(raw: torch.Tensor, pattern: str = "RGGB", method: str = "ahd", **kw
     refining step) from colour-demosaicing, or 'bilinear'. Run it on white-balanced raw
     data (:func:`white_balance_mosaic`): AHD's homogeneity test and the cross-channel
     filters of Malvar and Menon assume a neutral grey has equal R, G and B."""
-    p = _check_pattern(pattern)
+    p = cfa_pattern(pattern)
     meth = str(method).lower()
     if meth not in DEMOSAIC_METHODS:
         raise InputError(

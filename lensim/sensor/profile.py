@@ -55,8 +55,8 @@ import torch
 from lensim.assets import DEFAULT_SENSOR
 from lensim.errors import InputError, LensimError
 from lensim.io import read_text
+from lensim.sensor.cfa import CfaPattern, cfa_pattern
 
-BAYER_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
 SENSOR_DIR = Path(__file__).resolve().parents[1] / "assets" / "sensors"
 
 TOP_KEYS = {
@@ -162,7 +162,7 @@ class SensorProfile:
     name: str
     pixel_pitch_um: float
     resolution: tuple[int, int]  # (width, height) px
-    bayer_pattern: str
+    bayer_pattern: CfaPattern
     spectral_response: str
     ccm: tuple[tuple[float, float, float], ...]
     white_balance: tuple[WhiteBalancePoint, ...]
@@ -477,10 +477,7 @@ def sensor_from_dict(data: Any, source: str | None = None) -> SensorProfile:
     if w % 2 or h % 2:
         raise InputError(src, "resolution", f"expected even width and height (whole Bayer quads), got {[w, h]}")
 
-    pattern = data["bayer_pattern"]
-    if not isinstance(pattern, str) or pattern.strip().upper() not in BAYER_PATTERNS:
-        raise InputError(src, "bayer_pattern", f"expected one of {', '.join(BAYER_PATTERNS)}, got {pattern!r}")
-    pattern = pattern.strip().upper()
+    pattern = cfa_pattern(data["bayer_pattern"], src)
 
     spectral = _spectral(src, data["spectral_response"])
     ccm = _ccm(src, data["ccm"])
