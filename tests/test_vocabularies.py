@@ -1,8 +1,10 @@
-"""Vocabularies with one home: the Bayer pattern (lensim.sensor.cfa.CfaPattern), checked
-where a user's value enters, with one line naming the file or field."""
+"""Vocabularies with one home: the Bayer pattern (lensim.sensor.cfa.CfaPattern) and the
+EXIF shooting data (lensim.raw.exif.Exif, the fields RawImage carries and DngExif writes).
+Each is checked where a user's value enters, with one line naming the file or field."""
 
 from __future__ import annotations
 
+import dataclasses
 import typing
 
 import numpy as np
@@ -10,6 +12,9 @@ import pytest
 import torch
 
 from lensim.errors import InputError
+from lensim.raw.dng import DngExif
+from lensim.raw.exif import EXIF_FIELDS, Exif
+from lensim.raw.read import RawImage
 from lensim.sensor import isp
 from lensim.sensor.cfa import BAYER_PATTERNS, CfaPattern, cfa_pattern
 
@@ -40,3 +45,29 @@ def test_dng_writer_refuses_a_pattern_outside_the_vocabulary(tmp_path):
     with pytest.raises(InputError, match="cfa_pattern: expected one of RGGB, BGGR, GRBG, GBRG, got 'RGBG'"):
         write_cfa_dng(tmp_path / "x.dng", mosaic, "RGBG", 0, 4095, colour, DngCamera("a", "b"))
     assert not (tmp_path / "x.dng").exists()
+
+
+def test_exif_fields_declared_once():
+    names = tuple(f.name for f in dataclasses.fields(Exif))
+    assert names == EXIF_FIELDS
+    assert DngExif is Exif and issubclass(RawImage, Exif)
+    # RawImage declares none of them again, and info() (what DngExif.from_mapping reads
+    # when a restored raw is written as a DNG) carries every one
+    own = set(RawImage.__annotations__)
+    assert not own & set(EXIF_FIELDS)
+    raw = RawImage(
+        path="x.dng",
+        mosaic=np.zeros((4, 4), np.uint16),
+        cfa_pattern="RGGB",
+        black_level=(0.0, 0.0, 0.0, 0.0),
+        white_level=4095.0,
+        as_shot_wb_gains=None,
+        color_matrix=None,
+        exposure_s=0.01,
+        fno=2.8,
+        iso=400.0,
+        focal_length_mm=35.0,
+        focus_distance_m=float("inf"),
+        lens="Cooke",
+    )
+    assert DngExif.from_mapping(raw.info()) == Exif(0.01, 2.8, 400.0, 35.0, float("inf"), "Cooke")

@@ -27,7 +27,7 @@ from __future__ import annotations
 import json
 import os
 import struct
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from fractions import Fraction
 from pathlib import Path
@@ -37,6 +37,7 @@ import numpy as np
 
 from lensim.errors import InputError
 from lensim.io import atomic_writer
+from lensim.raw.exif import Exif
 from lensim.sensor.cfa import CfaPattern, cfa_pattern
 
 if TYPE_CHECKING:
@@ -140,26 +141,8 @@ class DngCamera:
         return self.unique_camera_model or f"{self.make} {self.model}".strip()
 
 
-@dataclass(frozen=True)
-class DngExif:
-    """Shooting data for the EXIF IFD; None fields are left out. Units: seconds, f-number,
-    ISO speed, millimetres, metres (focus distance, written as EXIF SubjectDistance; inf is
-    written as 0xFFFFFFFF/1, EXIF's infinity)."""
-
-    exposure_s: float | None = None
-    fno: float | None = None
-    iso: float | None = None
-    focal_length_mm: float | None = None
-    focus_distance_m: float | None = None
-    lens: str | None = None
-
-    @classmethod
-    def from_mapping(cls, data: Mapping[str, Any] | None) -> DngExif:
-        """From a mapping with (some of) the keys above, e.g. `lensim raw info --json`'s
-        output; other keys are ignored, and so are empty values."""
-        data = data or {}
-        vals = {k: data.get(k) for k in ("exposure_s", "fno", "iso", "focal_length_mm", "focus_distance_m", "lens")}
-        return cls(**{k: v for k, v in vals.items() if v not in (None, "", 0, 0.0)})
+#: the shooting data written to the EXIF IFD (None fields are left out): lensim.raw.exif.Exif
+DngExif = Exif
 
 
 # ----------------------------------------------------------------------------- tag values

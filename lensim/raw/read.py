@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from lensim.errors import InputError
+from lensim.raw.exif import Exif
 from lensim.sensor.cfa import BAYER_PATTERNS, CfaPattern, cfa_pattern
 
 RAW_SUFFIXES = (
@@ -103,8 +104,8 @@ _PHOTOMETRIC_NAMES = {
 }
 
 
-@dataclass
-class RawImage:
+@dataclass(frozen=True, kw_only=True)
+class RawImage(Exif):
     """A camera raw file's Bayer mosaic and metadata (see :func:`read_raw`).
 
     mosaic: (H, W) uint16 digital numbers of the active area, (0, 0) its top-left pixel.
@@ -119,8 +120,9 @@ class RawImage:
     color_matrices: every DNG ColorMatrix as (CalibrationIlluminant code, 3x3).
     orientation: EXIF Orientation 1..8 (1 = as stored).
     pixel_pitch_um: from EXIF FocalPlaneXResolution/ResolutionUnit, None when absent.
-    Shooting data (None where the file does not say): focal_length_mm, fno,
-    focus_distance_m, iso, exposure_s; make, model, lens are strings or None.
+    make, model: strings or None. Shooting data (the fields of :class:`lensim.raw.exif.Exif`,
+    None where the file does not say): exposure_s, fno, iso, focal_length_mm,
+    focus_distance_m, lens.
     """
 
     path: str
@@ -136,12 +138,6 @@ class RawImage:
     is_dng: bool = False
     make: str | None = None
     model: str | None = None
-    lens: str | None = None
-    focal_length_mm: float | None = None
-    fno: float | None = None
-    focus_distance_m: float | None = None
-    iso: float | None = None
-    exposure_s: float | None = None
     pixel_pitch_um: float | None = None
 
     @property
