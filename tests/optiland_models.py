@@ -80,6 +80,40 @@ def lensim_glass(material: Material):
     return _lensim_glass_class()(material)
 
 
+#: lensim's aperture type -> (optiland's, the factor from lensim's value to optiland's)
+OPTILAND_APERTURE = {"epd": ("EPD", 1.0), "fno": ("imageFNO", 1.0), "stop_semi_diameter": ("float_by_stop_size", 2.0)}
+
+
+def _optiland_surface(s, index: int, defocus: float) -> dict:
+    """optiland's Optic.surfaces.add keywords for lensim surface ``s`` at ``index``;
+    defocus (mm) is added to its thickness (the image defocus, on the last surface)."""
+    import optiland.backend as be
+    from optiland.physical_apertures import RadialAperture
+
+    if s.is_mirror:
+        raise ValueError("optiland_from_lens: mirrors are not supported")
+    kw = dict(
+        index=index,
+        radius=s.radius,
+        thickness=s.thickness + defocus,
+        material="air" if isinstance(s.material, Air) else lensim_glass(s.material),
+        is_stop=s.is_stop,
+    )
+    if s.is_aspheric:
+        kw.update(
+            surface_type="even_asphere",
+            conic=s.conic,
+            coefficients=[float(s.asphere.get(p, 0.0)) for p in range(2, max(s.asphere) + 1, 2)],
+        )
+    elif s.conic:
+        kw["conic"] = s.conic
+    if s.clear_radius is not None or s.obscuration_radius is not None:
+        kw["aperture"] = RadialAperture(
+            r_max=be.inf if s.clear_radius is None else s.clear_radius, r_min=s.obscuration_radius or 0.0
+        )
+    return kw
+
+
 def optiland_from_lens(
     lens: Lens,
     aiming: str = "paraxial",
@@ -99,7 +133,6 @@ def optiland_from_lens(
     """
     import optiland.backend as be
     from optiland.optic import Optic
-    from optiland.physical_apertures import RadialAperture
 
     if not lens.infinite_object or lens.field_type != "angle":
         raise ValueError("optiland_from_lens: expected an object at infinity and angle fields")
@@ -107,35 +140,10 @@ def optiland_from_lens(
     op.surfaces.add(index=0, radius=be.inf, thickness=be.inf)
     last = len(lens.surfaces)
     for i, s in enumerate(lens.surfaces, start=1):
-        if s.is_mirror:
-            raise ValueError("optiland_from_lens: mirrors are not supported")
-        kw = dict(
-            index=i,
-            radius=s.radius,
-            thickness=s.thickness + (lens.image_defocus if i == last else 0.0),
-            material="air" if isinstance(s.material, Air) else lensim_glass(s.material),
-            is_stop=s.is_stop,
-        )
-        if s.is_aspheric:
-            kw.update(
-                surface_type="even_asphere",
-                conic=s.conic,
-                coefficients=[float(s.asphere.get(p, 0.0)) for p in range(2, max(s.asphere) + 1, 2)],
-            )
-        elif s.conic:
-            kw["conic"] = s.conic
-        if s.clear_radius is not None or s.obscuration_radius is not None:
-            kw["aperture"] = RadialAperture(
-                r_max=be.inf if s.clear_radius is None else s.clear_radius, r_min=s.obscuration_radius or 0.0
-            )
-        op.surfaces.add(**kw)
+        op.surfaces.add(**_optiland_surface(s, i, lens.image_defocus if i == last else 0.0))
     op.surfaces.add(index=last + 1)
-    if lens.aperture_type == "epd":
-        op.set_aperture(aperture_type="EPD", value=lens.aperture_value)
-    elif lens.aperture_type == "fno":
-        op.set_aperture(aperture_type="imageFNO", value=lens.aperture_value)
-    else:
-        op.set_aperture(aperture_type="float_by_stop_size", value=2.0 * lens.aperture_value)
+    aperture_type, scale = OPTILAND_APERTURE[lens.aperture_type]
+    op.set_aperture(aperture_type=aperture_type, value=scale * lens.aperture_value)
     op.fields.set_type(field_type="angle")
     for a in lens.fields if fields_deg is None else fields_deg:
         op.fields.add(y=float(a))
@@ -175,7 +183,7 @@ def optiland_cooke(
     glass_rows = [k for k, row in enumerate(COOKE_TABLE) if row[2] is not None]
     if materials is not None and len(materials) != len(glass_rows):
         raise ValueError(f"expected {len(glass_rows)} materials (one per glass of the table), got {len(materials)}")
-    chosen = dict(zip(glass_rows, materials)) if materials is not None else {}
+    chosen = dict(zip(glass_rows, materials, strict=True)) if materials is not None else {}
     o = Optic()
     o.surfaces.add(index=0, radius=be.inf, thickness=be.inf)
     for k, (radius, thickness, glass) in enumerate(COOKE_TABLE):

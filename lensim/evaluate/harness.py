@@ -258,14 +258,7 @@ def evaluate_rows(
     the_bank = _load_bank(manifest, pairs_dir, bank)
     all_methods: dict[str, Method] = {"input": builtin_method("input")}
     all_methods.update(methods)
-    keep = set(sources) if sources is not None else None
-    crops = []
-    for ri, rec in enumerate(manifest["records"]):
-        src = str(rec.get("source", ""))
-        if keep is not None and src not in keep and Path(src).name not in keep:
-            continue
-        for ci, cr in enumerate(rec.get("crops", [])):
-            crops.append((ri, ci, rec, cr))
+    crops = _select_crops(manifest["records"], sources)
     if max_crops is not None:
         crops = crops[:max_crops]
     if not crops:
@@ -274,50 +267,78 @@ def evaluate_rows(
     if progress:
         progress(0, len(crops))
     for done, (ri, ci, rec, cr) in enumerate(crops, 1):
-        x, _ = read_image(pairs_dir / cr["input"])
-        y, _ = read_image(pairs_dir / cr["target"])
-        if x.shape != y.shape:
-            raise InputError(
-                str(pairs_dir / cr["input"]), "size", f"is {tuple(x.shape)}; its target is {tuple(y.shape)}"
-            )
-        _, h, w = x.shape
-        top, left = int(cr["sensor_top"]), int(cr["sensor_left"])
-        rec_bank = _record_bank(the_bank, rec, f"{pairs_dir / MANIFEST}: records[{ri}]")
-        ctx = CropContext(
-            native_mapping(h, w, sensor, top, left),
-            sensor,
-            rec_bank,
-            crop_capture(rec, cr),
-            top,
-            left,
-            ri,
-            ci,
-            _record_settings(rec, pairs_dir, ri),
-        )
-        rho = normalized_radius(h, w, top, left, sensor.height, sensor.width)
-        for name, method in all_methods.items():
-            out = method(x, ctx)
-            if tuple(out.shape) != tuple(x.shape):
-                raise ValueError(f"method {name!r} returned shape {tuple(out.shape)}; expected {tuple(x.shape)}")
-            s = image_scores(out.detach().float().cpu().clamp(0.0, 1.0), y, rho)
-            row = {
-                "record": ri,
-                "crop": ci,
-                "source": rec.get("source", ""),
-                "input": cr["input"],
-                "sensor_top": top,
-                "sensor_left": left,
-                "method": name,
-                "psnr_db": s["psnr_db"],
-                "ssim": s["ssim"],
-                "mse": s["mse"],
-            }
-            for z in ZONES:
-                for k in ("psnr_db", "ssim", "pixels", "ssim_pixels"):
-                    row[f"{z}_{k}"] = s["zones"][z][k]
-            rows.append(row)
+        rows += _crop_rows(pairs_dir, sensor, the_bank, all_methods, ri, ci, rec, cr)
         if progress:
             progress(done, len(crops))
+    return rows
+
+
+def _select_crops(records: list[dict], sources: Sequence[str] | None) -> list[tuple[int, int, dict, dict]]:
+    """(record index, crop index, record, crop) of every crop, of the records whose source
+    photo's file name or full path is in ``sources`` (all records when None)."""
+    keep = set(sources) if sources is not None else None
+    crops = []
+    for ri, rec in enumerate(records):
+        src = str(rec.get("source", ""))
+        if keep is not None and src not in keep and Path(src).name not in keep:
+            continue
+        for ci, cr in enumerate(rec.get("crops", [])):
+            crops.append((ri, ci, rec, cr))
+    return crops
+
+
+def _crop_rows(
+    pairs_dir: Path,
+    sensor: SensorProfile,
+    bank: PSFBank | GridBank | None,
+    methods: Mapping[str, Method],
+    ri: int,
+    ci: int,
+    rec: dict,
+    cr: dict,
+) -> list[dict]:
+    """The rows of one crop (crop ``ci`` of record ``ri``): one per method (evaluate_rows)."""
+    x, _ = read_image(pairs_dir / cr["input"])
+    y, _ = read_image(pairs_dir / cr["target"])
+    if x.shape != y.shape:
+        raise InputError(str(pairs_dir / cr["input"]), "size", f"is {tuple(x.shape)}; its target is {tuple(y.shape)}")
+    _, h, w = x.shape
+    top, left = int(cr["sensor_top"]), int(cr["sensor_left"])
+    rec_bank = _record_bank(bank, rec, f"{pairs_dir / MANIFEST}: records[{ri}]")
+    ctx = CropContext(
+        native_mapping(h, w, sensor, top, left),
+        sensor,
+        rec_bank,
+        crop_capture(rec, cr),
+        top,
+        left,
+        ri,
+        ci,
+        _record_settings(rec, pairs_dir, ri),
+    )
+    rho = normalized_radius(h, w, top, left, sensor.height, sensor.width)
+    rows = []
+    for name, method in methods.items():
+        out = method(x, ctx)
+        if tuple(out.shape) != tuple(x.shape):
+            raise ValueError(f"method {name!r} returned shape {tuple(out.shape)}; expected {tuple(x.shape)}")
+        s = image_scores(out.detach().float().cpu().clamp(0.0, 1.0), y, rho)
+        row = {
+            "record": ri,
+            "crop": ci,
+            "source": rec.get("source", ""),
+            "input": cr["input"],
+            "sensor_top": top,
+            "sensor_left": left,
+            "method": name,
+            "psnr_db": s["psnr_db"],
+            "ssim": s["ssim"],
+            "mse": s["mse"],
+        }
+        for z in ZONES:
+            for k in ("psnr_db", "ssim", "pixels", "ssim_pixels"):
+                row[f"{z}_{k}"] = s["zones"][z][k]
+        rows.append(row)
     return rows
 
 
