@@ -88,6 +88,16 @@ LENS_FILES = [
         make=lens_with("h.yaml", s5_thickness=1e12),
     ),
     case(
+        "lens-number-key",
+        INFO + "k.yaml",
+        "k.yaml",
+        "aperture",
+        "unknown key(s) 10.0",
+        make=text("k.yaml", COOKE_TEXT.replace("value: 10.0}", "10.0}")),
+    ),
+    case("lens-number-note", INFO + "n.yaml", "n.yaml", "notes", "[1.5]", make=lens_with("n.yaml", notes=[1.5])),
+    case("lens-text-notes", INFO + "n.yaml", "n.yaml", "notes", "'a note'", make=lens_with("n.yaml", notes="a note")),
+    case(
         "lens-huge-object-distance",
         INFO + "h.yaml",
         "h.yaml",

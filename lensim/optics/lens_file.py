@@ -122,7 +122,7 @@ def _length(src: str, field: str, value: Any, allow_inf: bool = False) -> float:
 def _check_keys(src: str, field: str, data: Any, allowed: set[str]) -> dict:
     if not isinstance(data, dict):
         raise InputError(src, field, f"expected a mapping, got {type(data).__name__}")
-    unknown = sorted(set(data) - allowed)
+    unknown = sorted(str(k) for k in set(data) - allowed)  # YAML keys may be numbers
     if unknown:
         raise InputError(
             src, field, f"unknown key(s) {', '.join(unknown)}; expected some of {', '.join(sorted(allowed))}"
@@ -150,7 +150,10 @@ def lens_from_dict(data: dict, source: str = "<lens>") -> Lens:
     surfaces_data = data.get("surfaces")
     if not isinstance(surfaces_data, list) or not surfaces_data:
         raise InputError(src, "surfaces", "expected a non-empty list of surfaces")
-    notes: list[str] = list(data.get("notes", []))
+    notes = data.get("notes", [])
+    if not isinstance(notes, list) or not all(isinstance(n, str) for n in notes):
+        raise InputError(src, "notes", f"expected a list of texts, got {notes!r}")
+    notes = list(notes)
     surfaces = [_surface_from_data(src, i, sd, notes) for i, sd in enumerate(surfaces_data)]
     image = _check_keys(src, "image", data.get("image", {}) or {}, {"defocus", "clear_semi_diameter", "tilt"})
     as_built = data.get("as_built", {}) or {}
