@@ -1,6 +1,7 @@
-"""Vocabularies with one home: the Bayer pattern (lensim.sensor.cfa.CfaPattern) and the
-EXIF shooting data (lensim.raw.exif.Exif, the fields RawImage carries and DngExif writes).
-Each is checked where a user's value enters, with one line naming the file or field."""
+"""Vocabularies with one home: the Bayer pattern (lensim.sensor.cfa.CfaPattern), the PSF
+methods (lensim.psf.defaults.PsfMethod) and the EXIF shooting data (lensim.raw.exif.Exif,
+the fields RawImage carries and DngExif writes). Each vocabulary is checked where a
+user's value enters, with one line naming the file or field."""
 
 from __future__ import annotations
 
@@ -71,3 +72,27 @@ def test_exif_fields_declared_once():
         lens="Cooke",
     )
     assert DngExif.from_mapping(raw.info()) == Exif(0.01, 2.8, 400.0, 35.0, float("inf"), "Cooke")
+
+
+def test_psf_method_vocabulary_is_the_literal_and_each_has_one_function():
+    from lensim.psf.compute import PSF_FUNCTIONS
+    from lensim.psf.defaults import METHODS, PsfMethod
+
+    assert METHODS == typing.get_args(PsfMethod) == ("huygens", "fft", "geometric")
+    assert tuple(PSF_FUNCTIONS) == METHODS
+
+
+def test_psf_method_refused_at_each_boundary():
+    from lensim.optics.lens_file import load_lens
+    from lensim.psf.bank import BankSettings
+    from lensim.psf.compute import compute_psf
+    from lensim.psf.defaults import psf_method
+
+    assert psf_method("fft") == "fft"
+    expected = "method: expected one of huygens, fft, geometric, got 'zemax'"
+    lens = load_lens("cooke_triplet")
+    with pytest.raises(InputError, match=expected) as e:
+        compute_psf(lens, 0.0, 0.55, method="zemax")  # type: ignore[arg-type]
+    assert e.value.source == lens.source
+    with pytest.raises(InputError, match=expected):
+        BankSettings(method="zemax")  # type: ignore[arg-type]

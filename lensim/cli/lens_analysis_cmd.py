@@ -28,7 +28,7 @@ from lensim.cli.lens_cmd import (
 )
 from lensim.cli.validate import at_least, choice, in_range, positive, wavelength_nm
 from lensim.errors import InputError
-from lensim.psf.defaults import DEFAULT_WAVELENGTHS_TEXT, METHODS
+from lensim.psf.defaults import DEFAULT_WAVELENGTHS_TEXT, METHODS, psf_method
 
 if TYPE_CHECKING:
     from lensim.optics.lens import Lens
@@ -370,7 +370,7 @@ def energy_command(
     from lensim.psf.analysis_reports import energy_report
 
     _outputs(output, json_out)
-    choice(method, METHODS, "--method")
+    kind = psf_method(method, "--method", None)
     choice(centre, ("centroid", "chief"), "--centre")
     if channel is not None:
         choice(channel, CHANNELS, "--channel")
@@ -384,6 +384,6 @@ def energy_command(
     wls, weights, _ = _spectrum(lens, sensor, channel, wavelengths)
     with progress_bar("encircled energy", "fields", quiet or json_out) as cb:
         report = energy_report(
-            lens, fields, wls, weights, grid, spacing_um, pupil_samples, aiming.value, method, centre, progress=cb
+            lens, fields, wls, weights, grid, spacing_um, pupil_samples, aiming.value, kind, centre, progress=cb
         )
     _finish(report, output, json_out, lambda: energy_figure(report, output))

@@ -41,7 +41,7 @@ from lensim.cli.validate import wavelength_nm as wavelength_nm_checked
 from lensim.errors import InputError
 from lensim.io import atomic_write_bytes
 from lensim.jsonable import jsonable
-from lensim.psf.defaults import METHODS
+from lensim.psf.defaults import METHODS, psf_method
 
 if TYPE_CHECKING:
     import numpy as np
@@ -82,7 +82,7 @@ def compute(
 
     in_range(field, 0.0, 1.0, "--field", what="a normalized field")
     wavelength_nm_checked(wavelength_nm)
-    choice(method, METHODS, "--method")
+    kind = psf_method(method, "--method", None)
     choice(aiming, AIMINGS, "--aiming")
     at_least(pupil_samples, 2, "--pupil-samples", what="a number of pupil samples")
     at_least(grid, 2, "--grid", "samples", "a PSF window")
@@ -90,7 +90,7 @@ def compute(
     if output is not None:
         output_file(output, suffixes=(".npy",))
     lens, described = lens_and_record(lens_file, shooting_settings(fno, object_m, focus_m, config))
-    psf = compute_psf(lens, field, wavelength_nm / 1000.0, method, pupil_samples, grid, spacing_um, aiming)
+    psf = compute_psf(lens, field, wavelength_nm / 1000.0, kind, pupil_samples, grid, spacing_um, aiming)
     if output is not None:
         _save_npy(output, psf.data)
     info = {
@@ -290,7 +290,7 @@ def _check_bank_options(
         pixel_pitch_um(pixel_um)
     if kernel:
         at_least(kernel, 1, "--kernel", "px", "a kernel size")
-    choice(method, METHODS, "--method")
+    psf_method(method, "--method", None)
     if max_spacing_um is not None:
         positive(max_spacing_um, "--max-spacing-um", "um", "a PSF spacing")
     at_least(workers, 1, "--workers", what="a number of processes")

@@ -17,6 +17,7 @@ from lensim.optics.aiming import Aiming
 from lensim.optics.field_analysis import _field_unit
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import paraxial_data
+from lensim.psf.defaults import PsfMethod
 from lensim.psf.energy import energy_curves
 from lensim.psf.mtf import field_otf, through_focus
 from lensim.psf.wavefront import wavefront, wavefront_figures, zernike_fit
@@ -153,7 +154,7 @@ def energy_report(
     spacing_um: float | None = None,
     pupil_samples: int | None = None,
     aiming: Aiming = "real",
-    method: str = "huygens",
+    method: PsfMethod = "huygens",
     centre: str = "centroid",
     progress: Progress = None,
 ) -> dict:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -18,7 +19,7 @@ from lensim.errors import InputError, PupilSamplingError
 from lensim.optics.aiming import Aiming, object_field
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import paraxial_data, paraxial_image_height
-from lensim.psf.defaults import METHODS
+from lensim.psf.defaults import PsfMethod, psf_method
 from lensim.psf.fourier import direction_scale, fft_psf, geometric_psf
 from lensim.psf.huygens import huygens_psf
 from lensim.psf.metrics import encircled_energy_radius, rms_spot_radius_um, strehl_ratio
@@ -27,6 +28,14 @@ from lensim.psf.pupil_field import PupilField, pupil_field
 
 class PSFSamplingWarning(UserWarning):
     """The requested PSF sampling is marginal (undersampled, window too small)."""
+
+
+#: the function of each PSF method: (pupil field, grid, spacing um, offset mm) -> (grid, grid) PSF
+PSF_FUNCTIONS: dict[PsfMethod, Callable[..., torch.Tensor]] = {
+    "huygens": huygens_psf,
+    "fft": fft_psf,
+    "geometric": geometric_psf,
+}
 
 
 @dataclass
@@ -40,7 +49,7 @@ class PSF:
     field: float
     field_value: float
     wavelength_um: float
-    method: str
+    method: PsfMethod
     chief_xy_mm: tuple[float, float]
     paraxial_xy_mm: tuple[float, float]
     transmission: float
@@ -48,7 +57,12 @@ class PSF:
 
 
 def check_sampling(
-    lens: Lens, pf: PupilField, grid: int, spacing_um: float, method: str, offset_mm: tuple[float, float] = (0.0, 0.0)
+    lens: Lens,
+    pf: PupilField,
+    grid: int,
+    spacing_um: float,
+    method: PsfMethod,
+    offset_mm: tuple[float, float] = (0.0, 0.0),
 ) -> None:
     """Refuse sampling that would alias; warn, with the figures, when it is marginal.
     The window is centred on the chief-ray point plus offset_mm, as the PSF's."""
@@ -112,7 +126,7 @@ def compute_psf(
     lens: Lens,
     field: float,
     wavelength_um: float,
-    method: str = "huygens",
+    method: PsfMethod = "huygens",
     pupil_samples: int = 128,
     grid: int = 128,
     spacing_um: float = 0.5,
@@ -120,15 +134,14 @@ def compute_psf(
     offset_mm: tuple[float, float] = (0.0, 0.0),
 ) -> PSF:
     """PSF of one normalized field (0..1) at one wavelength (um) by the chosen method."""
-    if method not in METHODS:
-        raise InputError(lens.source, "method", f"expected one of {', '.join(METHODS)}, got {method!r}")
+    method = psf_method(method, lens.source)
     if grid < 8 or spacing_um <= 0:
         raise InputError(lens.source, "grid", f"expected grid >= 8 and spacing > 0, got {grid} and {spacing_um}")
     para = paraxial_data(lens)
     value = field_in_lens_units(lens, field)
     pf = pupil_field(lens, value, wavelength_um, pupil_samples, aiming, para)
     check_sampling(lens, pf, grid, spacing_um, method, offset_mm)
-    fn = {"huygens": huygens_psf, "fft": fft_psf, "geometric": geometric_psf}[method]
+    fn = PSF_FUNCTIONS[method]
     data = fn(pf, grid, spacing_um, offset_mm)
     launch = object_field(lens, value, aiming, para)
     para_y = paraxial_image_height(lens.launch_lens(), launch, para)

@@ -28,6 +28,7 @@ from lensim.optics.aiming import Aiming
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import paraxial_data
 from lensim.psf.compute import check_sampling
+from lensim.psf.defaults import PsfMethod
 from lensim.psf.fourier import fft_psf, geometric_psf
 from lensim.psf.huygens import huygens_psf
 from lensim.psf.metrics import enclosed_energy, psf_centroid_um, size_at_fraction
@@ -88,7 +89,7 @@ def polychromatic_psf(
     spacing_um: float,
     pupil_samples: int | None = None,
     aiming: Aiming = "real",
-    method: str = "huygens",
+    method: PsfMethod = "huygens",
 ) -> tuple[np.ndarray, float, int]:
     """(grid x grid weighted sum of the wavelengths' PSFs centred on the reference point,
     the transmitted energy sum of weight x transmission, the pupil samples used)."""
@@ -124,7 +125,7 @@ def energy_curves(
     spacing_um: float | None = None,
     pupil_samples: int | None = None,
     aiming: Aiming = "real",
-    method: str = "huygens",
+    method: PsfMethod = "huygens",
     centre: str = "centroid",
     points: int = 101,
 ) -> EnergyCurves:

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -31,9 +30,8 @@ from lensim.psf.bank.store import (
     write_field,
 )
 from lensim.psf.bank.types import BankField, Progress, PSFBank
-from lensim.psf.compute import PSFSamplingWarning, check_sampling, field_in_lens_units
-from lensim.psf.fourier import fft_psf, geometric_psf
-from lensim.psf.huygens import huygens_psf
+from lensim.psf.compute import PSF_FUNCTIONS, PSFSamplingWarning, check_sampling, field_in_lens_units
+from lensim.psf.defaults import PsfMethod
 from lensim.psf.metrics import strehl_ratio
 from lensim.psf.pixels import integrate_pixels, oversampling_factor
 from lensim.psf.pupil_field import PupilField, pupil_field
@@ -52,7 +50,7 @@ class _Job:
     pixel_pitch_um: float
     kernel_pixels: int
     k: int
-    method: str
+    method: PsfMethod
     pupil_samples: int
     ri_samples: int
     aiming: str
@@ -63,11 +61,7 @@ class _Job:
         return self.pixel_pitch_um / self.k
 
 
-def _psf_fn(method: str) -> Callable:
-    return {"huygens": huygens_psf, "fft": fft_psf, "geometric": geometric_psf}[method]
-
-
-def alias_free_pixels(pf: PupilField, kernel_pixels: int, pixel_pitch_um: float, method: str) -> int:
+def alias_free_pixels(pf: PupilField, kernel_pixels: int, pixel_pitch_um: float, method: PsfMethod) -> int:
     """The odd number of kernel pixels (<= kernel_pixels) whose window the pupil sampling
     resolves without wrap-around: a pupil grid of N samples repeats a diffraction PSF every
     lambda / (n' du) um (du: direction-cosine step between samples). Outside that central
@@ -148,7 +142,7 @@ class _FieldWork:
         job = self.job
         m = alias_free_pixels(pf, job.kernel_pixels, job.pixel_pitch_um, job.method)
         self._check(pf, wl_um, m * job.k, offset)
-        fine = _psf_fn(job.method)(pf, m * job.k, job.spacing_um, offset)
+        fine = PSF_FUNCTIONS[job.method](pf, m * job.k, job.spacing_um, offset)
         return embed_centred(fine.numpy(), job.k * job.kernel_pixels)
 
     def relative_illumination(self) -> np.ndarray:

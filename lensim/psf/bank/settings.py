@@ -23,7 +23,7 @@ import numpy as np
 
 from lensim.errors import InputError
 from lensim.optics.lens import Lens
-from lensim.psf.defaults import BANK_FIELDS, BANK_PUPIL_SAMPLES, DEFAULT_WAVELENGTHS_TEXT, METHODS
+from lensim.psf.defaults import BANK_FIELDS, BANK_PUPIL_SAMPLES, DEFAULT_WAVELENGTHS_TEXT, PsfMethod, psf_method
 
 FIELD_SPACINGS = ("sqrt", "linear")
 _SOURCE = "bank settings"
@@ -160,7 +160,7 @@ class BankSettings:
     aiming: str = "real"
     kernel_pixels: int | None = None
     kernel_limit: int = 99
-    method: str = "huygens"
+    method: PsfMethod = "huygens"
     max_spacing_um: float | None = None
     illuminant: str = "E"
     ri_samples: int = 32
@@ -178,8 +178,7 @@ class BankSettings:
             raise InputError(_SOURCE, "pupil_samples", f"expected at least 8 pupil samples, got {self.pupil_samples}")
         if self.aiming not in ("real", "paraxial"):
             raise InputError(_SOURCE, "aiming", f"expected real or paraxial, got {self.aiming!r}")
-        if self.method not in METHODS:
-            raise InputError(_SOURCE, "method", f"expected one of {', '.join(METHODS)}, got {self.method!r}")
+        psf_method(self.method, _SOURCE)
         spacing = self.max_spacing_um
         if spacing is not None and not (math.isfinite(spacing) and spacing > 0):
             raise InputError(_SOURCE, "max_spacing_um", f"expected a positive spacing (um), got {spacing}")
