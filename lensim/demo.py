@@ -100,7 +100,7 @@ def _claim_folder(out: Path, settings: DemoSettings, quick: bool, seed: int, sho
                 str(marker),
                 "settings",
                 f"this folder holds a demo run with {what}; expected the "
-                "same options (--quick, --seed) to resume it, or a new output folder",
+                "same settings (`quick`, `seed`) to resume it, or a new output folder",
             )
     else:
         atomic_write_json(marker, mine)

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import re
+from collections.abc import Mapping
+
 
 class LensimError(ValueError):
     """Base class of every error lensim raises on bad input."""
@@ -24,6 +27,37 @@ class InputError(LensimError):
         """Pickle by the three parts, so an error raised in a worker process (psf bank and
         dataset make --workers) reaches the parent as the same one-line error."""
         return self.__class__, (self.source, self.field, self.message)
+
+
+class ParameterError(InputError):
+    """A bad argument: ``field`` is the parameter's Python name (``workers``, ``fno``; several
+    joined by ", " or "/" when the error is about their combination), ``source`` the file it
+    concerns or None. A message that points at another parameter quotes its name in
+    backticks (`` `fno` ``).
+
+    The library names parameters, never command-line options; the command line shows each
+    name as its option (lensim.cli.common.error_for_command_line)."""
+
+    @property
+    def parameter(self) -> str:
+        """The parameter's name (or names), as ``field``."""
+        return self.field or ""
+
+
+def renamed(error: ParameterError, names: Mapping[str, str]) -> ParameterError:
+    """The error with the parameters it names (its field, and the `name`s its message quotes)
+    renamed by ``names`` ({inner name: outer name}): for a function that passes its own
+    parameters to another under that one's names (lensfun_profile's ``aperture`` is
+    lens_at's ``fno``)."""
+
+    def name(m: re.Match[str]) -> str:
+        return names.get(m.group(0), m.group(0))
+
+    def quoted(m: re.Match[str]) -> str:
+        return f"`{names.get(m.group(1), m.group(1))}`"
+
+    field = re.sub(r"[A-Za-z_][A-Za-z0-9_]*", name, error.field or "") or None
+    return ParameterError(error.source, field, re.sub(r"`([A-Za-z_][A-Za-z0-9_]*)`", quoted, error.message))
 
 
 class PupilSamplingError(InputError):

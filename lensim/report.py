@@ -240,7 +240,7 @@ def _raw_file_html(raw: Mapping[str, Any] | None) -> str:
     return (
         f"<p>The held-out photo <code>{html.escape(raw['photo'])}</code> simulated at the sensor's right edge "
         f"(top-left sensor pixel {raw['sensor_top']}, {raw['sensor_left']}) and written as a CFA DNG "
-        f"(<code>{html.escape(raw['dng'])}</code>, what <code>lensim simulate --raw</code> writes), then "
+        f"(<code>{html.escape(raw['dng'])}</code>, as <code>lensim simulate</code> writes a raw output), then "
         "restored by <code>lensim restore</code>'s raw path: developed with the simulator's chain (no "
         "sharpening), restored with the field of view of its place on the sensor. PSNR against the truth: "
         f"developed {raw['developed_psnr_db']:.2f} dB, restored {raw['restored_psnr_db']:.2f} dB.</p>"

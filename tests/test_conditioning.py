@@ -8,8 +8,15 @@ import math
 import pytest
 import torch
 
-from lensim.errors import InputError
-from lensim.restore.conditioning import Conditioning, feature, record_settings, settings_planes
+from lensim.errors import InputError, ParameterError
+from lensim.restore.conditioning import (
+    Conditioning,
+    feature,
+    given_settings,
+    photo_vector,
+    record_settings,
+    settings_planes,
+)
 from lensim.restore.fov import fov_channels
 from lensim.restore.network import FieldAwareUNet
 
@@ -42,12 +49,44 @@ def test_ranges_and_inputs_from_records():
     assert Conditioning.from_records([None, None]) == Conditioning()
 
 
-def test_a_missing_input_names_the_options():
+def test_a_missing_input_names_the_settings():
     cond = Conditioning.from_records(record_settings(s) for s in GRID)
     with pytest.raises(InputError) as e:
         cond.vector({"focal_mm": 50.0}, "photo.png")
     msg = str(e.value)
-    assert "photo.png" in msg and "--fno" in msg and "--focus-m" in msg and "\n" not in msg
+    assert "photo.png" in msg and "`fno`" in msg and "`focus_m`" in msg and "\n" not in msg
+    assert "--" not in msg  # the library names no command-line option
+
+
+def test_a_photo_vector_takes_the_exif_settings_each_replaced_by_a_given_one():
+    """photo_vector: the one home of a photo's settings vector (developed photos and raws)."""
+    cond = Conditioning.from_records(record_settings(s) for s in GRID)
+    exif = {"fno": 2.0, "focus_m": 1.0, "focal_mm": 50.0}
+    assert photo_vector(cond, exif, {}, "a.png").tolist() == [-1.0, -1.0]
+    assert photo_vector(cond, exif, given_settings(fno=8.0), "a.png").tolist() == [1.0, -1.0]
+    assert photo_vector(cond, {"fno": None, "focus_m": None}, {"fno": 8.0, "focus_m": math.inf}, "a.png").tolist() == [
+        1.0,
+        1.0,
+    ]
+    with pytest.raises(ParameterError) as e:  # neither the EXIF nor the caller gives the F-number
+        photo_vector(cond, {"fno": None, "focus_m": 1.0}, {}, "a.png")
+    assert e.value.source == "a.png" and e.value.parameter == "fno"
+    assert "FNumber" in e.value.message and "`fno`" in e.value.message and "SubjectDistance" not in e.value.message
+    with pytest.warns(UserWarning, match="f/11"):  # 0.46 stop beyond the trained f/8: warned, restored
+        assert photo_vector(cond, {**exif, "fno": 11.0}, {}, "a.png") is not None
+    with pytest.raises(ParameterError) as e:  # 1.46 stops beyond: refused
+        photo_vector(cond, exif, {"fno": 22.0}, "a.png")
+    assert e.value.parameter == "fno"
+    unconditioned = Conditioning.from_records((record_settings(s) for s in GRID), use=False)
+    assert photo_vector(unconditioned, {}, {}, "a.png") is None  # nothing needed
+
+
+@pytest.mark.parametrize("bad", [{"fno": 0.0}, {"focus_m": -1.0}, {"focal_mm": math.nan}])
+def test_given_settings_are_checked_naming_the_setting(bad):
+    assert given_settings(fno=4, focus_m=math.inf) == {"fno": 4.0, "focus_m": math.inf}
+    with pytest.raises(ParameterError) as e:
+        given_settings(**bad)
+    assert e.value.parameter == next(iter(bad)) and "--" not in str(e.value)
 
 
 def test_range_check_tolerates_rounding_warns_then_refuses():
@@ -59,7 +98,7 @@ def test_range_check_tolerates_rounding_warns_then_refuses():
     assert len(cond.check({"focus_m": 0.8})) == 1  # 1.25 D: 0.25 D beyond 1 m
     with pytest.raises(InputError) as e:
         cond.check({"fno": 22.0}, "a.dng")  # 1.46 stops beyond f/8
-    assert "--fno" in str(e.value) and "a.dng" in str(e.value)
+    assert e.value.field == "fno" and "a.dng" in str(e.value)
     with pytest.raises(InputError):
         cond.check({"focus_m": 0.3})  # 3.3 D against a 0..1 D range
     with pytest.raises(InputError):

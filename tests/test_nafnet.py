@@ -286,12 +286,14 @@ def test_build_model_and_checkpoints(tmp_path: Path) -> None:
 
 
 def _app() -> typer.Typer:
+    from lensim.cli.common import name_options
     from lensim.cli.evaluate_cmd import evaluate_command
     from lensim.cli.train_cmd import train_command
 
     app = typer.Typer()
     app.command("train")(train_command)
     app.command("evaluate")(evaluate_command)
+    name_options(app)  # errors show the options, as in lensim.cli.app
     return app
 
 

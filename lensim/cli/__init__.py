@@ -9,7 +9,7 @@ from lensim.cli.ablation_cmd import ablation_command
 from lensim.cli.allocator import keep_freed_memory
 from lensim.cli.assets_cmd import assets_command
 from lensim.cli.chart_cmd import chart_app
-from lensim.cli.common import run_guarded
+from lensim.cli.common import name_options, run_guarded
 from lensim.cli.dataset_cmd import dataset_app
 from lensim.cli.demo_cmd import demo_command, report_command
 from lensim.cli.develop_cmd import develop_command
@@ -48,6 +48,7 @@ app.command("develop")(develop_command)
 app.command("demo")(demo_command)
 app.command("ablation")(ablation_command)
 app.command("report")(report_command)
+name_options(app)  # library errors name parameters; the commands show them as their options
 
 
 def main() -> None:

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 import typer
 
-from lensim.errors import InputError
+from lensim.errors import InputError, ParameterError
 from lensim.psf.defaults import BANK_FIELDS, BANK_PUPIL_SAMPLES, DEFAULT_WAVELENGTHS_TEXT
 
 if TYPE_CHECKING:
@@ -70,7 +70,12 @@ def setting_list_option(key: str) -> Any:
         "a grid.",
         "config": "Lens configuration(s) (zoom positions), names or 1-based numbers; a comma list makes a grid.",
     }
-    return typer.Option(None, "--" + key.replace("_", "-"), help=helps[key])
+    return typer.Option(None, setting_flag(key), help=helps[key])
+
+
+def setting_flag(key: str) -> str:
+    """The option of a shooting setting (fno -> --fno, focus_m -> --focus-m)."""
+    return "--" + key.replace("_", "-")
 
 
 _SINGLE_HELP = {
@@ -86,7 +91,7 @@ _SINGLE_HELP = {
 def setting_option(key: str) -> Any:
     """One shooting setting (fno, focus_m, object_m, config), a single value: commands
     that use the lens at one setting."""
-    return typer.Option(None, "--" + key.replace("_", "-"), help=_SINGLE_HELP[key])
+    return typer.Option(None, setting_flag(key), help=_SINGLE_HELP[key])
 
 
 def fno_option() -> Any:
@@ -110,14 +115,13 @@ def shooting_settings(
 ) -> ShootingSettings:
     """The ShootingSettings of the single-value options (checked; one-line errors naming
     the option; a comma list is refused: grids are psf bank's and dataset make's)."""
-    from lensim.optics.shooting import OPTIONS as SHOOTING_OPTIONS
     from lensim.optics.shooting import ShootingSettings
 
     for key, text in (("fno", fno), ("object_m", object_m), ("focus_m", focus_m), ("config", config)):
         if text is not None and "," in str(text):
             raise InputError(
                 "<command line>",
-                SHOOTING_OPTIONS[key],
+                setting_flag(key),
                 f"expected one value, got the list {text!r} (grids of settings are made by psf bank and dataset make)",
             )
     return ShootingSettings.from_text(fno, object_m, focus_m, config)
@@ -165,7 +169,7 @@ def bank_settings(
             **more,
         )
     except InputError as e:
-        if e.source == "<command line>":
+        if isinstance(e, ParameterError):  # the command shows the parameter as its option
             raise
         raise InputError("<command line>", OPTION_NAMES.get(e.field or "", e.field), e.message) from None
 
@@ -198,12 +202,11 @@ def bank_for_lens(
     computed for (a bank of another lens would be used silently otherwise). Shooting
     settings without --lens are refused: the bank's lens is already set."""
     from lensim.cli.validate import input_folder
-    from lensim.optics.shooting import OPTIONS as SHOOTING_OPTIONS
     from lensim.psf.bank import PSFBank
 
     bank = PSFBank.load(input_folder(bank_dir, "--bank", "bank folder"))
     if shooting is not None and not shooting.is_default:
-        given = ", ".join(SHOOTING_OPTIONS[k] for k, v in shooting.to_dict().items() if v is not None)
+        given = ", ".join(setting_flag(k) for k, v in shooting.to_dict().items() if v is not None)
         if lens_file is None:
             raise InputError(
                 "<command line>",

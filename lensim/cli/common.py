@@ -1,21 +1,27 @@
-"""Shared CLI helpers: consoles, one-line error handling (bad input, and the faults of a
-long run: a full disk, too little memory, SIGTERM or Ctrl-C), JSON output."""
+"""Shared CLI helpers: consoles, one-line error handling (bad input, with library parameter
+names shown as the command's options, and the faults of a long run: a full disk, too
+little memory, SIGTERM or Ctrl-C), JSON output."""
 
 from __future__ import annotations
 
 import contextlib
+import functools
+import inspect
 import json
+import re
 import signal
 import sys
 import time
 import warnings
 from collections.abc import Callable, Iterator
+from typing import Any
 
 import typer
 from rich.console import Console
 from rich.text import Text
+from typer.models import OptionInfo
 
-from lensim.errors import LensimError
+from lensim.errors import InputError, LensimError, ParameterError
 from lensim.jsonable import jsonable
 
 # markup off: file names and values such as "bad[bold]name.yaml" print as they are
@@ -47,6 +53,98 @@ def _usage_error_line(e: typer.TyperException) -> str:
     ctx = getattr(e, "ctx", None)
     where = ctx.command_path if ctx is not None else "lensim"
     return f"{where}: {e.format_message()} (see {where} --help)"
+
+
+# ---------------------------------------------------------------- parameter names -> options
+
+#: Library parameters that a command's own parameter spells differently: {library name:
+#: the command function's parameter name}. The one table of the mapping; everything else
+#: is read from the command's signature (see option_of).
+PARAMETER_ALIASES: dict[str, str] = {
+    "pixel_pitch_um": "pixel_um",  # sensor from-raw --pixel-um
+    "focal_mm": "focal",  # lens lensfun --focal
+    "distance_m": "distance",  # lens lensfun --distance
+}
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+_QUOTED = re.compile(r"`([A-Za-z_][A-Za-z0-9_]*)`")
+
+
+def command_options(command: Callable[..., Any]) -> dict[str, str]:
+    """{Python parameter name: its long option} of a Typer command function (typer's
+    default spelling, --name-with-dashes, where the option gives no names)."""
+    out: dict[str, str] = {}
+    for name, param in inspect.signature(command).parameters.items():
+        if isinstance(param.default, OptionInfo):
+            decls = [d for d in param.default.param_decls or () if d.startswith("--")]
+            out[name] = decls[0].split("/")[0] if decls else "--" + name.replace("_", "-")
+    return out
+
+
+def option_of(parameter: str, options: dict[str, str]) -> str | None:
+    """The option that gives a library parameter, among a command's ``options``
+    (command_options): the command's parameter of that name or of its PARAMETER_ALIASES
+    name, else an option spelled --PARAMETER (underscores as dashes); None when the
+    command has none."""
+    for name in (parameter, PARAMETER_ALIASES.get(parameter)):
+        if name is not None and name in options:
+            return options[name]
+    dashed = "--" + parameter.replace("_", "-")
+    return dashed if dashed in options.values() else None
+
+
+def error_for_command_line(error: LensimError, options: dict[str, str]) -> LensimError:
+    """The error as the command line shows it: the parameter(s) a ParameterError names, and
+    every `name` a message quotes in backticks, become the command's options; a name the
+    command has no option for stays as it is. The error itself when nothing changes."""
+
+    def named(m: re.Match[str]) -> str:
+        return option_of(m.group(0), options) or m.group(0)
+
+    def quoted(m: re.Match[str]) -> str:
+        return option_of(m.group(1), options) or m.group(0)
+
+    if isinstance(error, InputError):
+        field = _NAME.sub(named, error.field) if isinstance(error, ParameterError) and error.field else error.field
+        message = _QUOTED.sub(quoted, error.message)
+        if (field, message) == (error.field, error.message):
+            return error
+        return InputError(error.source, field, message)
+    text = _QUOTED.sub(quoted, str(error))
+    return error if text == str(error) else LensimError(text)
+
+
+def _naming_options(command: Callable[..., Any]) -> Callable[..., Any]:
+    """The command function, its lensim errors shown with its options (error_for_command_line)."""
+    if getattr(command, "names_options", False):
+        return command
+
+    @functools.wraps(command)
+    def run(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return command(*args, **kwargs)
+        except LensimError as e:
+            shown = error_for_command_line(e, command_options(command))
+            if shown is e:
+                raise
+            raise shown from e
+
+    run.names_options = True  # type: ignore[attr-defined]
+    return run
+
+
+def name_options(app: typer.Typer) -> None:
+    """Make every command of ``app`` (and of its sub-apps) show the library parameters its
+    errors name as the command's options: the library never names a command-line option
+    (its errors name the parameter), the command line maps it, here."""
+    for info in app.registered_commands:
+        if info.callback is not None:
+            info.callback = _naming_options(info.callback)
+    for group in app.registered_groups:
+        if group.typer_instance is not None:
+            name_options(group.typer_instance)
+
+
+# ---------------------------------------------------------------- faults and running the app
 
 
 class Stopped(BaseException):

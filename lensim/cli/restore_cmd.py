@@ -152,9 +152,11 @@ def restore_command(
     lensim restore runs/a raws/ -o restored/ --dng --workers 2;
     lensim restore model.onnx photo.png -o restored/ --engine onnxruntime
     """
+    from lensim.restore.conditioning import given_settings
+
     _check_options(bits, tile, overlap, workers, threads, device, output, checkpoint, engine)
     scheduler_address(scheduler)
-    shooting = _shooting(fno, focus_m, focal_mm)
+    shooting = given_settings(fno, focus_m, focal_mm)
     offset = _parse_pair(sensor_offset, "--sensor-offset") if sensor_offset else None
     raws, photos = _split_inputs(images)
     if dng and not raws:
@@ -268,39 +270,14 @@ def _check_options(
         raise InputError(str(checkpoint), "--engine", "is an ONNX model; expected --engine onnxruntime to run it")
 
 
-def _shooting(fno: float | None, focus_m: float | None, focal_mm: float | None) -> dict[str, float]:
-    """--fno/--focus-m/--focal-mm as a settings dict (those given), each checked."""
-    from lensim.restore.conditioning import OPTIONS, check_value
-
-    given = {"fno": fno, "focus_m": focus_m, "focal_mm": focal_mm}
-    return {k: check_value(k, v, OPTIONS[k], None) for k, v in given.items() if v is not None}
-
-
 def _photo_settings(photos: list[Path], shooting: dict[str, float], info: dict) -> dict[Path, torch.Tensor | None]:
-    """The settings vector of each (developed) photo: its EXIF's settings (FNumber,
-    SubjectDistance, FocalLength of a TIFF, JPEG or PNG), each replaced by the option's
-    value when one is given; None for a network without settings inputs. The trained
-    ranges are checked (a warning, or far outside a refusal) before any output."""
+    """The settings vector of each (developed) photo (lensim.restore.conditioning.photo_vector
+    of its EXIF's settings and the options'), checked before any output."""
     from lensim.raw.read import photo_exif_settings
-    from lensim.restore.conditioning import OPTIONS, Conditioning
+    from lensim.restore.conditioning import Conditioning, photo_vector
 
     cond = Conditioning.from_dict(info["conditioning"], info["path"])
-    vectors: dict[Path, torch.Tensor | None] = {}
-    for path in photos:
-        shot = {**photo_exif_settings(path), **shooting}
-        for text in cond.check(shot, str(path)):
-            warnings.warn(text, UserWarning, stacklevel=2)
-        missing = [OPTIONS[k] for k in cond.keys if k not in shot]
-        if missing:
-            raise InputError(
-                str(path),
-                ", ".join(missing),
-                f"{info['path']} was trained across shooting settings "
-                f"({cond.describe()}) and needs the photo's {', '.join(cond.keys)}; its EXIF does not "
-                f"say; give {' '.join(m + ' ...' for m in missing)}",
-            )
-        vectors[path] = cond.vector(shot) if cond.dim else None
-    return vectors
+    return {path: photo_vector(cond, photo_exif_settings(path), shooting, str(path)) for path in photos}
 
 
 def _photo_output_name(path: Path) -> str:

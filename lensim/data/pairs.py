@@ -49,7 +49,7 @@ from typing import Any
 import torch
 
 from lensim.data.manifest import FORMAT, MANIFEST
-from lensim.errors import InputError
+from lensim.errors import InputError, ParameterError
 from lensim.images import READ_SUFFIXES, read_image, write_image
 from lensim.io import atomic_write_json, folder_lock, read_json
 from lensim.psf.bank import GridBank, PSFBank
@@ -396,10 +396,10 @@ def check_photos(files: list[Path], size: int) -> None:
         img, _ = read_image(path)
         _, h, w = img.shape
         if h < size or w < size:
-            raise InputError(
+            raise ParameterError(
                 str(path),
                 "size",
-                f"image is {w}x{h}; expected at least {size}x{size} pixels for {size}-pixel crops (--size)",
+                f"image is {w}x{h}; expected at least {size}x{size} pixels for {size}-pixel crops",
             )
 
 

@@ -47,7 +47,7 @@ import torch
 
 from lensim.data.manifest import MANIFEST, read_pairs_manifest
 from lensim.data.pairs import crop_capture
-from lensim.errors import InputError
+from lensim.errors import InputError, ParameterError
 from lensim.evaluate import baselines
 from lensim.evaluate.metrics import ZONES, image_scores, normalized_radius
 from lensim.images import read_image
@@ -98,10 +98,10 @@ Method = Callable[[torch.Tensor, CropContext], torch.Tensor]
 
 def _need_bank(ctx: CropContext, name: str) -> PSFBank:
     if ctx.bank is None:
-        raise InputError(
+        raise ParameterError(
             None,
             "bank",
-            f"method {name!r} needs the dataset's PSF bank; it was not found (pass its folder with --bank)",
+            f"method {name!r} needs the dataset's PSF bank; it was not found (pass its folder as `bank`)",
         )
     return ctx.bank
 
@@ -155,7 +155,7 @@ def checkpoint_method(
         raise InputError(
             info["path"],
             "model_config",
-            f"holds a {arch_of(info['model_config'])!r} network; expected {arch!r} (--arch)",
+            f"holds a {arch_of(info['model_config'])!r} network; expected {arch!r} (`arch`)",
         )
     cond = Conditioning.from_dict(info["conditioning"], info["path"])
 
@@ -262,7 +262,7 @@ def evaluate_rows(
     if max_crops is not None:
         crops = crops[:max_crops]
     if not crops:
-        raise InputError(str(pairs_dir), "records", "no crops to evaluate (check --sources)")
+        raise InputError(str(pairs_dir), "records", "no crops to evaluate (check `sources`)")
     rows: list[dict] = []
     if progress:
         progress(0, len(crops))

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lensim.errors import InputError, LensimError
+from lensim.errors import InputError, LensimError, ParameterError, renamed
 from lensim.io import atomic_write_text
 from lensim.optics.aiming import Aiming, object_field
 from lensim.optics.field_analysis import distortion, lateral_colour, relative_illumination
@@ -77,15 +77,15 @@ class LensfunProfile:
 def check_settings(
     maker: str, model: str, mount: str, crop_factor: float, focal_mm: float, aperture: float, distance_m: float | None
 ) -> None:
-    """One-line errors for every bad setting, before any work."""
-    for name, text in (("--maker", maker), ("--model", model), ("--mount", mount)):
+    """One-line errors (ParameterError) for every bad setting, before any work."""
+    for name, text in (("maker", maker), ("model", model), ("mount", mount)):
         if not str(text).strip():
-            raise InputError(None, name, "expected a non-empty name")
-    for name, value in (("--crop-factor", crop_factor), ("--focal", focal_mm), ("--aperture", aperture)):
+            raise ParameterError(None, name, "expected a non-empty name")
+    for name, value in (("crop_factor", crop_factor), ("focal_mm", focal_mm), ("aperture", aperture)):
         if not (math.isfinite(value) and value > 0):
-            raise InputError(None, name, f"expected a positive number, got {value:g}")
+            raise ParameterError(None, name, f"expected a positive number, got {value:g}")
     if distance_m is not None and not (math.isfinite(distance_m) and distance_m > 0):
-        raise InputError(None, "--distance", f"expected a positive focus distance in metres, got {distance_m:g}")
+        raise ParameterError(None, "distance_m", f"expected a positive focus distance in metres, got {distance_m:g}")
 
 
 def _corner_launch(lens: Lens, corner_mm: float, crop_factor: float, aiming: Aiming) -> float:
@@ -94,9 +94,9 @@ def _corner_launch(lens: Lens, corner_mm: float, crop_factor: float, aiming: Aim
     try:
         return object_field(probe, corner_mm, aiming, paraxial_data(probe))
     except LensimError as e:
-        raise InputError(
+        raise ParameterError(
             lens.source,
-            "--crop-factor",
+            "crop_factor",
             f"the lens does not reach the corner of a 3:2 frame at crop "
             f"factor {crop_factor:g} ({corner_mm:.3f} mm image height): "
             f"{str(e).split(': ')[-1]}",
@@ -153,9 +153,8 @@ def lensfun_profile(
     check_settings(maker, model, mount, crop_factor, focal_mm, aperture, distance_m)
     try:
         set_lens = lens_at(lens, ShootingSettings(fno=aperture, focus_m=distance_m))
-    except InputError as e:  # this command's options are --aperture and --distance
-        names = {"--fno": "--aperture", "--focus-m": "--distance", "--object-m": "--distance"}
-        raise InputError(e.source, names.get(e.field or "", e.field), e.message) from None
+    except ParameterError as e:  # lens_at's settings are this function's aperture and distance_m
+        raise renamed(e, {"fno": "aperture", "focus_m": "distance_m", "object_m": "distance_m"}) from None
     unit = HALF_SHORT_SIDE_FULL_FRAME_MM / crop_factor
     corner = unit * CORNER_IN_SHORT_HALF_SIDES
     probe = set_lens.launch_lens()
@@ -252,5 +251,5 @@ def write_profile(profile: LensfunProfile, path: str | Path) -> None:
     """Write the lensfun database file atomically (.xml)."""
     path = Path(path)
     if path.suffix.lower() != ".xml":
-        raise InputError(str(path), "--output", "expected a .xml file name (a lensfun database file)")
+        raise ParameterError(str(path), "path", "expected a .xml file name (a lensfun database file)")
     atomic_write_text(path, profile_xml(profile))

@@ -44,44 +44,43 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from lensim.errors import InputError, LensimError
+from lensim.errors import InputError, LensimError, ParameterError
 from lensim.jsonable import strict_json
 from lensim.optics.configurations import apply_configuration, resolve_configuration
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import paraxial_data
 
-#: the command-line option of each setting, for error messages
-OPTIONS = {"fno": "--fno", "object_m": "--object-m", "focus_m": "--focus-m", "config": "--config"}
+#: the settings, as ShootingSettings' fields (and the parameters its errors name)
+SETTINGS = ("fno", "object_m", "focus_m", "config")
 #: the largest finite distance (m) a setting may give: beyond it the object is at infinity for any camera lens
 MAX_DISTANCE_M = 1.0e6
 _NEWTON_STEPS = 60
 _TOLERANCE_MM = 1e-9
-#: how much faster than wide open (in stops) an --fno may be and still mean wide open: marked
+#: how much faster than wide open (in stops) an fno may be and still mean wide open: marked
 #: F-numbers are rounded to third stops (F/3.5 on a lens at F/3.56) and EXIF FNumber carries the marking
 WIDE_OPEN_TOLERANCE_STOPS = 1.0 / 6.0
 
 
 def _number(value: Any, key: str, allow_inf: bool) -> float:
-    """A setting's number: a positive float (math.inf where allowed); InputError naming the option."""
-    option = OPTIONS[key]
+    """A setting's number: a positive float (math.inf where allowed); a ParameterError naming the setting."""
     if isinstance(value, str) and value.strip().lower() in ("inf", "infinity", "+inf"):
         value = math.inf
     if isinstance(value, bool):
-        raise InputError("<command line>", option, f"expected a number, got {value!r}")
+        raise ParameterError(None, key, f"expected a number, got {value!r}")
     try:
         x = float(value)
     except (TypeError, ValueError):
-        raise InputError("<command line>", option, f"expected a number, got {value!r}") from None
+        raise ParameterError(None, key, f"expected a number, got {value!r}") from None
     if key == "fno":
         if not (math.isfinite(x) and x > 0):
-            raise InputError("<command line>", option, f"expected a positive, finite F-number, got {value!r}")
+            raise ParameterError(None, key, f"expected a positive, finite F-number, got {value!r}")
         return x
     if math.isnan(x) or x <= 0 or (math.isinf(x) and not allow_inf):
-        raise InputError("<command line>", option, f"expected a positive distance in metres or inf, got {value!r}")
+        raise ParameterError(None, key, f"expected a positive distance in metres or inf, got {value!r}")
     if math.isfinite(x) and x > MAX_DISTANCE_M:
-        raise InputError(
-            "<command line>",
-            option,
+        raise ParameterError(
+            None,
+            key,
             f"expected a distance up to {MAX_DISTANCE_M:g} m (give inf for infinity), got {x:g} m",
         )
     return x
@@ -92,8 +91,8 @@ class ShootingSettings:
     """How the camera is set: fno (F-number at infinity, image space), object_m (object
     distance from the image plane, m, math.inf allowed), focus_m (focus distance from the
     image plane, m, math.inf allowed), config (configuration name or 1-based number, as a
-    string). None: as the lens file has it. Values are checked when made (InputError
-    naming the command-line option)."""
+    string). None: as the lens file has it. Values are checked when made (a ParameterError
+    naming the setting)."""
 
     fno: float | None = None
     object_m: float | None = None
@@ -107,9 +106,7 @@ class ShootingSettings:
                 object.__setattr__(self, key, _number(value, key, allow_inf=key != "fno"))
         if self.config is not None:
             if isinstance(self.config, bool) or not str(self.config).strip():
-                raise InputError(
-                    "<command line>", "--config", f"expected a configuration name or number, got {self.config!r}"
-                )
+                raise ParameterError(None, "config", f"expected a configuration name or number, got {self.config!r}")
             object.__setattr__(self, "config", str(self.config).strip())
 
     @property
@@ -131,18 +128,18 @@ class ShootingSettings:
             raise InputError(
                 None, "settings", f"expected a mapping of fno, object_m, focus_m, config, got {type(data).__name__}"
             )
-        unknown = sorted(set(data) - set(OPTIONS))
+        unknown = sorted(set(data) - set(SETTINGS))
         if unknown:
             raise InputError(
-                None, "settings", f"unknown key(s) {', '.join(unknown)}; expected some of {', '.join(OPTIONS)}"
+                None, "settings", f"unknown key(s) {', '.join(unknown)}; expected some of {', '.join(SETTINGS)}"
             )
-        return cls(**{k: data.get(k) for k in OPTIONS})
+        return cls(**{k: data.get(k) for k in SETTINGS})
 
     @classmethod
     def from_text(
         cls, fno: str | None = None, object_m: str | None = None, focus_m: str | None = None, config: str | None = None
     ) -> ShootingSettings:
-        """From command-line text: numbers, distances also "inf"; None where not given."""
+        """From text (as typed): numbers, distances also "inf"; None where not given."""
         numbers = {
             k: None if v is None else _number(v, k, allow_inf=k != "fno")
             for k, v in (("fno", fno), ("object_m", object_m), ("focus_m", focus_m))
@@ -180,16 +177,17 @@ def _focus_offset(lens: Lens) -> float:
     return _image_z(lens) - z
 
 
-def _object_distance_mm(lens: Lens, distance_m: float, option: str) -> float:
+def _object_distance_mm(lens: Lens, distance_m: float, setting: str) -> float:
     """The object distance from the first vertex (mm) of an object distance_m metres from the
-    image plane of `lens`; an object inside the lens is refused naming the option."""
+    image plane of `lens`; an object inside the lens is refused naming the setting
+    (focus_m or object_m)."""
     if math.isinf(distance_m):
         return math.inf
     s = distance_m * 1000.0 - _image_z(lens)
     if not s > 0:
-        raise InputError(
-            "<command line>",
-            option,
+        raise ParameterError(
+            None,
+            setting,
             f"{distance_m:g} m from the image plane is inside the lens "
             f"(its first vertex is {_image_z(lens) / 1000.0:.4g} m in front "
             "of the image plane); expected a larger distance",
@@ -228,8 +226,8 @@ def _newton(residual: Callable[[float], float], t0: float) -> float | None:
 def focus_changes(lens: Lens, focus_m: float) -> dict[int, float]:
     """{surface index: thickness (mm)} that focus the lens at focus_m metres from its image
     plane (math.inf: at infinity), by moving its image plane (unit focusing) or its focus
-    group, keeping its best-focus offset. An unreachable distance is an InputError naming
-    --focus-m."""
+    group, keeping its best-focus offset. An unreachable distance is a ParameterError
+    naming focus_m."""
     work = lens.with_changes(configurations={}, field_type="angle", fields=[0.0])  # fields play no part
     offset = _focus_offset(work)
     gap, comp = _focus_gaps(work)
@@ -240,24 +238,24 @@ def focus_changes(lens: Lens, focus_m: float) -> dict[int, float]:
 
     def residual(t: float) -> float:
         moved = _with_thickness(work, changes(t))
-        moved = moved.with_changes(object_distance=_object_distance_mm(moved, focus_m, "--focus-m"))
+        moved = moved.with_changes(object_distance=_object_distance_mm(moved, focus_m, "focus_m"))
         return _image_z(moved) - paraxial_data(moved).paraxial_image_z_mm - offset
 
     what = "its image plane" if work.focus_thickness is None else f"its focus group (surfaces[{gap}].thickness)"
     t = _newton(residual, work.surfaces[gap].thickness)
     if t is None:
-        _object_distance_mm(work, focus_m, "--focus-m")  # an object inside the lens: that message
-        raise InputError(
-            "<command line>",
-            "--focus-m",
+        _object_distance_mm(work, focus_m, "focus_m")  # an object inside the lens: that message
+        raise ParameterError(
+            None,
+            "focus_m",
             f"the lens cannot focus at {focus_m:g} m by moving {what}; expected a longer distance",
         )
     try:
         _with_thickness(work, changes(t))
     except InputError as e:
-        raise InputError(
-            "<command line>",
-            "--focus-m",
+        raise ParameterError(
+            None,
+            "focus_m",
             f"focusing at {focus_m:g} m moves {what} to {t:.4g} mm, "
             f"which the lens cannot take ({e.field}: {e.message})",
         ) from None
@@ -312,7 +310,7 @@ def _fields_for_object(file_lens: Lens, object_mm: float) -> dict[str, Any]:
 def _check_fno(lens_inf: Lens, fno: float, largest_mm: float) -> float:
     """The stop semi-diameter (mm) for F/fno at infinity. An fno faster than wide open by at
     most WIDE_OPEN_TOLERANCE_STOPS is wide open (lens markings and EXIF FNumber are rounded
-    to third stops), said in one UserWarning line; a faster fno is refused naming --fno."""
+    to third stops), said in one UserWarning line; a faster fno is refused naming fno."""
     stop = _stop_at_fno(lens_inf, fno)
     if stop > largest_mm * (1 + 1e-9):
         fastest = _fno_of_stop(lens_inf, largest_mm)
@@ -325,22 +323,22 @@ def _check_fno(lens_inf: Lens, fno: float, largest_mm: float) -> float:
                 stacklevel=2,  # lens_at's line: lens_at and describe then say it once
             )
             return largest_mm
-        raise InputError(
-            "<command line>",
-            "--fno",
+        raise ParameterError(
+            None,
+            "fno",
             f"F/{fno:g} is faster than the lens's maximum aperture "
             f"F/{fastest:.3g} by {stops:.2f} stop (more than the 1/6 stop of a rounded marking); "
-            f"expected --fno {fastest:.3g} or more",
+            f"expected an `fno` of {fastest:.3g} or more",
         )
     return stop
 
 
 def _configuration_key(lens: Lens, key: str) -> str:
-    """The configuration's name (resolve_configuration); an unknown key names --config."""
+    """The configuration's name (resolve_configuration); an unknown key names config."""
     try:
         return resolve_configuration(lens, key)
     except InputError as e:
-        raise InputError(e.source, "--config", e.message) from None
+        raise ParameterError(e.source, "config", e.message) from None
 
 
 def lens_at(lens: Lens, settings: ShootingSettings | None) -> Lens:
@@ -359,7 +357,7 @@ def lens_at(lens: Lens, settings: ShootingSettings | None) -> Lens:
         stop = paraxial_data(base).stop_semi_diameter_mm
     else:
         stop = _check_fno(_at_infinity(base), settings.fno, max_stop_mm(base))
-    object_mm = base.object_distance if object_m is None else _object_distance_mm(focused, object_m, "--object-m")
+    object_mm = base.object_distance if object_m is None else _object_distance_mm(focused, object_m, "object_m")
     return focused.with_changes(
         aperture_type="stop_semi_diameter",
         aperture_value=stop,

@@ -26,7 +26,7 @@ from typing import Any
 
 import torch
 
-from lensim.errors import InputError
+from lensim.errors import InputError, ParameterError
 from lensim.images import write_image
 from lensim.raw.read import RawImage, read_raw
 from lensim.sensor.isp import CaptureParams, quantize, raw_to_srgb
@@ -60,14 +60,14 @@ def parse_wb(text: str | float) -> str | float:
         try:
             kelvin = float(t.removesuffix("k"))
         except ValueError:
-            raise InputError(
-                "--wb",
+            raise ParameterError(
                 None,
+                "wb",
                 f"expected as-shot, a preset ({', '.join(WB_PRESETS)}) or a colour "
                 f"temperature such as 5000K, got {text!r}",
             ) from None
     if not (math.isfinite(kelvin) and 1000.0 <= kelvin <= 50000.0):
-        raise InputError("--wb", None, f"expected a colour temperature between 1000 and 50000 K, got {text!r}")
+        raise ParameterError(None, "wb", f"expected a colour temperature between 1000 and 50000 K, got {text!r}")
     return kelvin
 
 
@@ -112,7 +112,7 @@ def capture_params(raw: RawImage, sensor: SensorProfile | None = None, wb: str |
             raise InputError(
                 raw.path,
                 "white balance",
-                "the file has no as-shot white balance; give --wb with a "
+                "the file has no as-shot white balance; give a white balance (`wb`): a "
                 f"preset ({', '.join(WB_PRESETS)}) or a colour temperature",
             )
         r_gain, _, b_gain = raw.as_shot_wb_gains
@@ -214,7 +214,7 @@ OUTPUT_FORMATS = ("tif", "png")
 def plan_outputs(files: list[Path], out_dir: Path, fmt: str) -> list[tuple[Path, Path]]:
     """(input, OUT/<stem>.<fmt>) for each file; two inputs with one stem are refused."""
     if fmt not in OUTPUT_FORMATS:
-        raise InputError("--format", None, f"expected tif or png, got {fmt!r}")
+        raise ParameterError(None, "fmt", f"expected tif or png, got {fmt!r}")
     seen: dict[Path, Path] = {}
     for f in files:
         target = out_dir / f"{f.stem}.{fmt}"
@@ -243,7 +243,7 @@ def develop_files(
     ``progress(done, total)`` is called after each file. Returns one record per file:
     input, output, skipped, and the capture parameters used."""
     if bits not in (8, 16):
-        raise InputError("--bits", None, f"expected 8 or 16, got {bits!r}")
+        raise ParameterError(None, "bits", f"expected 8 or 16, got {bits!r}")
     choice = parse_wb(wb)
     jobs = plan_outputs(files, out_dir, fmt)
     todo = [(f, t) for f, t in jobs if not t.exists()]

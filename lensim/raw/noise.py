@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lensim.errors import InputError
+from lensim.errors import InputError, ParameterError
 from lensim.raw.read import RawImage
 
 TILE = 8  # same-colour pixels per tile side
@@ -74,7 +74,7 @@ def photon_transfer(flats: list[RawImage], read: float | None = None) -> tuple[f
                 src,
                 "flat field",
                 "one exposure level cannot separate shot from read noise; give a "
-                "dark frame (--dark) or flats at two exposures",
+                "dark frame (`dark`) or flats at two exposures",
             )
         shot, read_sq = np.polyfit(means, variances, 1)
         read = float(np.sqrt(max(read_sq, 0.0)))
@@ -102,7 +102,7 @@ def noise_from_frames(
     if dark is None and not flats:
         return None
     if not flats:
-        raise InputError("--dark", None, "a dark frame gives the read noise only; give a flat field (--flat) too")
+        raise ParameterError(None, "dark", "a dark frame gives the read noise only; give a flat field (`flats`) too")
     read = read_noise(dark) if dark is not None else None
     shot, read = photon_transfer(flats, read)
     return {"shot": shot, "read": read}

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from lensim.errors import InputError
+from lensim.errors import InputError, ParameterError
 from lensim.raw.read import RawImage
 from lensim.sensor.profile import SensorProfile, sensor_from_dict
 
@@ -44,7 +44,7 @@ def ccm_from_raw(raw: RawImage) -> list[list[float]]:
         raise InputError(
             raw.path,
             "color_matrix",
-            "the file has no colour matrix (LibRaw does not know this camera); give a sensor profile with --sensor",
+            "the file has no colour matrix (LibRaw does not know this camera); give a sensor profile (`sensor`)",
         )
     ccm, _, _ = ccm_from_dng_color_matrix(np.asarray(raw.color_matrix))
     return [[float(v) for v in row] for row in ccm]
@@ -65,10 +65,10 @@ def _pitch_um(raw: RawImage, pixel_pitch_um: float | None) -> float:
         raise InputError(
             raw.path,
             "pixel pitch",
-            "the file gives no pixel pitch (EXIF FocalPlaneXResolution); give it with --pixel-um",
+            "the file gives no pixel pitch (EXIF FocalPlaneXResolution); give it (`pixel_pitch_um`)",
         )
     if not (math.isfinite(pitch) and pitch > 0):
-        raise InputError("--pixel-um", None, f"expected a positive pixel pitch in micrometres, got {pitch!r}")
+        raise ParameterError(None, "pixel_pitch_um", f"expected a positive pixel pitch in micrometres, got {pitch!r}")
     return float(pitch)
 
 
@@ -83,7 +83,7 @@ def profile_dict_from_raw(
     width, height = raw.width - raw.width % 2, raw.height - raw.height % 2
     bit_depth = min(16, max(8, math.ceil(math.log2(raw.white_level + 1))))
     black = sum(raw.black_level) / 4.0
-    pitch_from = "--pixel-um" if pixel_pitch_um is not None else "EXIF FocalPlaneXResolution"
+    pitch_from = "the one given" if pixel_pitch_um is not None else "EXIF FocalPlaneXResolution"
     return {
         "name": name or raw.camera,
         "description": f"Made by lensim sensor from-raw from {raw.path} ({raw.camera}, active area "

@@ -15,8 +15,8 @@ For each raw file (:func:`restore_raw_files`):
    area is the whole sensor, the optical axis at its centre; a DNG written by `lensim
    simulate` records where its frame lay on the sensor (:func:`lensim.raw.dng.read_simulation_record`);
    a network conditioned on shooting settings gets the file's (:func:`raw_settings`: EXIF
-   FNumber, SubjectDistance and FocalLength, each replaced by the command line's value when
-   one is given), checked against the ranges it was trained across;
+   FNumber, SubjectDistance and FocalLength, each replaced by a value given for it;
+   lensim.restore.conditioning.photo_vector), checked against the ranges it was trained across;
 4. write OUT/<stem>.tif (16-bit sRGB, turned by the file's orientation) and, with
    ``dng``, OUT/<stem>.dng: the restored photo as LinearRaw camera RGB with the raw's
    colour matrix, as-shot white balance, orientation and EXIF (lensim.raw.dng).
@@ -40,7 +40,7 @@ from typing import Any
 
 import torch
 
-from lensim.errors import InputError, OutOfMemory
+from lensim.errors import InputError, OutOfMemory, ParameterError
 from lensim.jsonable import strict_json
 from lensim.sensor.profile import SensorProfile, sensor_from_dict
 
@@ -68,7 +68,7 @@ class RawJob:
 class RestoreSettings:
     """What every file shares: the checkpoint (or ONNX file), the sensor trained for
     (profile mapping), tiling, device, whether other cameras are allowed, the shooting
-    settings given on the command line (``shooting``: {fno, focus_m, focal_mm}, overriding
+    settings given for every file (``shooting``: {fno, focus_m, focal_mm}, overriding
     each file's EXIF), the checkpoint's conditioning (Conditioning.to_dict(); None: no
     settings) and the engine: "torch", or "onnxruntime" with ``onnx`` the serialized model
     (worker processes build their sessions from it)."""
@@ -97,8 +97,8 @@ def plan_jobs(files: list[Path], out_dir: Path, dng: bool) -> list[RawJob]:
                 str(f), None, f"has the same name stem as {seen[job.tif]}; both would be written to {job.tif}"
             )
         if job.dng is not None and job.dng.resolve() == f.resolve():
-            raise InputError(
-                str(f), "--output", "the restored DNG would overwrite this input; expected another output folder"
+            raise ParameterError(
+                str(f), "out_dir", "the restored DNG would overwrite this input; expected another output folder"
             )
         seen[job.tif] = f
         jobs.append(job)
@@ -135,7 +135,7 @@ def check_camera(
         raw.path,
         "camera",
         f"{what}, but {checkpoint} was trained for {sensor.name} "
-        f"{sensor.width}x{sensor.height} at {sensor.pixel_pitch_um:g} um; give --allow-other-camera "
+        f"{sensor.width}x{sensor.height} at {sensor.pixel_pitch_um:g} um; give `allow_other_camera` "
         "to restore it anyway (as a full frame of that sensor)",
     )
 
@@ -188,38 +188,22 @@ def raw_settings(raw: Any, given: dict[str, float]) -> dict[str, float]:
     (lensim.raw.read: 0 is unknown, 0xFFFFFFFF infinity) and FocalLength (LibRaw's aperture
     and focal length where the TIFF tags are missing), each replaced by ``given``'s value
     when there is one; settings known from neither are left out."""
-    exif = {"fno": raw.fno, "focus_m": raw.focus_distance_m, "focal_mm": raw.focal_length_mm}
-    return {k: v for k, v in {**exif, **given}.items() if v is not None}
+    return {k: v for k, v in {**_exif_settings(raw), **given}.items() if v is not None}
+
+
+def _exif_settings(raw: Any) -> dict[str, float | None]:
+    return {"fno": raw.fno, "focus_m": raw.focus_distance_m, "focal_mm": raw.focal_length_mm}
 
 
 def settings_vector(raw: Any, settings: RestoreSettings, warn: bool) -> torch.Tensor | None:
     """The settings vector of a raw for the checkpoint's network (None when it is not
-    conditioned): its settings (:func:`raw_settings`) are checked against the trained
-    ranges (a UserWarning beyond the tolerance when ``warn``; an InputError far outside)
-    and a missing one is an InputError naming the file and the option that gives it."""
-    import warnings
-
-    from lensim.restore.conditioning import Conditioning
+    conditioned): lensim.restore.conditioning.photo_vector of its EXIF settings and
+    ``settings.shooting`` (range warnings when ``warn``; a missing setting is a
+    ParameterError naming the file and the setting)."""
+    from lensim.restore.conditioning import Conditioning, photo_vector
 
     cond = Conditioning.from_dict(settings.conditioning, settings.checkpoint)
-    shot = raw_settings(raw, settings.shooting)
-    for text in cond.check(shot, raw.path):
-        if warn:
-            warnings.warn(text, UserWarning, stacklevel=2)
-    if not cond.dim:
-        return None
-    missing = [k for k in cond.keys if k not in shot]
-    if missing:
-        from lensim.restore.conditioning import OPTIONS
-
-        exif = {"fno": "FNumber", "focus_m": "SubjectDistance", "focal_mm": "FocalLength"}
-        raise InputError(
-            raw.path,
-            "settings",
-            f"the network is conditioned on {', '.join(cond.keys)}; the file's EXIF "
-            f"has no {', '.join(exif[k] for k in missing)}; give {' '.join(OPTIONS[k] for k in missing)}",
-        )
-    return cond.vector(shot, raw.path)
+    return photo_vector(cond, _exif_settings(raw), settings.shooting, raw.path, warn)
 
 
 def validate(jobs: list[RawJob], sensor: SensorProfile, settings: RestoreSettings) -> None:
@@ -241,7 +225,7 @@ def validate(jobs: list[RawJob], sensor: SensorProfile, settings: RestoreSetting
             raise InputError(
                 str(job.source),
                 "color_matrix",
-                "the file has no colour matrix to carry into the restored DNG; leave out --dng",
+                "the file has no colour matrix to carry into the restored DNG; leave out `dng`",
             )
 
 
@@ -378,7 +362,7 @@ def _restore_on_workers(
 ) -> None:
     """Restore the jobs through lensim.workers.run_jobs: on a local Dask cluster of
     min(workers, jobs) processes sharing this process's torch threads (each gets
-    threads // processes, at least 1, as ``--threads`` or torch's default gives them), or
+    threads // processes, at least 1, as torch.set_num_threads or its default gives them), or
     on the cluster at ``scheduler`` (one thread per job, as its workers are sized);
     ``finished(record)`` per file as it is written, with the paths as given."""
     from lensim.workers import run_jobs
@@ -421,7 +405,7 @@ def restore_raw_files(
     onnxruntime) on its first file. ``progress(done, total)`` counts files (in this
     process, fractions of a file as its tiles finish). Returns one record per file."""
     if workers < 1:
-        raise InputError("--workers", None, f"expected at least 1, got {workers}")
+        raise ParameterError(None, "workers", f"expected at least 1, got {workers}")
     sensor = sensor_from_dict(settings.sensor, "checkpoint sensor")
     jobs = plan_jobs(files, out_dir, dng)
     validate(jobs, sensor, settings)

@@ -321,7 +321,7 @@ def refuse_existing_run(run: Path) -> None:
     """A one-line InputError when ``run`` already holds a training run (a fresh run would
     overwrite it)."""
     if (run / LAST).exists():
-        raise InputError(str(run), None, "already holds a training run (last.pt); expected --resume or a new folder")
+        raise InputError(str(run), None, "already holds a training run (last.pt); expected `resume` or a new folder")
 
 
 __all__ = [

@@ -36,26 +36,29 @@ feature outside the trained range (0 inside):
   with the settings ignored) only warns: it does not read the settings.
 
 :func:`settings_planes` broadcasts settings vectors to constant image channels, the form
-networks take them in at their input.
+networks take them in at their input. :func:`photo_vector` is the settings vector of one
+photo (developed or raw): its EXIF's settings, each replaced by a value given for it,
+checked against the trained ranges.
 """
 
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import torch
 
-from lensim.errors import InputError
+from lensim.errors import InputError, ParameterError
 
 #: The settings a network can be conditioned on, in vector order.
 SETTINGS_KEYS: tuple[str, ...] = ("fno", "focus_m", "focal_mm")
 #: Human names and units for messages.
 LABELS = {"fno": ("F-number", ""), "focus_m": ("focus distance", " m"), "focal_mm": ("focal length", " mm")}
-#: The restore options that give each setting.
-OPTIONS = {"fno": "--fno", "focus_m": "--focus-m", "focal_mm": "--focal-mm"}
+#: The EXIF tag that records each setting.
+EXIF_TAGS = {"fno": "FNumber", "focus_m": "SubjectDistance", "focal_mm": "FocalLength"}
 #: Feature-space distance outside the trained range that passes without a word.
 TOLERANCE = {"fno": 1.0 / 6.0, "focus_m": 0.05, "focal_mm": math.log2(1.02)}
 #: Least feature-space distance outside the trained range at which a conditioned network refuses.
@@ -106,6 +109,21 @@ def record_settings(settings: Any, source: str | None = None, where: str = "sett
     return {
         k: check_value(k, settings[k], source, f"{where}.{k}") for k in SETTINGS_KEYS if settings.get(k) is not None
     }
+
+
+def given_settings(
+    fno: float | None = None, focus_m: float | None = None, focal_mm: float | None = None
+) -> dict[str, float]:
+    """The settings given for photos (None: not given) as {key: value}, those given, each
+    checked by :func:`check_value` (a ParameterError naming the setting)."""
+    out: dict[str, float] = {}
+    for key, value in (("fno", fno), ("focus_m", focus_m), ("focal_mm", focal_mm)):
+        if value is not None:
+            try:
+                out[key] = check_value(key, value, None, key)
+            except InputError as e:
+                raise ParameterError(None, key, e.message) from None
+    return out
 
 
 def _show(key: str, value: float) -> str:
@@ -190,15 +208,14 @@ class Conditioning:
 
     def vector(self, settings: Mapping[str, float], source: str | None = None) -> torch.Tensor:
         """(dim,) float32 settings vector: each key's feature mapped linearly from its
-        trained range to [-1, 1]. A missing input key is a one-line InputError naming the
-        option that gives it."""
+        trained range to [-1, 1]. A missing input key is a one-line InputError naming it."""
         missing = [k for k in self.keys if settings.get(k) is None]
         if missing:
             raise InputError(
                 source,
                 "settings",
                 f"this network is conditioned on {', '.join(self.keys)} and "
-                f"needs them; missing {', '.join(missing)} (give {' '.join(OPTIONS[k] for k in missing)})",
+                f"needs them; missing {', '.join(missing)} (give {', '.join(f'`{k}`' for k in missing)})",
             )
         out = []
         for k in self.keys:
@@ -215,8 +232,8 @@ class Conditioning:
     def check(self, settings: Mapping[str, float], source: str | None = None, refuse: bool | None = None) -> list[str]:
         """Compare a photo's settings with the trained ranges; returns one-line warnings
         (empty when all are within tolerance). ``refuse`` (default: whether the network is
-        conditioned) turns a setting beyond :meth:`refuse_margin` into an InputError.
-        Settings the photo does not give are not checked."""
+        conditioned) turns a setting beyond :meth:`refuse_margin` into a ParameterError
+        naming the setting. Settings the photo does not give are not checked."""
         refuse = self.dim > 0 if refuse is None else refuse
         warnings: list[str] = []
         for k, (low, high) in self.ranges.items():
@@ -230,14 +247,47 @@ class Conditioning:
             name = LABELS[k][0]
             what = f"{name} {_show(k, float(settings[k]))} is outside the trained range ({_show_range(k, low, high)})"
             if refuse and d > self.refuse_margin(k):
-                raise InputError(
+                raise ParameterError(
                     source,
-                    OPTIONS[k],
+                    k,
                     f"{what}, too far to extrapolate; expected a photo within the "
                     "range (or a network trained across it)",
                 )
             warnings.append(f"{source + ': ' if source else ''}{what}; the restoration may be wrong")
         return warnings
+
+
+def photo_vector(
+    conditioning: Conditioning,
+    exif: Mapping[str, float | None],
+    given: Mapping[str, float],
+    source: str,
+    warn: bool = True,
+) -> torch.Tensor | None:
+    """The settings vector (:meth:`Conditioning.vector`) of one photo for a network trained
+    across ``conditioning`` (None when the network is not conditioned): the photo's EXIF
+    settings ``exif`` ({fno, focus_m, focal_mm}; missing or None: not recorded), each
+    replaced by the value ``given`` for it (:func:`given_settings`), checked against the
+    trained ranges (:meth:`Conditioning.check`: a UserWarning beyond the tolerance when
+    ``warn``, a ParameterError far outside). A setting the network needs that neither
+    gives is a ParameterError naming the photo (``source``), the setting(s) and the EXIF
+    tag(s) that would record it."""
+    shot = {k: float(v) for k, v in {**exif, **given}.items() if v is not None}
+    for text in conditioning.check(shot, source):
+        if warn:
+            warnings.warn(text, UserWarning, stacklevel=2)
+    if not conditioning.dim:
+        return None
+    missing = [k for k in conditioning.keys if k not in shot]
+    if missing:
+        raise ParameterError(
+            source,
+            ", ".join(missing),
+            f"the network was trained across shooting settings ({conditioning.describe()}) and needs the "
+            f"photo's {', '.join(conditioning.keys)}; its EXIF has no {', '.join(EXIF_TAGS[k] for k in missing)}; "
+            f"give {', '.join(f'`{k}`' for k in missing)}",
+        )
+    return conditioning.vector(shot, source)
 
 
 def checkpoint_conditioning(info: Mapping[str, Any], settings_dim: int, source: str | None = None) -> Conditioning:
@@ -289,8 +339,8 @@ def batch_settings(
 
 
 __all__ = [
+    "EXIF_TAGS",
     "LABELS",
-    "OPTIONS",
     "REFUSE",
     "SETTINGS_KEYS",
     "TOLERANCE",
@@ -299,6 +349,8 @@ __all__ = [
     "check_value",
     "checkpoint_conditioning",
     "feature",
+    "given_settings",
+    "photo_vector",
     "record_settings",
     "settings_planes",
 ]

@@ -22,14 +22,15 @@ from typing import Any
 import numpy as np
 import torch
 
-from lensim.errors import InputError
+from lensim.errors import InputError, ParameterError
 from lensim.restore.export import DEFAULT_OPSET, export_model_bytes, parse_metadata
 
 ENGINES = ("torch", "onnxruntime")
 
 
-def providers_for(device: str, option: str = "--device") -> list[Any]:
-    """onnxruntime execution providers for a device name (cpu, cuda, cuda:N), best first."""
+def providers_for(device: str) -> list[Any]:
+    """onnxruntime execution providers for a device name (cpu, cuda, cuda:N), best first; a
+    ParameterError naming ``device`` for another name or a CUDA this onnxruntime lacks."""
     import onnxruntime as ort
 
     name = device.strip()
@@ -37,12 +38,12 @@ def providers_for(device: str, option: str = "--device") -> list[Any]:
         return ["CPUExecutionProvider"]
     kind, _, index = name.partition(":")
     if kind != "cuda" or (index and not index.isdigit()):
-        raise InputError(option, None, f"expected cpu, cuda or cuda:N for --engine onnxruntime, got {device!r}")
+        raise ParameterError(None, "device", f"expected cpu, cuda or cuda:N for `engine` onnxruntime, got {device!r}")
     available = ort.get_available_providers()
     if "CUDAExecutionProvider" not in available:
-        raise InputError(
-            option,
+        raise ParameterError(
             None,
+            "device",
             f"{device!r} requested but this onnxruntime has no CUDAExecutionProvider "
             f"(it has {', '.join(available)}); expected cpu, or install onnxruntime-gpu",
         )
@@ -143,14 +144,14 @@ def load_engine(
     from lensim.restore.conditioning import checkpoint_conditioning
 
     if engine not in ENGINES:
-        raise InputError("--engine", None, f"expected one of {', '.join(ENGINES)}, got {engine!r}")
+        raise ParameterError(None, "engine", f"expected one of {', '.join(ENGINES)}, got {engine!r}")
     if is_onnx_path(model_path):
         if engine != "onnxruntime":
             raise InputError(
                 str(model_path),
                 None,
-                "is an ONNX model; expected --engine onnxruntime to run it (or a "
-                "run folder or checkpoint for --engine torch)",
+                "is an ONNX model; expected `engine` onnxruntime to run it (or a "
+                "run folder or checkpoint for `engine` torch)",
             )
         data = Path(model_path).read_bytes() if Path(model_path).is_file() else b""
         if not data:

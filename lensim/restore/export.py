@@ -46,7 +46,7 @@ import torch
 import torch.nn as nn
 
 import lensim
-from lensim.errors import InputError
+from lensim.errors import InputError, ParameterError
 from lensim.io import atomic_write_bytes
 from lensim.jsonable import strict_json
 
@@ -203,11 +203,12 @@ def onnx_metadata(model: nn.Module, info: dict[str, Any], opset: int) -> dict[st
 
 
 def check_opset(opset: int) -> int:
+    """The ONNX opset, from MIN_OPSET to the newest this exporter writes (else a ParameterError)."""
     top = max_opset()
     if not isinstance(opset, int) or not MIN_OPSET <= opset <= top:
-        raise InputError(
-            "--opset",
+        raise ParameterError(
             None,
+            "opset",
             f"expected an ONNX opset from {MIN_OPSET} to {top} (the newest this "
             f"PyTorch's exporter writes), got {opset}",
         )

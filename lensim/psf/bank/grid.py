@@ -32,12 +32,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from lensim.errors import InputError
+from lensim.errors import InputError, ParameterError
 from lensim.io import atomic_write_text
 from lensim.jsonable import from_strict, strict_json
 from lensim.optics.lens import Lens
 from lensim.optics.lens_file import lens_to_dict
-from lensim.optics.shooting import OPTIONS, ShootingSettings, describe, lens_at, record
+from lensim.optics.shooting import ShootingSettings, describe, lens_at, record
 from lensim.psf.bank.compute import BankPlan, _plan_bank
 from lensim.psf.bank.settings import BankSettings, suggest_kernel_pixels
 from lensim.psf.bank.store import FORMAT as BANK_FORMAT
@@ -62,23 +62,20 @@ def resolved_numbers(d: dict[str, Any]) -> dict[str, Any]:
 
 
 def parse_setting_list(text: str | None, key: str) -> tuple[Any, ...] | None:
-    """A comma list of one setting from the command line (key: fno, focus_m, object_m or
-    config; distances may be 'inf'): the values in the order given, or None when the
-    option is not given. Empty items, bad numbers (0, negative, NaN, ...) and duplicates
-    are one-line InputErrors naming the option."""
+    """A comma list of one setting, as typed (key: fno, focus_m, object_m or config;
+    distances may be 'inf'): the values in the order given, or None when ``text`` is None.
+    Empty items, bad numbers (0, negative, NaN, ...) and duplicates are one-line
+    ParameterErrors naming the setting."""
     if text is None:
         return None
-    option = OPTIONS[key]
     items = [p.strip() for p in str(text).split(",")]
     if not items or any(not p for p in items):
-        raise InputError("<command line>", option, f"expected a comma list of values without empty items, got {text!r}")
+        raise ParameterError(None, key, f"expected a comma list of values without empty items, got {text!r}")
     values = tuple(getattr(ShootingSettings(**{key: p}), key) for p in items)  # type: ignore[arg-type]  # checked
     seen: set[Any] = set()
     for v in values:
         if v in seen:
-            raise InputError(
-                "<command line>", option, f"{strict_json(v)!s} is given twice in {text!r}; expected distinct values"
-            )
+            raise ParameterError(None, key, f"{strict_json(v)!s} is given twice in {text!r}; expected distinct values")
         seen.add(v)
     return values
 
@@ -245,9 +242,10 @@ def _plan_grid(
     one per setting in out_dir/s000, s001, ... (their kernel size, when settings give none,
     the largest any setting asks for), and the grid's manifest; nothing computed or written.
 
-    Raises InputError for settings the lens cannot take, and for axes without a value."""
+    Raises InputError for settings the lens cannot take (a ParameterError naming the
+    setting), and for axes without a value."""
     if not axes.given:
-        raise InputError(None, "shooting", "expected at least one setting list for a grid")
+        raise ParameterError(None, "shooting", "expected at least one setting list for a grid")
     shots = axes.settings()
     lenses = [lens_at(lens, s) for s in shots]
     resolved = [describe(lens, s) for s in shots]
@@ -295,7 +293,7 @@ class GridBank:
                 str(directory),
                 MANIFEST,
                 "not a grid of PSF banks; expected a folder written by "
-                "`lensim psf bank` with setting lists (--fno, --focus-m, --object-m, --config)",
+                "compute_grid (`lensim psf bank` with lists of settings)",
             )
         return cls(directory, m)
 

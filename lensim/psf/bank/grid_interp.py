@@ -29,9 +29,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from lensim.errors import InputError
+from lensim.errors import ParameterError
 from lensim.jsonable import strict_json
-from lensim.optics.shooting import OPTIONS
 from lensim.psf.bank.types import BankField, PSFBank
 
 if TYPE_CHECKING:
@@ -66,16 +65,16 @@ def _axis_value(grid: GridBank, key: str, query: Any) -> float | str | None:
     values = grid.axes.get(key)
     if values is None:
         if query is not None:
-            raise InputError(
+            raise ParameterError(
                 str(grid.directory),
-                OPTIONS[key],
-                f"the grid does not vary {key} (the lens file's value throughout); expected no {OPTIONS[key]}",
+                key,
+                f"the grid does not vary {key} (the lens file's value throughout); expected no `{key}`",
             )
         return None
     if query is None:
         if len(values) > 1:
             shown = ", ".join(str(v) if key == "config" else _show(key, v) for v in values)
-            raise InputError(str(grid.directory), OPTIONS[key], f"the grid spans {shown}; expected a value")
+            raise ParameterError(str(grid.directory), key, f"the grid spans {shown}; expected a value")
         return values[0]
     return query if key == "config" else float(query)
 
@@ -89,9 +88,9 @@ def _bracket(key: str, values: list[float], q: float, where: str) -> list[tuple[
     tol = 1e-9 * max(1.0, abs(lo), abs(hi))
     if not lo - tol <= c <= hi + tol:
         span = f"{_show(key, coords[0][1])} .. {_show(key, coords[-1][1])}"
-        raise InputError(
+        raise ParameterError(
             where,
-            OPTIONS[key],
+            key,
             f"{_show(key, q)} is outside the grid ({span}); expected a value inside it (kernels are not extrapolated)",
         )
     for (c0, v0), (c1, v1) in zip(coords, coords[1:], strict=False):
@@ -123,8 +122,8 @@ def setting_weights(grid: GridBank, query: dict[str, Any]) -> list[tuple[int, fl
     config = _axis_value(grid, "config", query.get("config"))
     configs = axes["config"] or []
     if config is not None and config not in configs:
-        raise InputError(
-            where, "--config", f"{config!r} is not one of the grid's configurations ({', '.join(map(str, configs))})"
+        raise ParameterError(
+            where, "config", f"{config!r} is not one of the grid's configurations ({', '.join(map(str, configs))})"
         )
     per_axis: list[list[tuple[Any, float]]] = []
     for key in NUMERIC_AXES:
@@ -160,7 +159,7 @@ def nearest_setting(grid: GridBank, query: dict[str, Any]) -> int:
         if d < best_d:
             best, best_d = i, d
     if best < 0:
-        raise InputError(str(grid.directory), "--config", f"{config!r} is not one of the grid's configurations")
+        raise ParameterError(str(grid.directory), "config", f"{config!r} is not one of the grid's configurations")
     return best
 
 

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lensim.errors import InputError
+from lensim.errors import InputError, ParameterError
 from lensim.optics.lens import Lens
 from lensim.psf.defaults import BANK_FIELDS, BANK_PUPIL_SAMPLES, DEFAULT_WAVELENGTHS_TEXT, PsfMethod, psf_method
 
@@ -50,7 +50,7 @@ def field_positions(n: int, spacing: str = "sqrt") -> np.ndarray:
 
 
 def parse_wavelengths_nm(text: str) -> tuple[float, ...]:
-    """Wavelengths (nm) from the command line: 'START:STOP:STEP' or a comma list.
+    """Wavelengths (nm) as typed: 'START:STOP:STEP' or a comma list.
 
     A range runs from START in steps of STEP and includes STOP only when a step lands on
     it: '400:700:10' gives 31 values 400..700, '400:700:7' gives 43 values 400..694. The
@@ -66,9 +66,9 @@ def parse_wavelengths_nm(text: str) -> tuple[float, ...]:
         else:
             values = tuple(float(p) for p in spec.split(",") if p.strip())
     except ValueError:
-        raise InputError(
-            "<command line>",
-            "--wavelengths-nm",
+        raise ParameterError(
+            None,
+            "wavelengths_nm",
             f"expected START:STOP:STEP (e.g. 400:700:10) or a comma list in nm, got {text!r}",
         ) from None
     if (
@@ -76,9 +76,9 @@ def parse_wavelengths_nm(text: str) -> tuple[float, ...]:
         or not all(math.isfinite(v) and v > 0 for v in values)
         or any(b <= a for a, b in zip(values, values[1:]))
     ):
-        raise InputError(
-            "<command line>",
-            "--wavelengths-nm",
+        raise ParameterError(
+            None,
+            "wavelengths_nm",
             f"expected positive, strictly increasing wavelengths in nm, got {text!r}",
         )
     return values
