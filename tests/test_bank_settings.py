@@ -27,7 +27,7 @@ def test_a_range_includes_stop_only_when_a_step_lands_on_it():
 
 @pytest.mark.parametrize("text", ["400:700", "700:400:10", "400:700:0", "400:inf:10", "a,b", "", "550,450", "-5"])
 def test_bad_wavelengths_are_one_line_errors(text):
-    with pytest.raises(InputError, match="--wavelengths-nm") as e:
+    with pytest.raises(InputError, match="^wavelengths_nm: ") as e:
         parse_wavelengths_nm(text)
     assert "\n" not in str(e.value)
 
@@ -136,3 +136,33 @@ def test_one_field_is_a_one_line_error_before_any_work(tmp_path, command):
     assert isinstance(res.exception, InputError), res.output
     assert "fields" in str(res.exception) and "\n" not in str(res.exception)
     assert not (tmp_path / "out").exists()
+
+
+def test_pupil_samples_are_raised_to_what_the_kernel_window_needs():
+    """with_enough_pupil_samples: the one home of the retry simulate makes for coarse pixels."""
+    from lensim.errors import ParameterError, PupilSamplingError
+    from lensim.psf.bank.settings import pupil_samples_for, with_enough_pupil_samples
+
+    asked = []
+
+    def compute(settings: BankSettings) -> int:
+        asked.append(settings.pupil_samples)
+        if settings.pupil_samples < 170:
+            raise PupilSamplingError("lens.yaml", "pupil_samples", "the PSF would wrap around", 150)
+        return settings.pupil_samples
+
+    assert pupil_samples_for(150) == 176  # 15 % more, a multiple of 8
+    with pytest.warns(UserWarning, match=r"^a.png: coarse; pupil samples raised from 128 to 176 for the PSF bank$"):
+        assert (
+            with_enough_pupil_samples(compute, BankSettings(pupil_samples=128), source="a.png", context="coarse") == 176
+        )
+    assert asked == [128, 176]
+    with pytest.raises(ParameterError) as e:  # the caller chose the samples: named, with the number to give
+        with_enough_pupil_samples(compute, BankSettings(pupil_samples=64), fixed=True, source="a.png")
+    assert e.value.source == "a.png" and e.value.parameter == "pupil_samples" and "`pupil_samples` 176" in str(e.value)
+
+    def never(settings: BankSettings) -> int:
+        raise PupilSamplingError(None, None, "wraps", settings.pupil_samples + 8)
+
+    with pytest.warns(UserWarning), pytest.raises(ParameterError, match="no pupil sampling up to"):
+        with_enough_pupil_samples(never, BankSettings())

@@ -206,3 +206,16 @@ def test_bad_glass_makers_are_one_line_errors(args, message, tmp_path, capsys, m
     code, _, err = run_cli(["lens", "convert", "phone_wide", *args, "-o", str(target)], capsys, monkeypatch)
     assert code == 2 and message in err and len(err.strip().splitlines()) == 1
     assert not target.exists()
+
+
+def test_glass_makers_are_named_in_any_case():
+    """lensim.optics.materials.glass_makers: what --glass-makers gives match_glasses."""
+    from lensim.errors import ParameterError
+    from lensim.optics.materials import CATALOGS, glass_makers
+
+    assert glass_makers("ohara, SCHOTT") == ["Ohara", "Schott"]
+    assert glass_makers(("cdgm",)) == ["CDGM"] and glass_makers(list(CATALOGS)) == list(CATALOGS)
+    for bad in ("Zeiss", "Schott,Zeiss", " , "):
+        with pytest.raises(ParameterError) as e:
+            glass_makers(bad)
+        assert e.value.parameter == "makers" and "expected some of Schott, Ohara" in e.value.message

@@ -179,6 +179,49 @@ def test_a_run_folder_is_not_overwritten(pairs: Path, tmp_path: Path):
         train(pairs, tmp_path / "run", epochs=1, max_steps_per_epoch=1, **TINY)
 
 
+def test_a_failed_new_run_leaves_no_folder_and_an_old_one_is_kept(
+    pairs: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+):
+    """train() itself (not only the CLI) removes a new run folder that failed before its
+    first checkpoint; a folder that existed before, or that holds a checkpoint, stays."""
+    import lensim.restore.train as train_module
+
+    def fail(loop, batches):
+        assert (tmp_path / "new" / "config.json").exists() or (tmp_path / "old").exists()  # the run had started
+        raise RuntimeError("out of memory")
+
+    monkeypatch.setattr(train_module, "_train_epoch", fail)
+    with pytest.raises(RuntimeError, match="out of memory"):
+        train(pairs, tmp_path / "new", epochs=1, **TINY)
+    assert not (tmp_path / "new").exists()
+    (tmp_path / "old").mkdir()
+    (tmp_path / "old" / "notes.txt").write_text("mine")
+    with pytest.raises(RuntimeError):
+        train(pairs, tmp_path / "old", epochs=1, **TINY)
+    assert (tmp_path / "old" / "notes.txt").read_text() == "mine"
+
+
+def test_the_run_folder_is_removed_only_when_new_unfinished_and_unlocked(tmp_path: Path):
+    from lensim.io import LOCK_NAME
+    from lensim.restore.checkpoint import remove_unfinished_run, run_folder
+
+    with pytest.raises(KeyboardInterrupt), run_folder(tmp_path / "a") as run:
+        (run / "config.json").write_text("{}")
+        raise KeyboardInterrupt  # a kill the process survives to clean up after
+    assert not (tmp_path / "a").exists()
+    with pytest.raises(RuntimeError), run_folder(tmp_path / "b") as run:
+        (run / "last.pt").write_bytes(b"checkpoint")
+        raise RuntimeError
+    assert (tmp_path / "b" / "last.pt").exists()  # a checkpoint: resumable, kept
+    with pytest.raises(RuntimeError), run_folder(tmp_path / "c", writer=False):
+        (tmp_path / "c").mkdir()  # another rank's folder: only rank 0 writes (and removes)
+        raise RuntimeError
+    assert (tmp_path / "c").exists()
+    (tmp_path / "d").mkdir()
+    (tmp_path / "d" / LOCK_NAME).write_text("")
+    assert remove_unfinished_run(tmp_path / "d") is False  # another process's run
+
+
 def test_resume_reproduces_the_loss_curve_exactly(pairs: Path, tmp_path: Path):
     kw = dict(TINY, max_steps_per_epoch=3, crop=24, depth=3)
     train(pairs, tmp_path / "straight", epochs=2, **kw)

@@ -64,6 +64,9 @@ PARAMETER_ALIASES: dict[str, str] = {
     "pixel_pitch_um": "pixel_um",  # sensor from-raw --pixel-um
     "focal_mm": "focal",  # lens lensfun --focal
     "distance_m": "distance",  # lens lensfun --distance
+    "makers": "glass_makers",  # lens info/convert/field/lensfun --glass-makers
+    "flats": "flat",  # sensor from-raw --flat
+    "out_dir": "output",  # restore --output
 }
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _QUOTED = re.compile(r"`([A-Za-z_][A-Za-z0-9_]*)`")

@@ -34,23 +34,15 @@ GLASS_MAKERS_HELP = (
 
 
 def _glass_makers(makers: str | None, match_glass: bool) -> list[str] | None:
-    """The --glass-makers list, checked before any work (an unknown maker is a one-line error)."""
-    from lensim.optics.materials import CATALOGS
+    """The --glass-makers list (lensim.optics.materials.glass_makers), checked before any
+    work; it needs --match-glass."""
+    from lensim.optics.materials import glass_makers
 
     if makers is None:
         return None
     if not match_glass:
         raise InputError(None, "--glass-makers", "only applies with --match-glass")
-    names = [m.strip() for m in makers.split(",") if m.strip()]
-    known = {c.lower(): c for c in CATALOGS}
-    unknown = [m for m in names if m.lower() not in known]
-    if unknown or not names:
-        raise InputError(
-            None,
-            "--glass-makers",
-            f"unknown glass maker(s) {', '.join(unknown) or repr(makers)}; expected some of {', '.join(CATALOGS)}",
-        )
-    return [known[m.lower()] for m in names]
+    return glass_makers(makers)
 
 
 def _load(
@@ -278,39 +270,6 @@ FIELD_DEG_HELP = "Field to show as an object-space angle (deg, below 90); repeat
 IMAGE_HEIGHT_HELP = "Field to show as the real chief ray's image height (mm); repeat for several."
 
 
-def fields_to_show(
-    lens: Lens, field: list[float] | None, field_deg: list[float] | None, image_height_mm: list[float] | None
-) -> tuple[Lens, list[float] | None]:
-    """The lens to trace and its field values for --field (normalized 0..1, in the lens's
-    own unit), --field-deg (an angle, deg) or --image-height-mm (the real chief ray's image
-    height, mm; solved for): at most one of them. (lens, None) when none is given: the
-    lens's own fields."""
-    given = [
-        name
-        for name, v in (("--field", field), ("--field-deg", field_deg), ("--image-height-mm", image_height_mm))
-        if v
-    ]
-    if len(given) > 1:
-        raise InputError(
-            None, given[1], f"expected one of --field, --field-deg, --image-height-mm, got {' and '.join(given)}"
-        )
-    if field:
-        from lensim.psf.compute import field_in_lens_units
-
-        return lens, [field_in_lens_units(lens, f) for f in field]
-    if field_deg:
-        if any(not (math.isfinite(f) and abs(f) < 90.0) for f in field_deg):
-            raise InputError(
-                None, "--field-deg", f"expected angles below 90 deg, got {', '.join(f'{f:g}' for f in field_deg)}"
-            )
-        return lens.with_changes(field_type="angle", fields=list(field_deg)), list(field_deg)
-    if image_height_mm:
-        if any(not math.isfinite(f) for f in image_height_mm):
-            raise InputError(None, "--image-height-mm", "expected finite image heights (mm)")
-        return lens.with_changes(field_type="real_image_height", fields=list(image_height_mm)), list(image_height_mm)
-    return lens, None
-
-
 @lens_app.command("plot")
 def plot(
     lens_file: str = LENS_ARG,
@@ -341,6 +300,8 @@ def plot(
     Example: lensim lens plot cooke_triplet -o layout.png --rays 9 --field 0 --field 0.7 --field 1
     Example: lensim lens plot cooke_triplet --kind lateral-colour --sensor apsc_mirrorless -o lateral.png
     """
+    from lensim.optics.analysis import fields_to_show
+
     _check_figure_name(output)
     lens, _ = _load(lens_file, shooting=(fno, object_m, focus_m, config))
     lens, fields = fields_to_show(lens, field, field_deg, image_height_mm)
@@ -387,9 +348,9 @@ def spot(
 
     Example: lensim lens spot cooke_triplet -o spot.png --json --image-height-mm 0 --image-height-mm 14.1
     """
+    from lensim.optics.analysis import fields_to_show
     from lensim.optics.pupil import hexapolar
-    from lensim.optics.spot import spot_diagram
-    from lensim.plots.lens import SPOT_RINGS, airy_radius_um, plot_spots, spot_summary
+    from lensim.optics.spot import SPOT_RINGS, spot_diagram, spot_report
 
     if output is None and not json_out:
         raise InputError(None, "--output", "expected -o FILE (an image to write), --json, or both")
@@ -399,21 +360,13 @@ def spot(
     lens, fields = fields_to_show(lens, field, field_deg, image_height_mm)
     spots = spot_diagram(lens, fields, None, hexapolar(SPOT_RINGS), aiming.value)
     if output is not None:
+        from lensim.plots.lens import plot_spots
+
         plot_spots(lens, aiming=aiming.value, path=output, reference=reference.value, spots=spots)
     if json_out:
-        print_json(
-            {
-                "name": lens.name,
-                "source": lens.source,
-                "aiming": aiming.value,
-                "reference": reference.value,
-                "airy_radius_um": airy_radius_um(lens),
-                "primary_wavelength_nm": lens.primary_wavelength_um * 1000.0,
-                "image_z_mm": float(lens.vertex_z()[-1]),
-                "output": None if output is None else str(output),
-                "fields": spot_summary(lens, spots, reference.value),
-            }
-        )
+        report = spot_report(lens, spots, aiming.value, reference.value)
+        per_field = report.pop("fields")
+        print_json({**report, "output": None if output is None else str(output), "fields": per_field})
     else:
         console.print(f"wrote {output}", highlight=False)
 
@@ -445,6 +398,8 @@ def field_command(
 
     Example: lensim lens field cooke_triplet --sensor apsc_mirrorless --json
     """
+    from lensim.optics.analysis import fields_to_show
+
     lens, matches = _load(
         lens_file, match_glass, _glass_makers(glass_makers, match_glass), (fno, object_m, focus_m, config)
     )

@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import dataclasses
 import json
-import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -28,7 +26,6 @@ from lensim.cli.bank_options import (
 )
 from lensim.cli.common import console, print_json, progress_bar
 from lensim.cli.validate import at_least, choice, distinct_outputs, output_folder
-from lensim.errors import InputError, PupilSamplingError
 from lensim.io import atomic_write_text
 
 if TYPE_CHECKING:
@@ -179,39 +176,22 @@ def _photo_bank(
     quiet: bool,
 ) -> PSFBank:
     """The cached bank for a photo mapped onto the sensor at ``pitch_um`` (um per photo
-    pixel). A small photo has coarse pixels whose kernel window the default pupil grid
-    cannot resolve without wrap-around: then the pupil sampling the window needs is
-    chosen (a warning says so), or, when --pupil-samples was given, named in the error."""
+    pixel), with the pupil sampling its kernel window needs (a small photo has coarse
+    pixels: lensim.psf.bank.settings.with_enough_pupil_samples raises it, or names
+    --pupil-samples when it was given)."""
     from lensim.psf.bank import get_bank
+    from lensim.psf.bank.settings import with_enough_pupil_samples
 
-    for _ in range(4):
-        try:
-            with progress_bar("PSF bank", "fields", quiet) as report:
-                return get_bank(
-                    lens, pitch_um, settings, response=sensor.spectral_response, workers=workers, progress=report
-                )
-        except PupilSamplingError as e:
-            need = -(-int(e.needed * 1.15) // 8) * 8  # a margin, rounded up to a multiple of 8
-            where = f"a {size_wh[0]}x{size_wh[1]} photo maps onto the sensor at {pitch_um:.3g} um per pixel"
-            if pupil_given:
-                raise InputError(
-                    str(path),
-                    "--pupil-samples",
-                    f"{where}, too coarse for {settings.pupil_samples} "
-                    f"pupil samples; expected --pupil-samples {need} or more (or leave it out to have it "
-                    "chosen), or a larger photo",
-                ) from None
-            warnings.warn(
-                f"{path}: {where}; pupil samples raised from {settings.pupil_samples} to {need} for its PSF bank",
-                UserWarning,
-                stacklevel=2,
-            )
-            settings = dataclasses.replace(settings, pupil_samples=need)
-    raise InputError(
-        str(path),
-        "--pupil-samples",
-        f"no pupil sampling up to {settings.pupil_samples} samples resolves "
-        "the photo's kernels; expected a larger photo",
+    def bank(s: BankSettings) -> PSFBank:
+        with progress_bar("PSF bank", "fields", quiet) as report:
+            return get_bank(lens, pitch_um, s, response=sensor.spectral_response, workers=workers, progress=report)
+
+    return with_enough_pupil_samples(
+        bank,
+        settings,
+        fixed=pupil_given,
+        source=str(path),
+        context=f"a {size_wh[0]}x{size_wh[1]} photo maps onto the sensor at {pitch_um:.3g} um per pixel",
     )
 
 

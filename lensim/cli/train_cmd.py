@@ -12,7 +12,6 @@ Register in lensim/cli/__init__.py with
 from __future__ import annotations
 
 import math
-import shutil
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -23,7 +22,6 @@ from lensim.cli.common import console, print_json
 from lensim.cli.validate import at_least, choice, in_range, input_folder, output_folder, positive
 from lensim.cli.validate import device as check_device
 from lensim.errors import InputError
-from lensim.io import LOCK_NAME
 from lensim.restore.config import TrainConfig
 
 if TYPE_CHECKING:
@@ -225,13 +223,8 @@ def train_command(
     if resume:  # the checkpoint's settings, changed only where an option is given
         overrides = {k: v for k, v in overrides.items() if _given(ctx, _OPTION_OF.get(k, k))}
     prog, callback = _progress(epochs, show=not quiet and not json_out)
-    new_run = not output.exists()
-    try:
+    try:  # a new run that fails before its first checkpoint leaves no folder (train removes it)
         result = _train(train, dataset, output, resume, callback, overrides)
-    except BaseException:
-        if new_run and not any(output.glob("*.pt")) and not (output / LOCK_NAME).exists():  # not another's run
-            shutil.rmtree(output, ignore_errors=True)  # no checkpoint: leave no half-made run behind
-        raise
     finally:
         if prog is not None:
             prog.stop()

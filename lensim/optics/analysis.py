@@ -1,7 +1,12 @@
-"""Lens analyses: first-order summary, spot diagrams, distortion, relative illumination."""
+"""Lens analyses: first-order summary, spot diagrams, distortion, relative illumination;
+the fields to analyse, given in any of three ways (fields_to_show)."""
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
+
+from lensim.errors import ParameterError
 from lensim.optics.aiming import Aiming, chief_ray_image_height, object_field
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import paraxial_data
@@ -46,3 +51,40 @@ def first_order_summary(lens: Lens, aiming: Aiming = "real") -> dict:
         "aiming": aiming,
         "notes": list(lens.notes),
     }
+
+
+def fields_to_show(
+    lens: Lens,
+    field: Sequence[float] | None = None,
+    field_deg: Sequence[float] | None = None,
+    image_height_mm: Sequence[float] | None = None,
+) -> tuple[Lens, list[float] | None]:
+    """The lens to trace and its field values for fields given one of three ways, at most
+    one of them: ``field`` normalized (0..1 of the maximum field, returned in the lens's own
+    unit), ``field_deg`` object-space angles (deg, below 90: the lens is returned with
+    angle fields) or ``image_height_mm`` real chief-ray image heights (mm: the lens is
+    returned with real-image-height fields, solved for when traced). (lens, None) when none
+    is given: the lens's own fields. A ParameterError names the parameter at fault."""
+    from lensim.psf.compute import field_in_lens_units
+
+    ways = (("field", field), ("field_deg", field_deg), ("image_height_mm", image_height_mm))
+    given = [name for name, values in ways if values]
+    if len(given) > 1:
+        raise ParameterError(
+            None,
+            given[1],
+            f"expected one of `field`, `field_deg`, `image_height_mm`, got {' and '.join(f'`{g}`' for g in given)}",
+        )
+    if field:
+        return lens, [field_in_lens_units(lens, f) for f in field]
+    if field_deg:
+        if any(not (math.isfinite(f) and abs(f) < 90.0) for f in field_deg):
+            raise ParameterError(
+                None, "field_deg", f"expected angles below 90 deg, got {', '.join(f'{f:g}' for f in field_deg)}"
+            )
+        return lens.with_changes(field_type="angle", fields=list(field_deg)), list(field_deg)
+    if image_height_mm:
+        if any(not math.isfinite(f) for f in image_height_mm):
+            raise ParameterError(None, "image_height_mm", "expected finite image heights (mm)")
+        return lens.with_changes(field_type="real_image_height", fields=list(image_height_mm)), list(image_height_mm)
+    return lens, None

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lensim.errors import InputError, UnknownGlassError
+from lensim.errors import InputError, ParameterError, UnknownGlassError
 
 CATALOGS: tuple[str, ...] = ("Schott", "Ohara", "CDGM", "Hikari", "Hoya", "Sumita")
 
@@ -221,6 +221,24 @@ def _catalog_key(catalog: str) -> str:
         if c.lower() == catalog.strip().lower():
             return c
     raise InputError(None, "catalog", f"unknown glass catalogue {catalog!r}; expected one of {', '.join(CATALOGS)}")
+
+
+def glass_makers(makers: str | list[str] | tuple[str, ...]) -> list[str]:
+    """The catalogues (their CATALOGS spelling) of glass makers named in any case, as a list
+    or a comma-separated string ("ohara, Schott"): what match_glasses and
+    nearest_catalog_glass search. None named, or an unknown one, is a ParameterError naming
+    ``makers``."""
+    given = makers.split(",") if isinstance(makers, str) else list(makers)
+    names = [str(m).strip() for m in given if str(m).strip()]
+    known = {c.lower(): c for c in CATALOGS}
+    unknown = [m for m in names if m.lower() not in known]
+    if unknown or not names:
+        raise ParameterError(
+            None,
+            "makers",
+            f"unknown glass maker(s) {', '.join(unknown) or repr(makers)}; expected some of {', '.join(CATALOGS)}",
+        )
+    return [known[m.lower()] for m in names]
 
 
 @functools.cache

@@ -1,4 +1,5 @@
-"""Spot diagrams and RMS spot radius."""
+"""Spot diagrams, RMS spot radii and the spot report (`lens spot --json`, the figures of
+lensim.plots.lens.plot_spots): one home for the numbers both show."""
 
 from __future__ import annotations
 
@@ -6,11 +7,14 @@ from dataclasses import dataclass
 
 import torch
 
+from lensim.errors import ParameterError
 from lensim.optics.aiming import Aiming, generate_rays, object_field, trace_chief_rays
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import ParaxialData, paraxial_data
 from lensim.optics.pupil import hexapolar
 from lensim.optics.trace import trace
+
+SPOT_RINGS = 8  # hexapolar rings in spot diagrams: 217 rays per field and wavelength
 
 
 @dataclass
@@ -100,3 +104,63 @@ def rms_spot_radius(
     wls = None if wavelength_um is None else [wavelength_um]
     sd = spot_diagram(lens, [field], wls, hexapolar(rings), aiming)
     return float(sd.rms_radius(reference, polychromatic=True)[0])
+
+
+def airy_radius_um(lens: Lens, para: ParaxialData | None = None) -> float:
+    """Airy-disk radius 1.22 lambda N (um) at the primary wavelength, N the working F/#."""
+    para = para or paraxial_data(lens)
+    return 1.22 * lens.primary_wavelength_um * para.working_fno
+
+
+def spot_summary(lens: Lens, spots: SpotDiagram, reference: str = "chief") -> list[dict]:
+    """Per field: polychromatic RMS radius (um) and, per wavelength, the RMS radius (um),
+    the chief-ray position on the image plane (mm) and how many rays reach the image.
+
+    reference: 'chief' (the primary-wavelength chief ray for the polychromatic radius,
+    each wavelength's own chief ray per wavelength) or 'centroid'.
+    """
+    if reference not in ("chief", "centroid"):
+        raise ParameterError(None, "reference", f"expected 'chief' or 'centroid', got {reference!r}")
+    poly = spots.rms_radius(reference, polychromatic=True) * 1000.0
+    mono = spots.rms_radius(reference, polychromatic=False) * 1000.0
+    out = []
+    for fi, f in enumerate(spots.fields):
+        per_wl = []
+        for wi, w in enumerate(spots.wavelengths_um):
+            n_valid = int(spots.valid[wi, fi].sum())
+            per_wl.append(
+                {
+                    "wavelength_nm": round(w * 1000.0, 6),
+                    "rms_radius_um": float(mono[wi, fi]) if n_valid else None,
+                    "chief_x_mm": float(spots.chief[wi, fi, 0]),
+                    "chief_y_mm": float(spots.chief[wi, fi, 1]),
+                    "rays": int(spots.valid.shape[-1]),
+                    "rays_reaching_image": n_valid,
+                }
+            )
+        out.append(
+            {
+                "field": float(f),
+                "field_unit": "deg" if lens.field_type == "angle" else "mm",
+                "rms_radius_um": float(poly[fi]) if bool(spots.valid[:, fi].any()) else None,
+                "wavelengths": per_wl,
+            }
+        )
+    return out
+
+
+def spot_report(lens: Lens, spots: SpotDiagram, aiming: Aiming, reference: str = "chief") -> dict:
+    """The spot diagram of a lens as a JSON-ready dict: name, source, aiming, reference,
+    airy_radius_um (1.22 lambda N at the primary wavelength, um), primary_wavelength_nm,
+    image_z_mm (the image plane, first vertex at 0) and ``fields`` (spot_summary). ``spots``
+    was traced with ``aiming``; reference: 'chief' or 'centroid'."""
+    return {
+        "name": lens.name,
+        "source": lens.source,
+        "aiming": aiming,
+        "reference": reference,
+        "airy_radius_um": airy_radius_um(lens),
+        "primary_wavelength_nm": lens.primary_wavelength_um * 1000.0,
+        "image_z_mm": float(lens.vertex_z()[-1]),
+        "fields": spot_summary(lens, spots, reference),
+    }

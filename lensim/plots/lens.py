@@ -27,7 +27,7 @@ from lensim.optics.lens import Lens
 from lensim.optics.materials import Air
 from lensim.optics.paraxial import ParaxialData, paraxial_data
 from lensim.optics.pupil import hexapolar
-from lensim.optics.spot import SpotDiagram, spot_diagram
+from lensim.optics.spot import SPOT_RINGS, SpotDiagram, airy_radius_um, spot_diagram, spot_summary
 from lensim.optics.surfaces import Surface
 from lensim.optics.trace import DTYPE, MISSED, OK, Rays, media_indices, trace_surface
 from lensim.plots.figure import new_figure, save_figure
@@ -44,7 +44,6 @@ FIELD_COLORS = (
     "tab:cyan",
     "tab:gray",
 )
-SPOT_RINGS = 8  # hexapolar rings in spot diagrams: 217 rays per field and wavelength
 
 
 # ---- shared helpers -------------------------------------------------------------------
@@ -399,49 +398,6 @@ def _draw_stop_and_image(ax, lens: Lens, sizes: _LayoutSizes) -> None:
 
 
 # ---- spot diagrams --------------------------------------------------------------------
-def airy_radius_um(lens: Lens, para: ParaxialData | None = None) -> float:
-    """Airy-disk radius 1.22 lambda N (um) at the primary wavelength, N the working F/#."""
-    para = para or paraxial_data(lens)
-    return 1.22 * lens.primary_wavelength_um * para.working_fno
-
-
-def spot_summary(lens: Lens, spots: SpotDiagram, reference: str = "chief") -> list[dict]:
-    """Per field: polychromatic RMS radius (um) and, per wavelength, the RMS radius (um),
-    the chief-ray position on the image plane (mm) and how many rays reach the image.
-
-    reference: 'chief' (the primary-wavelength chief ray for the polychromatic radius,
-    each wavelength's own chief ray per wavelength) or 'centroid'.
-    """
-    if reference not in ("chief", "centroid"):
-        raise InputError(None, "reference", f"expected 'chief' or 'centroid', got {reference!r}")
-    poly = spots.rms_radius(reference, polychromatic=True) * 1000.0
-    mono = spots.rms_radius(reference, polychromatic=False) * 1000.0
-    out = []
-    for fi, f in enumerate(spots.fields):
-        per_wl = []
-        for wi, w in enumerate(spots.wavelengths_um):
-            n_valid = int(spots.valid[wi, fi].sum())
-            per_wl.append(
-                {
-                    "wavelength_nm": round(w * 1000.0, 6),
-                    "rms_radius_um": float(mono[wi, fi]) if n_valid else None,
-                    "chief_x_mm": float(spots.chief[wi, fi, 0]),
-                    "chief_y_mm": float(spots.chief[wi, fi, 1]),
-                    "rays": int(spots.valid.shape[-1]),
-                    "rays_reaching_image": n_valid,
-                }
-            )
-        out.append(
-            {
-                "field": float(f),
-                "field_unit": "deg" if lens.field_type == "angle" else "mm",
-                "rms_radius_um": float(poly[fi]) if bool(spots.valid[:, fi].any()) else None,
-                "wavelengths": per_wl,
-            }
-        )
-    return out
-
-
 def plot_spots(
     lens: Lens,
     fields: list[float] | None = None,

@@ -30,11 +30,14 @@ raises lensim.restore.divergence.NonFinite instead).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import pickle
 import random
+import shutil
 import warnings
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -43,7 +46,7 @@ import numpy as np
 import torch
 
 from lensim.errors import InputError
-from lensim.io import atomic_writer
+from lensim.io import LOCK_NAME, atomic_writer, folder_lock
 from lensim.restore.conditioning import checkpoint_conditioning
 from lensim.restore.models import build_model
 
@@ -324,6 +327,31 @@ def refuse_existing_run(run: Path) -> None:
         raise InputError(str(run), None, "already holds a training run (last.pt); expected `resume` or a new folder")
 
 
+def remove_unfinished_run(run: Path) -> bool:
+    """Remove a run folder that holds no checkpoint (*.pt), so that nothing half-made is left
+    in the way of the rerun; a folder another process has locked (lensim.io.LOCK_NAME: its
+    own run) is left alone. Returns whether it was removed."""
+    if not run.is_dir() or any(run.glob("*.pt")) or (run / LOCK_NAME).exists():
+        return False
+    shutil.rmtree(run, ignore_errors=True)
+    return not run.exists()
+
+
+@contextlib.contextmanager
+def run_folder(run: Path, writer: bool = True) -> Iterator[Path]:
+    """The run folder while a run trains: locked (lensim.io.folder_lock: a second writer is
+    refused at once) when this process writes it (rank 0 under torchrun); a new run that
+    fails or is interrupted before its first checkpoint is removed (remove_unfinished_run)."""
+    new_run = not run.exists()
+    try:
+        with folder_lock(run) if writer else contextlib.nullcontext(run):
+            yield run
+    except BaseException:
+        if writer and new_run:
+            remove_unfinished_run(run)
+        raise
+
+
 __all__ = [
     "BEST",
     "CHECKPOINT_FORMAT",
@@ -337,7 +365,9 @@ __all__ = [
     "read_checkpoint",
     "read_resume_checkpoint",
     "refuse_existing_run",
+    "remove_unfinished_run",
     "resolve_checkpoint",
+    "run_folder",
     "rng_state",
     "set_rng_state",
     "warn_other_camera",

@@ -52,7 +52,6 @@ from torch.utils.data import DataLoader
 
 from lensim.data.manifest import read_pairs_manifest
 from lensim.errors import InputError
-from lensim.io import folder_lock
 from lensim.restore.batches import collate, epoch_batches, epoch_order, evaluate_pairs, model_inputs
 from lensim.restore.checkpoint import (
     BEST,
@@ -60,6 +59,7 @@ from lensim.restore.checkpoint import (
     TrainingState,
     read_resume_checkpoint,
     refuse_existing_run,
+    run_folder,
 )
 from lensim.restore.conditioning import Conditioning
 from lensim.restore.config import TrainConfig
@@ -484,8 +484,8 @@ def train(
             val_batch_size and the checkpoint intervals; a differing value of one listed in
             FROZEN_ON_RESUME is an InputError.
         progress: called with a TrainProgress after every step and every validation.
-        The run folder is locked while training (lensim.io.folder_lock: a second writer
-        is refused at once).
+        The run folder is locked while training, and removed if new and failed before its
+        first checkpoint (lensim.restore.checkpoint.run_folder).
 
     Returns:
         TrainResult (final and best validation metrics, steps, whether the time budget
@@ -493,7 +493,7 @@ def train(
     """
     run = Path(run_dir)
     writer = int(os.environ.get("RANK", "0")) == 0  # rank 0 writes the run folder (torchrun)
-    with folder_lock(run) if writer else contextlib.nullcontext(run):
+    with run_folder(run, writer):
         return _train(dataset_dir, run, config, resume, progress, overrides)
 
 

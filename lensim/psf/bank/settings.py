@@ -12,16 +12,20 @@ Units: wavelengths nm, normalized fields 0..1 (of the lens's maximum field), spa
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
 import os
+import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 
-from lensim.errors import InputError, ParameterError
+from lensim.errors import InputError, ParameterError, PupilSamplingError
 from lensim.optics.lens import Lens
 from lensim.psf.defaults import BANK_FIELDS, BANK_PUPIL_SAMPLES, DEFAULT_WAVELENGTHS_TEXT, PsfMethod, psf_method
 
@@ -259,3 +263,57 @@ class BankSettings:
             default=str,
         )
         return hashlib.sha256(blob.encode()).hexdigest()[:16]
+
+
+T = TypeVar("T")
+#: how many banks with_enough_pupil_samples computes at most (the first, then one per raise)
+PUPIL_TRIES = 4
+
+
+def pupil_samples_for(needed: int) -> int:
+    """The pupil samples to compute with when a kernel window needs ``needed``: 15 % more,
+    rounded up to a multiple of 8."""
+    return -(-int(needed * 1.15) // 8) * 8
+
+
+def with_enough_pupil_samples(
+    compute: Callable[[BankSettings], T],
+    settings: BankSettings,
+    fixed: bool = False,
+    source: str | None = None,
+    context: str = "",
+) -> T:
+    """``compute(settings)`` (a bank: get it however), again with more pupil samples while
+    the pupil grid is too coarse for the kernel window (a PupilSamplingError, raised when
+    the PSF would wrap around: coarse pixels make wide windows). The samples are raised to
+    pupil_samples_for what the window needs, each raise said in one UserWarning line, at
+    most PUPIL_TRIES computations in all. When ``fixed`` (the caller chose pupil_samples)
+    the first such error is a ParameterError naming pupil_samples and the number to give.
+    ``source`` (the file the bank is for) and ``context`` (why its pixels are coarse, e.g.
+    how a photo maps onto the sensor) go into the messages."""
+    lead = f"{source}: " if source else ""
+    where = f"{context}, " if context else ""
+    for _ in range(PUPIL_TRIES):
+        try:
+            return compute(settings)
+        except PupilSamplingError as e:
+            need = pupil_samples_for(e.needed)
+            if fixed:
+                raise ParameterError(
+                    source,
+                    "pupil_samples",
+                    f"{where}too coarse for {settings.pupil_samples} pupil samples; expected `pupil_samples` "
+                    f"{need} or more (or leave it out to have it chosen)",
+                ) from None
+            warnings.warn(
+                f"{lead}{context + '; ' if context else ''}pupil samples raised from "
+                f"{settings.pupil_samples} to {need} for the PSF bank",
+                UserWarning,
+                stacklevel=2,
+            )
+            settings = dataclasses.replace(settings, pupil_samples=need)
+    raise ParameterError(
+        source,
+        "pupil_samples",
+        f"{where}no pupil sampling up to {settings.pupil_samples} samples resolves the bank's kernels",
+    )
