@@ -9,7 +9,7 @@ from lensim.cli.ablation_cmd import ablation_command
 from lensim.cli.allocator import keep_freed_memory
 from lensim.cli.assets_cmd import assets_command
 from lensim.cli.chart_cmd import chart_app
-from lensim.cli.common import name_options, run_guarded
+from lensim.cli.common import help_in_sentences, name_options, run_guarded
 from lensim.cli.dataset_cmd import dataset_app
 from lensim.cli.demo_cmd import demo_command, report_command
 from lensim.cli.develop_cmd import develop_command
@@ -49,6 +49,7 @@ app.command("demo")(demo_command)
 app.command("ablation")(ablation_command)
 app.command("report")(report_command)
 name_options(app)  # library errors name parameters; the commands show them as their options
+help_in_sentences(app)  # docstrings' source line breaks do not reach --help
 
 
 def main() -> None:

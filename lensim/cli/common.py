@@ -135,6 +135,36 @@ def _naming_options(command: Callable[..., Any]) -> Callable[..., Any]:
     return run
 
 
+def help_text(doc: str) -> str:
+    """A command's docstring as its help text: each paragraph (they are separated by blank
+    lines) on one line, for the terminal to wrap at its own width, so that no line of the
+    help breaks a sentence where the source file wraps it; a line that starts with
+    "Example:" keeps a line of its own."""
+    paragraphs = []
+    for paragraph in inspect.cleandoc(doc).split("\n\n"):
+        lines: list[str] = []
+        for line in (text.strip() for text in paragraph.splitlines()):
+            if lines and line and not line.startswith("Example:"):
+                lines[-1] = f"{lines[-1]} {line}"
+            elif line:
+                lines.append(line)
+        paragraphs.append("\n".join(lines))
+    return "\n\n".join(paragraphs)
+
+
+def help_in_sentences(app: typer.Typer) -> None:
+    """Give every command of ``app`` (and of its sub-apps) its docstring as help_text: typer
+    keeps a docstring's line breaks (in its groups' command lists, and in every paragraph of
+    a command's help but the first), which cut sentences mid-line at a wide terminal."""
+    for info in app.registered_commands:
+        doc = info.help or (inspect.getdoc(info.callback) if info.callback is not None else None)
+        if doc:
+            info.help = help_text(doc)
+    for group in app.registered_groups:
+        if group.typer_instance is not None:
+            help_in_sentences(group.typer_instance)
+
+
 def name_options(app: typer.Typer) -> None:
     """Make every command of ``app`` (and of its sub-apps) show the library parameters its
     errors name as the command's options: the library never names a command-line option
