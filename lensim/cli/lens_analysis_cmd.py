@@ -23,7 +23,6 @@ from lensim.cli.lens_cmd import (
     AimingChoice,
     _check_figure_name,
     _load,
-    fields_to_show,
     lens_app,
 )
 from lensim.cli.validate import at_least, choice, in_range, positive, wavelength_nm
@@ -73,6 +72,8 @@ def _outputs(output: Path | None, json_out: bool) -> None:
 
 def _fields(lens: Lens, field, field_deg, image_height_mm) -> tuple[Lens, list[float]]:
     """The lens to trace and the fields to show, in its unit (default: its own fields)."""
+    from lensim.optics.analysis import fields_to_show
+
     shown, values = fields_to_show(lens, field, field_deg, image_height_mm)
     return shown, list(shown.fields) if values is None else values
 
@@ -324,6 +325,7 @@ def field_curves_command(
 
     Example: lensim lens field-curves cooke_triplet -o field_curves.png --json
     """
+    from lensim.optics.analysis import fields_to_show
     from lensim.optics.fans import field_curves
     from lensim.plots.analysis import field_curves_figure
 
