@@ -90,9 +90,9 @@ ZOOM_GAPS = {
 
 
 def test_zemax_thic_operands_are_read_into_configurations(reference_lenses) -> None:
-    lens = load_lens(reference_lenses / ZOOM, warn=False)
+    lens = load_lens(reference_lenses / ZOOM, warn=False, model_glasses=True)
     assert lens.configurations == ZOOM_GAPS
-    assert lens.notes == []  # configurations are read, not a caveat
+    assert lens.notes == []  # configurations are read, not a caveat (model glasses: no catalogue twins either)
     # the lens data as saved are configuration 1 (MNUM 3 1)
     assert [s.thickness for s in apply_configuration(lens, "1").surfaces] == [s.thickness for s in lens.surfaces]
     # and they survive a native round trip
@@ -107,7 +107,7 @@ def test_each_zoom_position_has_optilands_efl(reference_lenses) -> None:
 
     from lensim.optics.paraxial import paraxial_data
 
-    lens = load_lens(reference_lenses / ZOOM, warn=False)
+    lens = load_lens(reference_lenses / ZOOM, warn=False, model_glasses=True)  # optiland's glasses: the models
     op = load_zemax_file(str(reference_lenses / ZOOM))
     efl = {}
     for name, thicknesses in lens.configurations.items():

@@ -163,7 +163,9 @@ def test_nearest_catalogue_glass_finds_the_glass_a_model_was_made_from(dozen):
 
 
 def test_match_glass_replaces_model_glasses_and_reports_them(tmp_path, capsys, monkeypatch):
-    lens = load_lens("phone_wide")
+    data = lens_to_dict(load_lens("phone_wide"))
+    data["surfaces"][12]["material"] = {"nd": 1.517, "vd": 64.167}  # the IR-cut filter as the patent gives it
+    lens = lens_from_dict(data)  # every pair a model glass, as --match-glass loads a lens
     matched, records = match_glasses(lens, ["Schott"])
     models = [i for i, s in enumerate(lens.surfaces) if isinstance(s.material, ModelGlass)]
     assert [r["surface"] for r in records] == models

@@ -504,7 +504,17 @@ def test_lens_info_shows_the_lens_at_a_zoom_position(reference_lenses, capsys, m
     from cli_runner import run_cli
 
     code, out, err = run_cli(
-        ["lens", "info", str(reference_lenses / "nikon_80-200_zoom.zmx"), "--config", "3", "--fno", "4", "--json"],
+        [
+            "lens",
+            "info",
+            str(reference_lenses / "nikon_80-200_zoom.zmx"),
+            "--config",
+            "3",
+            "--fno",
+            "4",
+            "--model-glass",  # the EFL of the file's own nd/Vd model glasses (optiland's)
+            "--json",
+        ],
         capsys,
         monkeypatch,
     )

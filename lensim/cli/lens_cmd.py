@@ -28,6 +28,10 @@ MATCH_GLASS_HELP = (
     "Replace each model glass (nd/Vd) by the nearest catalogue glass (smallest RMS index "
     "difference over 400-700 nm); lens info reports each replacement."
 )
+MODEL_GLASS_HELP = (
+    "Keep each bare nd/Vd pair (a patent's glass) a model glass on Schott's normal line, where by default "
+    "a pair that matches a catalogue glass within its rounding is that glass (with its partial dispersion)."
+)
 GLASS_MAKERS_HELP = (
     "Catalogues --match-glass searches, comma-separated (Schott, Ohara, CDGM, Hikari, Hoya, Sumita). Default: all."
 )
@@ -45,16 +49,25 @@ def _glass_makers(makers: str | None, match_glass: bool) -> list[str] | None:
     return glass_makers(makers)
 
 
+def _model_glass(model_glass: bool, match_glass: bool) -> bool:
+    """--model-glass, refused beside --match-glass (which replaces every model glass)."""
+    if model_glass and match_glass:
+        raise InputError(None, "--model-glass", "cannot be combined with --match-glass; expected one of them")
+    return model_glass
+
+
 def _load(
     lens_file: str,
     match_glass: bool = False,
     makers: list[str] | None = None,
     shooting: tuple[str | None, ...] = (None, None, None, None),
+    model_glass: bool = False,
 ):
-    """Load a lens; with match_glass its model glasses become the nearest catalogue glasses;
-    then it is set to the shooting options (--fno, --object-m, --focus-m, --config).
-    Returns (lens, glass matches)."""
-    lens, matches, _ = _load_set(lens_file, match_glass, makers, shooting)
+    """Load a lens (model_glass: its bare nd/Vd pairs stay model glasses, see load_lens);
+    with match_glass its model glasses become the nearest catalogue glasses; then it is set
+    to the shooting options (--fno, --object-m, --focus-m, --config). Returns (lens, glass
+    matches)."""
+    lens, matches, _ = _load_set(lens_file, match_glass, makers, shooting, model_glass)
     return lens, matches
 
 
@@ -63,6 +76,7 @@ def _load_set(
     match_glass: bool = False,
     makers: list[str] | None = None,
     shooting: tuple[str | None, ...] = (None, None, None, None),
+    model_glass: bool = False,
 ):
     """_load, and the shooting settings resolved as records keep them (None when none is
     given)."""
@@ -70,7 +84,8 @@ def _load_set(
     from lensim.optics.shooting import lens_and_record
 
     settings = shooting_settings(*shooting)
-    lens = load_lens(lens_file)
+    # --match-glass replaces every model glass by its nearest catalogue glass, as it always did
+    lens = load_lens(lens_file, model_glasses=model_glass or match_glass)
     matches: list[dict] = []
     if match_glass:
         lens, matches = match_glasses(lens, makers)
@@ -92,6 +107,7 @@ def info(
     json_out: bool = typer.Option(False, "--json", help="Print a JSON object instead of tables."),
     aiming: str = typer.Option("real", help="Ray aiming for real-ray figures: real or paraxial."),
     match_glass: bool = typer.Option(False, "--match-glass", help=MATCH_GLASS_HELP),
+    model_glass: bool = typer.Option(False, "--model-glass", help=MODEL_GLASS_HELP),
     glass_makers: str | None = typer.Option(None, "--glass-makers", help=GLASS_MAKERS_HELP),
     fno: str | None = fno_option(),
     object_m: str | None = object_m_option(),
@@ -107,7 +123,11 @@ def info(
 
     choice(aiming, AIMINGS, "--aiming")
     lens, matches, described = _load_set(
-        lens_file, match_glass, _glass_makers(glass_makers, match_glass), (fno, object_m, focus_m, config)
+        lens_file,
+        match_glass,
+        _glass_makers(glass_makers, match_glass),
+        (fno, object_m, focus_m, config),
+        _model_glass(model_glass, match_glass),
     )
     summary = first_order_summary(lens, aiming=aiming)
     if described is not None:
@@ -188,6 +208,7 @@ def convert(
     lens_file: str = LENS_ARG,
     output: Path = typer.Option(..., "-o", "--output", help="Native lens file to write (.json or .yaml)."),
     match_glass: bool = typer.Option(False, "--match-glass", help=MATCH_GLASS_HELP),
+    model_glass: bool = typer.Option(False, "--model-glass", help=MODEL_GLASS_HELP),
     glass_makers: str | None = typer.Option(None, "--glass-makers", help=GLASS_MAKERS_HELP),
 ) -> None:
     """Convert any supported lens file to lensim's native format.
@@ -200,7 +221,7 @@ def convert(
     if output.suffix.lower() not in (".json", ".yaml", ".yml"):
         raise InputError(str(output), "--output", "expected a .json, .yaml or .yml file name for a native lens file")
     output_file(output)
-    lens, _ = _load(lens_file, match_glass, makers)
+    lens, _ = _load(lens_file, match_glass, makers, model_glass=_model_glass(model_glass, match_glass))
     save_lens(lens, output)
     console.print(f"wrote {output}", highlight=False)
 
@@ -385,6 +406,7 @@ def field_command(
     field_deg: list[float] | None = typer.Option(None, "--field-deg", help=FIELD_DEG_HELP),
     image_height_mm: list[float] | None = typer.Option(None, "--image-height-mm", help=IMAGE_HEIGHT_HELP),
     match_glass: bool = typer.Option(False, "--match-glass", help=MATCH_GLASS_HELP),
+    model_glass: bool = typer.Option(False, "--model-glass", help=MODEL_GLASS_HELP),
     glass_makers: str | None = typer.Option(None, "--glass-makers", help=GLASS_MAKERS_HELP),
     fno: str | None = fno_option(),
     object_m: str | None = object_m_option(),
@@ -401,7 +423,11 @@ def field_command(
     from lensim.optics.analysis import fields_to_show
 
     lens, matches = _load(
-        lens_file, match_glass, _glass_makers(glass_makers, match_glass), (fno, object_m, focus_m, config)
+        lens_file,
+        match_glass,
+        _glass_makers(glass_makers, match_glass),
+        (fno, object_m, focus_m, config),
+        _model_glass(model_glass, match_glass),
     )
     lens, fields = fields_to_show(lens, field, field_deg, image_height_mm)
     report = _field_report(lens, fields, sensor, aiming)
@@ -452,6 +478,7 @@ def lensfun_command(
     sensor: str | None = typer.Option(None, "--sensor", help=SENSOR_HELP),
     aiming: AimingChoice = typer.Option(AimingChoice.real, help="Ray aiming of the chief rays."),
     match_glass: bool = typer.Option(False, "--match-glass", help=MATCH_GLASS_HELP),
+    model_glass: bool = typer.Option(False, "--model-glass", help=MODEL_GLASS_HELP),
     glass_makers: str | None = typer.Option(None, "--glass-makers", help=GLASS_MAKERS_HELP),
 ) -> None:
     """Write a lensfun profile of the lens (for darktable, RawTherapee, Hugin): ptlens
@@ -468,7 +495,12 @@ def lensfun_command(
     if output.suffix.lower() != ".xml":
         raise InputError(str(output), "--output", "expected a .xml file name (a lensfun database file)")
     output_file(output)
-    lens, _ = _load(lens_file, match_glass, _glass_makers(glass_makers, match_glass))
+    lens, _ = _load(
+        lens_file,
+        match_glass,
+        _glass_makers(glass_makers, match_glass),
+        model_glass=_model_glass(model_glass, match_glass),
+    )
     wavelengths_nm, weights = _channel_weights(sensor)
     profile = lensfun_profile(
         lens,

@@ -22,7 +22,9 @@
 Surface keys: radius (mm, 'infinity' or omitted for a plane) or curvature (1/mm),
 thickness (mm to the next vertex; negative after a mirror, or in air to place a stop
 or dummy surface behind the next vertex, as in Zemax), material (glass name,
-name@Catalog, air, {nd, vd[, dpgf]} model glass or {n} constant index), conic, asphere
+name@Catalog, air, {nd, vd[, dpgf][, model: true]} model glass or {n} constant index;
+a bare {nd, vd} pair that matches a catalogue glass within its rounding is that glass
+unless `model: true`), conic, asphere
 ({r1..r20: coefficient}; even powers only: an even asphere, any odd power: an odd
 asphere), clear_semi_diameter (vignetting), obscuration (central
 obscuration radius), semi_diameter (drawing only), stop, mirror, comment, and for an
@@ -43,7 +45,15 @@ from typing import Any
 from lensim.errors import InputError
 from lensim.io import atomic_write_text, read_text
 from lensim.optics.lens import Lens
-from lensim.optics.materials import Air, Material, ModelGlass, material_from_spec, nearest_catalog_glass
+from lensim.optics.materials import (
+    Air,
+    Material,
+    ModelGlass,
+    catalogue_twin,
+    material_from_spec,
+    nearest_catalog_glass,
+    twin_note,
+)
 from lensim.optics.surfaces import MAX_ASPHERE_POWER, Surface
 
 TOP_KEYS = {
@@ -449,6 +459,52 @@ def match_glasses(lens: Lens, makers: list[str] | None = None) -> tuple[Lens, li
     return lens.with_changes(surfaces=surfaces, notes=notes), matches
 
 
+def use_catalogue_twins(lens: Lens, makers: list[str] | None = None) -> tuple[Lens, list[dict]]:
+    """Replace each bare nd/Vd pair (a patent's glass: a model glass with dPgF 0, not forced)
+    by the catalogue glass it matches within its rounding (materials.catalogue_twin), so that
+    the glass keeps its partial dispersion; pairs that match nothing stay model glasses.
+    Returns the new lens, with one note line for all the replacements, and one record per
+    replaced surface: surface (0-based index), model {nd, vd}, glass, catalog, nd, vd, dpgf."""
+    key = tuple(makers) if makers else None
+    surfaces, records = [], []
+    replaced: dict[tuple[ModelGlass, Material], list[int]] = {}
+    for i, s in enumerate(lens.surfaces):
+        m = s.material
+        twin = catalogue_twin(m, key) if isinstance(m, ModelGlass) and not s.is_mirror else None
+        if twin is None or not isinstance(m, ModelGlass):
+            surfaces.append(s)
+            continue
+        surfaces.append(dataclasses.replace(s, material=twin))
+        replaced.setdefault((m, twin), []).append(i)
+        records.append(
+            {
+                "surface": i,
+                "model": {"nd": m.nd_value, "vd": m.vd_value},
+                "glass": twin.name,
+                "catalog": twin.catalog,
+                "nd": twin.nd,
+                "vd": twin.vd,
+                "dpgf": twin.dpgf,
+            }
+        )
+    if not records:
+        return lens, []
+    note = twin_note([(idx, m, g) for (m, g), idx in replaced.items()])  # type: ignore[misc]
+    return lens.with_changes(surfaces=surfaces, notes=[*lens.notes, note]), records
+
+
+def keep_model_glasses(lens: Lens) -> Lens:
+    """The lens with each bare nd/Vd pair marked to stay a model glass (``forced``: written
+    ``model: true``), where use_catalogue_twins would take a catalogue glass."""
+    surfaces = [
+        dataclasses.replace(s, material=dataclasses.replace(s.material, forced=True))
+        if isinstance(s.material, ModelGlass) and s.material.dpgf_value == 0.0
+        else s
+        for s in lens.surfaces
+    ]
+    return lens.with_changes(surfaces=surfaces)
+
+
 def save_lens(lens: Lens, path: str | Path) -> None:
     """Write a lens in the native format (.json, or .yaml/.yml), atomically."""
     path = Path(path)
@@ -484,10 +540,13 @@ def _read_native(path: Path) -> dict:
         raise InputError(str(path), where, msg) from None
 
 
-def load_lens(path: str | Path, warn: bool = True) -> Lens:
+def load_lens(path: str | Path, warn: bool = True, model_glasses: bool = False) -> Lens:
     """Load a lens from a native .json/.yaml file, a Zemax .zmx or a CODE V .seq file,
-    or a built-in lens by name (see lensim.assets). Every note (kept in lens.notes) is
-    also issued as a LensNoteWarning; glass substitutions as GlassSubstitutionWarning."""
+    or a built-in lens by name (see lensim.assets). A bare nd/Vd pair (a patent's glass)
+    that matches a catalogue glass within its rounding becomes that glass
+    (use_catalogue_twins; one note says which); with model_glasses every pair stays a model
+    glass on the normal line (keep_model_glasses). Every note (kept in lens.notes) is also
+    issued as a LensNoteWarning; glass substitutions as GlassSubstitutionWarning."""
     from lensim import assets
 
     p = Path(path)
@@ -514,6 +573,7 @@ def load_lens(path: str | Path, warn: bool = True) -> Lens:
         lens = read_seq(p)
     else:
         raise InputError(str(p), None, "unknown lens file type; expected .json, .yaml, .yml, .zmx or .seq")
+    lens = keep_model_glasses(lens) if model_glasses else use_catalogue_twins(lens)[0]
     if warn:
         for note in lens.notes:
             category = GlassSubstitutionWarning if note.startswith("glass ") else LensNoteWarning

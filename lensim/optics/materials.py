@@ -144,6 +144,9 @@ class ModelGlass(Material):
     vd_value: float
     dpgf_value: float = 0.0
     name: str = "model"
+    #: kept as the model even where a catalogue glass matches nd/Vd (native ``model: true``;
+    #: :func:`catalogue_twin`)
+    forced: bool = False
 
     @property
     def pgf(self) -> float:
@@ -170,6 +173,8 @@ class ModelGlass(Material):
         out: dict = {"nd": self.nd_value, "vd": self.vd_value}
         if self.dpgf_value:
             out["dpgf"] = self.dpgf_value
+        if self.forced:
+            out["model"] = True
         return out
 
 
@@ -346,12 +351,17 @@ def nearest_catalog_glass(
 
 
 def _model_glass_from_spec(spec: dict) -> ModelGlass:
-    """{nd, vd[, dpgf][, name]} -> ModelGlass, with the ranges checked."""
-    unknown = sorted(set(spec) - {"nd", "vd", "dpgf", "name"})
+    """{nd, vd[, dpgf][, name][, model]} -> ModelGlass, with the ranges checked."""
+    unknown = sorted(set(spec) - {"nd", "vd", "dpgf", "name", "model"})
     if unknown:
         raise InputError(
-            None, "material", f"unknown model-glass key(s) {', '.join(map(str, unknown))}; expected nd, vd, dpgf, name"
+            None,
+            "material",
+            f"unknown model-glass key(s) {', '.join(map(str, unknown))}; expected nd, vd, dpgf, name, model",
         )
+    forced = spec.get("model", False)
+    if not isinstance(forced, bool):
+        raise InputError(None, "material", f"model glass 'model' must be true or false, got {forced!r}")
     try:
         nd, vd, dpgf = float(spec["nd"]), float(spec["vd"]), float(spec.get("dpgf", 0.0))
     except (TypeError, ValueError):
@@ -360,14 +370,15 @@ def _model_glass_from_spec(spec: dict) -> ModelGlass:
         raise InputError(None, "material", f"model glass needs 1 <= nd < 5 and vd > 0, got nd={nd}, vd={vd}")
     if not abs(dpgf) < 0.2:
         raise InputError(None, "material", f"model glass dpgf must lie between -0.2 and 0.2, got {dpgf}")
-    return ModelGlass(nd, vd, dpgf, name=str(spec.get("name", f"model {nd:.5f}/{vd:.2f}")))
+    return ModelGlass(nd, vd, dpgf, name=str(spec.get("name", f"model {nd:.5f}/{vd:.2f}")), forced=forced)
 
 
 def material_from_spec(spec, catalogs: list[str] | None = None, notes: list[str] | None = None) -> Material:
     """Build a material from its native-file form.
 
     Accepted: "air"; "N-BK7" (searched in all catalogues); "N-BK7@Schott";
-    {"nd": 1.5168, "vd": 64.17[, "dpgf": -0.0009]} (model glass; dpgf 0: on the normal line);
+    {"nd": 1.5168, "vd": 64.17[, "dpgf": -0.0009][, "model": true]} (model glass; dpgf 0: on
+    the normal line; "model": true keeps it a model where a catalogue glass matches);
     {"n": 1.5} (constant index);
     {"glass": "L-TIM28", "catalog": "Ohara"}.
     """
@@ -396,3 +407,112 @@ def material_from_spec(spec, catalogs: list[str] | None = None, notes: list[str]
             name = str(spec["glass"]) + (f"@{spec['catalog']}" if "catalog" in spec else "")
             return material_from_spec(name, catalogs, notes)
     raise InputError(None, "material", f"expected a glass name, 'air', {{nd, vd}} or {{n}}, got {spec!r}")
+
+
+# ---------------------------------------------------------------- catalogue twins of nd/Vd pairs
+
+#: a vendor's dispersion formula gives its catalogue's nominal nd to about 2e-5 and Vd to
+#: about 0.05 (measured over the six catalogues): added to a pair's own rounding
+TWIN_SLACK_ND = 2.5e-5
+TWIN_SLACK_VD = 0.05
+#: the table of every catalogue glass's nd and Vd (from its own formula), shipped so that a
+#: pair is matched without loading the six catalogues (lensim.optics.materials.twin_table_rows
+#: writes it; tests/test_glass_twins.py checks it against opticalglass)
+TWIN_TABLE = "glasses/nd_vd.json"
+
+
+def written_rounding(x: float, finest: float, coarsest: float) -> float:
+    """Half a unit in the last decimal place of x as written (the shortest decimal that reads
+    back as x: 1.497 -> 5e-4, 81.61 -> 5e-3), kept within [finest, coarsest] (trailing zeros
+    of the printed value, 1.49700, are lost in a float)."""
+    import decimal
+
+    exponent = decimal.Decimal(repr(float(x))).normalize().as_tuple().exponent
+    half = 0.5 * 10.0 ** int(exponent)  # normalize() never leaves a special exponent for a finite x
+    return min(max(half, finest), coarsest)
+
+
+def twin_table_rows(catalogs: tuple[str, ...] = CATALOGS) -> list[list]:
+    """[catalogue, name, nd, Vd] of every glass of the catalogues whose formula gives finite
+    indices at d, F and C (what TWIN_TABLE holds; nd to 1e-7, Vd to 1e-4)."""
+    import warnings
+
+    rows = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for cat in catalogs:
+            for name in sorted(_catalog_names(cat).values()):
+                try:
+                    glass = catalog_glass(name, cat)
+                    nd, vd = glass.nd, glass.vd
+                except Exception:  # noqa: BLE001 - opticalglass raises several kinds on an incomplete row
+                    continue
+                if math.isfinite(nd) and math.isfinite(vd) and nd > 1.0 and vd > 0:
+                    rows.append([cat, name, round(nd, 7), round(vd, 4)])
+    return rows
+
+
+@functools.cache
+def _twin_table() -> tuple[tuple[str, ...], tuple[str, ...], np.ndarray]:
+    """(catalogues, names, (N, 2) nd and Vd) of TWIN_TABLE."""
+    import json
+
+    from lensim.assets import ASSETS_DIR
+
+    rows = json.loads((ASSETS_DIR / TWIN_TABLE).read_text())["glasses"]
+    return (
+        tuple(r[0] for r in rows),
+        tuple(r[1] for r in rows),
+        np.array([[r[2], r[3]] for r in rows], dtype=np.float64),
+    )
+
+
+def twin_tolerances(model: ModelGlass) -> tuple[float, float]:
+    """(nd, Vd) tolerances of a pair: its written rounding (nd 5e-6 to 5e-4, Vd 5e-3 to 0.05)
+    plus the formula slack TWIN_SLACK_ND, TWIN_SLACK_VD."""
+    return (
+        written_rounding(model.nd_value, 5e-6, 5e-4) + TWIN_SLACK_ND,
+        written_rounding(model.vd_value, 5e-3, 0.05) + TWIN_SLACK_VD,
+    )
+
+
+@functools.cache
+def catalogue_twin(model: ModelGlass, makers: tuple[str, ...] | None = None) -> CatalogGlass | None:
+    """The catalogue glass a bare nd/Vd pair (a patent's glass: a model glass with dPgF 0 that
+    is not ``forced``) stands for: of the glasses whose nd and Vd lie within the pair's
+    rounding (twin_tolerances), the nearest in units of those tolerances, searched in
+    ``makers``' catalogues (default all; ties go to the first in CATALOGS order, then by
+    name). None when no glass matches, or for any other material."""
+    if not isinstance(model, ModelGlass) or model.forced or model.dpgf_value != 0.0:
+        return None
+    cats, names, table = _twin_table()
+    wanted = {_catalog_key(c) for c in (makers or CATALOGS)}
+    tol = np.array(twin_tolerances(model))
+    dist = np.abs(table - np.array([model.nd_value, model.vd_value])) / tol
+    order = np.lexsort((np.arange(len(names)), (dist**2).sum(axis=1)))
+    for i in order:
+        if dist[i].max() > 1.0:
+            break
+        if cats[i] not in wanted:
+            continue
+        try:
+            glass = catalog_glass(names[i], cats[i])
+        except UnknownGlassError:  # an opticalglass release without this glass
+            continue
+        if abs(glass.nd - model.nd_value) <= tol[0] and abs(glass.vd - model.vd_value) <= tol[1]:
+            return glass
+    return None
+
+
+def twin_note(replaced: list[tuple[list[int], ModelGlass, CatalogGlass]]) -> str:
+    """One note line for the pairs replaced by their catalogue twins: [(surface indices,
+    model, glass)]."""
+    each = "; ".join(
+        f"surfaces[{', '.join(map(str, idx))}] nd {m.nd_value:g} Vd {m.vd_value:g} = {g.name} ({g.catalog}, "
+        f"nd {g.nd:.5f} Vd {g.vd:.2f} dPgF {g.dpgf:+.4f})"
+        for idx, m, g in replaced
+    )
+    return (
+        "glass nd/Vd pairs that match a catalogue glass within their rounding are that glass, "
+        f"with its partial dispersion: {each}"
+    )
