@@ -1,5 +1,5 @@
 """The default network of `lensim train` (TrainConfig's defaults, resolved per architecture
-by lensim.restore.config.ARCH_DEFAULTS): NAFNet with FOV channels and a 2x pixel-unshuffle
+by lensim.restore.arch_rules.ARCH_DEFAULTS): NAFNet with FOV channels and a 2x pixel-unshuffle
 stem, no deformable convolution, no context block, at the paper's UNet's size; `--arch
 unet` alone is the paper's UNet exactly as the old default; the tri-state switches
 override either; the resolved values are what a run records; a checkpoint from before
@@ -17,8 +17,9 @@ import pytest
 import torch
 
 from cli_runner import run_cli
+from lensim.restore.arch_rules import ARCH_DEFAULTS
 from lensim.restore.checkpoint import atomic_torch_save, load_checkpoint
-from lensim.restore.config import ARCH_DEFAULTS, TrainConfig
+from lensim.restore.config import TrainConfig
 from lensim.restore.models import build_model, default_width, reference_parameters
 from lensim.restore.nafnet import NAFNet
 from lensim.restore.network import ContextBlock, DeformResBlock, FieldAwareUNet, count_parameters

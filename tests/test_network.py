@@ -322,7 +322,7 @@ def test_field_modulation_starts_as_the_identity_and_needs_fov() -> None:
     assert torch.equal(plain_net(rgb, fov), mod_net(rgb, fov))
     base, extra = (count_parameters(FieldAwareUNet(deformable_scales=1, field_modulation=m)) for m in (False, True))
     assert 0.005 < extra / base - 1 < 0.02
-    with pytest.raises(ValueError, match="field_modulation needs use_fov"):
+    with pytest.raises(ValueError, match="field_modulation: is computed from the field-of-view input"):
         FieldAwareUNet(width=8, use_fov=False, field_modulation=True)
 
 

@@ -282,56 +282,65 @@ def _check_network(
     stem: int,
     deformable: bool | None = None,
 ) -> None:
-    """The network's options (the rules of lensim.restore.network.FieldAwareUNet and
-    lensim.restore.nafnet.NAFNet), before any work. ``deformable`` None: the architecture's
-    default (lensim.restore.config.ARCH_DEFAULTS). ``arch`` None (a resumed run whose
+    """The network's options (their ranges, then lensim.restore.arch_rules: which
+    architecture takes which switches), before any work. ``deformable`` None: the
+    architecture's default (lensim.restore.arch_rules.ARCH_DEFAULTS). ``arch`` None (a resumed run whose
     --arch is not given): the rules that depend on the architecture are skipped; the run's
     stored settings hold, and a differing network option is refused by train()."""
-    from lensim.restore.models import ARCHS
+    from lensim.restore.arch_rules import ARCHS
 
     if arch is not None:
         choice(arch, ARCHS, "--arch")
     at_least(width, 0, "--width", "channels", "a width (0: the architecture's default)")
     at_least(depth, 2, "--depth", "scales", "a depth")
-    at_least(groups, 1, "--deformable-groups", what="a number of offset groups")
     in_range(deformable_scales, -1, depth - 1, "--deformable-scales", what="a number of decoder scales (-1: all)")
     choice(stem, (0, 1, 2), "--stem")
-    if field_modulation and no_fov:
-        raise InputError(
-            "--field-modulation", None, "is computed from the field-of-view input; expected it without --no-fov"
-        )
-    if arch is not None:
-        _check_arch_rules(arch, width, groups, deformable_scales, field_modulation, stem, deformable)
+    _check_arch_rules(arch, width, depth, groups, deformable_scales, field_modulation, no_fov, stem, deformable)
+
+
+#: the option of each network parameter lensim.restore.arch_rules names
+_NETWORK_OPTIONS = {
+    "arch": "--arch",
+    "deformable_groups": "--deformable-groups",
+    "deformable_scales": "--deformable-scales",
+    "field_modulation": "--field-modulation",
+    "stem": "--stem",
+}
 
 
 def _check_arch_rules(
-    arch: str,
+    arch: str | None,
     width: int,
+    depth: int,
     groups: int,
     deformable_scales: int,
     field_modulation: bool,
+    no_fov: bool,
     stem: int,
     deformable: bool | None,
 ) -> None:
-    """_check_network's rules that depend on the architecture (its defaults resolved)."""
-    from lensim.restore.config import ARCH_DEFAULTS
+    """Which architecture takes which switches (lensim.restore.arch_rules), the options'
+    sentinels resolved (width 0: not chosen yet; --deformable-scales -1: all; --stem 0 and
+    --deformable/--no-deformable unset: the architecture's default); an error names the
+    option."""
+    from lensim.restore.arch_rules import ARCH_DEFAULTS, check_switches
 
-    if deformable is None:
-        deformable = bool(ARCH_DEFAULTS[arch]["use_deformable"])
-    if deformable and width and width % groups:  # the groups split the deformable blocks' channels
-        raise InputError("--deformable-groups", None, f"expected a divisor of --width {width}, got {groups}")
-    if arch == "nafnet" and deformable and deformable_scales == 0:
-        raise InputError(
-            "--deformable-scales",
-            None,
-            "expected 1 or more (or -1: all) with --arch nafnet and --deformable; use --no-deformable for none",
+    defaults = ARCH_DEFAULTS.get(arch or "", {"use_deformable": False, "stem": 1})
+    try:
+        check_switches(
+            arch,
+            use_fov=not no_fov,
+            use_deformable=bool(defaults["use_deformable"] if deformable is None else deformable),
+            deformable_groups=groups,
+            deformable_scales=None if deformable_scales < 0 else deformable_scales,
+            field_modulation=field_modulation,
+            stem=stem or defaults["stem"],
+            widths=tuple(width * 2**s for s in range(depth)) if width else None,
         )
-    if field_modulation and arch != "unet":
-        raise InputError("--field-modulation", None, f"is an option of --arch unet; expected it without --arch {arch}")
-    if stem == 2 and arch != "nafnet":
-        raise InputError(
-            "--stem", None, f"is an option of --arch nafnet; expected 0 or 1 with --arch {arch}, got {stem}"
-        )
+    except InputError as e:
+        if e.source is not None or e.field not in _NETWORK_OPTIONS:
+            raise
+        raise InputError(_NETWORK_OPTIONS[e.field], None, e.message) from None
 
 
 def _check_crop(dataset: Path, crop: int) -> None:

@@ -6,18 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import Any
 
-from lensim.errors import InputError
-
-#: Each architecture's defaults of the switches TrainConfig leaves unset (None / 0): the
-#: paper's UNet has the deformable decoder, the context block and no stem; the default
-#: network, NAFNet with FOV channels, has neither and a 2x pixel-unshuffle stem
-#: (benchmarks/results/nafnet_vs_unet_30min: 30 minutes of training each, two seeds,
-#: +0.18 to +0.33 dB over the UNet on held-out photos, +0.04 to +0.10 dB on unseen ones;
-#: restores 3.0x faster).
-ARCH_DEFAULTS: dict[str, dict[str, Any]] = {
-    "unet": {"use_deformable": True, "use_context": True, "stem": 1},
-    "nafnet": {"use_deformable": False, "use_context": False, "stem": 2},
-}
+from lensim.restore.arch_rules import ARCH_DEFAULTS, check_switches
 
 
 def settings_dim(conditioning: dict[str, Any] | None) -> int:
@@ -154,12 +143,19 @@ class TrainConfig:
             "deformable_groups": self.deformable_groups,
             "settings_dim": settings_dim(self.conditioning),
         }
-        if self.arch == "nafnet":
-            if self.field_modulation:
-                raise InputError(
-                    None, "field_modulation", "is a FieldAwareUNet option; expected it off with arch 'nafnet'"
-                )
-            n = self.depth - 1
+        n = self.depth - 1
+        nafnet = self.arch == "nafnet"
+        check_switches(  # which architecture takes which switches (lensim.restore.arch_rules)
+            self.arch,
+            use_fov=self.use_fov,
+            use_deformable=bool(self.use_deformable),
+            deformable_groups=self.deformable_groups,
+            deformable_scales=n if nafnet and self.deformable_scales is None else self.deformable_scales,
+            field_modulation=self.field_modulation,
+            stem=self.stem,
+            widths=tuple(self.width * 2**s for s in range(self.depth)) if self.width > 0 else None,
+        )
+        if nafnet:
             return {
                 "arch": "nafnet",
                 "width": self.width,
@@ -170,8 +166,6 @@ class TrainConfig:
                 "stem": self.stem,
                 "deformable_scales": n if self.deformable_scales is None else self.deformable_scales,
             }
-        if self.stem != 1:
-            raise InputError(None, "stem", f"is a NAFNet option; expected 1 with arch {self.arch!r}, got {self.stem}")
         return {
             "arch": self.arch,
             "width": self.width,

@@ -19,10 +19,10 @@ from typing import Any
 import torch
 import torch.nn as nn
 
+from lensim.restore.arch_rules import ARCHS
 from lensim.restore.nafnet import NAFNet, nafnet_width
 from lensim.restore.network import FieldAwareUNet, count_parameters
 
-ARCHS: tuple[str, ...] = ("unet", "nafnet")
 #: Width of `lensim train --arch unet`'s FieldAwareUNet (and of the reference every default size matches).
 UNET_WIDTH = 32
 

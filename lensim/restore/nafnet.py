@@ -58,12 +58,10 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
+from lensim.restore.arch_rules import check_switches
 from lensim.restore.conditioning import batch_settings, settings_planes
 from lensim.restore.fov import batch_fov
 from lensim.restore.network import ContextBlock, DeformResBlock, _pad_bottom_right, count_parameters
-
-#: Pixel-unshuffle factors of the stem.
-STEMS = (1, 2)
 
 
 class LayerNorm2d(nn.Module):
@@ -181,14 +179,17 @@ class NAFNet(nn.Module):
     ) -> None:
         super().__init__()
         enc, dec = tuple(int(n) for n in enc_blocks), tuple(int(n) for n in dec_blocks)
-        _check_args(arch, width, enc, dec, middle_blocks, stem, settings_dim)
-        n_dec = len(dec)
+        _check_args(arch, width, enc, dec, middle_blocks, settings_dim)
         ws = tuple(width * 2**s for s in range(len(enc) + 1))
-        if use_deformable:
-            if not 1 <= deformable_scales <= n_dec:
-                raise ValueError(f"deformable_scales={deformable_scales} must be between 1 and {n_dec}")
-            if deformable_groups < 1 or any(w % deformable_groups for w in ws[:-1]):
-                raise ValueError(f"deformable_groups={deformable_groups} must divide decoder widths {ws[:-1]}")
+        check_switches(  # which architecture takes which switches (lensim.restore.arch_rules)
+            "nafnet",
+            use_fov=use_fov,
+            use_deformable=use_deformable,
+            deformable_groups=deformable_groups,
+            deformable_scales=deformable_scales,
+            stem=stem,
+            widths=ws,
+        )
         self.width, self.widths, self.enc_blocks, self.dec_blocks = width, ws, enc, dec
         self.middle_blocks, self.stem, self.sca_window = int(middle_blocks), int(stem), int(sca_window)
         self.use_fov, self.use_deformable, self.use_context = use_fov, use_deformable, use_context
@@ -292,9 +293,10 @@ class NAFNet(nn.Module):
 
 
 def _check_args(
-    arch: str, width: int, enc: tuple[int, ...], dec: tuple[int, ...], middle: int, stem: int, settings_dim: int
+    arch: str, width: int, enc: tuple[int, ...], dec: tuple[int, ...], middle: int, settings_dim: int
 ) -> None:
-    """The constructor's structural arguments (ValueError naming the argument)."""
+    """The constructor's structural arguments (ValueError naming the argument; the rules of
+    which switches it takes: lensim.restore.arch_rules)."""
     if arch != "nafnet":
         raise ValueError(f"arch must be 'nafnet' for NAFNet, got {arch!r}")
     if width < 1:
@@ -303,8 +305,6 @@ def _check_args(
         raise ValueError(f"enc_blocks {enc} and dec_blocks {dec} must be non-empty and of the same length")
     if any(n < 0 for n in enc + dec) or middle < 0:
         raise ValueError(f"block counts must be >= 0, got enc {enc}, middle {middle}, dec {dec}")
-    if stem not in STEMS:
-        raise ValueError(f"stem must be one of {STEMS}, got {stem}")
     if settings_dim < 0:
         raise ValueError(f"settings_dim must be >= 0, got {settings_dim}")
 

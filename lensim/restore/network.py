@@ -66,6 +66,7 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
+from lensim.restore.arch_rules import check_switches
 from lensim.restore.conditioning import batch_settings, settings_planes
 from lensim.restore.deform import ModulatedDeformConv2d
 from lensim.restore.fov import batch_fov
@@ -275,8 +276,6 @@ class FieldAwareUNet(nn.Module):
         super().__init__()
         if arch != "unet":
             raise ValueError(f"arch must be 'unet' for FieldAwareUNet, got {arch!r}")
-        if field_modulation and not use_fov:
-            raise ValueError("field_modulation needs use_fov=True (it is computed from the FOV channels)")
         ws = tuple(int(w) for w in widths) if widths is not None else tuple(width * 2**s for s in range(depth))
         if len(ws) < 2:
             raise ValueError(f"need at least 2 scales, got widths {ws}")
@@ -284,13 +283,16 @@ class FieldAwareUNet(nn.Module):
             raise ValueError(f"settings_dim must be >= 0, got {settings_dim}")
         if any(w < 1 for w in ws):
             raise ValueError(f"widths must be positive, got {ws}")
-        if use_deformable:
-            bad = [w for w in ws[:-1] if w % deformable_groups]
-            if deformable_groups < 1 or bad:
-                raise ValueError(f"deformable_groups={deformable_groups} must divide decoder widths {ws[:-1]}")
+        check_switches(  # which architecture takes which switches (lensim.restore.arch_rules)
+            "unet",
+            use_fov=use_fov,
+            use_deformable=use_deformable,
+            deformable_groups=deformable_groups,
+            deformable_scales=deformable_scales,
+            field_modulation=field_modulation,
+            widths=ws,
+        )
         n_dec = len(ws) - 1
-        if deformable_scales is not None and not 0 <= deformable_scales <= n_dec:
-            raise ValueError(f"deformable_scales={deformable_scales} must be between 0 and {n_dec} (decoder scales)")
         self.widths = ws
         self.depth = len(ws)
         self.deformable_scales = n_dec if deformable_scales is None else int(deformable_scales)
