@@ -149,8 +149,8 @@ def compute_psf(
     figures = {
         "strehl": strehl_ratio(data, pf, spacing_um) if method != "geometric" else None,
         "rms_spot_radius_um": rms_spot_radius_um(pf),
-        "ee50_radius_um": encircled_energy_radius(arr, spacing_um, 0.5),
-        "ee80_radius_um": encircled_energy_radius(arr, spacing_um, 0.8),
+        "ee50_radius_um": encircled_energy_radius(arr, spacing_um, 0.5, method != "geometric"),
+        "ee80_radius_um": encircled_energy_radius(arr, spacing_um, 0.8, method != "geometric"),
         "energy_in_window": float(arr.sum()),
         "transmission": pf.transmission,
         "chief_ray_xy_mm": [float(pf.chief[0]), float(pf.chief[1])],

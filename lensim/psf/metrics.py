@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import torch
 
@@ -21,18 +23,14 @@ def rms_spot_radius_um(pf: PupilField) -> float:
     return float(torch.sqrt((((pf.image_xy - c) ** 2).sum(-1) * w).sum()) * 1e3)
 
 
-def encircled_energy_radius(psf: np.ndarray, spacing_um: float, fraction: float) -> float:
-    """Radius (um) around the PSF centroid holding `fraction` of the window's energy."""
+def encircled_energy_radius(psf: np.ndarray, spacing_um: float, fraction: float, band_limited: bool = True) -> float:
+    """Radius (um) around the PSF centroid holding `fraction` of the window's energy
+    (enclosed_energy's curve, every 1/8 sample; band_limited as there)."""
     psf = np.asarray(psf, dtype=np.float64)
-    n_y, n_x = psf.shape
-    y, x = np.mgrid[0:n_y, 0:n_x].astype(np.float64)
-    total = psf.sum()
-    cx, cy = (psf * x).sum() / total, (psf * y).sum() / total
-    r = np.hypot(x - cx, y - cy).ravel() * spacing_um
-    order = np.argsort(r)
-    cum = np.cumsum(psf.ravel()[order]) / total
-    i = int(np.searchsorted(cum, fraction))
-    return float(r[order][min(i, r.size - 1)])
+    radii = np.arange(0.0, 0.5 * math.hypot(*psf.shape) + 1.0, 0.125) * spacing_um
+    curve = enclosed_energy(psf, spacing_um, radii, "circle", band_limited=band_limited)
+    found = size_at_fraction(radii, curve, fraction)
+    return float(radii[-1]) if found is None else found
 
 
 def _sub_samples(
