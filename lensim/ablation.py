@@ -46,6 +46,9 @@ def variants_for(arch: str) -> dict[str, dict]:
     return {("plain-nafnet" if k == "plain-unet" else k): v for k, v in VARIANTS.items()}
 
 
+_ANY_WIDTH = 32  # a width every switch accepts, for reading a variant's switches (the width is dropped)
+
+
 def _config(arch: str, width: int, crop: int | None, switches: dict[str, Any]) -> dict[str, Any]:
     """The model config train() builds for these settings (TrainConfig.model_kwargs)."""
     return TrainConfig(arch=arch, width=width, crop=crop, stem=STEM, **switches).model_kwargs()
@@ -84,7 +87,7 @@ def run_ablation(
         raise InputError(None, "time_budget_s", f"expected a positive number of seconds, got {time_budget_s:g}")
     manifest = read_pairs_manifest(pairs_dir)
     if width is None:
-        full = {k: v for k, v in _config(arch, 1, crop, FULL).items() if k not in ("arch", "width", "depth")}
+        full = {k: v for k, v in _config(arch, _ANY_WIDTH, crop, FULL).items() if k not in ("arch", "width", "depth")}
         width = default_width(arch, **full)
     with folder_lock(out_dir):
         return _run_variants(
@@ -112,7 +115,7 @@ def _plain_width(arch: str, width: int, crop: int | None) -> int:
     full = count_parameters(build_model(_config(arch, width, crop, FULL)))
     if arch == "unet":
         return plain_unet_width(full, 3)
-    plain = {k: v for k, v in _config(arch, 1, crop, ALL_OFF).items() if k not in ("arch", "width", "depth")}
+    plain = {k: v for k, v in _config(arch, _ANY_WIDTH, crop, ALL_OFF).items() if k not in ("arch", "width", "depth")}
     return nafnet_width(full, **plain)
 
 
