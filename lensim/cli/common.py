@@ -43,8 +43,25 @@ def print_error_line(label: str, style: str, message: object) -> None:
     err_console.print(Text.assemble((f"{label}:", style), " ", plain_line(message)), highlight=False, soft_wrap=True)
 
 
+#: Warnings held back until the command starts its long work or ends well (None: shown
+#: at once). A command that fails before then shows only its one error line.
+_held_warnings: list[str] | None = None
+
+
 def _show_warning(message, category, filename, lineno, file=None, line=None):
-    print_error_line("warning", "yellow", message)
+    if _held_warnings is None:
+        print_error_line("warning", "yellow", message)
+    else:
+        _held_warnings.append(str(message))
+
+
+def release_warnings() -> None:
+    """Show the warnings held so far, and every later one at once (called when a progress
+    bar starts and when a command ends well)."""
+    global _held_warnings
+    held, _held_warnings = _held_warnings or [], None
+    for message in held:
+        print_error_line("warning", "yellow", message)
 
 
 def _usage_error_line(e: typer.TyperException) -> str:
@@ -244,6 +261,20 @@ def fault_line(error: BaseException) -> str | None:
     return None
 
 
+def _run_holding_warnings(app: typer.Typer) -> object:
+    """Run the app with its warnings held until its long work starts or it ends well (a
+    command that fails before then shows only its error line); returns its exit code."""
+    global _held_warnings
+    _held_warnings = []
+    try:
+        with _stopped_by_signals():
+            code = app(standalone_mode=False, prog_name="lensim")
+        release_warnings()
+        return code
+    finally:
+        _held_warnings = None
+
+
 def run_guarded(app: typer.Typer) -> None:
     """Run a Typer app; lensim errors and command-line usage errors become one line on
     stderr and exit status 2 (usage errors keep click's status); a command's help
@@ -253,8 +284,7 @@ def run_guarded(app: typer.Typer) -> None:
     (:func:`fault_line`)."""
     warnings.showwarning = _show_warning
     try:
-        with _stopped_by_signals():
-            code = app(standalone_mode=False, prog_name="lensim")
+        code = _run_holding_warnings(app)
     except typer.TyperException as e:  # click's errors (typer vendors click)
         ctx = getattr(e, "ctx", None)
         if type(e).__name__ == "NoArgsIsHelpError" and ctx is not None:
@@ -294,7 +324,9 @@ def print_json(data) -> None:
 @contextlib.contextmanager
 def progress_bar(label: str, unit: str, quiet: bool) -> Iterator[Callable[[float, float], None] | None]:
     """A rich progress bar shown while the ``with`` block runs; yields its callback(done,
-    total), or None when quiet. The label is shown literally (no markup)."""
+    total), or None when quiet. The label is shown literally (no markup). The warnings
+    held so far are shown first."""
+    release_warnings()
     if quiet:
         yield None
         return
@@ -342,6 +374,7 @@ class StageBars:
             )
 
     def __enter__(self) -> StageBars:
+        release_warnings()
         if self.bars is not None:
             self.bars.start()
         return self
