@@ -17,7 +17,7 @@ from lensim.calibrate.chart import ChartLayout, chart_from_dict, chart_to_dict, 
 from lensim.calibrate.chart_detect import check_coverage, detect_chart, estimate_pose
 from lensim.calibrate.chart_draw import project, render_view
 from lensim.calibrate.chart_measure import ZONES, linear_rgb, measure_chart
-from lensim.calibrate.compare import compare_chart
+from lensim.calibrate.compare import PixelDistortion, compare_chart, ideal_homography
 from lensim.errors import InputError
 from lensim.evaluate.slanted_edge import mtf_area, pixel_aperture_mtf
 
@@ -180,7 +180,7 @@ def test_mtf_area_of_a_gaussian_blur_matches_the_analytic_mtf():
 def camera(tmp_path_factory):
     """The phone camera at 1 m: its bank (cached in a folder the CLI test reuses), the
     chart for it, and a photo of the chart simulated by lensim itself (perspective, noise,
-    relative illumination, AHD), written as a 16-bit PNG and as the CFA DNG of its raw
+    relative illumination, AHD, the lens's distortion), written as a 16-bit PNG and as the CFA DNG of its raw
     mosaic, with the chart's sidecar."""
     from lensim.images import write_image
     from lensim.io import atomic_write_json
@@ -202,8 +202,9 @@ def camera(tmp_path_factory):
         fields=5, wavelengths_nm=(450.0, 550.0, 650.0), pupil_samples=64, cache_dir=folder / "cache"
     )
     bank = get_bank(lens, mapping.pitch_um, settings, response=sensor.spectral_response)
-    h = _frontal(layout)
-    lin = render_view(layout, h, (0, 0, ROWS, COLS), levels=(np.full(3, 0.04), np.full(3, 0.8)))
+    h = _frontal(layout)  # chart -> undistorted pixels; the lens's distortion (2 %, 12 px at the corners) on top
+    warp = PixelDistortion.from_bank(bank, mapping)
+    lin = render_view(layout, h, (0, 0, ROWS, COLS), levels=(np.full(3, 0.04), np.full(3, 0.8)), warp=warp)
     photo, _ = simulate(torch.from_numpy(_srgb(lin)).float(), bank, sensor, torch.Generator().manual_seed(3),
                         mapping=mapping, bits=16, kelvin=5000.0, raw_path=folder / "photo.dng")  # fmt: skip
     write_image(folder / "photo.png", photo, 16)
@@ -213,17 +214,28 @@ def camera(tmp_path_factory):
 
 
 def test_compare_on_a_photo_lensim_simulated_gives_ratios_near_one(camera):
-    # measured (this size, seed): ratios 0.988-1.014, PSNR 26-34 dB
+    # measured (this size, seed): ratios within 0.99-1.02, PSNR 23-35 dB
     photo, layout = camera["photo"], camera["layout"]
     det = detect_chart(photo, layout)
     check_coverage(layout, det)
+    # the undistorted marker corners give back the chart's homography
+    warp = PixelDistortion.from_bank(camera["bank"], camera["mapping"])
+    pts = np.array([e.centre_mm for e in layout.edges] + [c.centre_mm for c in layout.checkers])
+    err = np.linalg.norm(project(ideal_homography(det, warp), pts) - project(camera["h"], pts), axis=1)
+    assert err.max() < 0.3, err.max()
     cmp = compare_chart(photo, layout, det, camera["bank"], camera["sensor"], camera["mapping"], seed=5)
     assert [z.zone for z in cmp.zones] == list(ZONES)
     for z in cmp.zones:
         assert 0.96 <= z.mtf_area_ratio <= 1.04, (z.zone, z.mtf_area_ratio)
-        assert z.psnr_db > 22.0 or z.checkers == 0
+        assert z.psnr_db > 21.0 or z.checkers == 0
         assert abs(z.sim_lateral_colour_px[0] - z.photo_lateral_colour_px[0]) < 0.1
     assert cmp.noise is not None and cmp.noise[0] > 0  # matched to the photo's noise
+    # without the lens's distortion (2 %: 12 px at the corners) the checkers land off the
+    # photo's: measured 4-10 dB lower PSNR in every zone (35/28/32/23/27 dB against 27/22/22/19/22)
+    flat = compare_chart(photo, layout, det, camera["bank"], camera["sensor"], camera["mapping"], seed=5,
+                         distortion=False)  # fmt: skip
+    for z, f in zip(cmp.zones, flat.zones, strict=True):
+        assert z.psnr_db > f.psnr_db + 2.0, (z.zone, z.psnr_db, f.psnr_db)
 
 
 def test_compare_sees_a_camera_blurrier_than_its_simulation(camera):

@@ -12,6 +12,7 @@ import math
 from dataclasses import replace
 from functools import lru_cache
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
@@ -21,6 +22,15 @@ from lensim.io import atomic_writer
 
 #: Rows of the page rasterized at a time (bounds memory).
 STRIP_ROWS = 256
+
+
+class PixelWarp(Protocol):
+    """A lens's distortion on a photo's pixel grid: where a real (distorted) pixel position
+    would be without distortion, and back. u: columns, v: rows (pixel centres), arrays."""
+
+    def to_ideal(self, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def to_real(self, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
 
 
 @lru_cache(maxsize=64)
@@ -117,20 +127,26 @@ def render_view(
     box: tuple[int, int, int, int],
     levels: tuple[np.ndarray, np.ndarray] | None = None,
     oversample: int = 4,
+    warp: PixelWarp | None = None,
 ) -> np.ndarray:
     """The chart as the camera sees it through ``homography`` (3x3: chart mm (x, y, 1) ->
     photo pixel centres (column, row, 1)), in the photo's pixel box (top, left, rows,
     cols): (3, rows, cols) float64, each pixel the mean reflectance over oversample x
     oversample points mapped back to the chart, scaled to levels = (black (3,), white
-    (3,)) per channel (default 0 and 1)."""
+    (3,)) per channel (default 0 and 1). warp: the lens's distortion; then ``homography``
+    maps the chart to undistorted pixel positions and each sample point is taken there
+    (warp.to_ideal) before mapping back to the chart: the chart drawn as the distorted lens
+    images it, sampled exactly (no resampling of a rendered image)."""
     top, left, rows, cols = box
     refl = np.ones((rows, cols))
     for part, corners in _parts(layout):
         q = project(homography, corners)
+        if warp is not None:
+            q = np.stack(warp.to_real(q[:, 0], q[:, 1]), axis=1)
         r0, r1 = max(top, math.floor(q[:, 1].min()) - 1), min(top + rows, math.ceil(q[:, 1].max()) + 2)
         c0, c1 = max(left, math.floor(q[:, 0].min()) - 1), min(left + cols, math.ceil(q[:, 0].max()) + 2)
         if r1 > r0 and c1 > c0:
-            sub = _view(part, homography, (r0, c0, r1 - r0, c1 - c0), oversample)
+            sub = _view(part, homography, (r0, c0, r1 - r0, c1 - c0), oversample, warp)
             refl[r0 - top : r1 - top, c0 - left : c1 - left] = np.minimum(
                 refl[r0 - top : r1 - top, c0 - left : c1 - left], sub
             )
@@ -152,7 +168,13 @@ def _parts(layout: ChartLayout) -> list[tuple[ChartLayout, np.ndarray]]:
     return out
 
 
-def _view(layout: ChartLayout, homography: np.ndarray, box: tuple[int, int, int, int], oversample: int) -> np.ndarray:
+def _view(
+    layout: ChartLayout,
+    homography: np.ndarray,
+    box: tuple[int, int, int, int],
+    oversample: int,
+    warp: PixelWarp | None = None,
+) -> np.ndarray:
     """(rows, cols) mean reflectance over oversample x oversample points per pixel of box."""
     top, left, rows, cols = box
     hinv = np.linalg.inv(np.asarray(homography, dtype=np.float64))
@@ -161,6 +183,8 @@ def _view(layout: ChartLayout, homography: np.ndarray, box: tuple[int, int, int,
     u = (left + np.arange(cols)[:, None] + sub[None, :]).ravel()  # photo columns
     v = (top + np.arange(rows)[:, None] + sub[None, :]).ravel()  # photo rows
     uu, vv = np.meshgrid(u, v)
+    if warp is not None:
+        uu, vv = warp.to_ideal(uu, vv)
     w = hinv[2, 0] * uu + hinv[2, 1] * vv + hinv[2, 2]
     x = (hinv[0, 0] * uu + hinv[0, 1] * vv + hinv[0, 2]) / w
     y = (hinv[1, 0] * uu + hinv[1, 1] * vv + hinv[1, 2]) / w

@@ -1,17 +1,18 @@
 """The paper's chart check: a photographed chart against lensim's simulation of the same
 chart at the same pose (Chen et al. 2021, "Authenticity", Table 1).
 
-The simulation takes the photo's own path: the chart as the camera sees it (the
-homography fitted to the photo's markers, lensim.calibrate.chart_detect) is rendered
+The simulation takes the photo's own path: the chart as the camera sees it is rendered
 sharp in linear light at the photo's local black and white levels, encoded to sRGB and
 run through lensim.render.pipeline.simulate (unprocess, the PSF bank's spatially-variant
 blur, mosaic, noise, ADC, AHD demosaic, white balance, CCM, sRGB curve): crop by crop
 around each feature, each crop placed on the sensor where it lies in the photo (so the
 blur is the bank's at that field and azimuth). The photo's own shading and lighting are
-in its measured levels, so the simulation adds no relative illumination. Lens distortion
-is not simulated: the homography is fitted to the photo's distorted marker corners, which
-places each feature where the photo has it to within the distortion's change over the
-chart's markers (its curvature across one feature is neglected).
+in its measured levels, so the simulation adds no relative illumination. "As the camera
+sees it": the photo's marker corners (lensim.calibrate.chart_detect) are moved to where
+they would be without the lens's distortion (the bank's chief-ray heights against the
+paraxial ones), a homography is fitted to those, and every sample point of the sharp
+chart is taken through the distortion and that homography (PixelDistortion,
+ideal_homography; exact point sampling, no resampling of a rendered image).
 
 Then both images are measured at the same regions (lensim.calibrate.chart_measure) and
 compared per field zone: MTF area (integral of the SFR from 0 to Nyquist, cycles/pixel)
@@ -112,6 +113,69 @@ class ChartComparison:
         }
 
 
+@dataclass(frozen=True)
+class PixelDistortion:
+    """The lens's radial distortion on a photo's pixel grid (a chart_draw.PixelWarp): the
+    bank's chief-ray image heights (real) against the paraxial ones (ideal) at its fields,
+    primary wavelength, interpolated linearly in radius on the sensor (as
+    lensim.render.distortion.apply_distortion reads them); mapping places the pixels on
+    the sensor."""
+
+    mapping: SensorMapping
+    r_real_mm: np.ndarray
+    r_ideal_mm: np.ndarray
+
+    @classmethod
+    def from_bank(cls, bank: PSFBank, mapping: SensorMapping) -> PixelDistortion:
+        real = np.array([float(np.hypot(*f.reference_xy_mm)) for f in bank.fields])
+        ideal = np.array([float(np.hypot(*f.paraxial_xy_mm)) for f in bank.fields])
+        return cls(mapping, real, ideal)
+
+    def _radial(
+        self, u: np.ndarray, v: np.ndarray, r_from: np.ndarray, r_to: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        p = self.mapping.pitch_um * 1e-3
+        x = self.mapping.x0_mm + (np.asarray(u, dtype=np.float64) + 0.5) * p
+        y = self.mapping.y0_mm + (np.asarray(v, dtype=np.float64) + 0.5) * p
+        r = np.hypot(x, y)
+        scale = np.where(r > 0, np.interp(r, r_from, r_to) / np.maximum(r, 1e-300), r_to[1] / r_from[1])
+        return (x * scale - self.mapping.x0_mm) / p - 0.5, (y * scale - self.mapping.y0_mm) / p - 0.5
+
+    def to_ideal(self, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Real (distorted) pixel positions -> where they would be without distortion."""
+        return self._radial(u, v, self.r_real_mm, self.r_ideal_mm)
+
+    def to_real(self, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Undistorted pixel positions -> where the lens puts them."""
+        return self._radial(u, v, self.r_ideal_mm, self.r_real_mm)
+
+
+def undistorted(detection: ChartDetection, warp: PixelDistortion) -> ChartDetection:
+    """The detection with its marker corners moved to where they would be without the
+    lens's distortion and the homography fitted to those as detect_chart fits it (RANSAC
+    at 3 px, then least squares on the inliers): the input of estimate_pose for a lens
+    with distortion, and the homography the simulation draws the chart with."""
+    import cv2
+
+    from lensim.calibrate.chart_draw import project
+
+    u, v = warp.to_ideal(detection.image_points_px[:, 0], detection.image_points_px[:, 1])
+    img = np.stack([u, v], axis=1)
+    h, inliers = cv2.findHomography(detection.chart_points_mm, img, cv2.RANSAC, 3.0)
+    if h is None:
+        return detection
+    keep = inliers.ravel().astype(bool)
+    h, _ = cv2.findHomography(detection.chart_points_mm[keep], img[keep], 0)
+    h = np.asarray(h, dtype=np.float64) / h[2, 2]
+    rms = float(np.sqrt(np.mean(np.sum((project(h, detection.chart_points_mm) - img) ** 2, axis=1))))
+    return replace(detection, homography=h, image_points_px=img, reprojection_rms_px=rms)
+
+
+def ideal_homography(detection: ChartDetection, warp: PixelDistortion) -> np.ndarray:
+    """The chart -> undistorted pixel homography (undistorted(detection, warp)'s)."""
+    return undistorted(detection, warp).homography
+
+
 def crop_mapping(mapping: SensorMapping, box: tuple[int, int, int, int]) -> SensorMapping:
     """Where a (top, left, rows, cols) crop of an image mapped by ``mapping`` lies on the sensor."""
     top, left, rows, cols = box
@@ -196,14 +260,20 @@ def matched_noise(
 
 
 def _scenes(
-    photo_linear: np.ndarray, layout: ChartLayout, homography: np.ndarray, margin_px: int
+    photo_linear: np.ndarray,
+    layout: ChartLayout,
+    detection: ChartDetection,
+    margin_px: int,
+    warp: PixelDistortion | None,
 ) -> list[tuple[tuple[int, int, int, int], np.ndarray, np.ndarray, np.ndarray]]:
-    """(box, sharp reflectance (rows, cols), black (3,), white (3,)) of every feature crop."""
+    """(box, sharp reflectance (rows, cols), black (3,), white (3,)) of every feature crop,
+    drawn through the lens's distortion when ``warp`` is given."""
     shape = (int(photo_linear.shape[1]), int(photo_linear.shape[2]))
+    h = detection.homography if warp is None else ideal_homography(detection, warp)
     out = []
-    for box in feature_boxes(layout, homography, shape, margin_px):
+    for box in feature_boxes(layout, detection.homography, shape, margin_px):
         top, left, rows, cols = box
-        sharp = render_view(layout, homography, box)[0]
+        sharp = render_view(layout, h, box, warp=warp)[0]
         black, white = local_levels(photo_linear[:, top : top + rows, left : left + cols], sharp)
         out.append((box, sharp, black, white))
     return out
@@ -235,6 +305,7 @@ def simulate_chart(
     noise: bool | tuple[float, float] = True,
     kelvin: float = 5000.0,
     demosaic: str = "ahd",
+    distortion: bool = True,
 ) -> tuple[np.ndarray, tuple[float, float]]:
     """The simulation of the photographed chart: ((3, H, W) float64 sRGB, the photo with
     the crop around every edge square and checker patch (feature_boxes) replaced by
@@ -243,14 +314,17 @@ def simulate_chart(
     pitch is the bank's); noise: True matches the photo's noise level on the chart's white
     paper (matched_noise), False adds none, (shot, read) fixes it (normalized raw units);
     kelvin: the colour temperature unprocessed and developed with (a neutral chart comes
-    back neutral at any)."""
+    back neutral at any); distortion: draw the chart through the lens's distortion (the
+    bank's; PixelDistortion), placed by the homography of the undistorted marker corners
+    (ideal_homography), else through the homography fitted to the photo's corners."""
     from lensim.render.pipeline import simulate
     from lensim.sensor.isp import linear_to_srgb
     from lensim.sensor.profile import NoiseModel
 
     radius = int(bank.psf_at(0.0, 0.0).shape[-1]) // 2
     lin = linear_rgb(photo)
-    scenes = _scenes(lin, layout, detection.homography, radius + CONTEXT_PX)
+    warp = PixelDistortion.from_bank(bank, mapping) if distortion else None
+    scenes = _scenes(lin, layout, detection, radius + CONTEXT_PX, warp)
     if noise is True:
         noise = matched_noise(*_photo_noise(lin, scenes), sensor, generator, kelvin)
     levels = (0.0, 0.0) if noise is False else (float(noise[0]), float(noise[1]))
@@ -331,6 +405,7 @@ def compare_chart(
     seed: int = 0,
     noise: bool | tuple[float, float] = True,
     kelvin: float = 5000.0,
+    distortion: bool = True,
 ) -> ChartComparison:
     """simulate_chart then compare_images: the photographed chart against lensim's
     simulation at the detected pose (bank: the lens at the photo's settings and distance,
@@ -345,6 +420,7 @@ def compare_chart(
         generator=torch.Generator().manual_seed(seed),
         noise=noise,
         kelvin=kelvin,
+        distortion=distortion,
     )
     return replace(compare_images(photo, sim, layout, detection, mapping.pitch_um), noise=levels)
 

@@ -119,7 +119,8 @@ def make_command(
 def _read_photo(path: Path, sensor: SensorProfile, wb: str) -> tuple[np.ndarray, float, str]:
     """(sRGB (3, H, W) float64, colour temperature to simulate at (K), 'raw' | 'image'):
     a PNG/TIFF/JPEG as stored, a raw file developed with lensim's own chain (as-shot
-    white balance, or --wb)."""
+    white balance, or --wb) in the sensor's orientation (the EXIF turn is not applied: the
+    photo maps onto the sensor as it was read out)."""
     from lensim.images import READ_SUFFIXES, read_image
 
     input_file(path, None, "photo")
@@ -130,7 +131,7 @@ def _read_photo(path: Path, sensor: SensorProfile, wb: str) -> tuple[np.ndarray,
     from lensim.raw.develop import develop_raw, parse_wb
 
     raw = read_raw(path)
-    img, params = develop_raw(raw, sensor, parse_wb(wb))
+    img, params = develop_raw(raw, sensor, parse_wb(wb), orient=False)  # the sensor's own orientation
     kelvin = params.kelvin if math.isfinite(params.kelvin) else 5000.0
     return img.double().numpy(), kelvin, "raw"
 
@@ -218,7 +219,7 @@ def _compare(
     import torch
 
     from lensim.calibrate.chart_detect import check_coverage, detect_chart, estimate_pose
-    from lensim.calibrate.compare import compare_chart, report
+    from lensim.calibrate.compare import PixelDistortion, compare_chart, report, undistorted
     from lensim.cli.bank_options import lens_and_record
     from lensim.cli.simulate_cmd import _photo_bank
     from lensim.images import write_image
@@ -239,6 +240,10 @@ def _compare(
     shooting = replace(given, object_m=object_m, focus_m=given.focus_m if given.focus_m is not None else object_m)
     lens, described = lens_and_record(lens_file, shooting)
     bank = _photo_bank(photo, (cols, rows), mapping.pitch_um, lens, sensor, settings, pupil_given, workers, quiet)
+    # the pose again from the corners without the lens's distortion (the bank stays: its
+    # distance changes by about the distortion's percentage, its focus far less)
+    pose = estimate_pose(undistorted(detection, PixelDistortion.from_bank(bank, mapping)), lens0, mapping.pitch_um,
+                         guess_m=pose.distance_m)  # fmt: skip
     cmp = compare_chart(img, layout, detection, bank, sensor, mapping, seed=seed, noise=noise, kelvin=kelvin)
     fig = chart_comparison_figure(cmp, f"{photo.name}: photo vs lensim ({lens.source})")
     save_figure(fig, out_dir / f"{photo.stem}_chart.png")
