@@ -20,9 +20,6 @@ from lensim.calibrate.chart import DICTIONARY, MARKER_CELLS, ChartLayout, Checke
 from lensim.errors import InputError
 from lensim.io import atomic_writer
 
-#: Rows of the page rasterized at a time (bounds memory).
-STRIP_ROWS = 256
-
 
 class PixelWarp(Protocol):
     """A lens's distortion on a photo's pixel grid: where a real (distorted) pixel position
@@ -86,20 +83,24 @@ def chart_reflectance(layout: ChartLayout, x_mm: np.ndarray, y_mm: np.ndarray) -
 
 def render_page(layout: ChartLayout, dpi: float, oversample: int = 2) -> np.ndarray:
     """The printable page, (rows, cols) uint8 grey (0 black, 255 white) at dpi dots per
-    inch, each pixel the mean of oversample x oversample point samples."""
+    inch, each pixel the mean of oversample x oversample point samples (only the features'
+    boxes are sampled: the rest is paper)."""
     if not (math.isfinite(dpi) and 50 <= dpi <= 2400):
         raise InputError(None, "dpi", f"expected 50-2400 dots per inch, got {dpi}")
     per_mm = dpi / 25.4
     cols, rows = round(layout.width_mm * per_mm), round(layout.height_mm * per_mm)
-    s = int(oversample)
-    sub = (np.arange(s) + 0.5) / s
-    xs = ((np.arange(cols)[:, None] + sub[None, :]).ravel()) / per_mm - layout.width_mm / 2.0
-    page = np.empty((rows, cols), dtype=np.uint8)
-    for r0 in range(0, rows, STRIP_ROWS):
-        r1 = min(rows, r0 + STRIP_ROWS)
-        ys = ((np.arange(r0, r1)[:, None] + sub[None, :]).ravel()) / per_mm - layout.height_mm / 2.0
-        refl = chart_reflectance(layout, xs[None, :], ys[:, None])
-        page[r0:r1] = np.round(255.0 * refl.reshape(r1 - r0, s, cols, s).mean(axis=(1, 3))).astype(np.uint8)
+    to_page = np.array(  # chart mm -> page pixel centres
+        [[per_mm, 0.0, layout.width_mm / 2.0 * per_mm - 0.5], [0.0, per_mm, layout.height_mm / 2.0 * per_mm - 0.5],
+         [0.0, 0.0, 1.0]]
+    )  # fmt: skip
+    page = np.full((rows, cols), 255, dtype=np.uint8)
+    for part, corners in _parts(layout):
+        q = project(to_page, corners)
+        r0, r1 = max(0, math.floor(q[:, 1].min()) - 1), min(rows, math.ceil(q[:, 1].max()) + 2)
+        c0, c1 = max(0, math.floor(q[:, 0].min()) - 1), min(cols, math.ceil(q[:, 0].max()) + 2)
+        if r1 > r0 and c1 > c0:
+            sub = np.round(255.0 * _view(part, to_page, (r0, c0, r1 - r0, c1 - c0), oversample)).astype(np.uint8)
+            page[r0:r1, c0:c1] = np.minimum(page[r0:r1, c0:c1], sub)
     return page
 
 

@@ -306,6 +306,7 @@ def simulate_chart(
     kelvin: float = 5000.0,
     demosaic: str = "ahd",
     distortion: bool = True,
+    tile: int = 64,
 ) -> tuple[np.ndarray, tuple[float, float]]:
     """The simulation of the photographed chart: ((3, H, W) float64 sRGB, the photo with
     the crop around every edge square and checker patch (feature_boxes) replaced by
@@ -316,7 +317,8 @@ def simulate_chart(
     kelvin: the colour temperature unprocessed and developed with (a neutral chart comes
     back neutral at any); distortion: draw the chart through the lens's distortion (the
     bank's; PixelDistortion), placed by the homography of the undistorted marker corners
-    (ideal_homography), else through the homography fitted to the photo's corners."""
+    (ideal_homography), else through the homography fitted to the photo's corners; tile:
+    the spacing (pixels) of the blur's kernel grid (lensim.render.blur)."""
     from lensim.render.pipeline import simulate
     from lensim.sensor.isp import linear_to_srgb
     from lensim.sensor.profile import NoiseModel
@@ -344,6 +346,7 @@ def simulate_chart(
             demosaic=demosaic,
             bits=None,
             kelvin=kelvin,
+            tile=tile,
             mapping=crop_mapping(mapping, box),
         )
         out[:, top + keep : top + rows - keep, left + keep : left + cols - keep] = sim.double().numpy()[
