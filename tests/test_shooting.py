@@ -158,7 +158,7 @@ def _system_matrix(lens: Lens) -> tuple[float, float, float, float]:
 @pytest.mark.parametrize("focus_m", [5.0, 1.0, 0.4])
 def test_unit_focusing_obeys_newtons_equation(focus_m: float) -> None:
     lens = load_lens("cooke_triplet")
-    at = lens_at(lens, ShootingSettings(focus_m=focus_m))
+    at = lens_at(lens, ShootingSettings(focus_m=focus_m, focus_mode="paraxial"))
     # the object is focus_m from the image plane
     assert at.object_distance + at.total_track == pytest.approx(focus_m * 1000.0, abs=1e-9)
     # focal points from the system matrix: front focal point D f before the first vertex,
@@ -181,7 +181,7 @@ def test_unit_focusing_matches_optilands_paraxial_image_solve(focus_m: float) ->
     from optiland_models import optiland_from_lens
 
     lens = load_lens("cooke_triplet").with_changes(image_defocus=0.0)
-    at = lens_at(lens, ShootingSettings(focus_m=focus_m))
+    at = lens_at(lens, ShootingSettings(focus_m=focus_m, focus_mode="paraxial"))
     op = optiland_from_lens(lens)
     op.updater.set_thickness(at.object_distance, 0)
     op.updater.image_solve()
@@ -234,7 +234,7 @@ def test_a_focus_group_moves_between_its_gaps_and_focuses() -> None:
     data["focus"] = {"thickness": 1, "compensator": 3}
     lens = lens_from_dict(data)
     assert lens_from_dict(lens_to_dict(lens)).focus_thickness == 1
-    at = lens_at(lens, ShootingSettings(focus_m=3.0))
+    at = lens_at(lens, ShootingSettings(focus_m=3.0, focus_mode="paraxial"))
     t = [s.thickness for s in at.surfaces]
     t0 = [s.thickness for s in lens.surfaces]
     assert t[1] != t0[1] and t[1] + t[3] == pytest.approx(t0[1] + t0[3], abs=1e-12)
@@ -299,7 +299,7 @@ def test_unknown_configurations_are_refused() -> None:
 def test_unit_focusing_of_a_mirror_lens() -> None:
     # after a mirror z runs backwards: the object is still focus_m from the image plane
     lens = paraboloid()
-    at = lens_at(lens, ShootingSettings(focus_m=2.0))
+    at = lens_at(lens, ShootingSettings(focus_m=2.0, focus_mode="paraxial"))
     assert at.object_distance + at.total_track == pytest.approx(2000.0, abs=1e-9)
     # a mirror of f = 100 mm: 1/s + 1/s' = 1/f from its vertex
     s = at.object_distance + 100.0

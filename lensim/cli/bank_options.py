@@ -110,11 +110,23 @@ def config_option() -> Any:
     return setting_option("config")
 
 
+def focus_mode_option() -> Any:
+    """--focus-mode: how --focus-m focuses (lensim.optics.shooting.FOCUS_MODES)."""
+    return typer.Option(
+        None,
+        "--focus-mode",
+        help="How --focus-m focuses: calibrated (default: the image plane follows the on-axis best focus, "
+        "minimum polychromatic RMS wavefront, keeping the lens file's own offset from it), best (on the best "
+        "focus itself, as a centre-point autofocus) or paraxial (the file's offset from the paraxial image).",
+    )
+
+
 def shooting_settings(
-    fno: str | None, object_m: str | None, focus_m: str | None, config: str | None
+    fno: str | None, object_m: str | None, focus_m: str | None, config: str | None, focus_mode: str | None = None
 ) -> ShootingSettings:
     """The ShootingSettings of the single-value options (checked; one-line errors naming
-    the option; a comma list is refused: grids are psf bank's and dataset make's)."""
+    the option; a comma list is refused: grids are psf bank's and dataset make's);
+    focus_mode is --focus-mode's text (None: the default)."""
     from lensim.optics.shooting import ShootingSettings
 
     for key, text in (("fno", fno), ("object_m", object_m), ("focus_m", focus_m), ("config", config)):
@@ -124,7 +136,7 @@ def shooting_settings(
                 setting_flag(key),
                 f"expected one value, got the list {text!r} (grids of settings are made by psf bank and dataset make)",
             )
-    return ShootingSettings.from_text(fno, object_m, focus_m, config)
+    return ShootingSettings.from_text(fno, object_m, focus_m, config, focus_mode)
 
 
 def lens_and_record(lens_file: str, settings: ShootingSettings) -> tuple[Lens, dict | None]:

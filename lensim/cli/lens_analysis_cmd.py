@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from lensim.cli.bank_options import config_option, fno_option, focus_m_option, object_m_option
+from lensim.cli.bank_options import config_option, fno_option, focus_m_option, focus_mode_option, object_m_option
 from lensim.cli.common import console, print_json, progress_bar
 from lensim.cli.lens_cmd import (
     FIELD_DEG_HELP,
@@ -107,8 +107,8 @@ def _spectrum(
     return [v / 1000.0 for v in nm], [float(v) for v in w], 1000.0 / (2.0 * profile.pixel_pitch_um)
 
 
-def _settings(fno, object_m, focus_m, config) -> tuple[str | None, ...]:
-    return (fno, object_m, focus_m, config)
+def _settings(fno, object_m, focus_m, config, focus_mode) -> tuple[str | None, ...]:
+    return (fno, object_m, focus_m, config, focus_mode)
 
 
 @lens_app.command("mtf")
@@ -148,6 +148,7 @@ def mtf_command(
     fno: str | None = fno_option(),
     object_m: str | None = object_m_option(),
     focus_m: str | None = focus_m_option(),
+    focus_mode: str | None = focus_mode_option(),
     config: str | None = config_option(),
 ) -> None:
     """Diffraction MTF (FFT: pupil autocorrelation), sagittal and tangential: against
@@ -173,7 +174,7 @@ def mtf_command(
     at_least(pupil_samples, 16, "--pupil-samples", what="a number of pupil samples")
     if channel is not None:
         choice(channel, CHANNELS, "--channel")
-    base, _ = _load(lens_file, shooting=_settings(fno, object_m, focus_m, config))
+    base, _ = _load(lens_file, shooting=_settings(fno, object_m, focus_m, config, focus_mode))
     lens, fields = _fields(base, field, field_deg, image_height_mm)
     wls, weights, nyquist = _spectrum(lens, sensor, channel, wavelengths)
     freqs = frequency or ([nyquist / 4.0, nyquist / 2.0] if nyquist else [10.0, 30.0])
@@ -245,6 +246,7 @@ def wavefront_command(
     fno: str | None = fno_option(),
     object_m: str | None = object_m_option(),
     focus_m: str | None = focus_m_option(),
+    focus_mode: str | None = focus_mode_option(),
     config: str | None = config_option(),
 ) -> None:
     """The wavefront of one field (default on axis): OPD against the reference sphere
@@ -263,7 +265,7 @@ def wavefront_command(
     at_least(pupil_samples, 16, "--pupil-samples", what="a number of pupil samples")
     if wavelength is not None:
         wavelength_nm(wavelength)
-    lens, _ = _load(lens_file, shooting=_settings(fno, object_m, focus_m, config))
+    lens, _ = _load(lens_file, shooting=_settings(fno, object_m, focus_m, config, focus_mode))
     if not (field or field_deg or image_height_mm):
         field = [0.0]
     lens, fields = _fields(lens, field, field_deg, image_height_mm)
@@ -287,6 +289,7 @@ def fans_command(
     fno: str | None = fno_option(),
     object_m: str | None = object_m_option(),
     focus_m: str | None = focus_m_option(),
+    focus_mode: str | None = focus_mode_option(),
     config: str | None = config_option(),
 ) -> None:
     """Transverse ray aberration fans: ey of the tangential fan against py and ex of the
@@ -299,7 +302,7 @@ def fans_command(
 
     _outputs(output, json_out)
     in_range(rays, 3, 1001, "--rays", what="a number of rays")
-    lens, _ = _load(lens_file, shooting=_settings(fno, object_m, focus_m, config))
+    lens, _ = _load(lens_file, shooting=_settings(fno, object_m, focus_m, config, focus_mode))
     lens, fields = _fields(lens, field, field_deg, image_height_mm)
     report = {"name": lens.name, "source": lens.source} | ray_fans(lens, fields, rays, aiming.value).to_dict()
     _finish(report, output, json_out, lambda: fans_figure(report, output))
@@ -317,6 +320,7 @@ def field_curves_command(
     fno: str | None = fno_option(),
     object_m: str | None = object_m_option(),
     focus_m: str | None = focus_m_option(),
+    focus_mode: str | None = focus_mode_option(),
     config: str | None = config_option(),
 ) -> None:
     """Field curvature: the tangential and sagittal foci of the chief ray's neighbourhood
@@ -330,7 +334,7 @@ def field_curves_command(
     from lensim.plots.analysis import field_curves_figure
 
     _outputs(output, json_out)
-    lens, _ = _load(lens_file, shooting=_settings(fno, object_m, focus_m, config))
+    lens, _ = _load(lens_file, shooting=_settings(fno, object_m, focus_m, config, focus_mode))
     lens, fields = fields_to_show(lens, field, field_deg, image_height_mm)
     report = {"name": lens.name, "source": lens.source} | field_curves(lens, fields, aiming.value).to_dict()
     _finish(report, output, json_out, lambda: field_curves_figure(report, output))
@@ -361,6 +365,7 @@ def energy_command(
     fno: str | None = fno_option(),
     object_m: str | None = object_m_option(),
     focus_m: str | None = focus_m_option(),
+    focus_mode: str | None = focus_mode_option(),
     config: str | None = config_option(),
 ) -> None:
     """Encircled and ensquared energy against radius and half-width per field, from the
@@ -381,7 +386,7 @@ def energy_command(
         positive(spacing_um, "--spacing-um", "um", "a sample spacing")
     if pupil_samples is not None:
         at_least(pupil_samples, 16, "--pupil-samples", what="a number of pupil samples")
-    lens, _ = _load(lens_file, shooting=_settings(fno, object_m, focus_m, config))
+    lens, _ = _load(lens_file, shooting=_settings(fno, object_m, focus_m, config, focus_mode))
     lens, fields = _fields(lens, field, field_deg, image_height_mm)
     wls, weights, _ = _spectrum(lens, sensor, channel, wavelengths)
     with progress_bar("encircled energy", "fields", quiet or json_out) as cb:

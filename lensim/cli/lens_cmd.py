@@ -10,7 +10,14 @@ from typing import TYPE_CHECKING
 import typer
 from rich.table import Table
 
-from lensim.cli.bank_options import config_option, fno_option, focus_m_option, object_m_option, shooting_settings
+from lensim.cli.bank_options import (
+    config_option,
+    fno_option,
+    focus_m_option,
+    focus_mode_option,
+    object_m_option,
+    shooting_settings,
+)
 from lensim.cli.common import console, print_json
 from lensim.cli.validate import AIMINGS, choice, output_file
 from lensim.errors import InputError
@@ -112,6 +119,7 @@ def info(
     fno: str | None = fno_option(),
     object_m: str | None = object_m_option(),
     focus_m: str | None = focus_m_option(),
+    focus_mode: str | None = focus_mode_option(),
     config: str | None = config_option(),
 ) -> None:
     """Surface table and first-order data (EFL, BFL, F/#, pupils, fields, wavelengths), of
@@ -126,7 +134,7 @@ def info(
         lens_file,
         match_glass,
         _glass_makers(glass_makers, match_glass),
-        (fno, object_m, focus_m, config),
+        (fno, object_m, focus_m, config, focus_mode),
         _model_glass(model_glass, match_glass),
     )
     summary = first_order_summary(lens, aiming=aiming)
@@ -310,6 +318,7 @@ def plot(
     fno: str | None = fno_option(),
     object_m: str | None = object_m_option(),
     focus_m: str | None = focus_m_option(),
+    focus_mode: str | None = focus_mode_option(),
     config: str | None = config_option(),
 ) -> None:
     """Draw the lens layout (a y-z cross-section with a fan of rays per field), or its
@@ -324,7 +333,7 @@ def plot(
     from lensim.optics.analysis import fields_to_show
 
     _check_figure_name(output)
-    lens, _ = _load(lens_file, shooting=(fno, object_m, focus_m, config))
+    lens, _ = _load(lens_file, shooting=(fno, object_m, focus_m, config, focus_mode))
     lens, fields = fields_to_show(lens, field, field_deg, image_height_mm)
     if kind is PlotKind.layout:
         from lensim.plots.lens import plot_layout
@@ -361,6 +370,7 @@ def spot(
     fno: str | None = fno_option(),
     object_m: str | None = object_m_option(),
     focus_m: str | None = focus_m_option(),
+    focus_mode: str | None = focus_mode_option(),
     config: str | None = config_option(),
 ) -> None:
     """Spot diagrams and RMS spot radii for each field, all wavelengths.
@@ -377,7 +387,7 @@ def spot(
         raise InputError(None, "--output", "expected -o FILE (an image to write), --json, or both")
     if output is not None:
         _check_figure_name(output)
-    lens, _ = _load(lens_file, shooting=(fno, object_m, focus_m, config))
+    lens, _ = _load(lens_file, shooting=(fno, object_m, focus_m, config, focus_mode))
     lens, fields = fields_to_show(lens, field, field_deg, image_height_mm)
     spots = spot_diagram(lens, fields, None, hexapolar(SPOT_RINGS), aiming.value)
     if output is not None:
@@ -411,6 +421,7 @@ def field_command(
     fno: str | None = fno_option(),
     object_m: str | None = object_m_option(),
     focus_m: str | None = focus_m_option(),
+    focus_mode: str | None = focus_mode_option(),
     config: str | None = config_option(),
 ) -> None:
     """Lens-level outputs per field: the real chief-ray height at each wavelength, the
@@ -426,7 +437,7 @@ def field_command(
         lens_file,
         match_glass,
         _glass_makers(glass_makers, match_glass),
-        (fno, object_m, focus_m, config),
+        (fno, object_m, focus_m, config, focus_mode),
         _model_glass(model_glass, match_glass),
     )
     lens, fields = fields_to_show(lens, field, field_deg, image_height_mm)

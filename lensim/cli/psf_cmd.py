@@ -15,6 +15,7 @@ from lensim.cli.bank_options import (
     fields_option,
     fno_option,
     focus_m_option,
+    focus_mode_option,
     lens_and_record,
     object_m_option,
     pupil_samples_option,
@@ -70,6 +71,7 @@ def compute(
     fno: str = fno_option(),
     object_m: str = object_m_option(),
     focus_m: str = focus_m_option(),
+    focus_mode: str | None = focus_mode_option(),
     config: str = config_option(),
 ) -> None:
     """One PSF: grid x grid samples at spacing_um, centred on the real chief-ray image point;
@@ -89,7 +91,7 @@ def compute(
     positive(spacing_um, "--spacing-um", "um", "a sample spacing")
     if output is not None:
         output_file(output, suffixes=(".npy",))
-    lens, described = lens_and_record(lens_file, shooting_settings(fno, object_m, focus_m, config))
+    lens, described = lens_and_record(lens_file, shooting_settings(fno, object_m, focus_m, config, focus_mode))
     psf = compute_psf(lens, field, wavelength_nm / 1000.0, kind, pupil_samples, grid, spacing_um, aiming)
     if output is not None:
         _save_npy(output, psf.data)

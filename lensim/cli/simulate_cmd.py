@@ -18,6 +18,7 @@ from lensim.cli.bank_options import (
     fields_option,
     fno_option,
     focus_m_option,
+    focus_mode_option,
     lens_and_record,
     object_m_option,
     pupil_samples_option,
@@ -74,6 +75,7 @@ def simulate_command(
     fno: str = fno_option(),
     object_m: str = object_m_option(),
     focus_m: str = focus_m_option(),
+    focus_mode: str | None = focus_mode_option(),
     config: str = config_option(),
 ) -> None:
     """Simulate what the camera (lens + sensor) would deliver for each sharp photo.
@@ -96,7 +98,7 @@ def simulate_command(
     from lensim.sensor.profile import load_sensor
 
     settings = bank_settings(fields, wavelengths, pupil_samples, cache)
-    shooting = shooting_settings(fno, object_m, focus_m, config)
+    shooting = shooting_settings(fno, object_m, focus_m, config, focus_mode)
     _check_options(output, fmt, bits, demosaic, workers, cache)
     _check_photos(images, fmt)
     described = None

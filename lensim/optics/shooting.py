@@ -8,9 +8,17 @@ holds those four choices, ``None`` meaning "as the lens file has it", and
 1. ``config`` (a configuration name or 1-based number) is applied first
    (lensim.optics.configurations): a zoom position's thicknesses.
 2. Focus at ``focus_m`` metres *from the image plane* (as cameras report it), ``math.inf``
-   allowed. Unit focusing by default: the image plane moves so that the paraxial image of
-   an object at that distance lands where the file's image plane sits relative to its own
-   paraxial image (the designer's best-focus offset is kept). A lens file that names a
+   allowed, as a camera's autofocus does it. The best focus is the criterion of
+   lensim.psf.best_focus (minimum polychromatic RMS wavefront error on axis, at the taking
+   aperture). ``focus_mode`` "calibrated" (default): the image plane keeps the lens file's
+   own offset from its best focus, so it follows the best focus as spherical aberration
+   changes with the distance, and the file's own focus distance (infinity, for most files)
+   leaves the file's image plane where it is (designers often balance the field there:
+   the Cooke triplet's plane is 74 um inside its on-axis best focus). "best": the plane on
+   the best focus itself (a centre-point autofocus), at infinity too. "paraxial" keeps the
+   file's offset from the paraxial image (lensim before 2026-11; the best focus of a fast
+   lens moves away from it at near distances). Unit focusing by default (the image plane
+   moves); a lens file that names a
    focus group (native ``focus: {thickness: i[, compensator: j]}``) moves that group
    instead: thickness i is solved (thickness j changes by the opposite amount, so the
    group moves between the two gaps), and everything behind the gap(s), the image plane
@@ -52,6 +60,19 @@ from lensim.optics.paraxial import paraxial_data
 
 #: the settings, as ShootingSettings' fields (and the parameters its errors name)
 SETTINGS = ("fno", "object_m", "focus_m", "config")
+#: how a focus distance is focused (the best focus: lensim.psf.best_focus's criterion, on
+#: axis at the taking aperture): "calibrated" (default; the image plane keeps the lens
+#: file's own offset from its best focus, so it follows the best focus as it moves with the
+#: distance, and the file's own focus distance is the file's image plane), "best" (the
+#: plane on the best focus itself: a centre-point autofocus), "paraxial" (the file's
+#: offset from the paraxial image kept, lensim before 2026-11)
+FOCUS_MODES = ("calibrated", "best", "paraxial")
+#: how close (mm) the image plane must come to best focus
+_BEST_TOLERANCE_MM = 1e-5
+_BEST_ITERATIONS = 6
+#: best focus solved before, by (the lens, the distance, the mode): lens_at runs again for records
+_BEST_MEMO: dict[tuple[str, float, str], dict[int, float]] = {}
+_MEMO_SIZE = 64
 #: the largest finite distance (m) a setting may give: beyond it the object is at infinity for any camera lens
 MAX_DISTANCE_M = 1.0e6
 _NEWTON_STEPS = 60
@@ -91,13 +112,15 @@ class ShootingSettings:
     """How the camera is set: fno (F-number at infinity, image space), object_m (object
     distance from the image plane, m, math.inf allowed), focus_m (focus distance from the
     image plane, m, math.inf allowed), config (configuration name or 1-based number, as a
-    string). None: as the lens file has it. Values are checked when made (a ParameterError
-    naming the setting)."""
+    string). None: as the lens file has it. focus_mode (FOCUS_MODES): how a focus distance
+    is focused, "calibrated" (default), "best" or "paraxial". Values are checked when made
+    (a ParameterError naming the setting)."""
 
     fno: float | None = None
     object_m: float | None = None
     focus_m: float | None = None
     config: str | None = None
+    focus_mode: str = "calibrated"
 
     def __post_init__(self) -> None:
         for key in ("fno", "object_m", "focus_m"):
@@ -108,6 +131,10 @@ class ShootingSettings:
             if isinstance(self.config, bool) or not str(self.config).strip():
                 raise ParameterError(None, "config", f"expected a configuration name or number, got {self.config!r}")
             object.__setattr__(self, "config", str(self.config).strip())
+        if self.focus_mode not in FOCUS_MODES:
+            raise ParameterError(
+                None, "focus_mode", f"expected one of {', '.join(FOCUS_MODES)}, got {self.focus_mode!r}"
+            )
 
     @property
     def is_default(self) -> bool:
@@ -116,8 +143,11 @@ class ShootingSettings:
 
     def to_dict(self) -> dict[str, Any]:
         """{fno, object_m, focus_m, config}; None where not set, infinite distances as the
-        string "inf" (strict JSON)."""
-        return strict_json({"fno": self.fno, "object_m": self.object_m, "focus_m": self.focus_m, "config": self.config})
+        string "inf" (strict JSON); focus_mode only where it is not the default "calibrated"."""
+        out = {"fno": self.fno, "object_m": self.object_m, "focus_m": self.focus_m, "config": self.config}
+        if self.focus_mode != "calibrated":
+            out["focus_mode"] = self.focus_mode
+        return strict_json(out)
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any] | None) -> ShootingSettings:
@@ -128,23 +158,31 @@ class ShootingSettings:
             raise InputError(
                 None, "settings", f"expected a mapping of fno, object_m, focus_m, config, got {type(data).__name__}"
             )
-        unknown = sorted(set(data) - set(SETTINGS))
+        keys = (*SETTINGS, "focus_mode")
+        unknown = sorted(set(data) - set(keys))
         if unknown:
             raise InputError(
-                None, "settings", f"unknown key(s) {', '.join(unknown)}; expected some of {', '.join(SETTINGS)}"
+                None, "settings", f"unknown key(s) {', '.join(unknown)}; expected some of {', '.join(keys)}"
             )
-        return cls(**{k: data.get(k) for k in SETTINGS})
+        return cls(**{k: data.get(k) for k in SETTINGS}, focus_mode=data.get("focus_mode", "calibrated"))
 
     @classmethod
     def from_text(
-        cls, fno: str | None = None, object_m: str | None = None, focus_m: str | None = None, config: str | None = None
+        cls,
+        fno: str | None = None,
+        object_m: str | None = None,
+        focus_m: str | None = None,
+        config: str | None = None,
+        focus_mode: str | None = None,
     ) -> ShootingSettings:
-        """From text (as typed): numbers, distances also "inf"; None where not given."""
+        """From text (as typed): numbers, distances also "inf"; None where not given
+        (focus_mode: "calibrated")."""
         numbers = {
             k: None if v is None else _number(v, k, allow_inf=k != "fno")
             for k, v in (("fno", fno), ("object_m", object_m), ("focus_m", focus_m))
         }
-        return cls(**numbers, config=config)
+        mode = "calibrated" if focus_mode is None else focus_mode.strip().lower()
+        return cls(**numbers, config=config, focus_mode=mode)
 
     def distances_m(self) -> tuple[float | None, float | None]:
         """(object_m, focus_m) with one given for the other when only one is set."""
@@ -223,13 +261,10 @@ def _newton(residual: Callable[[float], float], t0: float) -> float | None:
     return None
 
 
-def focus_changes(lens: Lens, focus_m: float) -> dict[int, float]:
-    """{surface index: thickness (mm)} that focus the lens at focus_m metres from its image
-    plane (math.inf: at infinity), by moving its image plane (unit focusing) or its focus
-    group, keeping its best-focus offset. An unreachable distance is a ParameterError
-    naming focus_m."""
-    work = lens.with_changes(configurations={}, field_type="angle", fields=[0.0])  # fields play no part
-    offset = _focus_offset(work)
+def _solve_focus(work: Lens, focus_m: float, offset: float) -> dict[int, float]:
+    """{surface index: thickness (mm)} that put the image plane of `work` offset mm (along
+    z) beyond the paraxial image of an object focus_m metres from the image plane. An
+    unreachable distance is a ParameterError naming focus_m."""
     gap, comp = _focus_gaps(work)
     total = work.surfaces[gap].thickness + (work.surfaces[comp].thickness if comp is not None else 0.0)
 
@@ -262,6 +297,58 @@ def focus_changes(lens: Lens, focus_m: float) -> dict[int, float]:
     return changes(t)
 
 
+def _best_offset(lens: Lens) -> float:
+    """The best-focus plane's distance (mm, along z) beyond the paraxial image of the lens
+    as it is (lensim.psf.best_focus)."""
+    from lensim.psf.best_focus import best_focus_shift  # psf builds on optics
+
+    best_z = _image_z(lens) + float(lens.directions()[-1]) * best_focus_shift(lens)
+    return best_z - paraxial_data(lens).paraxial_image_z_mm
+
+
+def _focused(work: Lens, changes: dict[int, float], focus_m: float) -> Lens:
+    """The lens with these thicknesses and its object focus_m metres from its image plane."""
+    moved = _with_thickness(work, changes)
+    return moved.with_changes(object_distance=_object_distance_mm(moved, focus_m, "focus_m"))
+
+
+def _best_changes(work: Lens, focus_m: float, focus_mode: str) -> dict[int, float]:
+    """focus_changes for "best" and "calibrated": the plane that lands on the best focus
+    (plus, calibrated, the file's own offset from its best focus), by a fixed point: the
+    best focus moves little with the lens."""
+    designer = _focus_offset(work)
+    changes = _solve_focus(work, focus_m, designer)
+    if focus_mode == "calibrated" and all(abs(t - work.surfaces[i].thickness) < 1e-9 for i, t in changes.items()):
+        return {i: work.surfaces[i].thickness for i in changes}  # the file's own focus: as designed
+    keep = designer - _best_offset(work) if focus_mode == "calibrated" else 0.0
+    offset = designer
+    for _ in range(_BEST_ITERATIONS):
+        new = _best_offset(_focused(work, changes, focus_m)) + keep
+        if abs(new - offset) < _BEST_TOLERANCE_MM:
+            break
+        offset = new
+        changes = _solve_focus(work, focus_m, offset)
+    return changes
+
+
+def focus_changes(lens: Lens, focus_m: float, focus_mode: str = "calibrated") -> dict[int, float]:
+    """{surface index: thickness (mm)} that focus the lens at focus_m metres from its image
+    plane (math.inf: at infinity), by moving its image plane (unit focusing) or its focus
+    group (FOCUS_MODES says how; the best focus is that of lensim.psf.best_focus at the
+    lens's own aperture). An unreachable distance is a ParameterError naming focus_m."""
+    if focus_mode not in FOCUS_MODES:
+        raise ParameterError(None, "focus_mode", f"expected one of {', '.join(FOCUS_MODES)}, got {focus_mode!r}")
+    work = lens.with_changes(configurations={}, field_type="angle", fields=[0.0])  # on axis only
+    if focus_mode == "paraxial":
+        return _solve_focus(work, focus_m, _focus_offset(work))
+    key = (repr(work), float(focus_m), focus_mode)
+    if key not in _BEST_MEMO:
+        if len(_BEST_MEMO) >= _MEMO_SIZE:
+            _BEST_MEMO.pop(next(iter(_BEST_MEMO)))
+        _BEST_MEMO[key] = _best_changes(work, focus_m, focus_mode)
+    return dict(_BEST_MEMO[key])
+
+
 # ---------------------------------------------------------------- aperture
 
 
@@ -291,7 +378,7 @@ def _at_infinity(lens: Lens) -> Lens:
     probe = lens.with_changes(configurations={}, object_distance=math.inf, field_type="angle", fields=[0.0])
     if lens.infinite_object or lens.focus_thickness is None:
         return probe
-    return _with_thickness(probe, focus_changes(lens, math.inf))
+    return _with_thickness(probe, focus_changes(lens, math.inf, "paraxial"))
 
 
 # ---------------------------------------------------------------- the lens at settings
@@ -352,11 +439,16 @@ def lens_at(lens: Lens, settings: ShootingSettings | None) -> Lens:
         return lens
     base = lens.with_changes(configurations={})
     object_m, focus_m = settings.distances_m()
-    focused = base if focus_m is None else _with_thickness(base, focus_changes(base, focus_m))
     if settings.fno is None:
         stop = paraxial_data(base).stop_semi_diameter_mm
     else:
         stop = _check_fno(_at_infinity(base), settings.fno, max_stop_mm(base))
+    focused = base
+    if focus_m is not None:  # focused at the taking aperture (the paraxial solve ignores it)
+        taking = base
+        if settings.focus_mode != "paraxial":
+            taking = base.with_changes(aperture_type="stop_semi_diameter", aperture_value=stop)
+        focused = _with_thickness(base, focus_changes(taking, focus_m, settings.focus_mode))
     object_mm = base.object_distance if object_m is None else _object_distance_mm(focused, object_m, "object_m")
     return focused.with_changes(
         aperture_type="stop_semi_diameter",

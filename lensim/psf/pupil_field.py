@@ -15,6 +15,7 @@ the sphere is centred on it whether or not an obscuration covers the stop centre
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import torch
@@ -217,10 +218,30 @@ def pupil_fields_through_focus(
     """pupil_field with the image plane moved by each shift (mm, along the image-space
     light direction: positive away from the lens), from one trace: the same as tracing
     the lens with its image_defocus changed by that amount (times the direction)."""
+    at = focus_stack(lens, field, wavelength_um, samples, aiming, para, start)
+    return [at(dz) for dz in shifts_mm]
+
+
+def focus_stack(
+    lens: Lens,
+    field: float,
+    wavelength_um: float,
+    samples: int = 128,
+    aiming: Aiming = "real",
+    para: ParaxialData | None = None,
+    start: torch.Tensor | None = None,
+) -> Callable[[float], PupilField]:
+    """One trace of pupil_field's grid, kept: a function of an image-plane shift (mm, along
+    the image-space light direction, positive away from the lens) giving the pupil field
+    on the plane so moved (pupil_fields_through_focus, one shift at a time)."""
     para = para or paraxial_data(lens)
     traced = _trace_grid(lens, field, wavelength_um, samples, aiming, para, start)
     direction = float(lens.directions()[-1])
-    return [_on_sphere(lens, traced.moved(direction * dz), field, wavelength_um, para) for dz in shifts_mm]
+
+    def at(dz: float) -> PupilField:
+        return _on_sphere(lens, traced.moved(direction * dz), field, wavelength_um, para)
+
+    return at
 
 
 #: the fewest pupil rays that must reach the image (and the reference sphere) for a PSF
