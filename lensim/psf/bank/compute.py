@@ -19,6 +19,7 @@ from lensim.errors import InputError, PupilSamplingError
 from lensim.optics.lens import Lens
 from lensim.optics.lens_file import lens_to_dict
 from lensim.optics.paraxial import ParaxialData, paraxial_data, paraxial_image_height
+from lensim.psf.bank.azimuth import azimuth_kernels
 from lensim.psf.bank.settings import BankSettings
 from lensim.psf.bank.store import (
     FORMAT,
@@ -169,6 +170,7 @@ def _compute_field(job: _Job, index: int, fld: float, para: ParaxialData | None 
     para_y = paraxial_image_height(lens.launch_lens(), object_field(lens, work.value, job.aiming, para), para)
     W, P = len(job.wavelengths_um), job.kernel_pixels
     rgb = np.zeros((3, P, P))
+    rgb_fine = np.zeros((3, job.k * P, job.k * P))  # the same sum before pixel integration
     offsets, trans, window = np.zeros((W, 2)), np.zeros(W), np.zeros(W)
     ri = work.relative_illumination()
     primary_fine = None
@@ -189,6 +191,7 @@ def _compute_field(job: _Job, index: int, fld: float, para: ParaxialData | None 
                 "no energy inside the kernel window; expected a larger kernel",
             )
         rgb += (job.weights[:, w] * ri[w])[:, None, None] * (pix / total)[None]
+        rgb_fine += (job.weights[:, w] * ri[w])[:, None, None] * (fine / total)[None]
         offsets[w] = [-off[0], -off[1]]
         trans[w] = pf.transmission
         window[w] = total / pf.transmission if pf.transmission > 0 else 0.0
@@ -213,6 +216,7 @@ def _compute_field(job: _Job, index: int, fld: float, para: ParaxialData | None 
         working_fno=float(primary_pf.working_fno()),
         primary_fine=primary_fine.astype(np.float32),
         warnings=work.caught,
+        rgb_azimuths=azimuth_kernels(rgb_fine, job.k).astype(np.float32),
     )
 
 

@@ -185,6 +185,9 @@ def _blend_field(fields: list[BankField], w: list[float]) -> BankField:
         strehl=float(mix("strehl")),
         working_fno=float(mix("working_fno")),
         primary_fine=(mix("primary_fine") if fine_same else top.primary_fine).astype(np.float32),
+        rgb_azimuths=mix("rgb_azimuths").astype(np.float32)
+        if all(f.rgb_azimuths is not None for f in fields)
+        else None,
     )
 
 

@@ -10,6 +10,7 @@ import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -35,7 +36,10 @@ class BankField:
     F-number at the primary wavelength; primary_fine (kP, kP) float32: the fine PSF at the
     primary wavelength (energy per fine sample); warnings: sampling warnings raised while
     computing this field; settings_key: the key of the bank settings it was computed with
-    (lensim.psf.bank.store.settings_key; '' in files written before keys were stored).
+    (lensim.psf.bank.store.settings_key; '' in files written before keys were stored);
+    rgb_azimuths (A, 3, P, P) float32: the kernels at the azimuth offsets
+    lensim.psf.bank.azimuth.AZIMUTHS_DEG, turned on the fine grid before pixel
+    integration (None in files written before 2026-11: psf_at then turns rgb itself).
     """
 
     index: int
@@ -53,13 +57,12 @@ class BankField:
     primary_fine: np.ndarray
     warnings: list[str] = field(default_factory=list)
     settings_key: str = ""
+    rgb_azimuths: np.ndarray | None = None
 
     def to_npz_bytes(self) -> bytes:
         """The field as an .npz file's bytes (the bank's field file, and what worker
         processes send back)."""
-        buf = io.BytesIO()
-        np.savez(
-            buf,
+        arrays: dict[str, Any] = dict(
             index=np.int64(self.index),
             field=np.float64(self.field),
             field_value=np.float64(self.field_value),
@@ -76,6 +79,10 @@ class BankField:
             warnings=np.array(json.dumps(self.warnings)),
             settings_key=np.array(self.settings_key),
         )
+        if self.rgb_azimuths is not None:
+            arrays["rgb_azimuths"] = self.rgb_azimuths.astype(np.float32)
+        buf = io.BytesIO()
+        np.savez(buf, **arrays)
         return buf.getvalue()
 
     @classmethod
@@ -100,6 +107,7 @@ class BankField:
                     primary_fine=z["primary_fine"],
                     warnings=list(json.loads(str(z["warnings"]))),
                     settings_key=str(z["settings_key"]) if "settings_key" in z.files else "",
+                    rgb_azimuths=z["rgb_azimuths"] if "rgb_azimuths" in z.files else None,
                 )
         except (OSError, EOFError, KeyError, ValueError, zipfile.BadZipFile) as e:  # truncated, foreign
             raise InputError(
@@ -184,6 +192,10 @@ class PSFBank:
         """(3, P, P) kernel at an image radius along the stored direction: linear
         interpolation between the two fields whose reference radii bracket it (clamped to
         the first and last field)."""
+        return self._radial(radius_mm, lambda f: f.rgb)
+
+    def _radial(self, radius_mm: float, part: Callable[[BankField], np.ndarray]) -> np.ndarray:
+        """part(field) (float64) at an image radius, interpolated as radial_kernel says."""
         radii = self.radii_mm
         if len(radii) > 1 and np.any(np.diff(radii) <= 0):
             raise InputError(
@@ -194,24 +206,31 @@ class PSFBank:
             )
         r = float(radius_mm)
         if len(radii) == 1 or r <= radii[0]:
-            return self.fields[0].rgb.astype(np.float64)
+            return part(self.fields[0]).astype(np.float64)
         if r >= radii[-1]:
-            return self.fields[-1].rgb.astype(np.float64)
+            return part(self.fields[-1]).astype(np.float64)
         j = int(np.searchsorted(radii, r, side="right"))
         t = (r - radii[j - 1]) / (radii[j] - radii[j - 1])
-        return (1.0 - t) * self.fields[j - 1].rgb.astype(np.float64) + t * self.fields[j].rgb.astype(np.float64)
+        return (1.0 - t) * part(self.fields[j - 1]).astype(np.float64) + t * part(self.fields[j]).astype(np.float64)
 
     def psf_at(self, x_mm: float, y_mm: float) -> np.ndarray:
         """(3, P, P) float32 RGB kernel at image point (x_mm, y_mm) (real image-plane
         coordinates, origin on the axis): the radially interpolated kernel rotated to the
-        point's azimuth about its centre pixel (lensim.render.rotation.rotate_kernel:
-        cubic spline, sum kept, centre fixed)."""
+        point's azimuth about its centre pixel. Where the fields store kernels at other
+        azimuths (rgb_azimuths, turned before pixel integration) the turn comes from them
+        (lensim.psf.bank.azimuth.kernel_at_azimuth); in banks without them the pixel
+        kernel itself is turned (lensim.render.rotation.rotate_kernel: cubic spline, sum
+        kept, centre fixed), which over-blurs off the axes at a coarse pitch."""
         # imported here: lensim.render builds on banks, so the bank must not need it loaded
+        from lensim.psf.bank.azimuth import kernel_at_azimuth, supported
         from lensim.render.rotation import rotate_kernel
 
         r = math.hypot(x_mm, y_mm)
-        k = self.radial_kernel(r)
         if r == 0:
-            return k.astype(np.float32)
-        angle = math.degrees(math.atan2(y_mm, x_mm)) - self.reference_azimuth_deg()
-        return rotate_kernel(k, angle).astype(np.float32)
+            return self.radial_kernel(r).astype(np.float32)
+        reference = self.reference_azimuth_deg()
+        angle = math.degrees(math.atan2(y_mm, x_mm)) - reference
+        if supported(reference) and all(f.rgb_azimuths is not None for f in self.fields):
+            stack = self._radial(r, lambda f: np.concatenate([f.rgb[None], f.rgb_azimuths]))  # type: ignore[list-item]
+            return kernel_at_azimuth(stack, angle, reference).astype(np.float32)
+        return rotate_kernel(self.radial_kernel(r), angle).astype(np.float32)
