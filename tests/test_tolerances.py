@@ -155,3 +155,103 @@ def test_lens_file_pose_errors():
     data["surfaces"][0]["tilt"] = [0.1]
     with pytest.raises(InputError, match=r"surfaces\[0\]\.tilt: expected a pair"):
         lens_from_dict(data, "lens.yaml")
+
+
+def test_turning_the_perturbation_turns_the_field():
+    # the chief ray of field -h of a lens decentred along y lands where field +h of the
+    # lens turned by 180 deg lands, mirrored (lens_at_azimuth: fields at other azimuths)
+    from lensim.calibrate.tolerance_report import lens_at_azimuth
+    from lensim.optics.aiming import chief_ray_image_height
+
+    lens = perturbed_lens(load_lens("cooke_triplet", warn=False), {"e2.decentre_y": 0.05, "e1.tilt_x": 0.1})
+    turned = lens_at_azimuth(lens, 180.0)
+    assert turned.surfaces[2].pose[1] == pytest.approx(-lens.surfaces[2].pose[1])
+    below = chief_ray_image_height(lens, -14.0)
+    above = chief_ray_image_height(turned, 14.0)
+    assert below == pytest.approx(-above, abs=1e-9)
+    assert abs(below + chief_ray_image_height(lens, 14.0)) > 1e-5  # the decentre breaks the symmetry
+
+
+def test_lens_tolerance_and_perturb_commands(tmp_path, capsys, monkeypatch):
+    import json
+
+    from cli_runner import run_cli
+
+    tol = tmp_path / "tol.yaml"
+    tol.write_text("elements:\n  '2': {tilt_deg: 0.05}\n  '3': {spacing_mm: 0.02}\nimage: {focus_mm: 0.02}\n")
+    args = ["lens", "tolerance", "cooke_triplet", "--tolerances", str(tol), "--field", "0", "--field", "1"]
+    code, out, err = run_cli(
+        [*args, "--draws", "2", "--pupil-samples", "32", "--aiming", "paraxial", "--json", "--quiet"],
+        capsys,
+        monkeypatch,
+    )
+    assert code == 0, err
+    report = json.loads(out)
+    assert len(report["per_draw"]) == 2 and report["fields"] == [0.0, 20.0]
+    names = [row["parameter"] for row in report["sensitivity"]]
+    assert sorted(names) == ["e2.tilt_x", "e2.tilt_y", "e3.spacing", "image.focus"]
+    worst = report["sensitivity"][0]["worst"]
+    assert worst < 0 and all(worst <= row["worst"] for row in report["sensitivity"])
+    again = run_cli(
+        [
+            *args,
+            "--draws",
+            "2",
+            "--pupil-samples",
+            "32",
+            "--aiming",
+            "paraxial",
+            "--json",
+            "--quiet",
+            "--no-sensitivity",
+        ],
+        capsys,
+        monkeypatch,
+    )[1]
+    assert json.loads(again)["per_draw"] == report["per_draw"]
+    unit = tmp_path / "unit.yaml"
+    code, _, err = run_cli(
+        ["lens", "perturb", "cooke_triplet", "--tolerances", str(tol), "--seed", "0", "--draw", "1", "-o", str(unit)],
+        capsys,
+        monkeypatch,
+    )
+    assert code == 0, err
+    assert load_lens(unit, warn=False).as_built["parameters"] == report["per_draw"][1]["parameters"]
+    tol.write_text("elements: {all: {decenter_mm: 0.02}}\n")
+    code, _, err = run_cli([*args, "-o", str(tmp_path / "t.png")], capsys, monkeypatch)
+    assert code == 2 and err.count("\n") == 1
+    assert "tol.yaml: elements.all.decenter_mm: unknown key; expected one of decentre_mm" in err
+    assert not (tmp_path / "t.png").exists()
+
+
+def test_dataset_make_draws_pairs_through_perturbed_lenses(tmp_path, capsys, monkeypatch):
+    import json
+
+    from cli_runner import run_cli
+
+    from lensim.images import write_image
+    from lensim.psf.bank import PSFBank
+
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    for k in range(4):
+        write_image(photos / f"p{k}.png", torch.rand(3, 48, 64, generator=torch.Generator().manual_seed(k)))
+    tol = tmp_path / "tol.yaml"
+    tol.write_text("elements: {'2': {decentre_mm: 0.05}}\nimage: {focus_mm: 0.03}\n")
+    args = ["dataset", "make", str(photos), "-o", str(tmp_path / "data"), "--lens", "cooke_triplet"]
+    args += ["--sensor", "apsc_mirrorless", "--crops", "1", "--size", "32", "--seed", "3", "--fields", "3"]
+    args += ["--wavelengths-nm", "500:600:100", "--pupil-samples", "32", "--cache", str(tmp_path / "cache")]
+    args += ["--tolerances", str(tol), "--tolerance-draws", "2", "--quiet", "--json"]
+    code, out, err = run_cli(args, capsys, monkeypatch)
+    assert code == 0, err
+    manifest = json.loads((tmp_path / "data" / "manifest.json").read_text())
+    draws = manifest["tolerances"]["draws"]
+    assert [d["draw"] for d in draws] == [0, 1] and [d["photos"] for d in draws] == [2, 2]
+    assert sorted(r["tolerance_draw"] for r in manifest["records"]) == [0, 0, 1, 1]
+    banks = [PSFBank.load(d["bank"]) for d in draws]
+    lenses = [b.manifest["lens"] for b in banks]
+    assert lenses[0] != lenses[1] and lenses[0]["as_built"]["parameters"] == draws[0]["parameters"]
+    assert lenses[0]["surfaces"][2]["decentre"][0] == pytest.approx(draws[0]["parameters"]["e2.decentre_x"])
+    bad = [*args[:-6], "--tolerances", str(tol), "--fno", "4,5.6"]
+    code, _, err = run_cli(bad, capsys, monkeypatch)
+    assert code == 2 and "--tolerances" in err and err.count("\n") == 1

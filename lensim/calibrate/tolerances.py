@@ -147,10 +147,19 @@ def tolerances_from_dict(data: Any, lens: Lens, source: str = "<tolerances>") ->
 
 def load_tolerances(path: str | Path, lens: Lens) -> Tolerances:
     """Read a tolerance YAML/JSON file for a lens (one-line InputError on a bad file)."""
-    from lensim.optics.lens_file import _read_native
+    import yaml
+
+    from lensim.io import read_text
 
     p = Path(path)
-    return tolerances_from_dict(_read_native(p), lens, str(p))
+    text = read_text(p, "tolerance file")
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        where = f"line {mark.line + 1}" if mark is not None else "syntax"
+        raise InputError(str(p), where, f"not valid YAML: {getattr(e, 'problem', None) or e}") from None
+    return tolerances_from_dict(data, lens, str(p))
 
 
 @dataclass

@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import typer
 
-from lensim.cli import lens_analysis_cmd  # noqa: F401  (registers lens mtf, wavefront, fans, ...)
+from lensim.cli import (
+    lens_analysis_cmd,  # noqa: F401  (registers lens mtf, wavefront, fans, ...)
+    tolerance_cmd,  # noqa: F401  (registers lens tolerance, perturb)
+)
 from lensim.cli.ablation_cmd import ablation_command
 from lensim.cli.allocator import keep_freed_memory
 from lensim.cli.assets_cmd import assets_command

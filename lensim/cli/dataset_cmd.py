@@ -25,6 +25,7 @@ from lensim.cli.validate import at_least, choice, even, in_range, input_folder, 
 from lensim.errors import InputError
 
 if TYPE_CHECKING:
+    from lensim.data.pairs import ToleranceBanks
     from lensim.psf.bank import BankSettings, GridAxes, GridBank, PSFBank
     from lensim.sensor.profile import SensorProfile
 
@@ -117,6 +118,13 @@ def make(
     workers: int = workers_option(),
     scheduler: str = scheduler_option(),
     cache: Path = cache_option(),
+    tolerances: Path = typer.Option(
+        None,
+        "--tolerances",
+        help="Tolerance file (YAML, docs/calibration.md): simulate each photo through one of "
+        "--tolerance-draws perturbed copies of the lens (seeded by --seed, banks cached).",
+    ),
+    tolerance_draws: int = typer.Option(8, "--tolerance-draws", help="Perturbed lenses (banks) with --tolerances."),
     quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
     json_out: bool = typer.Option(False, "--json", help="Print a summary as JSON."),
 ) -> None:
@@ -132,7 +140,13 @@ def make(
 
     Example: lensim dataset make photos/ --lens cooke_triplet --sensor apsc_mirrorless -o data/ --crops 8 --size 256 --placements 3
 
+    With --tolerances: --tolerance-draws perturbed lenses (draws 0..K-1 of --seed), one
+    cached bank each; each photo goes through one of them, every draw equally often; records
+    carry "tolerance_draw", the manifest every draw's parameters.
+
     Example: lensim dataset make photos/ --lens double_gauss --sensor full_frame --fno 2,2.8,4 --focus-m inf,3 -o data/
+
+    Example: lensim dataset make photos/ --lens cooke_triplet --tolerances tol.yaml --tolerance-draws 8 -o data/
     """
     from lensim.data.pairs import make_dataset
     from lensim.psf.bank import GridAxes, GridBank
@@ -152,8 +166,13 @@ def make(
         )
     sensor = load_sensor(sensor_file)
     quiet = quiet or json_out
-    bank: PSFBank | GridBank
-    if bank_dir is not None:
+    bank: PSFBank | GridBank | ToleranceBanks
+    if tolerances is not None:
+        _check_tolerances(tolerances, tolerance_draws, bank_dir, axes)
+        bank = _tolerance_banks(
+            lens_file, tolerances, tolerance_draws, seed, (sharp_dir, size, sensor, settings), workers, quiet, scheduler
+        )
+    elif bank_dir is not None:
         bank, _ = bank_or_grid_for_lens(bank_dir, lens_file)
     else:
         bank = _lens_bank(lens_file, sharp_dir, size, sensor, settings, axes, workers, quiet, scheduler)
@@ -179,9 +198,10 @@ def make(
         "output": str(output),
         "photos": len(manifest["records"]),
         "pairs": manifest["pairs"],
-        "bank": str(bank.directory),
+        "bank": str(manifest["bank"]),
         "seed": seed,
         **({"settings": len(bank)} if isinstance(bank, GridBank) else {}),
+        **({"tolerance_draws": len(manifest["tolerances"]["draws"])} if "tolerances" in manifest else {}),
     }
     if json_out:
         print_json(summary)
@@ -220,3 +240,49 @@ def _lens_bank(
             scheduler=scheduler,
             progress=report,
         )
+
+
+def _check_tolerances(tolerances: Path, draws: int, bank_dir: Path | None, axes: GridAxes) -> None:
+    """--tolerances with --tolerance-draws, and without a given bank or grid."""
+    from lensim.cli.validate import input_file
+
+    input_file(tolerances, "--tolerances", "tolerance file")
+    in_range(draws, 1, 1000, "--tolerance-draws", what="a number of perturbed lenses")
+    if bank_dir is not None or axes.given:
+        raise InputError(
+            "--tolerances",
+            None,
+            "perturbed lenses get banks of their own; expected --tolerances without --bank, --fno, "
+            "--focus-m, --object-m or --config",
+        )
+
+
+def _tolerance_banks(
+    lens_file: str | None,
+    tolerances: Path,
+    draws: int,
+    seed: int,
+    job: tuple[Path, int, SensorProfile, BankSettings],
+    workers: int,
+    quiet: bool,
+    scheduler: str | None,
+) -> ToleranceBanks:
+    """The banks of draws 0..draws-1 of `seed` (cached: a rerun or a killed run reuses
+    every field computed), computed together once the photos are known to work.
+    job: (folder of sharp photos, crop size, sensor, bank settings)."""
+    from lensim.calibrate.tolerances import drawn_lens, load_tolerances
+    from lensim.data.pairs import ToleranceBanks, check_photos, list_images
+    from lensim.optics.lens_file import lens_to_dict, load_lens
+    from lensim.psf.bank import BankRequest, PSFBank, get_banks
+
+    sharp_dir, size, sensor, settings = job
+    lens = load_lens(lens_file or assets.DEFAULT_LENS)
+    tol = load_tolerances(tolerances, lens)
+    check_response(settings, sensor.spectral_response, sensor=sensor)
+    check_photos(list_images(sharp_dir), size)
+    lenses = [drawn_lens(lens, tol, seed, k) for k in range(draws)]
+    requests = [BankRequest(m, sensor.pixel_pitch_um, settings, response=sensor.spectral_response) for m in lenses]
+    with progress_bar("PSF banks (tolerance draws)", "fields", quiet) as report:
+        banks = get_banks(requests, workers=workers, scheduler=scheduler, progress=report)
+    records = [{k: m.as_built[k] for k in ("seed", "draw", "parameters")} for m in lenses]
+    return ToleranceBanks([b for b in banks if isinstance(b, PSFBank)], lens_to_dict(lens), str(tolerances), records)

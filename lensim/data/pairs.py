@@ -78,6 +78,20 @@ class PairJob:
     exposure_ev: tuple[float, float] = (0.0, 0.0)
     settings: dict | None = None  # the bank's shooting settings (describe()), recorded when known
     grid_setting: int | None = None  # the setting's index in a grid of banks
+    tolerance_draw: int | None = None  # the perturbed lens's index in a ToleranceBanks
+
+
+@dataclass
+class ToleranceBanks:
+    """Banks of perturbed copies of one lens (lensim.calibrate.tolerances.drawn_lens),
+    one per draw: each photo is simulated through one of them, every draw equally often
+    (seeded, as grid settings are: grid_settings_of_photos). lens: the nominal lens (native
+    mapping); tolerances: the tolerance file; draws: per bank {"seed", "draw", "parameters"}."""
+
+    banks: list[PSFBank]
+    lens: dict
+    tolerances: str
+    draws: list[dict]
 
 
 def image_seed(seed: int, index: int, name: str) -> int:
@@ -194,6 +208,8 @@ def make_pairs_for_image(job: PairJob) -> dict:
         record["settings"] = job.settings
     if job.grid_setting is not None:
         record["grid_setting"] = job.grid_setting
+    if job.tolerance_draw is not None:
+        record["tolerance_draw"] = job.tolerance_draw
     atomic_write_json(record_path(out, job.index), record)
     return record
 
@@ -222,10 +238,32 @@ class _BankUse:
     where: str  # the bank's or grid's folder
 
 
-def _bank_use(bank: PSFBank | GridBank, photos: int, seed: int) -> _BankUse:
+def _tolerance_use(banks: ToleranceBanks, photos: int, seed: int) -> _BankUse:
+    """Each photo's perturbed lens's bank (balanced and seeded); grid_settings holds the
+    draw's index per photo."""
+    if any(b.directory is None for b in banks.banks) or not banks.banks:
+        raise InputError(None, "bank", "expected banks stored on disk (workers load them)")
+    picks = grid_settings_of_photos(seed, photos, len(banks.banks))
+    dirs = [str(b.directory) for b in banks.banks]
+    recorded = {
+        "lens": banks.lens,
+        "bank": dirs[0],
+        "tolerances": {
+            "file": banks.tolerances,
+            "draws": [{**d, "bank": b} for d, b in zip(banks.draws, dirs, strict=True)],
+        },
+    }
+    return _BankUse(
+        [dirs[k] for k in picks], [None] * photos, list(picks), recorded, banks.banks[0].pixel_pitch_um, dirs[0]
+    )
+
+
+def _bank_use(bank: PSFBank | GridBank | ToleranceBanks, photos: int, seed: int) -> _BankUse:
     """A single bank for every photo, or a grid's banks drawn per photo
     (grid_settings_of_photos); records carry the bank's resolved settings when its
     manifest describes them (a grid's, or a bank of one setting)."""
+    if isinstance(bank, ToleranceBanks):
+        return _tolerance_use(bank, photos, seed)
     if isinstance(bank, GridBank):
         picks = grid_settings_of_photos(seed, photos, len(bank))
         entries = bank.manifest["settings"]
@@ -259,7 +297,7 @@ def _bank_use(bank: PSFBank | GridBank, photos: int, seed: int) -> _BankUse:
 def make_dataset(
     sharp_dir: str | Path,
     out_dir: str | Path,
-    bank: PSFBank | GridBank,
+    bank: PSFBank | GridBank | ToleranceBanks,
     sensor_name: str,
     sensor: SensorProfile,
     crops: int = 8,
@@ -278,7 +316,9 @@ def make_dataset(
     The bank must be at the sensor's native pitch and cover its diagonal. A grid of banks
     (lensim.psf.bank.GridBank) gives each photo one of its settings (balanced and seeded:
     grid_settings_of_photos); its records carry "settings" (describe()'s numbers) and
-    "grid_setting" (the index), the manifest a "grid" summary. exposure_ev: the range of
+    "grid_setting" (the index), the manifest a "grid" summary. ToleranceBanks (perturbed
+    lenses) likewise: records carry "tolerance_draw", the manifest "tolerances" (each
+    draw's parameters and photo count). exposure_ev: the range of
     exposure changes in stops drawn per placement (module docstring)."""
     if size < 16 or size % 2:
         raise InputError(None, "size", f"expected an even crop size of at least 16 pixels, got {size}")
@@ -330,7 +370,8 @@ def make_dataset(
             placements,
             exposure_ev,
             use.settings[i],
-            use.grid_settings[i],
+            None if isinstance(bank, ToleranceBanks) else use.grid_settings[i],
+            use.grid_settings[i] if isinstance(bank, ToleranceBanks) else None,
         )
         for i, p in enumerate(files)
     ]
@@ -347,6 +388,9 @@ def make_dataset(
         manifest = {**settings, "records": records, "pairs": sum(len(r["crops"]) for r in records)}
         if isinstance(bank, GridBank):
             manifest["grid"] = [{**e, "photos": use.grid_settings.count(k)} for k, e in enumerate(settings["grid"])]
+        if isinstance(bank, ToleranceBanks):
+            draws = [{**d, "photos": use.grid_settings.count(k)} for k, d in enumerate(settings["tolerances"]["draws"])]
+            manifest["tolerances"] = {**settings["tolerances"], "draws": draws}
         atomic_write_json(out / MANIFEST, manifest)
     return manifest
 
