@@ -29,6 +29,7 @@ TOP = {
     "export",
     "library",
     "chart",
+    "calibrate",
 }
 # other spellings of the common options that must not appear anywhere
 FORBIDDEN = {
@@ -92,7 +93,16 @@ def test_common_options_are_spelled_one_way(path: tuple[str, ...], cmd: Any) -> 
 
 
 @pytest.mark.parametrize(
-    "path", [("simulate",), ("dataset", "make"), ("psf", "bank"), ("restore",), ("chart", "make"), ("chart", "compare")]
+    "path",
+    [
+        ("simulate",),
+        ("dataset", "make"),
+        ("psf", "bank"),
+        ("restore",),
+        ("chart", "make"),
+        ("chart", "compare"),
+        ("calibrate",),
+    ],
 )
 def test_lens_and_sensor_options_where_a_camera_is_chosen(path: tuple[str, ...]) -> None:
     cmd = dict(LEAVES)[path]

@@ -228,7 +228,6 @@ def test_dataset_make_draws_pairs_through_perturbed_lenses(tmp_path, capsys, mon
     import json
 
     from cli_runner import run_cli
-
     from lensim.images import write_image
     from lensim.psf.bank import PSFBank
 

@@ -11,6 +11,7 @@ from lensim.cli import (
 from lensim.cli.ablation_cmd import ablation_command
 from lensim.cli.allocator import keep_freed_memory
 from lensim.cli.assets_cmd import assets_command
+from lensim.cli.calibrate_cmd import calibrate_command
 from lensim.cli.chart_cmd import chart_app
 from lensim.cli.common import help_in_sentences, name_options, run_guarded
 from lensim.cli.dataset_cmd import dataset_app
@@ -40,6 +41,7 @@ app.add_typer(psf_app, name="psf")
 app.add_typer(raw_app, name="raw")
 app.add_typer(sensor_app, name="sensor")
 app.add_typer(chart_app, name="chart")
+app.command("calibrate")(calibrate_command)
 app.command("assets")(assets_command)
 app.command("simulate")(simulate_command)
 app.add_typer(dataset_app, name="dataset")

@@ -1,0 +1,139 @@
+"""`lensim calibrate PHOTO... --lens L --sensor S --chart chart.json -o as_built.yaml`:
+fit the lens as built to photographed charts (lensim.calibrate.calibrate, .fit)."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import typer
+
+from lensim import assets
+from lensim.cli.bank_options import (
+    bank_settings,
+    cache_option,
+    config_option,
+    fields_option,
+    fno_option,
+    focus_m_option,
+    pupil_samples_option,
+    shooting_settings,
+    wavelengths_option,
+)
+from lensim.cli.common import console, print_json, progress_bar
+from lensim.cli.validate import at_least, in_range, input_file, output_file
+from lensim.errors import InputError
+
+if TYPE_CHECKING:
+    from lensim.calibrate.calibrate import ChartData
+    from lensim.optics.lens import Lens
+    from lensim.sensor.profile import SensorProfile
+
+
+def _photo_data(
+    photo: Path, layout: Any, lens_file: str, sensor: SensorProfile, given: Any, settings: Any, options: dict
+) -> tuple[ChartData, Lens, dict | None]:
+    """One photo's chart observations, the nominal lens at its settings and distance, and
+    those settings as records keep them."""
+    from lensim.calibrate.calibrate import chart_data, luminance_spectrum
+    from lensim.calibrate.chart_detect import detect_chart, estimate_pose
+    from lensim.cli.bank_options import lens_and_record
+    from lensim.cli.chart_cmd import _read_photo
+    from lensim.cli.simulate_cmd import _photo_bank
+    from lensim.optics.lens_file import load_lens
+    from lensim.optics.shooting import lens_at
+    from lensim.render.mapping import map_to_sensor
+
+    img, _, _ = _read_photo(photo, sensor, options["wb"])
+    detection = detect_chart(img, layout, str(photo))
+    rows, cols = detection.shape
+    mapping = map_to_sensor(rows, cols, sensor)
+    lens0 = lens_at(load_lens(lens_file), replace(given, object_m=None, focus_m=None))
+    pose = estimate_pose(detection, lens0, mapping.pitch_um, guess_m=given.object_m or 2.0)
+    object_m = given.object_m if given.object_m is not None else pose.distance_m
+    shooting = replace(given, object_m=object_m, focus_m=given.focus_m if given.focus_m is not None else object_m)
+    lens, described = lens_and_record(lens_file, shooting)
+    bank = _photo_bank(photo, (cols, rows), mapping.pitch_um, lens, sensor, settings, False, 1, options["quiet"])
+    spectrum = luminance_spectrum(sensor, settings.wavelengths_nm)
+    data = chart_data(img, layout, lens, bank, sensor, mapping, spectrum, str(photo), options["samples"])
+    return data, lens, described
+
+
+def calibrate_command(
+    photos: list[Path] = typer.Argument(..., help="Photos of the chart (raw files or PNG/TIFF), one lens and setting."),
+    chart: Path = typer.Option(..., "--chart", help="The chart's layout (the .json `chart make` wrote)."),
+    output: Path = typer.Option(..., "-o", "--output", help="As-built lens file to write (.yaml or .json)."),
+    lens_file: str = typer.Option(assets.DEFAULT_LENS, "--lens", help="Lens file or built-in lens name."),
+    sensor_file: str = typer.Option(None, "--sensor", help="Sensor profile file or built-in name (default: built-in)."),
+    elements: int = typer.Option(1, "--elements", help="Elements whose decentre (x, y) is fitted (the best-fitting)."),
+    wb: str = typer.Option("as-shot", "--wb", help="Raw photos: white balance to develop with."),
+    fno: str = fno_option(),
+    focus_m: str = focus_m_option(),
+    object_m: str = typer.Option(
+        None, "--object-m", help="Chart distance in m from the image plane (default: estimated from the photo)."
+    ),
+    config: str = config_option(),
+    fields: int = fields_option(),
+    wavelengths: str = wavelengths_option(),
+    pupil_samples: int = pupil_samples_option(),
+    model_samples: int = typer.Option(32, "--model-samples", help="Pupil samples across for the fit's MTF model."),
+    cache: Path = cache_option(),
+    quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
+    json_out: bool = typer.Option(False, "--json", help="Print the fit as JSON."),
+) -> None:
+    """Fit the lens as built to photographed charts: the image-plane offset, the sensor's
+    tilt and the decentre of the element(s) that explain the photos best (a sensitivity
+    analysis ranks them), from each chart edge's SFR against lensim's simulation of the
+    nominal lens at the photo's pose. Writes a lens file every command takes, its
+    as_built record holding the fitted values, their 1-sigma uncertainties and the
+    residuals. A parameter the chart's edges cannot constrain is refused (exit status 2).
+
+    Example: lensim calibrate IMG_1.dng IMG_2.dng --lens my.yaml --sensor cam.yaml --chart chart.json -o as_built.yaml
+    """
+    from lensim.calibrate.calibrate import calibrate_charts, luminance_spectrum
+    from lensim.calibrate.chart import load_chart
+    from lensim.calibrate.tolerances import perturbed_lens
+    from lensim.optics.lens_file import load_lens, save_lens
+    from lensim.sensor.profile import load_sensor
+
+    t0 = time.perf_counter()
+    if output.suffix.lower() not in (".json", ".yaml", ".yml"):
+        raise InputError(str(output), "--output", "expected a .json, .yaml or .yml file name for a native lens file")
+    output_file(output)
+    in_range(elements, 0, 4, "--elements", what="a number of elements")
+    at_least(model_samples, 16, "--model-samples", what="a number of pupil samples")
+    settings = bank_settings(fields, wavelengths, pupil_samples, cache)
+    given = shooting_settings(fno, object_m, focus_m, config)
+    layout = load_chart(input_file(chart, "--chart", "chart layout"))
+    sensor = load_sensor(sensor_file)
+    base = load_lens(lens_file)
+    options = {"wb": wb, "quiet": quiet or json_out, "samples": model_samples}
+    found = [_photo_data(p, layout, lens_file, sensor, given, settings, options) for p in photos]
+    spectrum = luminance_spectrum(sensor, settings.wavelengths_nm)
+    where = str(photos[0]) if len(photos) == 1 else f"{len(photos)} photos"
+    with progress_bar("calibrate", "parameters", quiet or json_out) as cb:
+        result = calibrate_charts(
+            found[0][1], [d for d, _, _ in found], spectrum, None, elements, model_samples, where, cb
+        )
+    record = {**result.lens.as_built, "photos": [str(p) for p in photos], "settings": found[0][2]}
+    record["sensitivity"] = result.sensitivity
+    save_lens(perturbed_lens(base, result.values, record), output)
+    report = {
+        "output": str(output),
+        "values": result.values,
+        "sigma": result.sigma,
+        "rms_residual_before": result.rms_before,
+        "rms_residual_after": result.rms_after,
+        "sensitivity": result.sensitivity,
+        "zones_before": [z.to_dict() for z in found[0][0].comparison.zones],
+        "run_time_s": time.perf_counter() - t0,
+        "evaluations": result.evaluations,
+    }
+    if json_out:
+        print_json(report)
+    elif not quiet:
+        for n, v in result.values.items():
+            console.print(f"{n:>20s} = {v:+.5f} +- {result.sigma[n]:.5f}", highlight=False)
+        console.print(f"wrote {output} (RMS SFR residual {result.rms_before:.4f} -> {result.rms_after:.4f})")
