@@ -111,3 +111,12 @@ def test_pairs_use_trainable_banks_only(tmp_path, monkeypatch):
     assert (again.done, again.made) == (1, 0)
     r = make_library_pairs(lib, out, settings, holdout=True)
     assert r.made == 1 and (out / "pairs" / held.id / "manifest.json").exists()
+
+
+def test_a_spot_too_large_for_the_huygens_window_gets_geometric_psfs(tmp_path, monkeypatch):
+    sized = dataclasses.replace(TINY, kernel_pixels=None, kernel_limit=31)  # kernels hold the spot
+    monkeypatch.setattr(lb, "LIBRARY_BANK_SETTINGS", sized)  # 16 pupil samples: a Huygens window of ~30 um
+    planned = lb.bank_plan([library_entry("smith_tessar_f3.5")])[0]  # F/3.5: a 62 um RMS spot at the edge
+    r = lb.compute_library_banks(tmp_path, [planned])
+    assert (r.computed, r.failed) == (1, 0)
+    assert PSFBank.load(lb.bank_dir(tmp_path, planned.id)).manifest["method"] == "geometric"

@@ -25,8 +25,8 @@ def evaluate_command(
     methods: str = typer.Option(
         None,
         "--methods",
-        help="Comma list of input, wiener, rl, unsharp, model, plain "
-        "(default: input,wiener,rl,unsharp plus model / plain when their runs are given).",
+        help="Comma list of input, wiener, rl, unsharp, model, plain, universal (the shipped universal "
+        "model, zero-shot) (default: input,wiener,rl,unsharp plus model / plain when their runs are given).",
     ),
     model: Path = typer.Option(
         None, "--model", help="`lensim train` run folder or checkpoint of the field-aware model."
@@ -74,6 +74,10 @@ def evaluate_command(
     from lensim.evaluate import harness
 
     runs = _runs(model, plain, plain_unet)
+    if methods is not None and "universal" in [m.strip() for m in methods.split(",")]:
+        from lensim.restore.universal import NAME, model_path
+
+        runs["universal"] = model_path(NAME)  # the shipped universal model, zero-shot
     names = _method_names(methods, runs, "plain-unet" if plain_unet is not None else "plain")
     _check_options(rl_iterations, unsharp_sigma, unsharp_amount, max_crops, device, output)
     if arch is not None:
@@ -152,7 +156,7 @@ def _runs(model: Path | None, plain: Path | None, plain_unet: Path | None) -> di
     --plain (not both)."""
     if plain is not None and plain_unet is not None:
         raise InputError("--plain-unet", None, "is the old name of --plain; expected one of them, not both")
-    return {"model": model, "plain": plain if plain is not None else plain_unet}
+    return {"model": model, "plain": plain if plain is not None else plain_unet, "universal": None}
 
 
 def _method_names(methods: str | None, runs: dict[str, Path | None], plain_name: str = "plain") -> list[str]:

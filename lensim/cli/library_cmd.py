@@ -9,7 +9,7 @@ from rich.table import Table
 
 from lensim.cli.bank_options import scheduler_option, workers_option
 from lensim.cli.common import console, print_json, progress_bar
-from lensim.cli.validate import at_least, choice, scheduler_address
+from lensim.cli.validate import at_least, choice, positive, scheduler_address
 from lensim.errors import InputError
 
 library_app = typer.Typer(
@@ -151,5 +151,62 @@ def pairs_command(
         return
     console.print(
         f"{output}: pairs of {result.done + result.made} banks ({result.made} made now, {result.pairs} crops)",
+        highlight=False,
+    )
+
+
+def _pair_folders(paths: list[Path]) -> list[Path]:
+    """Each PATH: a library pairs folder (its pairs/<bank>/ folders) or one pairs folder."""
+    from lensim.data.library_pairs import library_pair_folders
+
+    out: list[Path] = []
+    for p in paths:
+        found = [p] if (p / "manifest.json").exists() else library_pair_folders(p)
+        if not found:
+            raise InputError(str(p), None, "holds no pairs; expected a `lensim library pairs` folder or a pairs folder")
+        out.extend(found)
+    return out
+
+
+@library_app.command("pretrain")
+def pretrain_command(
+    pairs: list[Path] = typer.Argument(
+        ..., help="Library pairs folder(s) (`lensim library pairs -o`) or pairs folders."
+    ),
+    output: Path = typer.Option(..., "-o", "--output", help="The run folder (last.pt, log.csv); a rerun resumes it."),
+    minutes: float = typer.Option(60.0, "--minutes", help="Training time in all, every call's (minutes)."),
+    call_minutes: float = typer.Option(None, "--call-minutes", help="Stop this call after this many minutes."),
+    width: int = typer.Option(46, "--width", help="NAFNet width (46: the default network's size)."),
+    crop: int = typer.Option(96, "--crop", help="Training sub-crop (pixels)."),
+    batch_size: int = typer.Option(8, "--batch-size", help="Crops per step."),
+    lr: float = typer.Option(5e-4, "--lr", help="Adam learning rate."),
+    seed: int = typer.Option(0, "--seed", help="Seed of initialisation, data order and augmentation."),
+    ship_to: Path = typer.Option(None, "--ship", help="Write the model for inference into this folder at the end."),
+    quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
+) -> None:
+    """Pretrain the universal model on the library's pairs (lensim.restore.universal).
+
+    Resumable: the same command continues the run (the time counts every call's);
+    --minutes larger than before trains on.
+
+    Example: lensim library pretrain library-pairs/ -o runs/universal --minutes 60
+    """
+    from lensim.restore.universal import PretrainConfig, pretrain, ship
+
+    positive(minutes, "--minutes", "minutes")
+    if call_minutes is not None:
+        positive(call_minutes, "--call-minutes", "minutes")
+    for value, option in ((width, "--width"), (crop, "--crop"), (batch_size, "--batch-size")):
+        at_least(value, 1, option, what="a count")
+    positive(lr, "--lr")
+    folders = _pair_folders(pairs)
+    cfg = PretrainConfig(width=width, crop=crop, batch_size=batch_size, lr=lr, time_budget_s=minutes * 60.0, seed=seed)
+    with progress_bar("universal pretraining", "s", quiet) as report:
+        result = pretrain(folders, output, cfg, report, None if call_minutes is None else call_minutes * 60.0)
+    if ship_to is not None:
+        ship(output, ship_to)
+    loss = "n/a" if result.loss is None else f"{result.loss:.5g}"
+    console.print(
+        f"{output}: {result.step} steps, {result.seconds / 60:.1f} min on {result.folders} pairs folders, loss {loss}",
         highlight=False,
     )

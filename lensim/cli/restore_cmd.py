@@ -18,6 +18,7 @@ from lensim.cli.bank_options import scheduler_option
 from lensim.cli.common import console, print_json, progress_bar
 from lensim.cli.validate import at_least, choice, distinct_outputs, output_folder, scheduler_address
 from lensim.cli.validate import device as check_device
+from lensim.cli.zero_shot import check_zero_shot, universal_inputs
 from lensim.errors import InputError, OutOfMemory
 from lensim.io import folder_lock
 
@@ -66,10 +67,11 @@ def restore_command(
     checkpoint: Path = typer.Argument(
         ...,
         help="Run folder (best.pt, else last.pt) or checkpoint file; with --engine "
-        "onnxruntime also an .onnx file from `lensim export`.",
+        "onnxruntime also an .onnx file from `lensim export`; 'universal' (or left out, with --lens and "
+        "--sensor): the shipped universal model, zero-shot.",
     ),
     images: list[Path] = typer.Argument(
-        ...,
+        None,
         help="Photos to restore (8/16-bit PNG, TIFF or JPEG), camera raw files "
         "(DNG, CR2, NEF, ARW, ...) or folders of raw files.",
     ),
@@ -148,12 +150,21 @@ def restore_command(
     file written by `lensim export` (its metadata gives the sensor and lens trained for), or
     a run, exported on the fly in memory.
 
+    Zero-shot: CHECKPOINT 'universal' (or, with --lens, no CHECKPOINT) restores with the
+    shipped universal model (lensim.restore.universal), no training run: --lens (a file, a
+    built-in or a library lens) and --sensor say what took the photos; a sensor pitch or
+    F-number (--fno, else the lens's own) outside the model's trained ranges is refused.
+
     Example: lensim restore runs/a photo.png -o restored/;
+    lensim restore --lens cooke_triplet --sensor fullframe_dslr photo.png -o restored/;
     lensim restore runs/a raws/ -o restored/ --dng --workers 2;
     lensim restore model.onnx photo.png -o restored/ --engine onnxruntime
     """
     from lensim.restore.conditioning import given_settings
 
+    checkpoint, images, zero_shot = universal_inputs(checkpoint, images or [], lens_file, sensor_file)
+    if not images:
+        raise InputError("IMAGES", None, "expected at least one photo, raw file or folder of raw files")
     _check_options(bits, tile, overlap, workers, threads, device, output, checkpoint, engine)
     scheduler_address(scheduler)
     shooting = given_settings(fno, focus_m, focal_mm)
@@ -177,8 +188,10 @@ def restore_command(
 
         torch.set_num_threads(threads)
     model, info, sensor_data, (sensor_w, sensor_h) = _load_model(
-        checkpoint, lens_file, sensor_file, device, engine, threads
+        checkpoint, None if zero_shot else lens_file, sensor_file, device, engine, threads
     )
+    if zero_shot:
+        check_zero_shot(info, sensor_data, lens_file, fno)
     _check_photos(photos, offset, (sensor_w, sensor_h))
     photo_settings = _photo_settings(photos, shooting, info)
     written = []

@@ -147,6 +147,12 @@ def train_command(
         "batch; stops after 3 in a row) or stop (one line naming the step).",
     ),
     seed: int = typer.Option(_D.seed, "--seed", help="Seed of initialisation, data order, crops and augmentation."),
+    init: str = typer.Option(
+        None,
+        "--init",
+        help="Start from these weights instead of a random initialisation: 'universal' (the shipped "
+        "universal model; fine-tuning) or a run folder / checkpoint of the same network.",
+    ),
     device: str = typer.Option(_D.device, "--device", help="cpu, cuda or cuda:N (mixed precision on CUDA)."),
     no_amp: bool = typer.Option(not _D.amp, "--no-amp", help="Full float32 on CUDA."),
     threads: int = typer.Option(0, "--threads", help="CPU threads for PyTorch (0: PyTorch's default)."),
@@ -219,6 +225,7 @@ def train_command(
         "checkpoint_every_steps": checkpoint_every_steps or None,
         "use_settings": not no_settings,
         "on_nan": on_nan,
+        "init": _check_init(init),
     }
     if resume:  # the checkpoint's settings, changed only where an option is given
         overrides = {k: v for k, v in overrides.items() if _given(ctx, _OPTION_OF.get(k, k))}
@@ -229,6 +236,19 @@ def train_command(
         if prog is not None:
             prog.stop()
     _report(result, quiet, json_out)
+
+
+def _check_init(init: str | None) -> str | None:
+    """--init: 'universal' (the shipped model must be there) or an existing run or checkpoint."""
+    if init is None:
+        return None
+    from lensim.restore.universal import NAME, model_path
+
+    if init == NAME:
+        model_path(NAME)
+    elif not Path(init).exists():
+        raise InputError("--init", None, f"no such run folder or checkpoint {init!r}; expected 'universal' or a path")
+    return init
 
 
 def _train(

@@ -249,11 +249,13 @@ def _one(out_dir: Path, planned: PlannedBank, workers: int, scheduler: str | Non
         except InputError as e:
             if isinstance(e, OutputError) or settings.method == "geometric" or "window" not in e.message:
                 raise
-            shutil.rmtree(folder)  # its Huygens fields so far: the geometric bank starts afresh
+            shutil.rmtree(folder, ignore_errors=True)  # its Huygens fields so far: the geometric bank starts afresh
             bank = _get(out_dir, planned, dataclasses.replace(settings, method="geometric"), workers, scheduler)
     except OutputError:
         raise
     except InputError as e:
+        if "another lensim run" in e.message:  # the folder is being written (a second build): not the lens's fault
+            raise
         atomic_write_json(_failed_file(out_dir, planned.id), {"id": planned.id, "reason": str(e)})
         return False
     _finish(out_dir, planned, bank)

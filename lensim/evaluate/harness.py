@@ -58,10 +58,10 @@ from lensim.psf.bank.grid import is_grid
 from lensim.render.mapping import SensorMapping, native_mapping
 from lensim.sensor.profile import SensorProfile, sensor_from_dict
 
-#: Method names understood by :func:`builtin_method` (``model`` and ``plain`` need a
-#: checkpoint: :func:`checkpoint_method`).
+#: Method names understood by :func:`builtin_method` (``model``, ``plain`` and ``universal``,
+#: the shipped universal model (lensim.restore.universal), need a checkpoint: :func:`checkpoint_method`).
 BUILTIN_METHODS: tuple[str, ...] = ("input", "wiener", "rl", "unsharp")
-CHECKPOINT_METHODS: tuple[str, ...] = ("model", "plain")
+CHECKPOINT_METHODS: tuple[str, ...] = ("model", "plain", "universal")
 #: Old method names still understood: alias -> the method it names (results stay keyed by
 #: the name the user wrote).
 METHOD_ALIASES: dict[str, str] = {"plain-unet": "plain"}

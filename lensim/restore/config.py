@@ -72,6 +72,9 @@ class TrainConfig:
         inputs in vector order, "ranges": {key: [smallest, largest]} over the training
         records}); None: derived from the training records when the run starts (and
         recorded here, in RUN/config.json and in checkpoints).
+    init: a checkpoint (or "universal": lensim.restore.universal's shipped model) whose
+        weights a new run starts from instead of a random initialisation; its network must
+        be the one these settings build. Not used when resuming.
     """
 
     epochs: int = 30
@@ -104,6 +107,7 @@ class TrainConfig:
     use_settings: bool = True
     on_nan: str = "rollback"
     conditioning: dict[str, Any] | None = None
+    init: str | None = None
 
     def resolved(self) -> TrainConfig:
         """A copy with the architecture's defaults filled in: use_deformable, use_context

@@ -32,9 +32,8 @@ resumed from any checkpoint, even one written mid-epoch by the time budget, cont
 very same sequence of batches; with model, optimizer and scheduler state restored the loss
 curve on CPU is bit-for-bit that of an uninterrupted run (same thread count).
 
-Devices: "cpu" (default), "cuda" (mixed precision: bfloat16 autocast where supported, else
-float16 with a gradient scaler). Multi-GPU: launch with ``torchrun --nproc_per_node N``
-(lensim.restore.distributed).
+Devices: "cpu", "cuda" (bfloat16 autocast where supported, else float16 with a grad scaler); multi-GPU:
+``torchrun --nproc_per_node N`` (lensim.restore.distributed). TrainConfig.init: start from those weights.
 """
 
 from __future__ import annotations
@@ -79,6 +78,7 @@ from lensim.restore.losses import LOSSES, restoration_loss
 from lensim.restore.models import ARCHS, build_model
 from lensim.restore.run_log import RunLog
 from lensim.restore.schedule import LR_SCHEDULES, BudgetClock, LearningRate
+from lensim.restore.universal import load_init
 
 # Settings that must not change when resuming (they would change the loss curve's meaning).
 FROZEN_ON_RESUME = (
@@ -287,6 +287,8 @@ def _build_state(
     state = TrainingState(model, optimizer, lr.scheduler, scaler)
     if ckpt is not None:
         state.resume_from(ckpt, source)
+    elif cfg.init:
+        load_init(model, cfg.init)
     return state, lr, autocast
 
 

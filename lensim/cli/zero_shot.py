@@ -1,0 +1,49 @@
+"""`lensim restore` with the universal model (zero-shot): no training run, the lens and the
+sensor named instead (lensim.restore.universal).
+
+``lensim restore universal PHOTO... --lens LENS --sensor SENSOR -o OUT``, or with --lens the
+checkpoint left out (``lensim restore --lens LENS --sensor SENSOR PHOTO... -o OUT``): the
+shipped universal model restores the photos. A sensor pitch or an F-number outside the
+ranges the model was trained across is one line naming --sensor or --fno (exit status 2).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from lensim.errors import InputError
+
+
+def universal_inputs(
+    checkpoint: Path, images: list[Path], lens: str | None, sensor: str | None
+) -> tuple[Path, list[Path], bool]:
+    """(checkpoint path, images, zero-shot?): CHECKPOINT "universal" is the shipped model;
+    with --lens given, a CHECKPOINT that is a photo or raw file is the first image and the
+    shipped model restores them all. Zero-shot needs --lens and --sensor (one line naming them)."""
+    from lensim.images import READ_SUFFIXES
+    from lensim.raw import RAW_SUFFIXES
+    from lensim.restore.universal import NAME, model_path
+
+    photo = checkpoint.suffix.lower() in (*READ_SUFFIXES, *RAW_SUFFIXES)
+    if str(checkpoint) != NAME and not (lens is not None and photo):
+        return checkpoint, images, False
+    if lens is None or sensor is None:
+        raise InputError(
+            "--lens/--sensor", None, "the universal model restores a lens it is told: expected --lens and --sensor"
+        )
+    return model_path(NAME), (images if str(checkpoint) == NAME else [checkpoint, *images]), True
+
+
+def check_zero_shot(info: dict, sensor_data: dict, lens: str, fno: float | None) -> Any:
+    """The lens (loaded) after checking that the universal model serves it: the sensor's
+    pitch and the F-number (--fno, else the lens's own) inside the model's trained ranges;
+    one-line InputErrors naming the option."""
+    from lensim.restore.checkpoint import read_checkpoint
+    from lensim.restore.universal import check_range, load_lens_or_entry, zero_shot_fno
+
+    universal = read_checkpoint(info["path"]).get("universal") or {}
+    lens_obj = load_lens_or_entry(lens)
+    check_range(universal, "pixel_pitch_um", float(sensor_data["pixel_pitch_um"]), "--sensor")
+    check_range(universal, "fno", zero_shot_fno(lens_obj, fno), "--fno" if fno is not None else "--lens")
+    return lens_obj

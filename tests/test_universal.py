@@ -1,0 +1,172 @@
+"""The universal model (lensim.restore.universal): pretraining resumes to the very weights of
+an uninterrupted run; the shipped model loads and restores a photo zero-shot through `lensim
+restore --lens --sensor`; a sensor or F-number outside its trained ranges is one line (exit
+2); `lensim train --init` starts from its weights and resumes after a kill.
+
+Networks and pairs are tiny (synthetic pairs, width 8): the shipped model's training is
+recorded in lensim/assets/models/universal/README.md.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+import pytest
+import torch
+
+import lensim.restore.universal as uni
+from cli_runner import run_cli
+from lensim.errors import InputError
+from lensim.images import write_image
+from lensim.restore.config import TrainConfig
+from lensim.restore.models import build_model
+from lensim.sensor.profile import load_sensor
+from test_kill_resume import TRAIN, _losses, _rows, cli, kill_when
+from test_train import make_pairs
+
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
+PITCH_UM = 5.97  # the fullframe_dslr profile's pitch: the pairs' sensor
+TINY = uni.PretrainConfig(width=8, stem=2, crop=32, batch_size=2, time_budget_s=None, checkpoint_every_s=0.0)
+
+
+def _pairs(root: Path, seed: int) -> Path:
+    """Synthetic pairs (tests/test_train.make_pairs) on a sensor of PITCH_UM."""
+    make_pairs(root, seed=seed)
+    manifest = json.loads((root / "manifest.json").read_text())
+    manifest["sensor"] = {**load_sensor("fullframe_dslr").to_dict(), "resolution": manifest["sensor"]["resolution"]}
+    (root / "manifest.json").write_text(json.dumps(manifest))
+    return root
+
+
+@pytest.fixture(scope="module")
+def shipped(tmp_path_factory) -> Path:
+    """A tiny universal model pretrained on two pairs folders and shipped into a folder."""
+    base = tmp_path_factory.mktemp("universal")
+    folders = [_pairs(base / "a", 0), _pairs(base / "b", 1)]
+    uni.pretrain(folders, base / "run", uni.replace(TINY, max_steps=4))
+    return uni.ship(base / "run", base / "model").parent
+
+
+def test_pretraining_resumes_to_the_weights_of_an_uninterrupted_run(tmp_path):
+    folders = [_pairs(tmp_path / "a", 0), _pairs(tmp_path / "b", 1)]
+    whole = uni.pretrain(folders, tmp_path / "whole", uni.replace(TINY, max_steps=6))
+    uni.pretrain(folders, tmp_path / "parts", uni.replace(TINY, max_steps=2))  # "killed" after 2 steps
+    parts = uni.pretrain(folders, tmp_path / "parts", uni.replace(TINY, max_steps=6))
+    assert whole.step == parts.step == 6
+    a = torch.load(tmp_path / "whole" / "last.pt", weights_only=True)["model_state"]
+    b = torch.load(tmp_path / "parts" / "last.pt", weights_only=True)["model_state"]
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    assert (tmp_path / "parts" / "log.csv").read_text().splitlines()[0] == "step,epoch,loss,seconds,folders"
+
+
+def test_shipped_model_loads_with_its_ranges(shipped):
+    model, universal = uni.load_universal(shipped)
+    assert universal["pixel_pitch_um"] == [PITCH_UM, PITCH_UM]
+    out = model(torch.rand(1, 3, 32, 32), torch.zeros(1, 2, 32, 32))
+    assert out.shape == (1, 3, 32, 32) and torch.isfinite(out).all()
+    assert (shipped / "training_log.csv").exists()
+
+
+def test_check_range_is_one_line_naming_the_option():
+    ranges = {"pixel_pitch_um": [1.0, 6.0], "fno": [2.0, 8.0]}
+    uni.check_range(ranges, "pixel_pitch_um", 6.2, "--sensor")  # within the 5 % margin
+    with pytest.raises(InputError, match="--sensor.*outside the universal model's range 1..6") as e:
+        uni.check_range(ranges, "pixel_pitch_um", 0.5, "--sensor")
+    assert "\n" not in str(e.value)
+    with pytest.raises(InputError, match="F-number"):
+        uni.check_range(ranges, "fno", 22.0, "--fno")
+
+
+def _photo(tmp_path: Path) -> Path:
+    img = torch.rand(3, 1, 1).expand(3, 48, 64) * 0.5 + 0.25 * torch.rand(3, 48, 64)
+    write_image(tmp_path / "photo.png", img, 8)
+    return tmp_path / "photo.png"
+
+
+def test_zero_shot_restore_and_out_of_range_sensor(shipped, tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(uni, "MODEL_DIR", shipped)
+    photo = _photo(tmp_path)
+    args = ["restore", "--lens", "cooke_triplet", "--sensor", "fullframe_dslr", str(photo), "-o", str(tmp_path / "o")]
+    code, _, err = run_cli([*args, "--quiet"], capsys, monkeypatch)
+    assert code == 0, err
+    assert (tmp_path / "o" / "photo.png").exists()
+    args = ["restore", "universal", str(photo), "--lens", "cooke_triplet", "--sensor", "phone", "-o", str(tmp_path)]
+    code, _, err = run_cli(args, capsys, monkeypatch)
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "--sensor" in lines[0] and "1.12 um pixel pitch" in lines[0], err
+
+
+def test_zero_shot_needs_lens_and_sensor(shipped, tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(uni, "MODEL_DIR", shipped)
+    code, _, err = run_cli(
+        ["restore", "universal", str(_photo(tmp_path)), "-o", str(tmp_path / "o")], capsys, monkeypatch
+    )
+    assert code == 2 and "--lens" in err and len(err.strip().splitlines()) == 1
+
+
+def _init_checkpoint(tmp_path: Path, reference_run: Path) -> Path:
+    """The reference run's trained weights as a checkpoint to start from (--init)."""
+    ckpt = torch.load(reference_run / "last.pt", weights_only=True)
+    path = tmp_path / "init.pt"
+    torch.save({k: ckpt[k] for k in ("format", "version", "model_config", "model_state")}, path)
+    return path
+
+
+@pytest.fixture(scope="module")
+def init_reference(tmp_path_factory):
+    """Uninterrupted runs on synthetic pairs: from scratch, then one started from its weights."""
+    base = tmp_path_factory.mktemp("init")
+    pairs = make_pairs(base / "pairs")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert cli(["train", str(pairs), "-o", str(base / "scratch"), *TRAIN]) == 0
+        init = _init_checkpoint(base, base / "scratch")
+        assert cli(["train", str(pairs), "-o", str(base / "tuned"), "--init", str(init), *TRAIN]) == 0
+    return base, pairs, init
+
+
+def test_init_starts_from_the_weights(init_reference):
+    base, _, _ = init_reference
+    scratch, tuned = _losses(base / "scratch"), _losses(base / "tuned")
+    assert float(tuned[0][1]) < float(scratch[0][1])  # the first step already has the trained weights
+
+
+def test_init_resumes_after_a_kill(init_reference, tmp_path):
+    base, pairs, init = init_reference
+    run = tmp_path / "run"
+    args = ["train", str(pairs), "-o", str(run), "--init", str(init), *TRAIN]
+    steps = kill_when(args, lambda: _rows(run / "steps.csv"), 8, 0, 0.02)
+    resume = ["train", str(pairs), "-o", str(run), "--resume", "--threads", "1", "--quiet"]
+    assert cli(resume if (run / "last.pt").exists() else args) == 0
+    ref = torch.load(base / "tuned" / "last.pt", weights_only=True)
+    got = torch.load(run / "last.pt", weights_only=True)
+    assert got["step"] == ref["step"] == 8, f"killed at step {steps}"
+    for key, value in ref["model_state"].items():
+        assert torch.equal(got["model_state"][key], value), f"{key}, killed at step {steps}"
+
+
+def test_init_of_another_network_is_one_line(tmp_path):
+    other = build_model(TrainConfig(width=8).resolved().model_kwargs())
+    path = tmp_path / "other.pt"
+    torch.save(
+        {"format": "lensim-restore-checkpoint", "model_config": other.config, "model_state": other.state_dict()}, path
+    )
+    mine = build_model(TrainConfig(width=16).resolved().model_kwargs())
+    with pytest.raises(InputError, match="init.*width 8.*width 16"):
+        uni.load_init(mine, path)
+
+
+def test_evaluate_scores_the_universal_model(shipped, tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(uni, "MODEL_DIR", shipped)
+    pairs = _pairs(tmp_path / "pairs", 2)
+    code, out, err = run_cli(
+        ["evaluate", "--pairs", str(pairs), "--methods", "input,universal", "--json"], capsys, monkeypatch
+    )
+    assert code == 0, err
+    summary = json.loads(out)
+    assert set(summary["methods"]) == {"input", "universal"}
+    assert summary["methods"]["universal"]["psnr_db"] != summary["methods"]["input"]["psnr_db"]
