@@ -2,6 +2,7 @@
 benchmarks/calibration_validation.py)."""
 
 import pytest
+
 from cli_runner import run_cli
 
 
