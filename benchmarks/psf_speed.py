@@ -53,7 +53,7 @@ import lensim  # noqa: F401  (before torch, as for a user: lensim's OMP_WAIT_POL
 import torch
 
 # isort: on
-from lensim.optics.aiming import chief_ray_image_height
+from lensim.optics.aiming.rays import chief_ray_image_height
 from lensim.optics.lens import Lens
 from lensim.optics.lens_file import load_lens
 from lensim.optics.paraxial import ParaxialData, paraxial_data

@@ -81,7 +81,7 @@ def optiland_model(lens: Lens):
 
 def lensim_runner(lens: Lens, pupil: np.ndarray):
     """A function that generates and traces the rays once; returns (image xy or NaN)."""
-    from lensim.optics.aiming import generate_rays
+    from lensim.optics.aiming.rays import generate_rays
 
     para = paraxial_data(lens)
     pts = torch.as_tensor(pupil, dtype=torch.float64)
@@ -161,7 +161,7 @@ class _Worker:
 
 def compare_trees(baseline: Path, lens_names: list[str], sizes: list[int], repeats: int, threads: int | None) -> None:
     """Old (baseline checkout) against new (this tree): trace() on the same saved rays."""
-    from lensim.optics.aiming import generate_rays
+    from lensim.optics.aiming.rays import generate_rays
 
     here = Path(__file__).resolve().parents[1]
     old, new = _Worker(baseline.resolve(), threads), _Worker(here, threads)

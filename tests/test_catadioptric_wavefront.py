@@ -13,10 +13,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lensim.optics.aiming import object_field
+from lensim.optics.aiming.rays import object_field
+from lensim.optics.aiming.sampling import square_grid_full
 from lensim.optics.lens_file import load_lens
 from lensim.optics.paraxial import paraxial_data
-from lensim.optics.pupil import square_grid_full
 from lensim.psf import zernike
 from lensim.psf.wavefront import wavefront
 from own_trace import opd_waves

@@ -16,12 +16,12 @@ import yaml
 
 from cli_runner import run_cli
 from lensim.errors import RayTraceError
-from lensim.optics.aiming import object_field
+from lensim.optics.aiming.rays import object_field
+from lensim.optics.aiming.sampling import hexapolar
 from lensim.optics.lens import Lens
 from lensim.optics.lens_file import lens_from_dict, load_lens
 from lensim.optics.materials import ConstantIndex
 from lensim.optics.paraxial import paraxial_data
-from lensim.optics.pupil import hexapolar
 from lensim.optics.spot import spot_diagram
 from lensim.optics.surfaces import Surface
 from lensim.optics.trace import VIGNETTED

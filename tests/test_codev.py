@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from lensim.errors import InputError
-from lensim.optics.aiming import generate_rays
+from lensim.optics.aiming.rays import generate_rays
 from lensim.optics.codev import read_seq
 from lensim.optics.lens_file import GlassSubstitutionWarning, load_lens
 from lensim.optics.materials import CatalogGlass, ModelGlass

@@ -8,7 +8,7 @@ import math
 import pytest
 
 from lensim.errors import InputError
-from lensim.optics.aiming import object_field
+from lensim.optics.aiming.rays import object_field
 from lensim.optics.lens import Lens
 from lensim.optics.materials import ConstantIndex
 from lensim.optics.paraxial import paraxial_image_height

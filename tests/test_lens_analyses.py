@@ -11,9 +11,9 @@ import math
 import pytest
 
 from lensim.errors import ParameterError
+from lensim.optics.aiming.sampling import hexapolar
 from lensim.optics.analysis import fields_to_show
 from lensim.optics.lens_file import load_lens
-from lensim.optics.pupil import hexapolar
 from lensim.optics.spot import SPOT_RINGS, spot_diagram, spot_report
 
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from cli_runner import run_cli
-from lensim.optics.aiming import chief_ray_image_height
+from lensim.optics.aiming.rays import chief_ray_image_height
 from lensim.optics.field_analysis import distortion, relative_illumination
 from lensim.optics.lens_file import load_lens
 from lensim.optics.lensfun import CORNER_IN_SHORT_HALF_SIDES

@@ -21,9 +21,9 @@ from lensim.assets.library import (
     load_library_lens,
 )
 from lensim.errors import InputError
-from lensim.optics.aiming import chief_ray_image_height, generate_rays, object_field
+from lensim.optics.aiming.rays import chief_ray_image_height, generate_rays, object_field
+from lensim.optics.aiming.sampling import hexapolar
 from lensim.optics.paraxial import paraxial_data
-from lensim.optics.pupil import hexapolar
 from lensim.optics.trace import MISSED, TIR, trace
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")

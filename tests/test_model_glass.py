@@ -14,7 +14,7 @@ import pytest
 
 from cli_runner import run_cli
 from lensim.errors import InputError
-from lensim.optics.aiming import chief_ray_image_height
+from lensim.optics.aiming.rays import chief_ray_image_height
 from lensim.optics.lens_file import lens_from_dict, lens_to_dict, load_lens, match_glasses
 from lensim.optics.materials import (
     WAVELENGTH_C_UM,

@@ -20,12 +20,12 @@ import pytest
 import torch
 
 from lensim.errors import InputError
-from lensim.optics.aiming import generate_rays
+from lensim.optics.aiming.rays import generate_rays
+from lensim.optics.aiming.sampling import hexapolar, square_grid
 from lensim.optics.lens import Lens
 from lensim.optics.lens_file import lens_from_dict, lens_to_dict, load_lens
 from lensim.optics.materials import Air, ConstantIndex
 from lensim.optics.paraxial import paraxial_data
-from lensim.optics.pupil import hexapolar, square_grid
 from lensim.optics.surfaces import Surface
 from lensim.optics.trace import MISSED, OK, VIGNETTED, trace, trace_reference
 from lensim.optics.zemax import read_zmx

@@ -50,7 +50,7 @@ from optiland.materials import AbbeMaterial
 from optiland.optic import Optic
 from optiland.rays.ray_aiming.initialization import RealReferenceStrategy
 
-from lensim.optics.aiming import generate_rays, object_field
+from lensim.optics.aiming.rays import generate_rays, object_field
 from lensim.optics.lens import Lens
 from lensim.optics.lens_file import GlassSubstitutionWarning, load_lens
 from lensim.optics.materials import WAVELENGTH_D_UM, Air, CatalogGlass

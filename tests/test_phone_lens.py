@@ -19,12 +19,12 @@ import torch
 
 from lensim.assets import lens_names
 from lensim.errors import InputError, RayTraceError
-from lensim.optics.aiming import chief_ray_image_height, generate_rays
+from lensim.optics.aiming.rays import chief_ray_image_height, generate_rays
+from lensim.optics.aiming.sampling import hexapolar
 from lensim.optics.analysis import first_order_summary
 from lensim.optics.lens_file import load_lens
 from lensim.optics.materials import WAVELENGTH_D_UM, Air, ModelGlass
 from lensim.optics.paraxial import paraxial_data
-from lensim.optics.pupil import hexapolar
 from lensim.optics.trace import trace
 from lensim.render.kernels import check_bank_fits
 from lensim.render.mapping import SensorMapping, map_to_sensor

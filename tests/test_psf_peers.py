@@ -81,7 +81,7 @@ from optiland.psf.huygens_fresnel import ScalarHuygensPSF, image_vertex_grid
 from optiland.psf.huygens_fresnel_strategies import NumbaSummation
 from optiland.rays.ray_aiming.initialization import get_stop_radius_strategy
 
-from lensim.optics.aiming import chief_ray_image_height, object_field
+from lensim.optics.aiming.rays import chief_ray_image_height, object_field
 from lensim.optics.lens import Lens
 from lensim.optics.lens_file import load_lens
 from lensim.optics.paraxial import paraxial_data

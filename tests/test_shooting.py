@@ -193,7 +193,7 @@ def test_unit_focusing_matches_optilands_paraxial_image_solve(focus_m: float) ->
 def test_defocus_blur_diameter_is_delta_z_over_working_f_number() -> None:
     # focused at 0.5 m, object at infinity: the image plane stands dz behind the object's
     # paraxial image and the geometric blur is a disc of diameter dz / N_w
-    from lensim.optics.pupil import hexapolar
+    from lensim.optics.aiming.sampling import hexapolar
     from lensim.optics.spot import spot_diagram
 
     lens = load_lens("cooke_triplet")

@@ -3,7 +3,7 @@ training and evaluation modules, SciPy's signal/statistics packages, Dask or Mat
 (they load inside the commands that use them). `import lensim.cli`, `lensim --help` and
 every command's --help load neither torch nor NumPy nor the optics/PSF/render stack: the
 options' defaults come from plain-Python modules (lensim.psf.defaults,
-lensim.optics.aiming_modes, lensim.assets). Checked in a fresh interpreter through
+lensim.optics.aiming.modes, lensim.assets). Checked in a fresh interpreter through
 sys.modules, not by timing: `import lensim.cli`, `lensim --help`, `lensim CMD --help` for
 every command of the app, and `lensim lens info`."""
 
@@ -39,7 +39,8 @@ COMPUTE = (
     "numpy",
     "lensim.optics.lens",
     "lensim.optics.trace",
-    "lensim.optics.aiming",
+    "lensim.optics.aiming.rays",
+    "lensim.optics.aiming.real",
     "lensim.psf.compute",
     "lensim.psf.bank",
     "lensim.render",

@@ -161,7 +161,7 @@ def test_turning_the_perturbation_turns_the_field():
     # the chief ray of field -h of a lens decentred along y lands where field +h of the
     # lens turned by 180 deg lands, mirrored (lens_at_azimuth: fields at other azimuths)
     from lensim.calibrate.tolerance_report import lens_at_azimuth
-    from lensim.optics.aiming import chief_ray_image_height
+    from lensim.optics.aiming.rays import chief_ray_image_height
 
     lens = perturbed_lens(load_lens("cooke_triplet", warn=False), {"e2.decentre_y": 0.05, "e1.tilt_x": 0.1})
     turned = lens_at_azimuth(lens, 180.0)

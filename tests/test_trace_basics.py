@@ -5,12 +5,12 @@ import math
 import pytest
 import torch
 
-from lensim.optics.aiming import generate_rays
+from lensim.optics.aiming.rays import generate_rays
+from lensim.optics.aiming.sampling import square_grid
 from lensim.optics.lens import Lens
 from lensim.optics.lens_file import load_lens
 from lensim.optics.materials import ConstantIndex
 from lensim.optics.paraxial import paraxial_data
-from lensim.optics.pupil import square_grid
 from lensim.optics.surfaces import Surface
 from lensim.optics.trace import MISSED, TIR, VIGNETTED, trace
 

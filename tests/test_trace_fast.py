@@ -4,11 +4,11 @@ import pytest
 import torch
 
 import lensim.optics.trace as T
-from lensim.optics.aiming import generate_rays, object_field
+from lensim.optics.aiming.rays import generate_rays, object_field
+from lensim.optics.aiming.sampling import random_uniform, square_grid
 from lensim.optics.lens import Lens
 from lensim.optics.lens_file import load_lens
 from lensim.optics.materials import ConstantIndex
-from lensim.optics.pupil import random_uniform, square_grid
 from lensim.optics.surfaces import Surface
 from reference_lenses import REFERENCE_LENSES
 

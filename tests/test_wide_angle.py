@@ -20,7 +20,7 @@ import pytest
 import torch
 
 from lensim.errors import RayTraceError
-from lensim.optics.aiming import chief_ray_image_height, generate_rays, trace_chief_rays
+from lensim.optics.aiming.rays import chief_ray_image_height, generate_rays, trace_chief_rays
 from lensim.optics.lens import Lens
 from lensim.optics.lens_file import load_lens
 from lensim.optics.materials import ConstantIndex

@@ -21,7 +21,7 @@ from lensim.cli.bank_options import (
 from lensim.cli.common import console, print_json
 from lensim.cli.validate import AIMINGS, choice, output_file
 from lensim.errors import InputError
-from lensim.optics.aiming_modes import Aiming
+from lensim.optics.aiming.modes import Aiming
 
 if TYPE_CHECKING:
     from lensim.optics.lens import Lens
@@ -379,8 +379,8 @@ def spot(
 
     Example: lensim lens spot cooke_triplet -o spot.png --json --image-height-mm 0 --image-height-mm 14.1
     """
+    from lensim.optics.aiming.sampling import hexapolar
     from lensim.optics.analysis import fields_to_show
-    from lensim.optics.pupil import hexapolar
     from lensim.optics.spot import SPOT_RINGS, spot_diagram, spot_report
 
     if output is None and not json_out:

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import TypeVar
 
 from lensim.errors import InputError
-from lensim.optics.aiming_modes import AIMINGS
+from lensim.optics.aiming.modes import AIMINGS
 
 T = TypeVar("T")
 

@@ -7,7 +7,8 @@ import math
 from collections.abc import Sequence
 
 from lensim.errors import ParameterError
-from lensim.optics.aiming import Aiming, chief_ray_image_height, object_field
+from lensim.optics.aiming import Aiming
+from lensim.optics.aiming.rays import chief_ray_image_height, object_field
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import paraxial_data
 

@@ -13,7 +13,7 @@ the chief ray's neighbourhood (the Coddington foci, to O(delta^2)). Each is give
 distance from the image plane along z (mm), positive away from the lens, so a lens with
 the image plane at its paraxial focus reads 0 on axis; astigmatism is T - S.
 
-Fields in the lens's field unit (lensim.optics.aiming.object_field), along +y.
+Fields in the lens's field unit (lensim.optics.aiming.rays.object_field), along +y.
 """
 
 from __future__ import annotations
@@ -24,7 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from lensim.optics.aiming import Aiming, generate_rays, object_field, trace_chief_rays
+from lensim.optics.aiming import Aiming
+from lensim.optics.aiming.rays import generate_rays, object_field, trace_chief_rays
 from lensim.optics.field_analysis import _default_fields, _field_unit
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import paraxial_data

@@ -14,8 +14,8 @@ import numpy as np
 import torch
 
 from lensim.errors import InputError, RayTraceError
-from lensim.optics.aiming import (
-    Aiming,
+from lensim.optics.aiming import Aiming
+from lensim.optics.aiming.rays import (
     chief_ray_image_height,
     describe_failure,
     generate_rays,

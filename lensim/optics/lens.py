@@ -332,7 +332,7 @@ class Lens:
     def launch_field_type(self) -> str:
         """What rays are launched with: "angle" (deg) for an object at infinity or for angle
         fields, "object_height" (mm) for a finite object otherwise. Image-height fields are
-        solved for a launch value of this type (lensim.optics.aiming.object_field)."""
+        solved for a launch value of this type (lensim.optics.aiming.rays.object_field)."""
         return "angle" if self.infinite_object or self.field_type == "angle" else "object_height"
 
     def launch_lens(self) -> Lens:

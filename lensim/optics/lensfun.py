@@ -30,7 +30,8 @@ import numpy as np
 
 from lensim.errors import InputError, LensimError, ParameterError, renamed
 from lensim.io import atomic_write_text
-from lensim.optics.aiming import Aiming, object_field
+from lensim.optics.aiming import Aiming
+from lensim.optics.aiming.rays import object_field
 from lensim.optics.field_analysis import distortion, lateral_colour, relative_illumination
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import paraxial_data

@@ -8,10 +8,11 @@ from dataclasses import dataclass
 import torch
 
 from lensim.errors import ParameterError
-from lensim.optics.aiming import Aiming, generate_rays, object_field, trace_chief_rays
+from lensim.optics.aiming import Aiming
+from lensim.optics.aiming.rays import generate_rays, object_field, trace_chief_rays
+from lensim.optics.aiming.sampling import hexapolar
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import ParaxialData, paraxial_data
-from lensim.optics.pupil import hexapolar
 from lensim.optics.trace import trace
 
 SPOT_RINGS = 8  # hexapolar rings in spot diagrams: 217 rays per field and wavelength

@@ -22,11 +22,12 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Circle
 
 from lensim.errors import InputError, RayTraceError
-from lensim.optics.aiming import Aiming, generate_rays, object_field, trace_chief_rays
+from lensim.optics.aiming import Aiming
+from lensim.optics.aiming.rays import generate_rays, object_field, trace_chief_rays
+from lensim.optics.aiming.sampling import hexapolar
 from lensim.optics.lens import Lens
 from lensim.optics.materials import Air
 from lensim.optics.paraxial import ParaxialData, paraxial_data
-from lensim.optics.pupil import hexapolar
 from lensim.optics.spot import SPOT_RINGS, SpotDiagram, airy_radius_um, spot_diagram, spot_summary
 from lensim.optics.surfaces import Surface
 from lensim.optics.trace import DTYPE, MISSED, OK, Rays, media_indices, trace_surface

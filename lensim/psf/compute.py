@@ -16,7 +16,8 @@ import numpy as np
 import torch
 
 from lensim.errors import InputError, PupilSamplingError
-from lensim.optics.aiming import Aiming, object_field
+from lensim.optics.aiming import Aiming
+from lensim.optics.aiming.rays import object_field
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import paraxial_data, paraxial_image_height
 from lensim.psf.defaults import PsfMethod, psf_method

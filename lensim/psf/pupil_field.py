@@ -8,8 +8,9 @@ is the object-space étendue of its grid cell (so energy is conserved) and its a
 the sphere comes from the grid neighbours (so ray density sets the amplitude).
 
 Central obscurations block their rays (an annular pupil of ratio eps transmits 1 - eps^2
-of the power), never the chief ray, which is a reference ray (aiming.trace_chief_rays):
-the sphere is centred on it whether or not an obscuration covers the stop centre.
+of the power), never the chief ray, which is a reference ray
+(lensim.optics.aiming.rays.trace_chief_rays): the sphere is centred on it whether or not an
+obscuration covers the stop centre.
 """
 
 from __future__ import annotations
@@ -21,10 +22,11 @@ from dataclasses import dataclass, replace
 import torch
 
 from lensim.errors import InputError, RayTraceError
-from lensim.optics.aiming import Aiming, generate_rays, object_field, trace_chief_rays
+from lensim.optics.aiming import Aiming
+from lensim.optics.aiming.rays import generate_rays, object_field, trace_chief_rays
+from lensim.optics.aiming.sampling import square_grid_full
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import ParaxialData, paraxial_data
-from lensim.optics.pupil import square_grid_full
 from lensim.optics.trace import DTYPE, MISSED, OK, TIR, VIGNETTED, trace
 
 

@@ -160,7 +160,7 @@ def _compute_field(job: _Job, index: int, fld: float, para: ParaxialData | None 
     """Compute one bank field: per wavelength a fine PSF about the primary chief-ray point,
     integrated over pixels, normalized to unit sum, times relative illumination and the
     channel weights, summed into R, G, B (see lensim.psf.bank)."""
-    from lensim.optics.aiming import object_field
+    from lensim.optics.aiming.rays import object_field
 
     lens = job.lens
     para = para or paraxial_data(lens)

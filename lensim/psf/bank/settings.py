@@ -100,9 +100,9 @@ def suggest_kernel_pixels(lens: Lens, pitch_um: float, limit: int = 99) -> int:
     7 and at most `limit`."""
     import torch
 
-    from lensim.optics.aiming import generate_rays, object_field, trace_chief_rays
+    from lensim.optics.aiming.rays import generate_rays, object_field, trace_chief_rays
+    from lensim.optics.aiming.sampling import hexapolar
     from lensim.optics.paraxial import paraxial_data
-    from lensim.optics.pupil import hexapolar
     from lensim.optics.trace import trace
 
     para = paraxial_data(lens)

@@ -1,7 +1,7 @@
 """Real ray aiming: the rays that cross the real stop at given points.
 
 The unknown of each ray is the point (x, y) where it crosses the paraxial entrance-pupil
-plane (lensim.optics.launch); the target is the point (px, py) * paraxial stop
+plane (lensim.optics.aiming.launch); the target is the point (px, py) * paraxial stop
 semi-diameter on the stop surface (as Zemax's ray aiming does). Rays are traced to the
 stop without apertures (a clear aperture or an obscuration vignettes a ray, it does not
 move the ray's aim).
@@ -31,7 +31,7 @@ import math
 
 import torch
 
-from lensim.optics.launch import launch_at, object_rays
+from lensim.optics.aiming.launch import launch_at, object_rays
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import ParaxialData
 from lensim.optics.trace import DTYPE, trace

@@ -1,5 +1,5 @@
 """The ray-aiming modes, in plain Python (no NumPy or torch): the command line checks and
-names them without loading the ray tracer (lensim.optics.aiming, which re-exports Aiming)."""
+names them without loading the ray tracer (lensim.optics.aiming re-exports both names)."""
 
 from __future__ import annotations
 

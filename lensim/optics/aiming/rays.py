@@ -1,12 +1,12 @@
-"""Object-space ray generation and ray aiming.
+"""Rays of fields and pupil points (paraxial or real aiming), and the chief ray as a reference ray.
 
 A ray is named by its field (in the lens's field unit) and its normalized pupil
 coordinates (px, py) in the unit disc. Paraxial aiming sends it through the point
-(px, py) * EPD/2 of the paraxial entrance pupil; real aiming (lensim.optics.real_aiming)
+(px, py) * EPD/2 of the paraxial entrance pupil; real aiming (lensim.optics.aiming.real)
 finds the ray that crosses the real stop surface at (px, py) * paraxial stop
 semi-diameter (as Zemax's ray aiming does), so wide-angle lenses with pupil aberration
 and distortion are traced right, up to the field where the chief ray stops existing.
-The chief ray is (0, 0). Where rays start: lensim.optics.launch.
+The chief ray is (0, 0). Where rays start: lensim.optics.aiming.launch.
 
 The chief ray is a reference ray: it is traced through unobscured(lens), so a central
 obscuration (a Cassegrain's secondary, a mirror-backed secondary spot, the shadow of a
@@ -23,11 +23,11 @@ import numpy as np
 import torch
 
 from lensim.errors import InputError, RayTraceError
-from lensim.optics.aiming_modes import Aiming
-from lensim.optics.launch import launch, launch_at, object_rays
+from lensim.optics.aiming.launch import launch, launch_at, object_rays
+from lensim.optics.aiming.modes import Aiming
+from lensim.optics.aiming.real import aim_real
 from lensim.optics.lens import Lens
 from lensim.optics.paraxial import ParaxialData, paraxial_data, paraxial_image_height
-from lensim.optics.real_aiming import aim_real
 from lensim.optics.trace import (
     DTYPE,
     STATUS_TEXT,
@@ -58,7 +58,7 @@ def generate_rays(
     normalized pupil coordinates. Returns (rays, wavelength tensor shaped (W, 1, 1)).
     start: with real aiming, a nearby solution of the aim (the ``entrance_xy`` of rays
     aimed before, e.g. at a neighbouring wavelength) to start from
-    (lensim.optics.real_aiming.aim_real). Real-aimed rays carry their aim as
+    (lensim.optics.aiming.real.aim_real). Real-aimed rays carry their aim as
     ``rays.entrance_xy`` (W, F, P, 2).
     """
     device = pupil.device
@@ -197,8 +197,9 @@ def describe_failure(lens: Lens, field_value: float, fail, what: str, coverage: 
     if coverage is not None:
         largest = math.copysign(math.floor(abs(coverage) * 100) / 100, coverage)  # rounded towards the axis
         expected += f" (its chief ray reaches the image up to {largest:g} {unit})"
+    ray = f"{lens.source}: fields: the {what} at field {field_value:g} {unit}"
     if fail is None:
-        return f"{lens.source}: fields: the {what} at field {field_value:g} {unit} could not be aimed through the stop; {expected}"
+        return f"{ray} could not be aimed through the stop; {expected}"
     status, surf = fail
     where = "the image plane" if surf >= lens.num_surfaces else f"surfaces[{surf}] (surface {surf + 1} in lens info)"
-    return f"{lens.source}: fields: the {what} at field {field_value:g} {unit} {STATUS_TEXT[status]} at {where}; {expected}"
+    return f"{ray} {STATUS_TEXT[status]} at {where}; {expected}"
