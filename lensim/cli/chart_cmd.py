@@ -269,15 +269,18 @@ def _print_table(record: dict) -> None:
         f"{len(det['marker_ids'])}, reprojection {det['reprojection_rms_px']:.2f} px RMS",
         highlight=False,
     )
-    t = Table(title="photo vs lensim per field zone (MTF area: SFR integral 0..Nyquist, cycles/pixel)")
-    for col in ("field", "edges", "MTF area photo", "MTF area sim", "ratio sim/photo", "MTF50 photo", "MTF50 sim",
-                "R-G px", "B-G px", "PSNR dB"):  # fmt: skip
-        t.add_column(col)
+    t = Table(
+        title="per field zone: MTF area (SFR integral to Nyquist, cycles/pixel) of the photo and of lensim, their "
+        "ratio lensim/photo, MTF50 photo/lensim (cycles/pixel), lateral colour R-G/B-G (px), checker PSNR (dB)"
+    )
+    for col in ("field", "n", "photo", "lensim", "ratio", "MTF50", "R-G/B-G", "PSNR"):
+        t.add_column(col, no_wrap=True)
     for z in record["zones"]:
+        lc = z["photo_lateral_colour_px"]
         t.add_row(
             f"{z['mean_field']:.2f}", str(z["edges"]), f"{z['photo_mtf_area']:.4f}", f"{z['sim_mtf_area']:.4f}",
-            f"{z['mtf_area_ratio']:.3f}", f"{z['photo_mtf50_cy_px']:.3f}", f"{z['sim_mtf50_cy_px']:.3f}",
-            f"{z['photo_lateral_colour_px'][0]:+.2f}", f"{z['photo_lateral_colour_px'][1]:+.2f}",
+            f"{z['mtf_area_ratio']:.3f}", f"{z['photo_mtf50_cy_px']:.3f}/{z['sim_mtf50_cy_px']:.3f}",
+            f"{lc[0]:+.2f}/{lc[1]:+.2f}",
             "-" if z["psnr_db"] is None or not math.isfinite(z["psnr_db"]) else f"{z['psnr_db']:.1f}",
         )  # fmt: skip
     console.print(t)
