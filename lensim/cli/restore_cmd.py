@@ -127,6 +127,12 @@ def restore_command(
         help="Focus distance in metres from the sensor, inf for infinity (overrides their EXIF SubjectDistance).",
     ),
     focal_mm: float = typer.Option(None, "--focal-mm", help="Focal length in mm (overrides their EXIF FocalLength)."),
+    bank: Path = typer.Option(
+        None,
+        "--bank",
+        help="PSF bank folder of the lens, for a PSF-informed network (--arch psfnet; default: the bank "
+        "of the pairs it was trained on).",
+    ),
     quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
     json_out: bool = typer.Option(False, "--json", help="Print what was written as JSON."),
 ) -> None:
@@ -194,6 +200,7 @@ def restore_command(
         check_zero_shot(info, sensor_data, lens_file, fno)
     _check_photos(photos, offset, (sensor_w, sensor_h))
     photo_settings = _photo_settings(photos, shooting, info)
+    stage = _stage_inputs(model, info, bank, sensor_data)
     written = []
     with folder_lock(output), _tile_memory(workers):  # one writer at a time
         if raws:
@@ -210,6 +217,7 @@ def restore_command(
                 conditioning=info["conditioning"],
                 engine=engine,
                 onnx=info.get("onnx"),
+                bank=None if stage is None else str(stage[0].directory),
             )
             written += _restore_raws(raws, output, model, settings, dng, (workers, scheduler), quiet or json_out)
         for path in photos:
@@ -224,6 +232,7 @@ def restore_command(
                     bits,
                     quiet or json_out,
                     photo_settings[path],
+                    stage,
                 )
             )
     if json_out:
@@ -350,6 +359,25 @@ def _load_model(
     return model, info, sensor_data, (int(res[0]), int(res[1]))
 
 
+def _stage_inputs(model: Any, info: dict, bank: Path | None, sensor_data: dict) -> tuple[Any, Any] | None:
+    """(PSF bank, sensor profile) for a PSF-informed network (lensim.restore.psf_stage), else
+    None; a bank that is not found is one line naming --bank."""
+    if not getattr(model, "uses_wiener", False):
+        if bank is not None:
+            raise InputError("--bank", None, "applies to a PSF-informed network (--arch psfnet); this one is not")
+        return None
+    from lensim.restore.psf_stage import network_bank
+    from lensim.sensor.profile import sensor_from_dict
+
+    try:
+        found = network_bank(info, bank)
+    except InputError as e:
+        if bank is not None or e.field != "bank":
+            raise
+        raise InputError("--bank", None, f"{info['path']} {e.message}") from None
+    return found, sensor_from_dict(sensor_data, str(info["path"]))
+
+
 def _restore_photo(
     path: Path,
     output: Path,
@@ -360,10 +388,12 @@ def _restore_photo(
     bits: int,
     quiet: bool,
     settings: torch.Tensor | None,
+    stage: tuple[Any, Any] | None = None,
 ) -> dict:
     """Restore one photo (a full frame, or a native-scale crop at ``offset`` = (top, left)
     sensor pixels; tiling: (tile, overlap); settings: its settings vector for a conditioned
-    network) into OUTPUT/<stem>.png (.tif for TIFF input); returns what was written."""
+    network; stage: (bank, sensor profile) for a PSF-informed network) into
+    OUTPUT/<stem>.png (.tif for TIFF input); returns what was written."""
     tile, overlap = tiling
     from lensim.images import read_image, write_image
     from lensim.restore.infer import image_sensor_geometry, restore_image
@@ -383,10 +413,23 @@ def _restore_photo(
     else:
         _check_offset(path, offset, (w, h), sensor_wh)
     top_left, size = image_sensor_geometry(h, w, (sensor_w, sensor_h), offset)
+    wiener = None
+    if stage is not None:
+        from lensim.restore.psf_stage import photo_wiener, stage_of
+
+        wiener = photo_wiener(img, stage[0], stage[1], top_left, size, None, stage_of(model), str(path))
     with progress_bar(f"restoring {path.name}", "tiles", quiet) as tiles_done:
         try:
             out = restore_image(
-                model, img, top_left, size, tile=tile, overlap=overlap, progress=tiles_done, settings=settings
+                model,
+                img,
+                top_left,
+                size,
+                tile=tile,
+                overlap=overlap,
+                progress=tiles_done,
+                settings=settings,
+                wiener=wiener,
             )
         except OutOfMemory as e:
             raise OutOfMemory(str(path), e.field, e.message) from None

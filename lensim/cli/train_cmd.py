@@ -58,7 +58,9 @@ def train_command(
         "--arch",
         help="Network: nafnet (the default: NAFNet blocks with FOV input "
         "channels and a 2x pixel-unshuffle stem, no deformable convolution, no context block) "
-        "or unet (the paper's field-aware UNet: FOV input, deformable decoder, context block).",
+        "unet (the paper's field-aware UNet: FOV input, deformable decoder, context block) "
+        "or psfnet (the PSF-informed network: the nafnet body refining the Wiener deconvolution "
+        "with the pairs' PSF bank, computed once per crop into DATASET/wiener/).",
     ),
     width: int = typer.Option(
         _D.width,

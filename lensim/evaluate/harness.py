@@ -15,7 +15,8 @@ crop's sensor offset). Outputs are clipped to [0, 1] before scoring. Built-in me
 ``input``, ``wiener``, ``rl``, ``unsharp`` (lensim.evaluate.baselines; the first two are
 oracles using the true bank), and ``model`` / ``plain`` (the plain network baseline;
 ``plain-unet`` is its old name, an alias: :data:`METHOD_ALIASES`) from `lensim train`
-checkpoints (:func:`checkpoint_method`, via lensim.restore.infer).
+checkpoints (:func:`checkpoint_method`, via lensim.restore.infer; a PSF-informed network
+gets each crop's Wiener stage image, lensim.restore.psf_stage).
 
 Aggregation (the summary JSON):
   * ``psnr_db``, ``ssim``: mean over crops of each crop's PSNR (dB) and mean SSIM;
@@ -182,9 +183,20 @@ def checkpoint_method(
             tile=tile,
             overlap=overlap,
             settings=vec,
+            wiener=_stage_image(model, image, ctx),
         )
 
     return restore
+
+
+def _stage_image(model: Any, image: torch.Tensor, ctx: CropContext) -> torch.Tensor | None:
+    """The Wiener stage's image of a crop for a network that takes it (lensim.restore.psfnet:
+    the crop's bank, mapping and capture, as the training cache computed it), else None."""
+    if not getattr(model, "uses_wiener", False):
+        return None
+    from lensim.restore.psf_stage import wiener_channels
+
+    return wiener_channels(image, ctx.mapping, _need_bank(ctx, "model"), ctx.capture, model.stage)
 
 
 # ---------------------------------------------------------------------------------------

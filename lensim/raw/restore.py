@@ -71,7 +71,8 @@ class RestoreSettings:
     settings given for every file (``shooting``: {fno, focus_m, focal_mm}, overriding
     each file's EXIF), the checkpoint's conditioning (Conditioning.to_dict(); None: no
     settings) and the engine: "torch", or "onnxruntime" with ``onnx`` the serialized model
-    (worker processes build their sessions from it)."""
+    (worker processes build their sessions from it); ``bank``: the PSF bank's folder, for a
+    PSF-informed network (lensim.restore.psf_stage.network_bank)."""
 
     checkpoint: str
     sensor: dict[str, Any]
@@ -83,6 +84,7 @@ class RestoreSettings:
     conditioning: dict[str, Any] | None = None
     engine: str = "torch"
     onnx: bytes | None = None
+    bank: str | None = None
 
 
 def plan_jobs(files: list[Path], out_dir: Path, dng: bool) -> list[RawJob]:
@@ -251,9 +253,18 @@ def restore_raw(
     vec = settings_vector(raw, settings, warn=False)  # validate() warned
     img, params = develop_raw(raw, sensor, orient=False)
     top_left, size = raw_geometry(raw, sensor, placement, native)
+    wiener = _stage_image(model, img, (top_left, size), sensor, settings, params.to_dict(), str(job.source))
     try:
         out = restore_image(
-            model, img, top_left, size, tile=settings.tile, overlap=settings.overlap, progress=progress, settings=vec
+            model,
+            img,
+            top_left,
+            size,
+            tile=settings.tile,
+            overlap=settings.overlap,
+            progress=progress,
+            settings=vec,
+            wiener=wiener,
         )
     except OutOfMemory as e:
         raise OutOfMemory(str(job.source), e.field, e.message) from None
@@ -282,6 +293,25 @@ def restore_raw(
         "capture": params.to_dict(),
         "settings": strict_json(raw_settings(raw, settings.shooting)),
     }
+
+
+def _stage_image(
+    model: Any,
+    img: torch.Tensor,
+    geometry: tuple[tuple[float, float], tuple[float, float]],
+    sensor: SensorProfile,
+    settings: RestoreSettings,
+    capture: dict[str, Any],
+    source: str,
+) -> torch.Tensor | None:
+    """The Wiener stage's image of a developed raw for a PSF-informed network (the develop's
+    colour pipeline as its capture; the noise level is not known), else None."""
+    if not getattr(model, "uses_wiener", False):
+        return None
+    from lensim.restore.psf_stage import network_bank, photo_wiener, stage_of
+
+    bank = network_bank({"path": settings.checkpoint}, settings.bank)
+    return photo_wiener(img, bank, sensor, geometry[0], geometry[1], capture, stage_of(model), source)
 
 
 # ----------------------------------------------------------------------------- batches

@@ -4,7 +4,8 @@ by TrainConfig (lensim.restore.config) and by `lensim train` before any work. Pl
 Python (no torch), so the command line checks its options without loading the networks.
 
 The architectures are "nafnet" (the default network: NAFNet with the FOV channels and a 2x
-pixel-unshuffle stem) and "unet" (the paper's field-aware UNet). The rules:
+pixel-unshuffle stem), "unet" (the paper's field-aware UNet) and "psfnet" (the
+PSF-informed network: NAFNet's body refining the Wiener stage's image; NAFNet's rules). The rules:
 
 - field_modulation is a UNet switch, and it is computed from the FOV channels (use_fov);
 - stem (a 2x pixel-unshuffle stem: 2, none: 1) is a NAFNet switch: the UNet takes 1 only;
@@ -26,7 +27,7 @@ from typing import Any
 from lensim.errors import InputError
 
 #: the restoration architectures lensim.restore.models.build_model knows
-ARCHS: tuple[str, ...] = ("unet", "nafnet")
+ARCHS: tuple[str, ...] = ("unet", "nafnet", "psfnet")
 #: the stems NAFNet takes: 1 (none) or 2 (a 2x pixel-unshuffle stem)
 STEMS = (1, 2)
 
@@ -39,6 +40,9 @@ STEMS = (1, 2)
 ARCH_DEFAULTS: dict[str, dict[str, Any]] = {
     "unet": {"use_deformable": True, "use_context": True, "stem": 1},
     "nafnet": {"use_deformable": False, "use_context": False, "stem": 2},
+    # the PSF-informed network (issue 23): the default network's body refining the Wiener
+    # stage's image (lensim.restore.psfnet); NAFNet's rules
+    "psfnet": {"use_deformable": False, "use_context": False, "stem": 2},
 }
 
 
@@ -92,9 +96,10 @@ def check_switches(
 
 def _check_scales(arch: str, use_deformable: bool, scales: int | None, n_dec: int | None) -> None:
     """deformable_scales against the number of decoder scales (None: not known yet)."""
-    if scales is None or (arch == "nafnet" and not use_deformable):  # None: all; no deformable blocks: unused
+    nafnet = arch in ("nafnet", "psfnet")
+    if scales is None or (nafnet and not use_deformable):  # None: all; no deformable blocks: unused
         return
-    low = 1 if arch == "nafnet" else 0
+    low = 1 if nafnet else 0
     if scales < low or (n_dec is not None and scales > n_dec):
         top = " or more" if n_dec is None else f" to {n_dec}"
         why = " (use_deformable=False for none)" if low else ""

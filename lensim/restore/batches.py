@@ -36,15 +36,18 @@ def epoch_batches(
 
 
 def model_inputs(batch: dict[str, torch.Tensor], device: torch.device) -> tuple[torch.Tensor, ...]:
-    """A batch's network arguments on ``device``: (input, fov) or, when the batch carries
-    settings vectors, (input, fov, settings)."""
-    args: tuple[torch.Tensor, ...] = (
+    """A batch's network arguments on ``device``: (input, fov), with (input, fov, settings)
+    when the batch carries settings vectors, and (input, fov, settings or None, wiener) when
+    it carries the Wiener stage's images (the PSF-informed network)."""
+    args: tuple[torch.Tensor | None, ...] = (
         batch["input"].to(device, non_blocking=True),
         batch["fov"].to(device, non_blocking=True),
     )
-    if "settings" in batch:
-        args += (batch["settings"].to(device, non_blocking=True),)
-    return args
+    if "settings" in batch or "wiener" in batch:
+        args += (batch["settings"].to(device, non_blocking=True) if "settings" in batch else None,)
+    if "wiener" in batch:
+        args += (batch["wiener"].to(device, non_blocking=True),)
+    return args  # type: ignore[return-value]
 
 
 def collate(items: list[dict[str, Any]]) -> dict[str, torch.Tensor]:

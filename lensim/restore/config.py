@@ -7,6 +7,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from lensim.restore.arch_rules import ARCH_DEFAULTS, check_switches
+from lensim.restore.psf_stage import WienerStage
 
 
 def settings_dim(conditioning: dict[str, Any] | None) -> int:
@@ -29,8 +30,10 @@ class TrainConfig:
         one is set, else of the epochs; set before every step); lensim.restore.schedule.
     crop: training sub-crop size in pixels (None: the stored crops).
     arch: "nafnet" (the default: lensim.restore.nafnet.NAFNet, one NAFBlock per encoder
-        and decoder scale, two at the smallest) or "unet" (the paper's field-aware UNet,
-        lensim.restore.network.FieldAwareUNet); lensim.restore.models builds either.
+        and decoder scale, two at the smallest), "unet" (the paper's field-aware UNet,
+        lensim.restore.network.FieldAwareUNet) or "psfnet" (the PSF-informed network:
+        NAFNet refining the Wiener stage's image, lensim.restore.psfnet; it needs the
+        pairs' PSF bank); lensim.restore.models builds each.
     width: channels at full resolution (0: the architecture's default, the width at which
         the network, unconditioned, has the reference FieldAwareUNet's parameter count:
         lensim.restore.models.default_width).
@@ -148,7 +151,7 @@ class TrainConfig:
             "settings_dim": settings_dim(self.conditioning),
         }
         n = self.depth - 1
-        nafnet = self.arch == "nafnet"
+        nafnet = self.arch in ("nafnet", "psfnet")  # psfnet: NAFNet's body (lensim.restore.psfnet)
         check_switches(  # which architecture takes which switches (lensim.restore.arch_rules)
             self.arch,
             use_fov=self.use_fov,
@@ -160,8 +163,10 @@ class TrainConfig:
             widths=tuple(self.width * 2**s for s in range(self.depth)) if self.width > 0 else None,
         )
         if nafnet:
+            stage = {"stage": WienerStage().to_dict()} if self.arch == "psfnet" else {}
             return {
-                "arch": "nafnet",
+                **stage,
+                "arch": self.arch,
                 "width": self.width,
                 "enc_blocks": [1] * n,
                 "middle_blocks": 2,

@@ -15,6 +15,10 @@ Every item is a dict
     settings (k,) float32               the settings vector of the crop's record
                                         (lensim.restore.conditioning), only when the
                                         dataset is given a Conditioning with k > 0
+    wiener (3, h, w) float32 in [0, 1]  the Wiener stage's image of the crop (cut and
+                                        augmented with it), only when the dataset is
+                                        given a stage cache folder
+                                        (lensim.restore.psf_stage.ensure_wiener_cache)
 with h = w = ``crop`` when sub-cropping, else the stored crop size.
 
 Randomness (sub-crop position, dihedral op) is drawn from a generator seeded by
@@ -123,6 +127,8 @@ class PairDataset(Dataset):
         conditioning: the settings the network is conditioned on; when it has inputs
             (dim > 0) every item carries its record's settings vector (a record without
             settings is then a one-line InputError).
+        wiener_dir: a Wiener stage cache folder (lensim.restore.psf_stage): every item
+            carries its crop's stage image (16-bit PNG, read once when ``cache``).
     """
 
     def __init__(
@@ -134,6 +140,7 @@ class PairDataset(Dataset):
         seed: int = 0,
         cache: bool = True,
         conditioning: Conditioning | None = None,
+        wiener_dir: Path | None = None,
     ) -> None:
         if crop is not None and crop < 1:
             raise ValueError(f"crop must be positive, got {crop}")
@@ -144,7 +151,8 @@ class PairDataset(Dataset):
         self.seed = seed
         self.epoch = 0
         self.cache = cache
-        self._cache: dict[int, tuple[torch.Tensor, torch.Tensor]] = {}
+        self._cache: dict[int, tuple[torch.Tensor, ...]] = {}
+        self.wiener_dir = None if wiener_dir is None else Path(wiener_dir)
         self.settings: list[torch.Tensor] | None = None
         if conditioning is not None and conditioning.dim:
             self.settings = [conditioning.vector(r.settings or {}, str(r.input)) for r in self.refs]
@@ -173,12 +181,25 @@ class PairDataset(Dataset):
             return torch.round(img * 255.0).to(torch.uint8), bits
         return img, bits
 
-    def _load(self, i: int) -> tuple[torch.Tensor, torch.Tensor]:
+    def _load(self, i: int) -> tuple[torch.Tensor, ...]:
+        """(input, target) of item i, and its Wiener stage image when the dataset has a cache."""
         if i in self._cache:
             return self._cache[i]
         ref = self.refs[i]
         inp, _ = self._read(ref.input)
         tgt, _ = self._read(ref.target)
+        extra: tuple[torch.Tensor, ...] = ()
+        if self.wiener_dir is not None:
+            from lensim.restore.psf_stage import cached_path
+
+            wien, _ = read_image(cached_path(self.wiener_dir, ref.input))
+            if wien.shape != inp.shape:
+                raise InputError(
+                    str(cached_path(self.wiener_dir, ref.input)),
+                    "size",
+                    f"is {tuple(wien.shape)}; expected the shape of its input {ref.input.name} {tuple(inp.shape)}",
+                )
+            extra = (wien,)
         if inp.shape != tgt.shape:
             raise InputError(
                 str(ref.target),
@@ -193,8 +214,8 @@ class PairDataset(Dataset):
                 f"{self.crop}x{self.crop} for {self.crop}-pixel training crops",
             )
         if self.cache:
-            self._cache[i] = (inp, tgt)
-        return inp, tgt
+            self._cache[i] = (inp, tgt, *extra)
+        return (inp, tgt, *extra)
 
     @staticmethod
     def _float(x: torch.Tensor) -> torch.Tensor:
@@ -202,7 +223,7 @@ class PairDataset(Dataset):
 
     def __getitem__(self, i: int) -> dict[str, Any]:
         ref = self.refs[i]
-        inp, tgt = self._load(i)
+        inp, tgt, *extra = self._load(i)
         _, h, w = inp.shape
         top, left = 0, 0
         gen = item_generator(self.seed, self.epoch, i)
@@ -211,13 +232,14 @@ class PairDataset(Dataset):
             left = int(torch.randint(0, w - self.crop + 1, (1,), generator=gen))
             h = w = self.crop
         op = int(torch.randint(0, 8, (1,), generator=gen)) if self.augment else 0
-        inp = self._float(inp[:, top : top + h, left : left + w])
-        tgt = self._float(tgt[:, top : top + h, left : left + w])
+        planes = [self._float(x[:, top : top + h, left : left + w]) for x in (inp, tgt, *extra)]
         fov = fov_channels(h, w, ref.sensor_top + top, ref.sensor_left + left, *self.sensor_size)
         if op:
-            both, fov = augment(torch.cat((inp, tgt)), fov, op)
-            inp, tgt = both[:3], both[3:]
-        item = {"input": inp.contiguous(), "target": tgt.contiguous(), "fov": fov, "index": i}
+            both, fov = augment(torch.cat(planes), fov, op)
+            planes = list(both.split(3))
+        item = {"input": planes[0].contiguous(), "target": planes[1].contiguous(), "fov": fov, "index": i}
+        if extra:
+            item["wiener"] = planes[2].contiguous()
         if self.settings is not None:
             item["settings"] = self.settings[i]
         return item

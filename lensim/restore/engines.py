@@ -60,7 +60,8 @@ class OnnxEngine:
         source: the name used in error messages (default: the file name).
 
     Attributes: ``metadata`` (lensim.restore.export.onnx_metadata), size_multiple,
-    use_fov, settings_dim; device/dtype are CPU float32 (the tiles' host arrays).
+    use_fov, settings_dim, uses_wiener and stage (the PSF-informed network's WienerStage,
+    else None); device/dtype are CPU float32 (the tiles' host arrays).
     """
 
     def __init__(
@@ -93,18 +94,34 @@ class OnnxEngine:
         self.size_multiple = int(self.metadata["size_multiple"])
         self.use_fov = bool(self.metadata["use_fov"])
         self.settings_dim = int(self.metadata["settings_dim"])
+        self.uses_wiener = bool(self.metadata["uses_wiener"])
+        self.stage = None
+        if self.uses_wiener:
+            from lensim.restore.psf_stage import WienerStage
+
+            self.stage = WienerStage.from_dict(self.metadata.get("stage"), self.source)
         self.input_names = [i.name for i in self.session.get_inputs()]
-        expected = ["rgb"] + (["fov"] if self.use_fov else []) + (["settings"] if self.settings_dim else [])
+        expected = (
+            ["rgb"]
+            + (["fov"] if self.use_fov else [])
+            + (["settings"] if self.settings_dim else [])
+            + (["wiener"] if self.uses_wiener else [])
+        )
         if self.input_names != expected:
             raise InputError(self.source, "inputs", f"expected {expected} as its metadata says, got {self.input_names}")
         self.device = torch.device("cpu")
         self.dtype = torch.float32
 
     def __call__(
-        self, rgb: torch.Tensor, fov: torch.Tensor | None, settings: torch.Tensor | None = None
+        self,
+        rgb: torch.Tensor,
+        fov: torch.Tensor | None,
+        settings: torch.Tensor | None = None,
+        wiener: torch.Tensor | None = None,
     ) -> torch.Tensor:
-        """rgb (N, 3, h, w), fov (N, 2, h, w) or None, settings (N, D) or None ->
-        restored (N, 3, h, w) float32 on the CPU."""
+        """rgb (N, 3, h, w), fov (N, 2, h, w) or None, settings (N, D) or None, wiener
+        (N, 3, h, w) or None (the PSF-informed network's Wiener image) -> restored
+        (N, 3, h, w) float32 on the CPU."""
         feed = {"rgb": _host(rgb)}
         if self.use_fov:
             if fov is None:
@@ -114,6 +131,10 @@ class OnnxEngine:
             if settings is None:
                 raise ValueError(f"this model takes a settings vector of {self.settings_dim} values")
             feed["settings"] = _host(settings.reshape(rgb.shape[0], self.settings_dim))
+        if self.uses_wiener:
+            if wiener is None:
+                raise ValueError("this model takes the Wiener stage's image (lensim.restore.psf_stage)")
+            feed["wiener"] = _host(wiener)
         return torch.from_numpy(self.session.run(["restored"], feed)[0])
 
 

@@ -9,6 +9,10 @@ The ONNX model (:func:`export_onnx`) has named inputs
   at the pixels' absolute place on the sensor (see :data:`FOV_CONVENTION`);
 * ``settings``: (N, settings_dim) float32, present when the network is conditioned on
   shooting settings (metadata ``settings_dim`` > 0);
+* ``wiener``: (N, 3, H, W) float32, present for the PSF-informed network (metadata
+  ``uses_wiener``, ``stage``): the Wiener stage's image of the same pixels (sRGB in
+  [0, 1]), computed by lensim before onnxruntime runs (lensim.restore.psf_stage.photo_wiener
+  over the whole photo, with the lens's PSF bank and the stage settings of ``stage``);
 
 and one output ``restored`` (N, 3, H, W) float32 (not clamped). N, H and W are dynamic,
 H, W >= 2. The network works on multiples of its ``size_multiple``; the graph pads the
@@ -90,6 +94,7 @@ class OnnxGraph(nn.Module):
         self.multiple = int(getattr(model, "size_multiple", 1))
         self.use_fov = bool(getattr(model, "use_fov", True))
         self.settings_dim = int(getattr(model, "settings_dim", 0) or 0)
+        self.uses_wiener = bool(getattr(model, "uses_wiener", False))
 
     @staticmethod
     def _indices(n: Any, multiple: int) -> tuple[torch.Tensor, torch.Tensor]:
@@ -110,9 +115,14 @@ class OnnxGraph(nn.Module):
 
     @property
     def input_names(self) -> list[str]:
-        """The graph's inputs, in order: rgb, then fov when the network takes it, then
-        settings when it is conditioned."""
-        return ["rgb"] + (["fov"] if self.use_fov else []) + (["settings"] if self.settings_dim else [])
+        """The graph's inputs, in order: rgb, then fov when the network takes it, settings
+        when it is conditioned and wiener for the PSF-informed network."""
+        return (
+            ["rgb"]
+            + (["fov"] if self.use_fov else [])
+            + (["settings"] if self.settings_dim else [])
+            + (["wiener"] if self.uses_wiener else [])
+        )
 
     def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
         """inputs: rgb (N, 3, H, W)[, fov (N, 2, H, W)][, settings (N, D)] as input_names
@@ -126,7 +136,11 @@ class OnnxGraph(nn.Module):
         f = None
         if fov is not None:
             f = self._pad_linear(self._pad_linear(fov, 2, rows, past_r), 3, cols, past_c)
-        out = self.model(x, f, settings) if self.settings_dim > 0 else self.model(x, f)
+        if self.uses_wiener:
+            wien = named["wiener"].index_select(2, rows).index_select(3, cols)
+            out = self.model(x, f, settings, wien)
+        else:
+            out = self.model(x, f, settings) if self.settings_dim > 0 else self.model(x, f)
         return out[:, :, :h, :w]
 
 
@@ -156,6 +170,11 @@ def onnx_metadata(model: nn.Module, info: dict[str, Any], opset: int) -> dict[st
         inputs["fov"] = "(N, 2, H, W) float32 field-of-view channels (fov_convention)"
     if graph.settings_dim:
         inputs["settings"] = f"(N, {graph.settings_dim}) float32 shooting-settings vector (lensim.restore.conditioning)"
+    if graph.uses_wiener:
+        inputs["wiener"] = (
+            "(N, 3, H, W) float32 the Wiener stage's image of the same pixels, sRGB in [0, 1] "
+            "(lensim.restore.psf_stage.photo_wiener with the lens's PSF bank and the settings in 'stage')"
+        )
     return {
         "format": ONNX_FORMAT,
         "format_version": ONNX_FORMAT_VERSION,
@@ -181,6 +200,8 @@ def onnx_metadata(model: nn.Module, info: dict[str, Any], opset: int) -> dict[st
         "size_multiple": graph.multiple,
         "use_fov": graph.use_fov,
         "settings_dim": graph.settings_dim,
+        "uses_wiener": graph.uses_wiener,
+        "stage": config.get("stage"),
         "inputs": inputs,
         "outputs": {"restored": "(N, 3, H, W) float32, not clamped"},
         "fov_convention": _fov_metadata(sensor),
@@ -224,6 +245,7 @@ def _example_inputs(graph: OnnxGraph) -> tuple[torch.Tensor, ...]:
         "rgb": lambda: torch.rand(2, 3, h, w, generator=gen),
         "fov": lambda: torch.rand(2, 2, h, w, generator=gen) * 2 - 1,
         "settings": lambda: torch.rand(2, graph.settings_dim, generator=gen),
+        "wiener": lambda: torch.rand(2, 3, h, w, generator=gen),
     }
     return tuple(make[n]() for n in graph.input_names)
 
@@ -336,6 +358,8 @@ def parse_metadata(props: dict[str, str], source: str) -> dict[str, Any]:
     for key, kind in (("size_multiple", int), ("use_fov", bool), ("settings_dim", int)):
         if not isinstance(meta.get(key), kind):
             raise InputError(source, f"metadata.{key}", f"expected {kind.__name__}, got {meta.get(key)!r}")
+    if not isinstance(meta.setdefault("uses_wiener", False), bool):  # absent before issue 23: no Wiener input
+        raise InputError(source, "metadata.uses_wiener", f"expected bool, got {meta.get('uses_wiener')!r}")
     return meta
 
 

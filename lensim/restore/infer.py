@@ -86,11 +86,13 @@ class Engine(Protocol):
 
 class TorchEngine:
     """A PyTorch network as an :class:`Engine`: tiles are built on its parameters' device
-    and in their dtype (so CUDA and half-precision networks run as they are)."""
+    and in their dtype (so CUDA and half-precision networks run as they are). uses_wiener:
+    the network takes the Wiener stage's image (lensim.restore.psfnet)."""
 
     def __init__(self, model: torch.nn.Module) -> None:
         param = next(model.parameters())
         self.model = model
+        self.uses_wiener = bool(getattr(model, "uses_wiener", False))
         self.size_multiple = int(getattr(model, "size_multiple", 1))
         self.use_fov = bool(getattr(model, "use_fov", True))
         self.settings_dim = int(getattr(model, "settings_dim", 0) or 0)
@@ -98,8 +100,14 @@ class TorchEngine:
         self.dtype = param.dtype
 
     def __call__(
-        self, rgb: torch.Tensor, fov: torch.Tensor | None, settings: torch.Tensor | None = None
+        self,
+        rgb: torch.Tensor,
+        fov: torch.Tensor | None,
+        settings: torch.Tensor | None = None,
+        wiener: torch.Tensor | None = None,
     ) -> torch.Tensor:
+        if self.uses_wiener:
+            return self.model(rgb, fov, settings, wiener)
         if settings is None:
             return self.model(rgb, fov)
         return self.model(rgb, fov, settings)
@@ -201,6 +209,7 @@ def restore_image(
     margin: int | None = None,
     progress: Callable[[int, int], None] | None = None,
     settings: torch.Tensor | None = None,
+    wiener: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """Restore a (3, H, W) image of any size, tile by tile (see the module docstring).
 
@@ -221,6 +230,9 @@ def restore_image(
         settings: (k,) settings vector of the photo for a network conditioned on shooting
             settings (Conditioning.vector; model.settings_dim = k), given to every tile;
             None for an unconditioned network.
+        wiener: (3, H, W) the Wiener stage's image of the whole image, for a network that
+            takes it (``uses_wiener``: lensim.restore.psfnet; computed by
+            lensim.restore.psf_stage.photo_wiener); each tile gets its part.
 
     Returns:
         (3, H, W) float32 restored image on the CPU (not clamped).
@@ -232,6 +244,14 @@ def restore_image(
     if image.dim() != 3 or image.shape[0] != 3:
         raise ValueError(f"image must be (3, H, W), got {tuple(image.shape)}")
     engine = as_engine(model)
+    if bool(getattr(engine, "uses_wiener", False)) != (wiener is not None):
+        raise ValueError(
+            "the network takes the Wiener stage's image (lensim.restore.psf_stage.photo_wiener); give wiener"
+            if wiener is None
+            else "wiener was given but the network does not take it"
+        )
+    if wiener is not None and tuple(wiener.shape) != tuple(image.shape):
+        raise ValueError(f"wiener must have the image's shape {tuple(image.shape)}, got {tuple(wiener.shape)}")
     m = engine.size_multiple
     tile = max(m, tile // m * m)
     if not 0 <= overlap < tile:
@@ -245,7 +265,13 @@ def restore_image(
     while True:
         try:
             return _restore_tiles(
-                engine, image, out, (sensor_top_left, sensor_size), (tile, overlap_eff, margin), progress, settings
+                engine,
+                (image, wiener),
+                out,
+                (sensor_top_left, sensor_size),
+                (tile, overlap_eff, margin),
+                progress,
+                settings,
             )
         except Exception as e:  # noqa: BLE001  (PyTorch's and onnxruntime's allocation failures)
             if not out_of_memory(e):
@@ -269,7 +295,7 @@ def restore_image(
 
 def _restore_tiles(
     engine: Engine,
-    image: torch.Tensor,
+    images: tuple[torch.Tensor, torch.Tensor | None],
     out: torch.Tensor,
     geometry: tuple[tuple[float, float], tuple[float, float]],
     tiling: tuple[int, int, int],
@@ -277,7 +303,9 @@ def _restore_tiles(
     settings: torch.Tensor | None,
 ) -> torch.Tensor:
     """restore_image's pass over its tiles, accumulated into ``out`` (zeros, (3, H, W));
-    geometry: (sensor top-left, sensor size); tiling: (tile, overlap, margin)."""
+    images: (the image, its Wiener stage image or None); geometry: (sensor top-left,
+    sensor size); tiling: (tile, overlap, margin)."""
+    image, wiener = images
     top, left = (float(v) for v in geometry[0])
     sh, sw = (float(v) for v in geometry[1])
     tile, overlap, margin = tiling
@@ -298,7 +326,11 @@ def _restore_tiles(
             fov = None
             if engine.use_fov:
                 fov = fov_channels(th, tw, top + y0, left + x0, sh, sw, dtype=dtype, device=device).unsqueeze(0)
-            res = engine(rgb, fov, vec)[0].float().cpu()
+            if wiener is None:
+                res = engine(rgb, fov, vec)[0].float().cpu()
+            else:
+                part = wiener[:, y0 : y0 + th, x0 : x0 + tw].to(device=device, dtype=dtype).unsqueeze(0)
+                res = engine(rgb, fov, vec, part)[0].float().cpu()  # type: ignore[call-arg]
             out[:, y0 : y0 + th, x0 : x0 + tw] += res * (wyy.view(1, th, 1) * wxx.view(1, 1, tw))
             done += 1
             if progress is not None:

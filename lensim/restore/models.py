@@ -2,7 +2,8 @@
 
 ``config["arch"]`` is ``"unet"`` (lensim.restore.network.FieldAwareUNet; the default when
 the key is missing, so checkpoints written before there was a choice keep loading) or
-``"nafnet"`` (lensim.restore.nafnet.NAFNet). Every model has ``.config`` (a dict that
+``"nafnet"`` (lensim.restore.nafnet.NAFNet) or ``"psfnet"`` (lensim.restore.psfnet.PSFNet,
+NAFNet refining the Wiener stage's image). Every model has ``.config`` (a dict that
 rebuilds it through :func:`build_model`, "arch" included), ``.size_multiple``, ``.use_fov``
 and ``.settings_dim``.
 
@@ -42,6 +43,10 @@ def build_model(config: dict[str, Any]) -> nn.Module:
         return FieldAwareUNet(**kwargs)
     if arch == "nafnet":
         return NAFNet(**kwargs)
+    if arch == "psfnet":
+        from lensim.restore.psfnet import PSFNet
+
+        return PSFNet(**kwargs)
     raise ValueError(f"unknown architecture {arch!r}; expected one of {', '.join(ARCHS)}")
 
 
@@ -49,7 +54,9 @@ def describe_network(config: dict[str, Any]) -> str:
     """A network's config in words, for reports: "plain NAFNet (stem 2, width 46)" with
     every field-aware part off, else e.g. "NAFNet with FOV (stem 2, width 40)" or "UNet with
     FOV, deformable, context (width 32)" (the stem only where it is not 1)."""
-    arch = {"unet": "UNet", "nafnet": "NAFNet"}.get(arch_of(config), arch_of(config))
+    arch = {"unet": "UNet", "nafnet": "NAFNet", "psfnet": "PSF-informed NAFNet (Wiener stage)"}.get(
+        arch_of(config), arch_of(config)
+    )
     on = arch_of(config) == "unet"  # a switch the config lacks: the constructor's default
     parts = [
         name
@@ -82,8 +89,9 @@ def default_width(arch: str, **switches: Any) -> int:
     the stem or without)."""
     if arch == "unet":
         return UNET_WIDTH
-    if arch == "nafnet":
-        frozen = tuple(sorted((k, tuple(v) if isinstance(v, list) else v) for k, v in switches.items()))
+    if arch in ("nafnet", "psfnet"):  # psfnet: NAFNet's width (its 3 more input planes add < 1 %)
+        items = ((k, v) for k, v in switches.items() if k != "stage")
+        frozen = tuple(sorted((k, tuple(v) if isinstance(v, list) else v) for k, v in items))
         return _nafnet_default_width(frozen)
     raise ValueError(f"unknown architecture {arch!r}; expected one of {', '.join(ARCHS)}")
 

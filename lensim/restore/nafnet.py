@@ -246,12 +246,22 @@ class NAFNet(nn.Module):
             "dcn_backend": self.dcn_backend,
         }
 
-    def _inputs(self, rgb: torch.Tensor, fov: torch.Tensor | None, settings: torch.Tensor | None) -> torch.Tensor:
-        """The padded input planes: RGB [+ FOV] [+ settings], (B, C, H', W')."""
+    def _inputs(
+        self,
+        rgb: torch.Tensor,
+        fov: torch.Tensor | None,
+        settings: torch.Tensor | None,
+        guide: torch.Tensor | None = None,
+    ) -> torch.Tensor:
+        """The padded input planes: RGB [+ guide (B, G, H, W), e.g. the PSF-informed
+        network's Wiener image] [+ FOV] [+ settings], (B, C, H', W') (pixel-unshuffled by
+        the stem)."""
         b, _, h, w = rgb.shape
         m = self.size_multiple
         ph, pw = (-h) % m, (-w) % m
         planes = [_pad_bottom_right(rgb, ph, pw, linear=False)]
+        if guide is not None:
+            planes.append(_pad_bottom_right(guide.to(rgb.dtype), ph, pw, linear=False))
         if self.use_fov:
             planes.append(_pad_bottom_right(batch_fov(fov, rgb), ph, pw, linear=True))
         s = batch_settings(settings, b, self.settings_dim, rgb)
@@ -267,7 +277,11 @@ class NAFNet(nn.Module):
         if rgb.dim() != 4 or rgb.shape[1] != 3:
             raise ValueError(f"rgb must be (B, 3, H, W), got {tuple(rgb.shape)}")
         h, w = rgb.shape[-2:]
-        x = self._inputs(rgb, fov, settings)
+        return rgb + self._residual(self._inputs(rgb, fov, settings), h, w)
+
+    def _residual(self, x: torch.Tensor, h: int, w: int) -> torch.Tensor:
+        """The network's body on the input planes x (:meth:`_inputs`): the correction
+        (B, 3, h, w) added to the image it refines."""
         if not self.training and x.device.type == "cpu" and not torch.onnx.is_in_onnx_export():
             # inference on a CPU in channels_last: 1.8x the restore speed of NCHW
             # (benchmarks/restore_speed.py; depthwise convs about 6x faster); training
@@ -289,7 +303,7 @@ class NAFNet(nn.Module):
         residual = self.ending(feat)
         if self.stem > 1:
             residual = F.pixel_shuffle(residual, self.stem)
-        return rgb + residual[..., :h, :w]
+        return residual[..., :h, :w]
 
 
 def _check_args(

@@ -76,6 +76,7 @@ from lensim.restore.distributed import (
 from lensim.restore.divergence import ON_NAN, NonFinite, Rollbacks, check_loss, roll_back
 from lensim.restore.losses import LOSSES, restoration_loss
 from lensim.restore.models import ARCHS, build_model
+from lensim.restore.psf_stage import training_cache
 from lensim.restore.run_log import RunLog
 from lensim.restore.schedule import LR_SCHEDULES, BudgetClock, LearningRate
 from lensim.restore.universal import load_init
@@ -260,10 +261,11 @@ def _load_data(dataset_dir: str | Path, cfg: TrainConfig, ckpt: dict[str, Any] |
     if cfg.conditioning is None:  # a new run: what its training records span
         cfg.conditioning = Conditioning.from_records((r.settings for r in train_refs), cfg.use_settings).to_dict()
     cond = Conditioning.from_dict(cfg.conditioning, str(dataset_dir))
-    train_ds = PairDataset(train_refs, hw, crop=cfg.crop, augment=cfg.augment, seed=cfg.seed, conditioning=cond)
-    val_ds = PairDataset(
-        [r for r in refs if r.source in set(val_src)], hw, crop=None, augment=False, seed=cfg.seed, conditioning=cond
+    shared: dict[str, Any] = dict(
+        seed=cfg.seed, conditioning=cond, wiener_dir=training_cache(dataset_dir, cfg.model_kwargs())
     )
+    train_ds = PairDataset(train_refs, hw, crop=cfg.crop, augment=cfg.augment, **shared)
+    val_ds = PairDataset([r for r in refs if r.source in set(val_src)], hw, crop=None, augment=False, **shared)
     if len(train_ds) < 1:
         raise InputError(str(dataset_dir), "records", "has no training crops; expected at least one")
     split = {"train": list(train_src), "val": list(val_src), "val_fraction": cfg.val_fraction, "seed": cfg.seed}

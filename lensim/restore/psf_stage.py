@@ -1,0 +1,277 @@
+"""The Wiener stage of the PSF-informed network (issue 23, ``arch="psfnet"``): what the
+lens's PSF bank knows, as an image the network sees beside the aberrated one.
+
+The stage is the Wiener oracle of lensim.evaluate.baselines (:func:`baselines.wiener`,
+the one home of the per-tile Wiener deconvolution): at every tile centre of a regular grid
+(``tile`` pixels apart) the bank's kernel at that sensor position and azimuth, per colour
+channel, deconvolves a window in the camera's energy domain with a natural-image prior
+(NSR falling as 1/|f|^2), and the windows are blended with bilinear hats (seamless). The
+stage gives it exactly the same arguments the oracle gets: the capture's colour pipeline
+(CCM, white-balance gains) and noise levels when they are known (simulated pairs record
+them; a raw file's develop gives the colour, not the noise level), else the sRGB curve
+only and the noise floor. Nothing in it depends on the lens except through the bank's
+kernels, so a network trained on its output is lens-agnostic given the bank.
+
+Shapes: images (3, H, W) float32 sRGB in [0, 1]; the stage's output likewise (clipped to
+[0, 1] in linear sRGB by from_energy).
+
+Cache (:func:`ensure_wiener_cache`, training): the stage of every crop of a pairs folder,
+computed once and read by the training crops. Layout:
+
+    DATASET/wiener/<key>/<crop input file name>   16-bit PNG, the stage's output for
+                                                  that input crop (quantisation 1/65535)
+    DATASET/wiener/<key>/stage.json               {"format": "lensim-wiener-cache",
+                                                  "version": 1, "stage": WienerStage.to_dict(),
+                                                  "bank": the manifest's bank entry,
+                                                  "crops": how many} written last
+
+``key`` is a digest of the stage's settings and the manifest's bank entry, so a change of
+either computes a new cache beside the old one. Every file is written atomically and an
+existing one is kept: a killed computation resumes where it stopped.
+
+Whole photos (:func:`photo_wiener`): the stage runs on the whole photo (it is tiled and
+seamless itself) before the network's tiles are cut, so each network tile reads the same
+stage pixels it would in a whole-image pass. The bank must be at the photo's pixel scale:
+photos are taken at the sensor's native resolution (a full frame, or a frame whose place
+on the sensor is known).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections.abc import Callable, Mapping
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from lensim.errors import InputError
+
+if TYPE_CHECKING:  # torch is imported where the stage runs, not by the configs that name it
+    import torch
+
+#: Where a pairs folder's stage caches live (one sub-folder per stage key).
+CACHE_DIR = "wiener"
+CACHE_FORMAT = "lensim-wiener-cache"
+CACHE_VERSION = 1
+STAGE_JSON = "stage.json"
+
+
+@dataclass(frozen=True)
+class WienerStage:
+    """The stage's settings (recorded in the network's config as ``stage``).
+
+    tile: spacing of the tile centres, pixels (the oracle's default 32).
+    noise_floor: variance added to the capture's noise, normalized raw units squared
+        (lensim.evaluate.baselines.DEFAULT_NOISE_FLOOR)."""
+
+    tile: int = 32
+    noise_floor: float = 1e-5
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any] | None, source: str = "stage") -> WienerStage:
+        """The stage a config records (None: the defaults); InputError naming ``source``
+        for unknown keys or values out of range."""
+        if data is None:
+            return cls()
+        if not isinstance(data, Mapping) or set(data) - {"tile", "noise_floor"}:
+            raise InputError(source, "stage", f"expected {{tile, noise_floor}}, got {data!r}")
+        stage = cls(int(data.get("tile", 32)), float(data.get("noise_floor", 1e-5)))
+        if stage.tile < 1 or not stage.noise_floor >= 0:
+            raise InputError(source, "stage", f"expected tile >= 1 and noise_floor >= 0, got {data!r}")
+        return stage
+
+
+def wiener_channels(
+    image: torch.Tensor,
+    mapping: Any,
+    bank: Any,
+    capture: Mapping[str, Any] | None = None,
+    stage: WienerStage | None = None,
+) -> torch.Tensor:
+    """The stage's output for one image: (3, H, W) float32 sRGB in [0, 1].
+
+    image: (3, H, W) sRGB in [0, 1]; mapping: its pixels on the sensor
+    (lensim.render.mapping.SensorMapping, at the bank's pitch); bank: lensim.psf.bank.PSFBank;
+    capture: the capture record (ccm, r_gain, b_gain, shot, read; lensim.data.pairs
+    crop_capture) or None. The Wiener oracle itself (lensim.evaluate.baselines.wiener)."""
+    from lensim.evaluate.baselines import wiener
+
+    st = stage or WienerStage()
+    return wiener(image, mapping, bank, capture, tile=st.tile, noise_floor=st.noise_floor)
+
+
+def photo_wiener(
+    image: torch.Tensor,
+    bank: Any,
+    sensor: Any,
+    sensor_top_left: tuple[float, float],
+    sensor_size: tuple[float, float],
+    capture: Mapping[str, Any] | None = None,
+    stage: WienerStage | None = None,
+    source: str = "photo",
+) -> torch.Tensor:
+    """The stage over a whole photo placed on the sensor as lensim.restore.infer places it
+    (sensor_top_left, sensor_size: in image pixels, image_sensor_geometry). The photo must
+    be at the sensor's native pixel scale (its sensor_size the sensor's resolution), since
+    the bank's kernels are sampled at the sensor's pitch; otherwise a one-line InputError
+    naming ``source``. Returns (3, H, W) float32."""
+    from lensim.render.mapping import SensorMapping
+
+    sh, sw = (float(v) for v in sensor_size)
+    if abs(sh - sensor.height) > 1e-6 or abs(sw - sensor.width) > 1e-6:
+        raise InputError(
+            source,
+            "size",
+            f"is not at the sensor's native pixel scale (the sensor would span {sw:g}x{sh:g} of its pixels, "
+            f"expected {sensor.width}x{sensor.height}); the PSF-informed network restores photos at the "
+            "sensor's resolution",
+        )
+    top, left = (float(v) for v in sensor_top_left)
+    p = sensor.pixel_pitch_um * 1e-3
+    _, h, w = image.shape
+    mapping = SensorMapping(h, w, sensor.pixel_pitch_um, (left - sw / 2.0) * p, (top - sh / 2.0) * p)
+    return wiener_channels(image, mapping, bank, capture, stage)
+
+
+def stage_of(model: Any) -> WienerStage:
+    """The WienerStage a network (lensim.restore.psfnet.PSFNet) or engine (an exported one:
+    lensim.restore.engines.OnnxEngine) was trained with."""
+    stage = getattr(model, "stage", None)
+    return stage if isinstance(stage, WienerStage) else WienerStage()
+
+
+def network_bank(info: Mapping[str, Any], bank: Any = None) -> Any:
+    """The PSF bank a PSF-informed network restores with: ``bank`` (a PSFBank or its
+    folder) when given, else the bank of the pairs the network was trained on (``info``:
+    what lensim.restore.checkpoint.load_checkpoint / engines.load_engine return; its
+    "dataset" manifest's "bank"). One-line InputError naming the checkpoint (field "bank")
+    when neither is found, or when it is a grid of banks (one setting's bank is needed)."""
+    from lensim.psf.bank import GridBank, PSFBank
+
+    where = str(info.get("path", "checkpoint"))
+    found: Any = None
+    if isinstance(bank, PSFBank):
+        found = bank
+    elif bank is not None:
+        found = PSFBank.load(bank)
+    elif info.get("dataset"):
+        from lensim.data.manifest import read_pairs_manifest
+        from lensim.evaluate.harness import _load_bank
+
+        pairs = Path(str(info["dataset"]))
+        if (pairs / "manifest.json").is_file():
+            found = _load_bank(read_pairs_manifest(pairs), pairs, None)
+    if found is None:
+        raise InputError(
+            where,
+            "bank",
+            f"is a PSF-informed network, which needs the PSF bank of the lens; the pairs it was trained on "
+            f"({info.get('dataset')}) name none that exists here; expected the bank's folder",
+        )
+    if isinstance(found, GridBank):
+        raise InputError(where, "bank", "is a grid of banks; expected the bank of the photos' shooting settings")
+    return found
+
+
+# ----------------------------------------------------------------------------- cache
+
+
+def cache_key(stage: WienerStage, bank_entry: Any) -> str:
+    """The cache folder name of a stage on a pairs folder whose manifest names ``bank_entry``."""
+    text = json.dumps({"stage": stage.to_dict(), "bank": bank_entry, "version": CACHE_VERSION}, sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
+def cache_folder(dataset_dir: str | Path, stage: WienerStage | None = None) -> Path:
+    """DATASET/wiener/<key> of a stage (the folder may not exist yet)."""
+    from lensim.data.manifest import read_pairs_manifest
+
+    manifest = read_pairs_manifest(dataset_dir)
+    return Path(dataset_dir) / CACHE_DIR / cache_key(stage or WienerStage(), manifest.get("bank"))
+
+
+def cached_path(folder: Path, input_path: Path) -> Path:
+    """The cache file of the crop whose aberrated input is ``input_path``."""
+    return folder / (Path(input_path).stem + ".png")
+
+
+def ensure_wiener_cache(
+    dataset_dir: str | Path,
+    stage: WienerStage | None = None,
+    bank: Any = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> Path:
+    """Compute the stage of every crop of a pairs folder that is not cached yet (module
+    docstring); returns the cache folder. bank: the PSF bank (or grid) the pairs were made
+    with, or its folder (default: the manifest's). A bank that cannot be found is a
+    one-line InputError naming the pairs folder. progress(done, total) counts crops."""
+    from lensim.data.manifest import MANIFEST, read_pairs_manifest
+    from lensim.data.pairs import crop_capture
+    from lensim.evaluate.harness import _load_bank, _record_bank
+    from lensim.images import read_image, write_image
+    from lensim.io import atomic_write_json
+    from lensim.render.mapping import native_mapping
+    from lensim.sensor.profile import sensor_from_dict
+
+    root = Path(dataset_dir)
+    st = stage or WienerStage()
+    manifest = read_pairs_manifest(root)
+    folder = root / CACHE_DIR / cache_key(st, manifest.get("bank"))
+    sensor = sensor_from_dict(manifest["sensor"], str(root / MANIFEST))
+    crops = [(i, rec, cr) for i, rec in enumerate(manifest["records"]) for cr in rec.get("crops", [])]
+    todo = [(i, rec, cr) for i, rec, cr in crops if not cached_path(folder, root / cr["input"]).exists()]
+    if todo or not (folder / STAGE_JSON).is_file():
+        the_bank = _load_bank(manifest, root, bank)
+        if the_bank is None:
+            raise InputError(
+                str(root / MANIFEST),
+                "bank",
+                f"names the bank {manifest.get('bank')!r}, which was not found; the PSF-informed "
+                "network needs the bank the pairs were made with",
+            )
+        folder.mkdir(parents=True, exist_ok=True)
+        for done, (i, rec, cr) in enumerate(todo, 1):
+            x, _ = read_image(root / cr["input"])
+            _, h, w = x.shape
+            mapping = native_mapping(h, w, sensor, int(cr["sensor_top"]), int(cr["sensor_left"]))
+            rec_bank = _record_bank(the_bank, rec, f"{root / MANIFEST}: records[{i}]")
+            out = wiener_channels(x, mapping, rec_bank, crop_capture(rec, cr), st)
+            write_image(cached_path(folder, root / cr["input"]), out.clamp(0.0, 1.0), bits=16)
+            if progress is not None:
+                progress(done, len(todo))
+        info = {
+            "format": CACHE_FORMAT,
+            "version": CACHE_VERSION,
+            "stage": st.to_dict(),
+            "bank": manifest.get("bank"),
+            "crops": len(crops),
+        }
+        atomic_write_json(folder / STAGE_JSON, info)
+    return folder
+
+
+def training_cache(dataset_dir: str | Path, model_config: Mapping[str, Any]) -> Path | None:
+    """The Wiener stage cache a network of ``model_config`` trains from (computed where
+    missing: :func:`ensure_wiener_cache`), or None for a network without the stage."""
+    if model_config.get("arch") != "psfnet":
+        return None
+    return ensure_wiener_cache(dataset_dir, WienerStage.from_dict(model_config.get("stage")))
+
+
+__all__ = [
+    "CACHE_DIR",
+    "WienerStage",
+    "cache_folder",
+    "cache_key",
+    "cached_path",
+    "ensure_wiener_cache",
+    "network_bank",
+    "photo_wiener",
+    "stage_of",
+    "training_cache",
+    "wiener_channels",
+]

@@ -1,0 +1,258 @@
+"""The PSF-informed network (issue 23): the Wiener stage against a direct per-tile Wiener,
+its training cache, the network end to end at tiny size, tiling, ONNX and bad inputs."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from lensim.assets.images import sample_image_path
+from lensim.data.pairs import make_dataset
+from lensim.errors import InputError
+from lensim.evaluate import baselines as B
+from lensim.evaluate import harness
+from lensim.images import read_image, write_image
+from lensim.optics.lens_file import load_lens
+from lensim.psf.bank import BankSettings, get_bank
+from lensim.render.kernels import kernels_at
+from lensim.render.mapping import SensorMapping
+from lensim.restore.infer import restore_image
+from lensim.restore.models import build_model
+from lensim.restore.psf_stage import (
+    STAGE_JSON,
+    WienerStage,
+    cached_path,
+    ensure_wiener_cache,
+    photo_wiener,
+    wiener_channels,
+)
+from lensim.restore.psfnet import PSFNet
+from lensim.restore.train import train
+from lensim.sensor.profile import load_sensor, sensor_from_dict
+from tests.test_baselines import PITCH_UM, _bank
+
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
+
+# ----------------------------------------------------------------------------- the stage
+
+
+def _direct_wiener(window: np.ndarray, kernel: np.ndarray, var_n: np.ndarray) -> np.ndarray:
+    """Wiener deconvolution of one (n, n) window with one (P, P) kernel, written out with
+    NumPy: even-symmetric extension, the kernel's OTF about its centre pixel, NSR of the
+    1/|f|^2 prior scaled by the window's mean squared gradient (baselines' docstring)."""
+    n, p = window.shape[0], kernel.shape[0]
+    ext = np.block([[window, window[:, ::-1]], [window[::-1, :], window[::-1, ::-1]]])
+    big = np.zeros((2 * n, 2 * n))
+    big[:p, :p] = kernel
+    otf = np.fft.fft2(np.roll(big, (-(p // 2), -(p // 2)), axis=(0, 1)))
+    f = np.fft.fftfreq(2 * n)
+    g2 = 4 * np.sin(np.pi * f)[:, None] ** 2 + 4 * np.sin(np.pi * f)[None, :] ** 2
+    grad = np.mean(np.diff(window, axis=1) ** 2) + np.mean(np.diff(window, axis=0) ** 2)
+    amp = max(grad - 4 * var_n, 4 * var_n, 1e-8)
+    x = np.conj(otf) * np.fft.fft2(ext) / (np.abs(otf) ** 2 + var_n / amp * g2)
+    return np.real(np.fft.ifft2(x))[:n, :n]
+
+
+def test_stage_equals_a_direct_per_tile_wiener_at_the_tile_centres():
+    """At a tile centre only that tile's window counts (its hat is 1, its neighbours' 0):
+    the stage's value there is the direct Wiener of that window with the bank's kernel at
+    that sensor position, per channel, in the energy domain."""
+    bank = _bank()
+    img, _ = read_image(sample_image_path("kodim23"))
+    image = img[:, 200:296, 300:396]
+    mapping = SensorMapping(96, 96, PITCH_UM, 1.3, 1.7)  # off axis: rotated, asymmetric kernels
+    capture = {
+        "ccm": [[1.8, -0.6, -0.2], [-0.2, 1.5, -0.3], [0.0, -0.5, 1.5]],
+        "r_gain": 1.9,
+        "b_gain": 1.6,
+        "shot": 1e-3,
+        "read": 2e-3,
+    }
+    stage = WienerStage(tile=24, noise_floor=1e-5)
+    out = wiener_channels(image, mapping, bank, capture, stage)
+    assert out.shape == (3, 96, 96) and out.dtype == torch.float32
+    cam = B.to_energy(image, capture).numpy()
+    p = bank.kernel_pixels
+    half = stage.tile + p  # the window reaches tile + margin (= the kernel size) around its centre
+    padded = np.pad(cam, ((0, 0), (half, half), (half, half)), mode="symmetric")
+    direct = np.zeros((3, 3, 3))
+    centres = (0, 24, 48)
+    for a, r in enumerate(centres):
+        for b, c in enumerate(centres):
+            k = kernels_at(bank, mapping, torch.tensor([float(r)]), torch.tensor([float(c)]))[0].numpy()
+            for ch in range(3):
+                win = padded[ch, r : r + 2 * half + 1, c : c + 2 * half + 1]
+                var_n = capture["shot"] * max(win.mean(), 0) + capture["read"] ** 2 + stage.noise_floor
+                direct[ch, a, b] = _direct_wiener(win, k[ch], var_n)[half, half]
+    got = B.to_energy(out, capture).numpy()[:, [0, 24, 48]][:, :, [0, 24, 48]]
+    ref = B.to_energy(B.from_energy(torch.from_numpy(direct), capture), capture).numpy()  # the same clipping
+    assert np.abs(got - ref).max() < 2e-4, np.abs(got - ref).max()
+    # and the oracle baseline is the same computation (one home)
+    oracle = B.wiener(image, mapping, bank, capture, tile=24, noise_floor=1e-5)
+    assert torch.equal(oracle, out)
+
+
+def test_stage_settings_are_checked():
+    assert WienerStage.from_dict(None) == WienerStage()
+    assert WienerStage.from_dict({"tile": 16}).tile == 16
+    with pytest.raises(InputError, match="stage"):
+        WienerStage.from_dict({"tile": 0})
+    with pytest.raises(InputError, match="stage"):
+        WienerStage.from_dict({"tile": 16, "nsr": 1})
+
+
+# ----------------------------------------------------------------------------- pairs
+
+
+@pytest.fixture(scope="module")
+def world(tmp_path_factory):
+    """Two photos on a 128 x 96 pixel sensor (the APS-C profile's pitch), two 64 px crops
+    each, and the bank they were made with."""
+    base = tmp_path_factory.mktemp("psfnet")
+    sharp = base / "sharp"
+    for name in ("kodim23", "coffee"):
+        img, _ = read_image(sample_image_path(name))
+        write_image(sharp / f"{name}.png", img[:, 100:196, 100:228])
+    d = load_sensor("apsc_mirrorless").to_dict()
+    d["resolution"] = [128, 96]
+    d["name"] = "tiny"
+    sensor_file = base / "tiny_sensor.json"
+    sensor_file.write_text(json.dumps(d))
+    sensor = sensor_from_dict(d, str(sensor_file))
+    settings = BankSettings(fields=(0.0, 0.5, 1.0), wavelengths_nm=(500, 600), pupil_samples=64, kernel_pixels=21)
+    bank = get_bank(load_lens("cooke_triplet"), sensor.pixel_pitch_um, settings, out_dir=base / "bank")
+    make_dataset(sharp, base / "pairs", bank, str(sensor_file), sensor, crops=2, size=64, seed=1)
+    return {"pairs": base / "pairs", "bank": bank, "sensor": sensor, "base": base}
+
+
+def test_cache_is_the_stage_of_each_crop_and_resumes(world):
+    pairs = world["pairs"]
+    folder = ensure_wiener_cache(pairs)
+    manifest = json.loads((pairs / "manifest.json").read_text())
+    crop = manifest["records"][0]["crops"][0]
+    stored, bits = read_image(cached_path(folder, pairs / crop["input"]))
+    assert bits == 16
+    # equal to the stage computed the way the evaluation computes it, up to 16-bit rounding
+    x, _ = read_image(pairs / crop["input"])
+    rows = []
+    harness.evaluate(pairs, {"wiener": harness.builtin_method("wiener")}, rows=rows, max_crops=1)
+    from lensim.data.pairs import crop_capture
+    from lensim.render.mapping import native_mapping
+
+    mapping = native_mapping(64, 64, world["sensor"], crop["sensor_top"], crop["sensor_left"])
+    live = wiener_channels(x, mapping, world["bank"], crop_capture(manifest["records"][0], crop))
+    assert (stored - live).abs().max() < 1.0 / 65535 + 1e-6
+    info = json.loads((folder / STAGE_JSON).read_text())
+    assert info["crops"] == 4 and info["stage"] == WienerStage().to_dict()
+    # a killed computation: a missing file is computed again, the others are kept
+    victim = cached_path(folder, pairs / crop["input"])
+    other = cached_path(folder, pairs / manifest["records"][1]["crops"][0]["input"])
+    mtime = other.stat().st_mtime_ns
+    victim.unlink()
+    assert ensure_wiener_cache(pairs) == folder
+    assert victim.exists() and other.stat().st_mtime_ns == mtime
+
+
+def test_cache_without_the_bank_is_one_line(world, tmp_path):
+    import shutil
+
+    copy = tmp_path / "pairs"
+    shutil.copytree(world["pairs"], copy, ignore=shutil.ignore_patterns("wiener"))
+    m = json.loads((copy / "manifest.json").read_text())
+    m["bank"] = str(tmp_path / "gone")
+    (copy / "manifest.json").write_text(json.dumps(m))
+    with pytest.raises(InputError, match="bank") as e:
+        ensure_wiener_cache(copy)
+    assert "\n" not in str(e.value)
+
+
+# ----------------------------------------------------------------------------- network
+
+
+def test_untrained_network_is_the_wiener_stage_and_tiles_equal_the_whole():
+    torch.manual_seed(0)
+    net = PSFNet(width=8, use_fov=True, stem=2).eval()
+    rgb, wien = torch.rand(1, 3, 50, 70), torch.rand(1, 3, 50, 70)
+    fov = torch.rand(1, 2, 50, 70)
+    assert torch.equal(net(rgb, fov, None, wien), wien)  # zero-initialised tail
+    with torch.no_grad():
+        for p in net.parameters():
+            p.add_(0.05 * torch.randn_like(p))
+    assert build_model(net.config).config == net.config
+    image, wiener = torch.rand(3, 200, 180), torch.rand(3, 200, 180)
+    whole = restore_image(net, image, (10.0, 20.0), (400.0, 600.0), tile=4096, wiener=wiener)
+    tiled = restore_image(net, image, (10.0, 20.0), (400.0, 600.0), tile=96, overlap=80, margin=36, wiener=wiener)
+    assert (whole - tiled).abs().max() < 1e-4
+    with pytest.raises(ValueError, match="Wiener"):
+        restore_image(net, image, (10.0, 20.0), (400.0, 600.0))
+
+
+TINY = dict(width=8, depth=2, crop=32, batch_size=2, lr=3e-3, val_fraction=0.5, val_batch_size=4, seed=0)
+
+
+@pytest.fixture(scope="module")
+def run(world, tmp_path_factory):
+    out = tmp_path_factory.mktemp("run") / "psfnet"
+    res = train(world["pairs"], out, arch="psfnet", epochs=2, **TINY)
+    return out, res
+
+
+def test_trains_and_restores_end_to_end(world, run):
+    out, res = run
+    assert res.step > 0 and math.isfinite(res.last_loss)
+    cfg = json.loads((out / "config.json").read_text())
+    assert cfg["arch"] == "psfnet"
+    rows = []
+    methods = {"model": harness.checkpoint_method(out / "last.pt"), "wiener": harness.builtin_method("wiener")}
+    summary = harness.evaluate(world["pairs"], methods, rows=rows)
+    assert math.isfinite(summary["methods"]["model"]["psnr_db"])
+    # a whole photo at the sensor's native scale: the stage, then the network's tiles
+    from lensim.restore.checkpoint import load_checkpoint
+
+    model, _ = load_checkpoint(out / "last.pt")
+    photo = torch.rand(3, 96, 128)
+    wien = photo_wiener(photo, world["bank"], world["sensor"], (0.0, 0.0), (96.0, 128.0), stage=model.stage)
+    restored = restore_image(model, photo, (0.0, 0.0), (96.0, 128.0), tile=64, overlap=32, wiener=wien)
+    assert restored.shape == photo.shape and torch.isfinite(restored).all()
+    with pytest.raises(InputError, match="native"):
+        photo_wiener(photo[:, :48, :64], world["bank"], world["sensor"], (0.0, 0.0), (48.0, 64.0))
+
+
+def test_onnx_export_takes_the_wiener_image_as_a_named_input(run):
+    from lensim.restore.checkpoint import load_checkpoint
+    from lensim.restore.engines import OnnxEngine
+    from lensim.restore.export import export_model_bytes
+
+    out, _ = run
+    model, info = load_checkpoint(out / "last.pt")
+    engine = OnnxEngine(export_model_bytes(model, info), threads=1)
+    assert engine.uses_wiener and engine.stage == model.stage
+    assert engine.input_names == ["rgb", "fov", "wiener"]
+    assert engine.metadata["inputs"]["wiener"].startswith("(N, 3, H, W)")
+    gen = torch.Generator().manual_seed(1)
+    image, wiener = torch.rand(3, 70, 90, generator=gen), torch.rand(3, 70, 90, generator=gen)
+    ref = restore_image(model, image, (5.0, 7.0), (96.0, 128.0), tile=64, overlap=32, wiener=wiener)
+    got = restore_image(engine, image, (5.0, 7.0), (96.0, 128.0), tile=64, overlap=32, wiener=wiener)
+    assert (ref - got).abs().max() < 1e-4
+
+
+def test_cli_restores_a_photo_and_refuses_a_missing_bank(world, run, tmp_path, capsys, monkeypatch):
+    from tests.cli_runner import run_cli
+
+    out, _ = run
+    photo = tmp_path / "photo.png"
+    write_image(photo, torch.rand(3, 96, 128), 8)
+    code, _, err = run_cli(
+        ["restore", str(out), str(photo), "-o", str(tmp_path / "restored"), "--quiet"], capsys, monkeypatch
+    )
+    assert code == 0, err
+    assert (tmp_path / "restored" / "photo.png").exists()
+    args = ["restore", str(out), str(photo), "-o", str(tmp_path / "r2"), "--bank", str(tmp_path / "nothing")]
+    code, _, err = run_cli(args, capsys, monkeypatch)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "nothing" in err, err
+    assert not (tmp_path / "r2" / "photo.png").exists()
