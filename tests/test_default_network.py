@@ -75,7 +75,7 @@ def test_arch_unet_is_the_papers_unet_as_before() -> None:
 
 
 def test_given_switches_beat_the_architecture_defaults() -> None:
-    assert set(ARCH_DEFAULTS) == {"unet", "nafnet"}
+    assert set(ARCH_DEFAULTS) == {"unet", "nafnet", "psfnet"}
     cfg = TrainConfig(use_deformable=True, use_context=True, stem=1).resolved()
     assert (cfg.arch, cfg.use_deformable, cfg.use_context, cfg.stem) == ("nafnet", True, True, 1)
     cfg = TrainConfig(arch="unet", use_deformable=False, use_context=False).resolved()

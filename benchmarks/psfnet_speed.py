@@ -1,0 +1,95 @@
+"""Benchmark: restoration speed of the PSF-informed network (issue 23), its Wiener stage
+included, against the default network, in the same run.
+
+    .venv/bin/python benchmarks/psfnet_speed.py BANK [--threads 2] [--side 1024] [--rounds 3]
+
+BANK: a PSF bank of the default sensor (benchmarks/psfnet_data.py writes the demo's). Each
+measurement runs in its own subprocess with ``--threads`` torch threads, on a synthetic
+side x side photo at the sensor's native scale (its top-left corner at the sensor's, so the
+stage's kernels span the field from the corner inwards), rounds interleaved:
+
+* ``stage``: lensim.restore.psf_stage.photo_wiener over the photo (the Wiener stage);
+* ``default``: the default network (NAFNet + FOV, stem 2, width 46) through restore_image;
+* ``psfnet``: the PSF-informed network (same body, width 46) through restore_image, given
+  the stage's image (computed once beforehand, not timed here).
+
+Prints MP/s (median over rounds) and the time a 24-megapixel frame would take at that rate
+(every part is linear in the pixels: the stage works per 32-pixel tile, the networks per
+512-pixel tile), with the stage's and the network's times added for ``psfnet``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+
+CHILD = r"""
+import json, sys, time, torch
+torch.set_num_threads(int(sys.argv[3]))
+from lensim.cli.allocator import keep_freed_memory
+keep_freed_memory()
+from lensim.psf.bank import PSFBank
+from lensim.restore.infer import restore_image
+from lensim.restore.nafnet import NAFNet
+from lensim.restore.psf_stage import photo_wiener
+from lensim.restore.psfnet import PSFNet
+from lensim.sensor.profile import DEFAULT_SENSOR, load_sensor
+
+what, bank_dir, side = sys.argv[1], sys.argv[2], int(sys.argv[4])
+sensor = load_sensor(DEFAULT_SENSOR)
+gen = torch.Generator().manual_seed(0)
+photo = torch.rand(3, side, side, generator=gen)
+size = (float(sensor.height), float(sensor.width))
+torch.manual_seed(0)
+with torch.inference_mode():
+    if what == "stage":
+        bank = PSFBank.load(bank_dir)
+        t = time.perf_counter()
+        photo_wiener(photo, bank, sensor, (0.0, 0.0), size)
+    else:
+        net = (PSFNet if what == "psfnet" else NAFNet)(width=46, use_fov=True, stem=2).eval()
+        for p in net.parameters():
+            p.add_(0.01 * torch.randn_like(p))
+        kw = {"wiener": torch.rand(3, side, side, generator=gen)} if what == "psfnet" else {}
+        t = time.perf_counter()
+        restore_image(net, photo, (0.0, 0.0), size, **kw)
+print(json.dumps({"seconds": time.perf_counter() - t}))
+"""
+
+PARTS = ("stage", "default", "psfnet")
+
+
+def measure(part: str, bank: str, threads: int, side: int) -> float:
+    out = subprocess.run(
+        [sys.executable, "-c", CHILD, part, bank, str(threads), str(side)], check=True, capture_output=True, text=True
+    )
+    return float(json.loads(out.stdout.strip().splitlines()[-1])["seconds"])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("bank")
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--side", type=int, default=1024)
+    ap.add_argument("--rounds", type=int, default=3)
+    a = ap.parse_args()
+    times: dict[str, list[float]] = {p: [] for p in PARTS}
+    for r in range(a.rounds):
+        for part in PARTS[r % 3 :] + PARTS[: r % 3]:
+            times[part].append(measure(part, a.bank, a.threads, a.side))
+    mp = a.side * a.side / 1e6
+    rate = {p: mp / statistics.median(t) for p, t in times.items()}
+    full = {p: 24.0 / rate[p] for p in PARTS}
+    print(f"{a.side}x{a.side} photo, {a.threads} threads, {a.rounds} rounds (median):")
+    for p in PARTS:
+        print(f"  {p:8s} {rate[p]:.3f} MP/s  (24 MP: {full[p]:.0f} s)")
+    total = full["stage"] + full["psfnet"]
+    print(f"  psfnet with its stage: {24.0 / total:.3f} MP/s (24 MP: {total:.0f} s)")
+    print(json.dumps({"times_s": times, "mp_per_s": rate}))
+
+
+if __name__ == "__main__":
+    main()
