@@ -113,21 +113,26 @@ def evaluate_all(out: Path, seeds: list[int]) -> dict:
 
     results: dict = {}
     for seed in seeds:
+        nets = [n for n in NETWORKS if (out / f"{n}-s{seed}.done").exists()]  # those trained so far
         for label, pairs, sources in (
             ("held_out", out / "pairs", read_held_out(out / f"psfnet-s{seed}")),
             ("unseen", out / "pairs-test", None),
         ):
             csv_path = out / f"eval-{label}-s{seed}.csv"
-            if not csv_path.exists():
-                methods = {n: checkpoint_method(out / f"{n}-s{seed}" / "last.pt") for n in NETWORKS}
-                methods = {"wiener": builtin_method("wiener"), **methods}
-                rows = evaluate_rows(pairs, methods, bank=out / "bank", sources=sources)
+            rows = _read_rows(csv_path) if csv_path.exists() else []
+            todo = [n for n in ["wiener", *nets] if n not in {r["method"] for r in rows}]
+            if todo:
+                methods = {n: checkpoint_method(out / f"{n}-s{seed}" / "last.pt") for n in todo if n != "wiener"}
+                if "wiener" in todo:
+                    methods = {"wiener": builtin_method("wiener"), **methods}
+                new = evaluate_rows(pairs, methods, bank=out / "bank", sources=sources)
+                rows += [r for r in new if r["method"] != "input" or not rows]
                 write_csv(rows, csv_path)
-            rows = _read_rows(csv_path)
+                rows = _read_rows(csv_path)
             results[f"{label}-s{seed}"] = {
                 "summary": summarize(rows),
                 "photos": _per_photo(rows),
-                "steps": {n: _steps(out / f"{n}-s{seed}") for n in NETWORKS},
+                "steps": {n: _steps(out / f"{n}-s{seed}") for n in nets},
             }
     return results
 
@@ -157,6 +162,11 @@ def _per_photo(rows: list[dict]) -> dict:
     }
 
 
+def _present(runs: list[dict]) -> list[str]:
+    """The methods every run scored, in METHODS order."""
+    return [n for n in METHODS if all(n in r["summary"]["methods"] for r in runs)]
+
+
 def _row(name: str, runs: list[dict]) -> str:
     """One method's line: PSNR (gain over input) and SSIM, mean over the seeds; zone gains."""
     ms = [r["summary"]["methods"] for r in runs]
@@ -180,23 +190,28 @@ def tables(results: dict, seeds: list[int]) -> str:
             "",
             "| method | PSNR dB (gain) | SSIM | gain centre / middle / edge | PSNR per seed |",
             "| --- | ---: | ---: | --- | --- |",
-            *[_row(n, runs) for n in METHODS],
+            *[_row(n, runs) for n in _present(runs)],
             "",
         ]
-        steps = " ; ".join(f"{n} " + "/".join(str(r["steps"][n]) for r in runs) for n in NETWORKS)
+        nets = [n for n in _present(runs) if n in NETWORKS]
+        steps = " ; ".join(f"{n} " + "/".join(str(r["steps"][n]) for r in runs) for n in nets)
         lines += [f"Training steps per seed: {steps}.", ""]
         photos = sorted(runs[0]["photos"]) if label == "unseen" else []
-        if photos:
+        if photos and "psfnet" in nets:
+            present = _present(runs)
+            refs = [n for n in ("wiener", "default", "plain") if n in present]
             lines += [
-                "| photo | input | wiener | plain | default | psfnet | psfnet - wiener | psfnet - plain |",
-                "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+                "| photo | " + " | ".join(present) + " | " + " | ".join(f"psfnet - {n}" for n in refs) + " |",
+                "| --- |" + " ---: |" * (len(present) + len(refs)),
             ]
             for p in photos:
-                v = {n: statistics.mean(r["photos"][p][n][0] for r in runs) for n in METHODS}
+                v = {n: statistics.mean(r["photos"][p][n][0] for r in runs) for n in present}
                 lines.append(
                     f"| {p} | "
-                    + " | ".join(f"{v[n]:.2f}" for n in METHODS)
-                    + f" | {v['psfnet'] - v['wiener']:+.2f} | {v['psfnet'] - v['plain']:+.2f} |"
+                    + " | ".join(f"{v[n]:.2f}" for n in present)
+                    + " | "
+                    + " | ".join(f"{v['psfnet'] - v[n]:+.2f}" for n in refs)
+                    + " |"
                 )
             lines.append("")
     return "\n".join(lines)

@@ -35,7 +35,7 @@ def test_each_rule_names_its_parameter(arch, switches, field):
 
 
 def test_what_each_architecture_takes():
-    assert ARCHS == ("unet", "nafnet") and set(ARCH_DEFAULTS) == set(ARCHS)
+    assert ARCHS == ("unet", "nafnet", "psfnet") and set(ARCH_DEFAULTS) == set(ARCHS)
     check_switches("unet", use_deformable=True, field_modulation=True, deformable_scales=0, widths=(8, 16, 32))
     check_switches("nafnet", stem=2, use_deformable=True, deformable_scales=2, widths=(8, 16, 32))
     check_switches("nafnet", deformable_scales=0)  # no deformable blocks: the count is unused
