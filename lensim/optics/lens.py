@@ -289,11 +289,21 @@ class Lens:
 
     def vertex_z(self) -> np.ndarray:
         """z (mm) of every surface vertex, then of the image plane (length N+1)."""
+        return np.asarray([float(z) for z in self.vertex_positions()])
+
+    def vertex_positions(self) -> list:
+        """vertex_z() as a list of numbers, each a tensor where a thickness (or the image
+        defocus) before it is one: what the tracer differentiates."""
         z = [0.0]
         for s in self.surfaces[:-1]:
             z.append(z[-1] + s.thickness)
         z.append(z[-1] + self.surfaces[-1].thickness + self.image_defocus)
-        return np.asarray(z)
+        return z
+
+    @property
+    def requires_grad(self) -> bool:
+        """Whether a surface parameter or the image defocus is a tensor that requires grad."""
+        return any(s.requires_grad for s in self.surfaces) or bool(getattr(self.image_defocus, "requires_grad", False))
 
     def media(self) -> list[Material]:
         """Medium before surface 0, then after every surface (length N+1).

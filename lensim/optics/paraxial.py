@@ -12,6 +12,7 @@ import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
+import torch
 
 from lensim.errors import InputError
 from lensim.optics.lens import Lens
@@ -38,6 +39,8 @@ def trace_yu(lens: Lens, y: float, nu: float, wavelength_um: float, start: int =
         heights.append(y)
         power = s.curvature * (n[i + 1] - n[i]) + 2.0 * s.asphere.get(2, 0.0) * (n[i + 1] - n[i])
         nu = nu - y * power
+    if any(isinstance(h, torch.Tensor) for h in heights):  # a lens parameter requires grad
+        return torch.stack([torch.as_tensor(h, dtype=torch.float64) for h in heights]), nu
     return np.asarray(heights), nu
 
 
@@ -80,7 +83,7 @@ def paraxial_data(lens: Lens, wavelength_um: float | None = None) -> ParaxialDat
     wl = lens.primary_wavelength_um if wavelength_um is None else wavelength_um
     n = signed_indices(lens, wl)
     n_obj = n[0]
-    zv = lens.vertex_z()
+    zv = lens.vertex_positions() if lens.requires_grad else lens.vertex_z()
     last = lens.num_surfaces - 1
     ys, nu = trace_yu(lens, 1.0, 0.0, wl)
     power = -nu / ys[0]

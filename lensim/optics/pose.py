@@ -34,21 +34,33 @@ def rotation(tilt_x_deg: float, tilt_y_deg: float) -> torch.Tensor:
     return rx @ ry
 
 
-def to_local(pose: Pose, z_vertex: float, pos: torch.Tensor, dirs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+def _vertex(dx: float, dy: float, z_vertex: float | torch.Tensor, like: torch.Tensor) -> torch.Tensor:
+    """The vertex (dx, dy, z_vertex) mm as a (3,) tensor of like's dtype and device, stacked
+    where a coordinate is a tensor, so that gradients reach decentres and thicknesses."""
+    if any(isinstance(v, torch.Tensor) for v in (dx, dy, z_vertex)):
+        return torch.stack([torch.as_tensor(v, dtype=like.dtype, device=like.device) for v in (dx, dy, z_vertex)])
+    return torch.tensor([dx, dy, z_vertex], dtype=like.dtype, device=like.device)
+
+
+def to_local(
+    pose: Pose, z_vertex: float | torch.Tensor, pos: torch.Tensor, dirs: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Positions (..., 3) mm and directions (..., 3) from the global frame to the frame of
     a surface with this pose whose nominal vertex is at z_vertex (mm); positions relative
     to the vertex."""
     dx, dy, tx, ty = pose
-    v = torch.tensor([dx, dy, z_vertex], dtype=pos.dtype, device=pos.device)
+    v = _vertex(dx, dy, z_vertex, pos)
     r = rotation(tx, ty).to(pos.device)
     return (pos - v) @ r, dirs @ r  # row vectors: p R == (R^T p)^T
 
 
-def to_global(pose: Pose, z_vertex: float, pos: torch.Tensor, dirs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+def to_global(
+    pose: Pose, z_vertex: float | torch.Tensor, pos: torch.Tensor, dirs: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
     """The inverse of to_local: local positions (relative to the vertex) and directions
     (..., 3) back to the global frame."""
     dx, dy, tx, ty = pose
-    v = torch.tensor([dx, dy, z_vertex], dtype=pos.dtype, device=pos.device)
+    v = _vertex(dx, dy, z_vertex, pos)
     rt = rotation(tx, ty).to(pos.device).T
     return pos @ rt + v, dirs @ rt
 

@@ -51,8 +51,9 @@ class Surface:
 
     @property
     def has_pose(self) -> bool:
-        """True when the surface is decentred or tilted (lensim.optics.pose)."""
-        return any(v != 0.0 for v in self.pose)
+        """True when the surface is decentred or tilted (lensim.optics.pose), or its pose is
+        a tensor that requires grad (a calibration's start at zero)."""
+        return any(v != 0.0 or getattr(v, "requires_grad", False) for v in self.pose)
 
     @property
     def radius(self) -> float:
@@ -66,6 +67,14 @@ class Surface:
     def kind(self) -> str:
         """'plane', 'sphere', 'conic', 'even asphere' or 'odd asphere' (any odd power)."""
         return self.geometry.kind
+
+    @property
+    def requires_grad(self) -> bool:
+        """Whether curvature, thickness, conic, an aspheric coefficient or a decentre is a
+        tensor that requires grad (the tracer then runs its reference path, which autograd
+        follows; tilts enter through math and take no gradient)."""
+        values = (self.curvature, self.thickness, self.conic, *self.asphere.values(), *self.pose[:2])
+        return any(getattr(v, "requires_grad", False) for v in values)
 
     @property
     def geometry(self) -> Geometry:

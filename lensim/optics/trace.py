@@ -109,7 +109,7 @@ def _reflect(d: torch.Tensor, normal: torch.Tensor) -> torch.Tensor:
 
 def trace_surface(
     surf: Surface,
-    z_vertex: float,
+    z_vertex: float | torch.Tensor,
     rays: Rays,
     n_before: torch.Tensor,
     n_after: torch.Tensor,
@@ -184,7 +184,7 @@ def trace_reference(
     plain reference implementation (also used when gradients are needed)."""
     end = lens.num_surfaces if end is None else end
     n = media_indices(lens, wavelength_um) if indices is None else indices
-    zv = lens.vertex_z()
+    zv = [z if isinstance(z, torch.Tensor) else float(z) for z in lens.vertex_positions()]
     backwards = lens.virtual_steps()  # where a ray may travel backwards to the surface
     backwards[min(start, lens.num_surfaces)] = True  # rays start anywhere
     status = torch.zeros(rays.shape, dtype=torch.int8, device=rays.opl.device)
@@ -193,7 +193,7 @@ def trace_reference(
     for i in range(start, end):
         rays, st = trace_surface(
             lens.surfaces[i],
-            float(zv[i]),
+            zv[i],
             rays,
             n[i],
             n[i + 1],
@@ -209,7 +209,7 @@ def trace_reference(
         image = Surface(clear_radius=lens.image_clear_radius, pose=(0.0, 0.0, *lens.image_tilt))
         rays, st = trace_surface(
             image,
-            float(zv[-1]),
+            zv[-1],
             rays,
             n[-1],
             n[-1],
@@ -471,11 +471,13 @@ def trace(
     and stop: one that misses a surface keeps its state from before that surface, one that
     is vignetted or totally internally reflected stops on the surface (direction unchanged).
     Runs the chunked fast path below; trace_reference() is the plain one (same results for
-    valid rays to rounding) and is used when an input requires gradients or a surface or the
-    image plane is decentred or tilted (lensim.optics.pose).
+    valid rays to rounding) and is used when the rays or the lens's parameters (curvature,
+    thickness, conic, aspheric terms, image defocus, surface poses given as tensors) require
+    gradients, or a surface or the image plane is decentred or tilted (lensim.optics.pose).
     """
     end = lens.num_surfaces if end is None else end
-    if lens.has_poses or any(t.requires_grad for t in (rays.position, rays.direction, rays.opl)):
+    reference = lens.has_poses or lens.requires_grad
+    if reference or any(t.requires_grad for t in (rays.position, rays.direction, rays.opl)):
         return trace_reference(lens, rays, wavelength_um, start, end, to_image, record, apertures, indices)
     n = media_indices(lens, wavelength_um) if indices is None else indices
     zv = lens.vertex_z()

@@ -131,28 +131,31 @@ def huygens_psf(
     pf: PupilField,
     grid: int,
     spacing_um: float,
-    offset_mm: tuple[float, float] = (0.0, 0.0),
+    offset_mm: tuple[float, float] | tuple[torch.Tensor, torch.Tensor] = (0.0, 0.0),
     max_phase_error: float = 0.01,
     tile: int | None = None,
     dtype: torch.dtype = torch.complex64,
     mirror: bool | None = None,
 ) -> torch.Tensor:
     """Huygens PSF (grid x grid, energy per sample, float64) on the image plane, sampled
-    every spacing_um, centred (sample grid//2) on the chief-ray point plus offset_mm.
+    every spacing_um, centred (sample grid//2) on the chief-ray point plus offset_mm (mm;
+    0-dim tensors where gradients with respect to the sensor's decentre are wanted).
     Rows are y, columns x. dtype: the complex type of the per-tile phase factors and their
     matrix products (complex64 or complex128; see the module's note on precision).
     mirror: compute the columns at x >= the window centre only and mirror them, for a PSF
     symmetric about the meridional plane (about half the work); None: when
-    :func:`mirror_symmetric` finds the wavelets symmetric about the window's centre line."""
+    :func:`mirror_symmetric` finds the wavelets symmetric about the window's centre line
+    and no gradient flows through pf (the derivative of a symmetric PSF, say with respect
+    to an x decentre, need not be symmetric)."""
     s = spacing_um * 1e-3
     k_vac = 2.0 * math.pi / pf.wavelength_mm
     kn = k_vac * pf.n_image
     m = tile or min(grid, _tile_size(pf, s, max_phase_error))
-    cx = pf.chief[0].item() + offset_mm[0]
-    cy = pf.chief[1].item() + offset_mm[1]
-    cz = pf.chief[2].item()
-    if mirror is None:
-        mirror = mirror_symmetric(pf, cx)
+    cx = pf.chief[0] + offset_mm[0]  # 0-dim tensors, so that gradients reach the chief ray
+    cy = pf.chief[1] + offset_mm[1]
+    cz = pf.chief[2]
+    if mirror is None:  # a symmetric PSF's gradient need not be (a decentre across the plane)
+        mirror = not (cx.requires_grad or _requires_grad(pf)) and mirror_symmetric(pf, cx.item())
     k = torch.arange(grid) - grid // 2  # sample index from the window centre
     ty_c, ey_t = _axis_tiles(k.to(torch.float64) * s, m)
     if mirror:  # the columns at x >= 0, the first tile reaching m // 2 from its centre at x = 0
@@ -168,7 +171,7 @@ def huygens_psf(
     cos_d = (nu * pf.directions).sum(-1)
     ty, tx = torch.meshgrid(ty_c, tx_c, indexing="ij")
     T = n_ty * n_tx
-    centres = torch.stack([cx + tx.reshape(-1), cy + ty.reshape(-1), torch.full((T,), cz, dtype=torch.float64)], -1)
+    centres = torch.stack([cx + tx.reshape(-1), cy + ty.reshape(-1), cz.expand(T)], -1)
     # tile t = (row ty, column tx): its x offsets and y offsets, (T, m)
     ex = ex_t[torch.arange(n_tx).repeat(n_ty)]
     ey = ey_t[torch.arange(n_ty).repeat_interleave(n_tx)]
@@ -192,14 +195,24 @@ def huygens_psf(
     if mirror:
         out = out[:, k.abs()]
     out = out.to(torch.complex128)
-    return (out.real**2 + out.imag**2) * s * s * plane_obliquity(pf)
+    return (out.real**2 + out.imag**2) * s * s * _obliquity(pf)
+
+
+def _requires_grad(pf: PupilField) -> bool:
+    """Whether autograd follows any of pf's tensors (a lens parameter requires grad)."""
+    values = (pf.points, pf.directions, pf.opl, pf.power, pf.area, pf.chief, pf.radius)
+    return any(isinstance(v, torch.Tensor) and v.requires_grad for v in values)
+
+
+def _obliquity(pf: PupilField) -> torch.Tensor:
+    d = (pf.chief.unsqueeze(0) - pf.points) / pf.radius
+    return ((d[:, 2] * pf.power).sum() / pf.power.sum()).abs()
 
 
 def plane_obliquity(pf: PupilField) -> float:
     """cos of the chief ray's angle to the image-plane normal: the beam's intensity
     |E|^2 becomes irradiance on the tilted-incidence plane with this factor."""
-    d = (pf.chief.unsqueeze(0) - pf.points) / pf.radius
-    return float(abs((d[:, 2] * pf.power).sum() / pf.power.sum()))
+    return float(_obliquity(pf))
 
 
 def ideal_peak(pf: PupilField, spacing_um: float) -> float:

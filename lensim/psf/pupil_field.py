@@ -49,7 +49,7 @@ class PupilField:
     area: torch.Tensor
     pupil_xy: torch.Tensor
     chief: torch.Tensor
-    radius: float
+    radius: float | torch.Tensor
     n_image: float
     wavelength_um: float
     transmission: float
@@ -294,12 +294,13 @@ def _on_sphere(lens: Lens, tr: _ImageRays, field: float, wavelength_um: float, p
     # reference sphere: centre at the chief-ray image point, through the chief ray's
     # crossing of the paraxial exit-pupil plane
     z_xp = para.exit_pupil_z_mm
-    dz = chief_dir[2].item()
-    if not math.isfinite(z_xp) or abs(dz) < 1e-12:
+    dz = chief_dir[2]
+    radius: float | torch.Tensor
+    if not math.isfinite(z_xp) or abs(dz.item()) < 1e-12:
         radius = 1e3 * max(para.efl_mm, 1.0)  # telecentric: a large sphere
     else:
-        t_xp = (z_xp - chief[2].item()) / dz
-        radius = abs(t_xp)
+        radius = abs((z_xp - chief[2]) / dz)
+        radius = radius if radius.requires_grad else radius.item()  # a tensor where gradients flow
     # carry every ray from the image plane back/forward to the sphere: |p + t d - C| = R,
     # root on the pupil side of the focus
     w = pos - chief

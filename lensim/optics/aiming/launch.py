@@ -17,12 +17,15 @@ from lensim.optics.paraxial import ParaxialData
 from lensim.optics.trace import DTYPE, Rays
 
 
-def launch_at(lens: Lens, field: torch.Tensor, ep_xy: torch.Tensor, z_ep: float) -> tuple[torch.Tensor, torch.Tensor]:
+def launch_at(
+    lens: Lens, field: torch.Tensor, ep_xy: torch.Tensor, z_ep: float | torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
     """(position, direction), each (..., 3), of the rays of launch field values `field`
     (deg or mm; broadcast against ep_xy[..., 0]) through the points ep_xy (..., 2) mm of
-    the plane z = z_ep."""
+    the plane z = z_ep (a 0-dim tensor where gradients flow to the entrance pupil)."""
     fld, ex, ey = torch.broadcast_tensors(field, ep_xy[..., 0], ep_xy[..., 1])
-    through = torch.stack([ex, ey, torch.full_like(ex, z_ep)], -1)
+    ez = z_ep.expand_as(ex) if isinstance(z_ep, torch.Tensor) else torch.full_like(ex, z_ep)
+    through = torch.stack([ex, ey, ez], -1)
     if lens.infinite_object:
         a = torch.deg2rad(fld)
         return through, torch.stack([torch.zeros_like(a), torch.sin(a), torch.cos(a)], -1)
