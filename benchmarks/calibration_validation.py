@@ -222,7 +222,12 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("benchmarks/results/calibration"))
     ap.add_argument("--cameras", default="focus_decentre,focus_tilt_decentre,held_out")
     ap.add_argument("--cache", type=Path, default=Path("benchmarks/results/calibration-cache"), help="bank cache")
+    ap.add_argument("--table-only", action="store_true", help="only gather OUT/*.json into OUT/table.md")
     args = ap.parse_args()
+    if args.table_only:
+        found = [json.loads((args.out / f"{n}.json").read_text()) for n in args.cameras.split(",")]
+        (args.out / "table.md").write_text(table([r for r in found]))
+        return
     torch.set_num_threads(1)
     args.out.mkdir(parents=True, exist_ok=True)
     world = World(args.cache)
