@@ -43,12 +43,14 @@ class DemoSettings:
     """Sizes of a demo run. quick: about 3 minutes on 2 cores; default: about 15.
 
     width, deformable_scales: the field-aware UNet whose parameter count every network of
-    the demo matches. arch, stem: the demo's network (the default network): "nafnet" with
-    FOV channels and a ``stem``x``stem`` pixel-unshuffle stem (benchmarks/nafnet_vs_unet.py:
-    ahead of the UNet on the same budget, restores about 5x faster), or "unet", the UNet
-    itself. The baseline (:func:`plain_network`) is the same network with every field-aware
-    part off, of the same size: plain NAFNet with the same stem (the stronger plain network
-    measured, benchmarks/nafnet_vs_unet.py), or the plain UNet."""
+    the demo matches. arch, stem: the demo's field-aware network: "psfnet" (the PSF-informed
+    network, issue 23: the default network's body refining the Wiener stage's image, with
+    FOV channels and a ``stem``x``stem`` pixel-unshuffle stem; benchmarks/psfnet_demo.py),
+    "nafnet" (the default network of `lensim train`: the same body on the image and FOV
+    channels only; benchmarks/nafnet_vs_unet.py) or "unet", the paper's UNet. The baseline
+    (:func:`plain_network`) is the same body with every field-aware part off, of the same
+    size: plain NAFNet with the same stem (the stronger plain network measured,
+    benchmarks/nafnet_vs_unet.py), or the plain UNet."""
 
     fields: int
     wavelengths_nm: tuple[float, ...]
@@ -61,7 +63,7 @@ class DemoSettings:
     width: int
     train_crop: int
     deformable_scales: int
-    arch: str = "nafnet"
+    arch: str = "psfnet"
     stem: int = 2
 
     @classmethod
@@ -141,7 +143,7 @@ def plain_network(settings: DemoSettings) -> dict[str, Any]:
 
     target = _target_parameters(settings)
     switches: dict[str, Any] = dict(use_fov=False, use_deformable=False, use_context=False)
-    if settings.arch == "nafnet":
+    if settings.arch in ("nafnet", "psfnet"):
         switches["stem"] = settings.stem
         return dict(arch="nafnet", width=nafnet_width(target, **switches), **switches)
     return dict(arch="unet", width=plain_unet_width(target, 3), **switches)
@@ -179,9 +181,9 @@ def _train(
     )
     if plain:
         kw.update(plain_network(settings))
-    elif settings.arch == "nafnet":
+    elif settings.arch in ("nafnet", "psfnet"):  # psfnet: NAFNet's width (lensim.restore.models.default_width)
         switches: dict[str, Any] = dict(use_fov=True, use_deformable=False, use_context=False, stem=settings.stem)
-        kw.update(arch="nafnet", width=nafnet_width(_target_parameters(settings), **switches), **switches)
+        kw.update(arch=settings.arch, width=nafnet_width(_target_parameters(settings), **switches), **switches)
     else:
         kw.update(
             arch="unet",
@@ -347,6 +349,14 @@ def _run_demo(
     )
     timings["pairs"] = time.perf_counter() - t
 
+    if settings.arch == "psfnet":  # once, before the two trainings run side by side
+        from lensim.restore.psf_stage import ensure_wiener_cache
+
+        t = time.perf_counter()
+        say("Wiener stage of the pairs")
+        ensure_wiener_cache(out / "pairs", bank=bank, progress=step)
+        timings["wiener_stage"] = time.perf_counter() - t
+
     t = time.perf_counter()
     model_info, plain_info = _train_both(out, settings, seed, device, workers, say, step)
     timings["training"] = time.perf_counter() - t
@@ -452,7 +462,7 @@ def _raw_stage(out: Path, bank: PSFBank, sensor: SensorProfile, figs: Path, seed
         )
     checkpoint = out / "run-model" / "last.pt"
     model, _ = load_checkpoint(checkpoint, device=device)
-    settings = RestoreSettings(str(checkpoint), sensor.to_dict(), device=device)
+    settings = RestoreSettings(str(checkpoint), sensor.to_dict(), device=device, bank=str(out / "bank"))
     record = restore_raw_files([dng], d / "restored", model, settings)[0]
     entry = raw_file_figure(dng, Path(record["output"]), truth, sensor, figs)
     return {"photo": name, "dng": str(dng.relative_to(out)), "sensor_top": top, "sensor_left": left, **entry}

@@ -240,8 +240,8 @@ def _demo_configs(tmp_path: Path, monkeypatch, settings: list) -> list[TrainConf
 
 def test_demo_trains_the_networks_it_named_before(tmp_path: Path, monkeypatch) -> None:
     """lensim demo names every architecture and switch: its UNet variant and that
-    variant's plain UNet resolve as with the old defaults, its NAFNet is the default
-    network's switches."""
+    variant's plain UNet resolve as with the old defaults, its field-aware network is the
+    PSF-informed network (issue 23) with the default network's switches."""
     import dataclasses
 
     from lensim.demo import DemoSettings
@@ -259,7 +259,7 @@ def test_demo_trains_the_networks_it_named_before(tmp_path: Path, monkeypatch) -
         "use_context": False,
     }
     assert (model.arch, model.use_fov, model.use_deformable, model.use_context, model.stem) == (
-        "nafnet",
+        "psfnet",  # the demo's field-aware network since issue 23: the PSF-informed one
         True,
         False,
         False,
