@@ -253,7 +253,8 @@ def restore_raw(
     vec = settings_vector(raw, settings, warn=False)  # validate() warned
     img, params = develop_raw(raw, sensor, orient=False)
     top_left, size = raw_geometry(raw, sensor, placement, native)
-    wiener = _stage_image(model, img, (top_left, size), sensor, settings, params.to_dict(), str(job.source))
+    capture = {**params.to_dict(), **_recorded_noise(placement)}
+    wiener = _stage_image(model, img, (top_left, size), sensor, settings, capture, str(job.source))
     try:
         out = restore_image(
             model,
@@ -295,6 +296,15 @@ def restore_raw(
     }
 
 
+def _recorded_noise(placement: dict[str, Any] | None) -> dict[str, float]:
+    """The noise levels (shot, read) a DNG written by `lensim simulate` records of its
+    capture, for the Wiener stage; empty for any other raw file (its noise is not known)."""
+    cap = (placement or {}).get("capture") or {}
+    if cap.get("shot") is None or cap.get("read") is None:
+        return {}
+    return {"shot": float(cap["shot"]), "read": float(cap["read"])}
+
+
 def _stage_image(
     model: Any,
     img: torch.Tensor,
@@ -305,7 +315,7 @@ def _stage_image(
     source: str,
 ) -> torch.Tensor | None:
     """The Wiener stage's image of a developed raw for a PSF-informed network (the develop's
-    colour pipeline as its capture; the noise level is not known), else None."""
+    colour pipeline as its capture, with the noise levels a simulated DNG records), else None."""
     if not getattr(model, "uses_wiener", False):
         return None
     from lensim.restore.psf_stage import network_bank, photo_wiener, stage_of
