@@ -266,7 +266,7 @@ def test_size_matching() -> None:
 
 
 def test_build_model_and_checkpoints(tmp_path: Path) -> None:
-    assert ARCHS == ("unet", "nafnet")
+    assert ARCHS == ("unet", "nafnet", "psfnet")
     torch.manual_seed(0)
     naf = _randomised(NAFNet(8, use_fov=True, stem=2))
     unet = FieldAwareUNet(8, 2)

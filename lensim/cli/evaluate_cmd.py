@@ -168,7 +168,7 @@ def _method_names(methods: str | None, runs: dict[str, Path | None], plain_name:
 
     if methods is None:
         names = DEFAULT_METHODS.split(",") + [
-            plain_name if n == "plain" else n for n in CHECKPOINT_METHODS if runs[n] is not None
+            plain_name if n == "plain" else n for n in CHECKPOINT_METHODS if runs.get(n) is not None
         ]
     else:
         names = [m.strip() for m in methods.split(",") if m.strip()]
@@ -182,7 +182,7 @@ def _method_names(methods: str | None, runs: dict[str, Path | None], plain_name:
                 f"unknown method {n!r}; expected some of {', '.join(BUILTIN_METHODS + CHECKPOINT_METHODS)}",
             )
         canonical = METHOD_ALIASES.get(n, n)
-        if canonical in CHECKPOINT_METHODS and runs[canonical] is None:
+        if canonical in CHECKPOINT_METHODS and runs.get(canonical) is None:
             raise InputError("--methods", None, f"method {n!r} needs its run: pass --{canonical} RUN")
     return names
 
