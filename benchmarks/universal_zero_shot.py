@@ -28,19 +28,10 @@ from pathlib import Path
 
 def unseen_folder(out: Path, size: int) -> Path:
     """The unseen test photos, centre-cropped to size x size, in out/unseen (written once)."""
-    from lensim.assets.images import read_sample_image, unseen_photos
-    from lensim.images import write_image
+    from lensim.assets.images import unseen_photos, write_centre_crops
 
     folder = out / "unseen"
-    folder.mkdir(parents=True, exist_ok=True)
-    for img in unseen_photos():
-        target = folder / f"{img.name}.png"
-        if not target.exists():
-            arr = read_sample_image(img.name)
-            _, h, w = arr.shape
-            s = min(size, h, w)
-            y, x = (h - s) // 2, (w - s) // 2
-            write_image(target, arr[:, y : y + s, x : x + s])
+    write_centre_crops(unseen_photos(), folder, size)
     return folder
 
 

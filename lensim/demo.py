@@ -20,9 +20,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from lensim.assets import DEFAULT_LENS
-from lensim.assets.images import available_sample_images, read_sample_image
+from lensim.assets.images import available_sample_images, write_centre_crops
 from lensim.errors import InputError
-from lensim.images import write_image
 from lensim.io import atomic_write_json, folder_lock, read_json
 from lensim.optics.analysis import first_order_summary
 from lensim.optics.lens_file import load_lens
@@ -111,14 +110,7 @@ def _claim_folder(out: Path, settings: DemoSettings, quick: bool, seed: int, sho
 def _photos(out: Path, size: int) -> Path:
     """The built-in sample photos, centre-cropped to size x size (sharp, sRGB)."""
     d = _stage(out, "photos")
-    for img in available_sample_images():
-        target = d / f"{img.name}.png"
-        if not target.exists():
-            arr = read_sample_image(img.name)
-            _, h, w = arr.shape
-            s = min(size, h, w)
-            y, x = (h - s) // 2, (w - s) // 2
-            write_image(target, arr[:, y : y + s, x : x + s])
+    write_centre_crops(available_sample_images(), d, size)
     return d
 
 

@@ -335,3 +335,24 @@ def unseen_photos() -> list[SampleImage]:
     """The unseen test photos whose package is installed (:data:`TEST_IMAGES`): for
     evaluation only; no default of lensim trains on them."""
     return _installed(TEST_IMAGES)
+
+
+def write_centre_crops(images: list[SampleImage], folder: str | Path, size: int) -> list[Path]:
+    """Write each photo centre-cropped to size x size (or its shorter side) as
+    folder/<name>.png, once: a file already there is kept. Returns the paths in the order
+    of ``images``."""
+    from lensim.images import write_image
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for img in images:
+        target = folder / f"{img.name}.png"
+        if not target.exists():
+            arr = read_sample_image(img.name)
+            _, h, w = arr.shape
+            s = min(size, h, w)
+            y, x = (h - s) // 2, (w - s) // 2
+            write_image(target, arr[:, y : y + s, x : x + s])
+        paths.append(target)
+    return paths

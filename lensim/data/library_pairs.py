@@ -67,21 +67,9 @@ class LibraryPairsResult:
 def training_photos(out_dir: str | Path, size: int) -> list[Path]:
     """The built-in training photos centre-cropped to size x size, written once into
     out_dir/photos/all (atomic writes); their paths, sorted by name."""
-    from lensim.assets.images import available_sample_images, read_sample_image
-    from lensim.images import write_image
+    from lensim.assets.images import available_sample_images, write_centre_crops
 
-    folder = Path(out_dir) / "photos" / "all"
-    folder.mkdir(parents=True, exist_ok=True)
-    paths = []
-    for img in available_sample_images():
-        target = folder / f"{img.name}.png"
-        if not target.exists():
-            arr = read_sample_image(img.name)
-            _, h, w = arr.shape
-            s = min(size, h, w)
-            y, x = (h - s) // 2, (w - s) // 2
-            write_image(target, arr[:, y : y + s, x : x + s])
-        paths.append(target)
+    paths = write_centre_crops(available_sample_images(), Path(out_dir) / "photos" / "all", size)
     if not paths:
         raise InputError(None, "photos", "no built-in training photo is installed; expected `bash scripts/setup.sh`")
     return sorted(paths)
