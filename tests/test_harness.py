@@ -7,16 +7,12 @@ import pytest
 import typer
 from typer.testing import CliRunner
 
-from lensim.assets.images import sample_image_path
 from lensim.cli.evaluate_cmd import evaluate_command
 from lensim.data.pairs import make_dataset
 from lensim.errors import InputError
 from lensim.evaluate import harness
 from lensim.evaluate.metrics import ZONES
-from lensim.images import read_image, write_image
-from lensim.optics.lens_file import load_lens
-from lensim.psf.bank import BankSettings, get_bank
-from lensim.sensor.profile import load_sensor, sensor_from_dict
+from tests.tiny_camera import tiny_camera
 
 
 @pytest.fixture(scope="module")
@@ -24,18 +20,7 @@ def pairs(tmp_path_factory):
     """Two photos on a 128 x 96 pixel sensor (the APS-C profile's pitch), one 96 px crop
     each, which spans every field zone (its corners lie beyond 2/3 of the half-diagonal)."""
     base = tmp_path_factory.mktemp("harness")
-    sharp = base / "sharp"
-    for name in ("kodim23", "coffee"):
-        img, _ = read_image(sample_image_path(name))
-        write_image(sharp / f"{name}.png", img[:, 100:196, 100:228])
-    d = load_sensor("apsc_mirrorless").to_dict()
-    d["resolution"] = [128, 96]
-    d["name"] = "tiny"
-    sensor_file = base / "tiny_sensor.json"
-    sensor_file.write_text(json.dumps(d))
-    sensor = sensor_from_dict(d, str(sensor_file))
-    settings = BankSettings(fields=(0.0, 0.5, 1.0), wavelengths_nm=(500, 600), pupil_samples=64, kernel_pixels=21)
-    bank = get_bank(load_lens("cooke_triplet"), sensor.pixel_pitch_um, settings, out_dir=base / "bank")
+    sharp, sensor_file, sensor, bank = tiny_camera(base)
     make_dataset(sharp, base / "pairs", bank, str(sensor_file), sensor, crops=1, size=96, seed=1)
     return base / "pairs"
 

@@ -16,8 +16,6 @@ from lensim.errors import InputError
 from lensim.evaluate import baselines as B
 from lensim.evaluate import harness
 from lensim.images import read_image, write_image
-from lensim.optics.lens_file import load_lens
-from lensim.psf.bank import BankSettings, get_bank
 from lensim.render.kernels import kernels_at
 from lensim.render.mapping import SensorMapping
 from lensim.restore.infer import restore_image
@@ -32,8 +30,8 @@ from lensim.restore.psf_stage import (
 )
 from lensim.restore.psfnet import PSFNet
 from lensim.restore.train import train
-from lensim.sensor.profile import load_sensor, sensor_from_dict
 from tests.test_baselines import PITCH_UM, _bank
+from tests.tiny_camera import tiny_camera
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
@@ -114,18 +112,7 @@ def world(tmp_path_factory):
     """Two photos on a 128 x 96 pixel sensor (the APS-C profile's pitch), two 64 px crops
     each, and the bank they were made with."""
     base = tmp_path_factory.mktemp("psfnet")
-    sharp = base / "sharp"
-    for name in ("kodim23", "coffee"):
-        img, _ = read_image(sample_image_path(name))
-        write_image(sharp / f"{name}.png", img[:, 100:196, 100:228])
-    d = load_sensor("apsc_mirrorless").to_dict()
-    d["resolution"] = [128, 96]
-    d["name"] = "tiny"
-    sensor_file = base / "tiny_sensor.json"
-    sensor_file.write_text(json.dumps(d))
-    sensor = sensor_from_dict(d, str(sensor_file))
-    settings = BankSettings(fields=(0.0, 0.5, 1.0), wavelengths_nm=(500, 600), pupil_samples=64, kernel_pixels=21)
-    bank = get_bank(load_lens("cooke_triplet"), sensor.pixel_pitch_um, settings, out_dir=base / "bank")
+    sharp, sensor_file, sensor, bank = tiny_camera(base)
     make_dataset(sharp, base / "pairs", bank, str(sensor_file), sensor, crops=2, size=64, seed=1)
     return {"pairs": base / "pairs", "bank": bank, "sensor": sensor, "base": base}
 
