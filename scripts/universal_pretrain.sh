@@ -1,19 +1,25 @@
 #!/bin/bash
-# The run that made lensim/assets/models/universal (see its README.md): the library's banks in the
-# background, and rounds of pairs for the banks done so far + 6 minutes of pretraining, until END.
-# Every step resumes after a kill; rerun this script (or any single command) to continue.
-#   bash scripts/universal_pretrain.sh WORK_DIR [END_TIME] [MINUTES]
-set -u
-WORK=${1:?usage: universal_pretrain.sh WORK_DIR [END_TIME] [MINUTES]}
-END=$(date -d "${2:-+75 minutes}" +%s)
-MINUTES=${3:-75}
+# The run that made lensim/assets/models/universal (see its README.md): the PSF-informed universal
+# network pretrained on the library's pairs. Every step resumes after a kill; rerun this script
+# (or any single command) to continue the same run.
+#   bash scripts/universal_pretrain.sh WORK_DIR [MINUTES] [NEW_BANKS]
+# WORK_DIR/lib: the library's banks (`lensim library banks`); NEW_BANKS (default 0): how many more
+# banks of the plan to compute first (all: leave it empty and run `lensim library banks` alone).
+set -eu
+WORK=${1:?usage: universal_pretrain.sh WORK_DIR [MINUTES] [NEW_BANKS]}
+MINUTES=${2:-60}
+NEW_BANKS=${3:-0}
 export OMP_NUM_THREADS=1 MALLOC_MMAP_MAX_=0 MALLOC_TRIM_THRESHOLD_=100000000000
 LENSIM="nice -n 15 ${LENSIM_PYTHON:-.venv/bin/python} -W ignore -m lensim"
-$LENSIM library banks -o "$WORK/lib" --quiet &
-BANKS=$!
-trap 'kill $BANKS 2>/dev/null' EXIT
-while [ "$(date +%s)" -lt "$END" ]; do
-  $LENSIM library pairs "$WORK/lib" -o "$WORK/pairs" --limit 6 --quiet
-  $LENSIM library pretrain "$WORK/pairs" -o "$WORK/run" --minutes "$MINUTES" --call-minutes 6 --quiet || break
+if [ "$NEW_BANKS" -gt 0 ]; then
+  $LENSIM library banks -o "$WORK/lib" --limit "$NEW_BANKS" --quiet
+fi
+# 4 training photos x 3 sensor positions per bank: 12 crops of 128 px
+$LENSIM library pairs "$WORK/lib" -o "$WORK/pairs" --photos-per-bank 4 --placements 3 --crops 1 --quiet
+# each pairs folder's Wiener stage cache is computed first (resumable), then training in calls of
+# 10 minutes (checkpointed every 2 minutes)
+# (a call after the budget is spent returns at once)
+for _ in $(seq 1 $((MINUTES / 10 + 1))); do
+  $LENSIM library pretrain "$WORK/pairs" -o "$WORK/run" --arch psfnet --minutes "$MINUTES" --call-minutes 10 --quiet
 done
-$LENSIM library pretrain "$WORK/pairs" -o "$WORK/run" --minutes 0.001 --ship lensim/assets/models/universal --quiet
+$LENSIM library pretrain "$WORK/pairs" -o "$WORK/run" --arch psfnet --minutes "$MINUTES" --ship lensim/assets/models/universal --quiet

@@ -1,10 +1,12 @@
 """The universal model (lensim.restore.universal): pretraining resumes to the very weights of
-an uninterrupted run; the shipped model loads and restores a photo zero-shot through `lensim
-restore --lens --sensor`; a sensor or F-number outside its trained ranges is one line (exit
-2); `lensim train --init` starts from its weights and resumes after a kill.
+an uninterrupted run; the shipped (PSF-informed) model loads and restores a photo zero-shot
+through `lensim restore --lens --sensor`, the lens's bank computed for it; a sensor or
+F-number outside its trained ranges is one line (exit 2); `lensim train --init` starts from
+its weights and resumes after a kill.
 
-Networks and pairs are tiny (synthetic pairs, width 8): the shipped model's training is
-recorded in lensim/assets/models/universal/README.md.
+Networks and pairs are tiny (width 8; synthetic pairs, or the tiny camera's pairs where the
+Wiener stage needs a bank): the shipped model's training is recorded in
+lensim/assets/models/universal/README.md.
 """
 
 from __future__ import annotations
@@ -18,18 +20,23 @@ import torch
 
 import lensim.restore.universal as uni
 from cli_runner import run_cli
+from lensim.data.pairs import make_dataset
 from lensim.errors import InputError
 from lensim.images import write_image
 from lensim.restore.config import TrainConfig
 from lensim.restore.models import build_model
+from lensim.restore.psfnet import uses_wiener
 from lensim.sensor.profile import load_sensor
 from test_kill_resume import TRAIN, _losses, _rows, cli, kill_when
 from test_train import make_pairs
+from tests.tiny_camera import tiny_camera
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
-PITCH_UM = 5.97  # the fullframe_dslr profile's pitch: the pairs' sensor
-TINY = uni.PretrainConfig(width=8, stem=2, crop=32, batch_size=2, time_budget_s=None, checkpoint_every_s=0.0)
+PITCH_UM = 5.97  # the fullframe_dslr profile's pitch: the synthetic pairs' sensor
+TINY = uni.PretrainConfig(
+    width=8, stem=2, crop=32, batch_size=2, time_budget_s=None, checkpoint_every_s=0.0, arch="nafnet"
+)
 
 
 def _pairs(root: Path, seed: int) -> Path:
@@ -42,11 +49,23 @@ def _pairs(root: Path, seed: int) -> Path:
 
 
 @pytest.fixture(scope="module")
-def shipped(tmp_path_factory) -> Path:
-    """A tiny universal model pretrained on two pairs folders and shipped into a folder."""
-    base = tmp_path_factory.mktemp("universal")
-    folders = [_pairs(base / "a", 0), _pairs(base / "b", 1)]
-    uni.pretrain(folders, base / "run", uni.replace(TINY, max_steps=4))
+def camera(tmp_path_factory) -> dict:
+    """The tiny camera (tests/tiny_camera.py) and two pairs folders made through its bank."""
+    base = tmp_path_factory.mktemp("camera")
+    sharp, sensor_file, sensor, bank = tiny_camera(base)
+    folders = []
+    for seed in (0, 1):
+        make_dataset(sharp, base / f"pairs{seed}", bank, str(sensor_file), sensor, crops=1, size=64, seed=seed)
+        folders.append(base / f"pairs{seed}")
+    return {"base": base, "folders": folders, "sensor_file": sensor_file, "sensor": sensor}
+
+
+@pytest.fixture(scope="module")
+def shipped(camera) -> Path:
+    """A tiny PSF-informed universal model pretrained on the tiny camera's two pairs folders
+    (their Wiener stage caches computed first) and shipped into a folder."""
+    base = camera["base"]
+    uni.pretrain(camera["folders"], base / "run", uni.replace(TINY, arch="psfnet", max_steps=4))
     return uni.ship(base / "run", base / "model").parent
 
 
@@ -62,12 +81,22 @@ def test_pretraining_resumes_to_the_weights_of_an_uninterrupted_run(tmp_path):
     assert (tmp_path / "parts" / "log.csv").read_text().splitlines()[0] == "step,epoch,loss,seconds,folders"
 
 
-def test_shipped_model_loads_with_its_ranges(shipped):
+def test_shipped_model_loads_with_its_ranges(shipped, camera):
     model, universal = uni.load_universal(shipped)
-    assert universal["pixel_pitch_um"] == [PITCH_UM, PITCH_UM]
-    out = model(torch.rand(1, 3, 32, 32), torch.zeros(1, 2, 32, 32))
+    pitch = camera["sensor"].pixel_pitch_um
+    assert universal["pixel_pitch_um"] == [pitch, pitch] and uses_wiener(model)
+    out = model(torch.rand(1, 3, 32, 32), torch.zeros(1, 2, 32, 32), None, torch.rand(1, 3, 32, 32))
     assert out.shape == (1, 3, 32, 32) and torch.isfinite(out).all()
     assert (shipped / "training_log.csv").exists()
+    for folder in camera["folders"]:  # each pairs folder's own Wiener stage cache
+        assert len(list((folder / "wiener").glob("*/*.png"))) == 2
+
+
+def test_unknown_architecture_is_one_line_naming_it(tmp_path, capsys, monkeypatch):
+    code, _, err = run_cli(
+        ["library", "pretrain", str(tmp_path), "-o", str(tmp_path / "run"), "--arch", "unet"], capsys, monkeypatch
+    )
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "--arch" in err, err
 
 
 def test_check_range_is_one_line_naming_the_option():
@@ -80,19 +109,27 @@ def test_check_range_is_one_line_naming_the_option():
         uni.check_range(ranges, "fno", 22.0, "--fno")
 
 
-def _photo(tmp_path: Path) -> Path:
-    img = torch.rand(3, 1, 1).expand(3, 48, 64) * 0.5 + 0.25 * torch.rand(3, 48, 64)
+def _photo(tmp_path: Path, h: int = 96, w: int = 128) -> Path:
+    img = torch.rand(3, 1, 1).expand(3, h, w) * 0.5 + 0.25 * torch.rand(3, h, w)
     write_image(tmp_path / "photo.png", img, 8)
     return tmp_path / "photo.png"
 
 
-def test_zero_shot_restore_and_out_of_range_sensor(shipped, tmp_path, capsys, monkeypatch):
+def test_zero_shot_restore_and_out_of_range_sensor(shipped, camera, tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(uni, "MODEL_DIR", shipped)
-    photo = _photo(tmp_path)
-    args = ["restore", "--lens", "cooke_triplet", "--sensor", "fullframe_dslr", str(photo), "-o", str(tmp_path / "o")]
+    monkeypatch.setenv("LENSIM_CACHE", str(tmp_path / "cache"))
+    photo = _photo(tmp_path)  # a whole frame of the tiny camera's 128 x 96 sensor
+    sensor = str(camera["sensor_file"])
+    args = ["restore", "--lens", "cooke_triplet", "--sensor", sensor, str(photo), "-o", str(tmp_path / "o")]
     code, _, err = run_cli([*args, "--quiet"], capsys, monkeypatch)
     assert code == 0, err
     assert (tmp_path / "o" / "photo.png").exists()
+    assert list((tmp_path / "cache").rglob("manifest.json"))  # the lens's bank, computed for the stage
+    small = _photo(tmp_path / "small", 48, 64)  # not at the sensor's scale: the bank cannot serve it
+    args = ["restore", "--lens", "cooke_triplet", "--sensor", sensor, str(small), "-o", str(tmp_path / "o2")]
+    code, _, err = run_cli(args, capsys, monkeypatch)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "native pixel scale" in err, err
+    assert not (tmp_path / "o2" / "photo.png").exists()
     args = ["restore", "universal", str(photo), "--lens", "cooke_triplet", "--sensor", "phone", "-o", str(tmp_path)]
     code, _, err = run_cli(args, capsys, monkeypatch)
     assert code == 2
@@ -160,9 +197,9 @@ def test_init_of_another_network_is_one_line(tmp_path):
         uni.load_init(mine, path)
 
 
-def test_evaluate_scores_the_universal_model(shipped, tmp_path, capsys, monkeypatch):
+def test_evaluate_scores_the_universal_model(shipped, camera, tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(uni, "MODEL_DIR", shipped)
-    pairs = _pairs(tmp_path / "pairs", 2)
+    pairs = camera["folders"][1]
     code, out, err = run_cli(
         ["evaluate", "--pairs", str(pairs), "--methods", "input,universal", "--json"], capsys, monkeypatch
     )

@@ -176,6 +176,11 @@ def pretrain_command(
     output: Path = typer.Option(..., "-o", "--output", help="The run folder (last.pt, log.csv); a rerun resumes it."),
     minutes: float = typer.Option(60.0, "--minutes", help="Training time in all, every call's (minutes)."),
     call_minutes: float = typer.Option(None, "--call-minutes", help="Stop this call after this many minutes."),
+    arch: str = typer.Option(
+        "psfnet",
+        "--arch",
+        help="The network: psfnet (refines the Wiener stage of each lens's own PSF bank) or nafnet (image only).",
+    ),
     width: int = typer.Option(46, "--width", help="NAFNet width (46: the default network's size)."),
     crop: int = typer.Option(96, "--crop", help="Training sub-crop (pixels)."),
     batch_size: int = typer.Option(8, "--batch-size", help="Crops per step."),
@@ -199,8 +204,11 @@ def pretrain_command(
     for value, option in ((width, "--width"), (crop, "--crop"), (batch_size, "--batch-size")):
         at_least(value, 1, option, what="a count")
     positive(lr, "--lr")
+    cfg = PretrainConfig(
+        width=width, crop=crop, batch_size=batch_size, lr=lr, time_budget_s=minutes * 60.0, seed=seed, arch=arch
+    )
+    cfg.network()  # an unknown --arch is one line before any work
     folders = _pair_folders(pairs)
-    cfg = PretrainConfig(width=width, crop=crop, batch_size=batch_size, lr=lr, time_budget_s=minutes * 60.0, seed=seed)
     with progress_bar("universal pretraining", "s", quiet) as report:
         result = pretrain(folders, output, cfg, report, None if call_minutes is None else call_minutes * 60.0)
     if ship_to is not None:

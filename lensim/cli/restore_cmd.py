@@ -18,7 +18,7 @@ from lensim.cli.bank_options import scheduler_option
 from lensim.cli.common import console, print_json, progress_bar
 from lensim.cli.validate import at_least, choice, distinct_outputs, output_folder, scheduler_address
 from lensim.cli.validate import device as check_device
-from lensim.cli.zero_shot import check_zero_shot, universal_inputs
+from lensim.cli.zero_shot import check_zero_shot, universal_inputs, zero_shot_bank_folder
 from lensim.errors import InputError, OutOfMemory
 from lensim.io import folder_lock
 
@@ -196,11 +196,13 @@ def restore_command(
     model, info, sensor_data, (sensor_w, sensor_h) = _load_model(
         checkpoint, None if zero_shot else lens_file, sensor_file, device, engine, threads
     )
-    if zero_shot:
-        check_zero_shot(info, sensor_data, lens_file, fno)
-    _check_photos(photos, offset, (sensor_w, sensor_h))
+    lens_obj = check_zero_shot(info, sensor_data, lens_file, fno) if zero_shot else None
+    _check_photos(photos, offset, (sensor_w, sensor_h), getattr(model, "uses_wiener", False))
+    bank_dir: Path | None = bank
+    if zero_shot and bank_dir is None:
+        bank_dir = zero_shot_bank_folder(model, lens_obj, sensor_data, (fno, focus_m), quiet or json_out)
     photo_settings = _photo_settings(photos, shooting, info)
-    stage = _stage_inputs(model, info, bank, sensor_data)
+    stage = _stage_inputs(model, info, bank_dir, sensor_data)
     written = []
     with folder_lock(output), _tile_memory(workers):  # one writer at a time
         if raws:
@@ -307,15 +309,22 @@ def _photo_output_name(path: Path) -> str:
     return path.stem + (".tif" if path.suffix.lower() in (".tif", ".tiff") else ".png")
 
 
-def _check_photos(photos: list[Path], offset: tuple[int, int] | None, sensor_wh: tuple[int, int]) -> None:
-    """Every photo decodes (and fits on the sensor at --sensor-offset), and no two write
-    the same output, before the first output."""
+def _check_photos(
+    photos: list[Path], offset: tuple[int, int] | None, sensor_wh: tuple[int, int], native: bool = False
+) -> None:
+    """Every photo decodes (and fits on the sensor at --sensor-offset; is at the sensor's
+    native scale when ``native``: a PSF-informed network), and no two write the same
+    output, before the first output."""
     from lensim.images import read_image
+    from lensim.restore.infer import image_sensor_geometry
+    from lensim.restore.psf_stage import check_native_scale
 
     distinct_outputs(photos, _photo_output_name)
     for path in photos:
         _, h, w = read_image(path)[0].shape
         _check_offset(path, offset, (w, h), sensor_wh)
+        if native:
+            check_native_scale(image_sensor_geometry(h, w, sensor_wh, offset)[1], sensor_wh, str(path))
 
 
 def _check_offset(

@@ -35,6 +35,24 @@ def universal_inputs(
     return model_path(NAME), (images if str(checkpoint) == NAME else [checkpoint, *images]), True
 
 
+def zero_shot_bank_folder(
+    model: Any, lens: Any, sensor_data: dict, shooting: tuple[float | None, float | None], quiet: bool
+) -> Path | None:
+    """The PSF bank folder of the lens (loaded) at the sensor's pitch and shooting =
+    (fno, focus_m), from the bank cache or computed into it with a progress bar, for a
+    universal model that is PSF-informed (lensim.restore.psfnet); None for one that is not."""
+    if not getattr(model, "uses_wiener", False):
+        return None
+    from lensim.cli.common import progress_bar
+    from lensim.restore.universal import zero_shot_bank
+    from lensim.sensor.profile import sensor_from_dict
+
+    sensor = sensor_from_dict(sensor_data, "--sensor")
+    with progress_bar("PSF bank of the lens", "fields", quiet) as report:
+        bank = zero_shot_bank(lens, sensor, shooting[0], shooting[1], progress=report)
+    return Path(bank.directory)
+
+
 def check_zero_shot(info: dict, sensor_data: dict, lens: str, fno: float | None) -> Any:
     """The lens (loaded) after checking that the universal model serves it: the sensor's
     pitch and the F-number (--fno, else the lens's own) inside the model's trained ranges;

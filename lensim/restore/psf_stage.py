@@ -121,20 +121,29 @@ def photo_wiener(
     naming ``source``. Returns (3, H, W) float32."""
     from lensim.render.mapping import SensorMapping
 
+    check_native_scale(sensor_size, (sensor.width, sensor.height), source)
     sh, sw = (float(v) for v in sensor_size)
-    if abs(sh - sensor.height) > 1e-6 or abs(sw - sensor.width) > 1e-6:
-        raise InputError(
-            source,
-            "size",
-            f"is not at the sensor's native pixel scale (the sensor would span {sw:g}x{sh:g} of its pixels, "
-            f"expected {sensor.width}x{sensor.height}); the PSF-informed network restores photos at the "
-            "sensor's resolution",
-        )
     top, left = (float(v) for v in sensor_top_left)
     p = sensor.pixel_pitch_um * 1e-3
     _, h, w = image.shape
     mapping = SensorMapping(h, w, sensor.pixel_pitch_um, (left - sw / 2.0) * p, (top - sh / 2.0) * p)
     return wiener_channels(image, mapping, bank, capture, stage)
+
+
+def check_native_scale(sensor_size: tuple[float, float], sensor_wh: tuple[int, int], source: str) -> None:
+    """One-line InputError naming ``source`` unless a photo whose sensor spans sensor_size
+    (height, width) of its pixels (lensim.restore.infer.image_sensor_geometry) is at the
+    sensor's native pixel scale (sensor_wh: the sensor's (width, height) in pixels): the
+    bank's kernels are sampled at the sensor's pitch."""
+    sh, sw = (float(v) for v in sensor_size)
+    if abs(sh - sensor_wh[1]) > 1e-6 or abs(sw - sensor_wh[0]) > 1e-6:
+        raise InputError(
+            source,
+            "size",
+            f"is not at the sensor's native pixel scale (the sensor would span {sw:g}x{sh:g} of its pixels, "
+            f"expected {sensor_wh[0]}x{sensor_wh[1]}); the PSF-informed network restores photos at the "
+            "sensor's resolution (a whole frame, or a crop placed with its sensor offset)",
+        )
 
 
 def stage_of(model: Any) -> WienerStage:
@@ -268,6 +277,7 @@ __all__ = [
     "cache_folder",
     "cache_key",
     "cached_path",
+    "check_native_scale",
     "ensure_wiener_cache",
     "network_bank",
     "photo_wiener",

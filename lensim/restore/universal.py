@@ -19,8 +19,12 @@ inference needs (format, model_config, model_state in float32) and ``universal``
 ranges of pixel pitch (um) and F-number it was trained across and the library banks it saw.
 :func:`check_range` refuses a lens or sensor outside them (InputError naming the parameter).
 
-Network: the default network (NAFNet with FOV channels, pixel-unshuffle stem 2) of
-lensim.restore.models; :data:`NETWORK` is its config.
+Network (:meth:`PretrainConfig.network`): the PSF-informed network (lensim.restore.psfnet,
+``arch="psfnet"``: NAFNet with FOV channels, pixel-unshuffle stem 2, refining the Wiener
+stage's image of the lens's own bank), so that what tells it the lens is the bank, not
+what it memorised; untrained it is the Wiener stage. Each pairs folder's Wiener stage cache
+(lensim.restore.psf_stage.ensure_wiener_cache, with its own bank) is computed where
+missing before training. ``arch="nafnet"`` pretrains the image-only default network.
 """
 
 from __future__ import annotations
@@ -35,7 +39,7 @@ from typing import Any
 
 import torch
 
-from lensim.errors import InputError
+from lensim.errors import InputError, ParameterError
 from lensim.io import append_text, atomic_write_json, folder_lock, read_json
 
 #: where the shipped universal model lives
@@ -49,10 +53,11 @@ RANGE_MARGIN = 0.05  # a lens or sensor within 5 % beyond a trained range is sti
 
 @dataclass(frozen=True)
 class PretrainConfig:
-    """Pretraining settings. width, stem: the NAFNet (FOV channels on); crop: training
-    sub-crop (pixels); batch_size; lr: Adam's learning rate; time_budget_s: seconds of
-    training in all (every call's; None: until max_steps); max_steps: optimizer steps in
-    all (None: no limit); checkpoint_every_s: seconds between checkpoints; seed."""
+    """Pretraining settings. arch: "psfnet" (the PSF-informed network) or "nafnet" (image
+    only); width, stem: its NAFNet body (FOV channels on); crop: training sub-crop
+    (pixels); batch_size; lr: Adam's learning rate; time_budget_s: seconds of training in
+    all (every call's; None: until max_steps); max_steps: optimizer steps in all (None: no
+    limit); checkpoint_every_s: seconds between checkpoints; seed."""
 
     width: int = 32
     stem: int = 2
@@ -63,10 +68,13 @@ class PretrainConfig:
     max_steps: int | None = None
     checkpoint_every_s: float = 120.0
     seed: int = 0
+    arch: str = "psfnet"
 
     def network(self) -> dict[str, Any]:
         """The network's config (lensim.restore.models.build_model)."""
-        return {"arch": "nafnet", "width": self.width, "stem": self.stem, "use_fov": True}
+        if self.arch not in ("psfnet", "nafnet"):
+            raise ParameterError(None, "arch", f"expected 'psfnet' or 'nafnet', got {self.arch!r}")
+        return {"arch": self.arch, "width": self.width, "stem": self.stem, "use_fov": True}
 
 
 @dataclass
@@ -81,13 +89,27 @@ class PretrainResult:
     folders: int
 
 
-def pool(folders: Sequence[str | Path], crop: int, seed: int) -> torch.utils.data.ConcatDataset:
-    """The pairs of every folder as one dataset (items as lensim.restore.dataset's)."""
+def pool(
+    folders: Sequence[str | Path],
+    crop: int,
+    seed: int,
+    network: dict[str, Any] | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> torch.utils.data.ConcatDataset:
+    """The pairs of every folder as one dataset (items as lensim.restore.dataset's). For a
+    network with the Wiener stage (``network``: its config) each folder's stage cache is
+    computed where missing (progress(folders done, folders))."""
     from lensim.restore.dataset import PairDataset
+    from lensim.restore.psf_stage import training_cache
 
     if not folders:
         raise InputError(None, "folders", "expected at least one pairs folder")
-    parts = [PairDataset.from_folder(f, crop=crop, augment=True, seed=seed) for f in folders]
+    parts = []
+    for done, folder in enumerate(folders, 1):
+        wiener_dir = training_cache(folder, network or {})
+        parts.append(PairDataset.from_folder(folder, crop=crop, augment=True, seed=seed, wiener_dir=wiener_dir))
+        if progress is not None:
+            progress(done, len(folders))
     return torch.utils.data.ConcatDataset(parts)
 
 
@@ -211,7 +233,7 @@ def pretrain(
     run = Path(run_dir)
     with folder_lock(run):
         atomic_write_json(run / "config.json", {**asdict(cfg), "folders": [str(f) for f in folders]})
-        data = pool(folders, cfg.crop, cfg.seed)
+        data = pool(folders, cfg.crop, cfg.seed, cfg.network())
         universal = _ranges(folders)
         state = _resume(run, cfg)
         if call_budget_s is not None:
@@ -324,10 +346,18 @@ def zero_shot_fno(lens: Any, fno: float | None) -> float:
     return float(describe(lens, ShootingSettings(focus_m=math.inf))["fno"])
 
 
-def zero_shot_bank(lens: Any, sensor: Any, fno: float | None, focus_m: float | None, workers: int = 1) -> Any:
+def zero_shot_bank(
+    lens: Any,
+    sensor: Any,
+    fno: float | None,
+    focus_m: float | None,
+    workers: int = 1,
+    progress: Callable[[int, int], None] | None = None,
+) -> Any:
     """The lens's PSF bank at the sensor's pitch and these settings, with the library's bank
     settings (lensim.data.library_banks.LIBRARY_BANK_SETTINGS), from the bank cache or
-    computed into it: what a PSF-informed universal network reads."""
+    computed into it (progress(fields done, fields)): what a PSF-informed universal network
+    reads."""
     import warnings
 
     from lensim.data.library_banks import LIBRARY_BANK_SETTINGS
@@ -344,6 +374,7 @@ def zero_shot_bank(lens: Any, sensor: Any, fno: float | None, focus_m: float | N
             response=sensor.spectral_response,
             shooting=shot,
             workers=workers,
+            progress=progress,
         )
 
 
