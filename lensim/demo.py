@@ -2,9 +2,11 @@
 
 Stages (each cached in the output folder, so a second run reuses what exists and a
 killed run resumes): lens figures -> PSF bank at the sensor's pitch -> training pairs from
-the built-in photos -> the field-aware network and the plain version of it (every
-field-aware part off) of about the same size, trained on the same time budget ->
-evaluation on held-out photos against the aberrated input and the Wiener oracle ->
+the built-in photos -> the field-aware network (the PSF-informed network, fine-tuned from
+the shipped universal model where it serves the camera) and the plain version of it (every
+field-aware part off, from scratch) of about the same size, trained on the same time
+budget -> evaluation on held-out photos against the aberrated input, the Wiener oracle and
+the universal model zero-shot ->
 slanted-edge MTF and lateral colour before and after -> report.json and a self-contained
 report.html.
 """
@@ -15,7 +17,7 @@ import json
 import shutil
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -49,7 +51,12 @@ class DemoSettings:
     channels only; benchmarks/nafnet_vs_unet.py) or "unet", the paper's UNet. The baseline
     (:func:`plain_network`) is the same body with every field-aware part off, of the same
     size: plain NAFNet with the same stem (the stronger plain network measured,
-    benchmarks/nafnet_vs_unet.py), or the plain UNet."""
+    benchmarks/nafnet_vs_unet.py), or the plain UNet.
+
+    init, init_width: where the demo's network starts: "universal" (the shipped universal
+    model, lensim.restore.universal; the network is then its PSF-informed network of width
+    init_width, and every network of the demo matches its parameter count) or None (from
+    scratch; :func:`with_universal_start` decides)."""
 
     fields: int
     wavelengths_nm: tuple[float, ...]
@@ -64,6 +71,8 @@ class DemoSettings:
     deformable_scales: int
     arch: str = "psfnet"
     stem: int = 2
+    init: str | None = None
+    init_width: int | None = None
 
     @classmethod
     def make(cls, quick: bool) -> DemoSettings:
@@ -115,14 +124,42 @@ def _photos(out: Path, size: int) -> Path:
 
 
 def _target_parameters(settings: DemoSettings) -> int:
-    """The parameter count every network of the demo matches: the field-aware UNet of
-    settings.width (deformable blocks at settings.deformable_scales decoder scales)."""
+    """The parameter count every network of the demo matches: the universal model's network
+    when the demo starts from it, else the field-aware UNet of settings.width (deformable
+    blocks at settings.deformable_scales decoder scales)."""
     import torch
 
+    from lensim.restore.models import build_model
     from lensim.restore.network import FieldAwareUNet, count_parameters
 
     with torch.device("meta"):
+        if settings.init_width is not None:
+            return count_parameters(
+                build_model({"arch": "psfnet", "width": settings.init_width, "stem": settings.stem, "use_fov": True})
+            )
         return count_parameters(FieldAwareUNet(width=settings.width, deformable_scales=settings.deformable_scales))
+
+
+def with_universal_start(settings: DemoSettings, pixel_pitch_um: float, fno: float) -> DemoSettings:
+    """The settings with init "universal" when the shipped universal model can start the
+    demo's network: it is a PSF-informed network (settings.arch "psfnet") with the demo's
+    stem, and the sensor's pitch (um) and the lens's F-number lie inside its trained ranges
+    (lensim.restore.universal.check_range); else the settings unchanged (from scratch)."""
+    from lensim.restore.checkpoint import read_checkpoint
+    from lensim.restore.universal import NAME, check_range, model_path
+
+    if settings.arch != "psfnet":
+        return settings
+    try:
+        ckpt = read_checkpoint(model_path(NAME))
+        config, universal = ckpt["model_config"], ckpt.get("universal") or {}
+        check_range(universal, "pixel_pitch_um", pixel_pitch_um, "sensor")
+        check_range(universal, "fno", fno, "lens")
+    except (InputError, KeyError):
+        return settings
+    if config.get("arch") != "psfnet" or int(config.get("stem", 1)) != settings.stem:
+        return settings
+    return replace(settings, init=NAME, init_width=int(config["width"]))
 
 
 def plain_network(settings: DemoSettings) -> dict[str, Any]:
@@ -176,6 +213,8 @@ def _train(
     elif settings.arch in ("nafnet", "psfnet"):  # psfnet: NAFNet's width (lensim.restore.models.default_width)
         switches: dict[str, Any] = dict(use_fov=True, use_deformable=False, use_context=False, stem=settings.stem)
         kw.update(arch=settings.arch, width=nafnet_width(_target_parameters(settings), **switches), **switches)
+        if settings.init is not None:  # the universal model's own network, from its weights
+            kw.update(width=settings.init_width, init=settings.init)
     else:
         kw.update(
             arch="unet",
@@ -187,6 +226,7 @@ def _train(
         )
     res = train(pairs, run, progress=budget_progress(progress, settings.train_seconds), **kw)
     info = {k: v for k, v in asdict(res).items() if k != "history"}
+    info["init"] = None if plain else settings.init
     atomic_write_json(marker, info)
     return info
 
@@ -267,6 +307,13 @@ def _set_lens(shooting: ShootingSettings | None) -> tuple[Any, dict | None]:
     return lens_and_record(load_lens(DEFAULT_LENS), shooting)
 
 
+def _fno(lens: Any, shooting: ShootingSettings | None) -> float:
+    """The F-number the demo's lens works at (the shooting settings', else the lens's own)."""
+    from lensim.restore.universal import zero_shot_fno
+
+    return zero_shot_fno(lens, None if shooting is None else shooting.fno)
+
+
 def _run_demo(
     out: Path,
     quick: bool,
@@ -286,12 +333,12 @@ def _run_demo(
 
     say = say or (lambda msg: None)
     step = progress or (lambda done, total: None)
-    settings = DemoSettings.make(quick)
     lens, described = _set_lens(shooting)  # before the folder is claimed: a refused setting leaves nothing
+    sensor = load_sensor(DEFAULT_SENSOR)
+    settings = with_universal_start(DemoSettings.make(quick), sensor.pixel_pitch_um, _fno(lens, shooting))
     _claim_folder(out, settings, quick, seed, None if described is None or shooting is None else shooting.to_dict())
     timings: dict[str, float] = {}
     figs = _stage(out, "figures")
-    sensor = load_sensor(DEFAULT_SENSOR)
 
     t = time.perf_counter()
     say("lens figures")
@@ -355,7 +402,7 @@ def _run_demo(
 
     t = time.perf_counter()
     say("evaluation on held-out photos")
-    evaluation = _evaluate(out, bank, sensor, figs, seed, device, step)
+    evaluation = _evaluate(out, (bank, sensor), settings, figs, seed, device, step)
     timings["evaluation"] = time.perf_counter() - t
 
     t = time.perf_counter()
@@ -389,27 +436,39 @@ def _run_demo(
 
 
 def _evaluate(
-    out: Path, bank: PSFBank, sensor: SensorProfile, figs: Path, seed: int, device: str, progress: StageProgress
+    out: Path,
+    camera: tuple[PSFBank, SensorProfile],
+    settings: DemoSettings,
+    figs: Path,
+    seed: int,
+    device: str,
+    progress: StageProgress,
 ) -> dict:
-    """The held-out evaluation of both networks and the Wiener oracle, the sample crops and
-    the edge study (slanted-edge MTF, lateral colour): the report's entries
-    held_out_photos, sample_crops, metrics, slanted_edge and lateral_colour."""
+    """The held-out evaluation of both networks, the Wiener oracle and (when the demo's
+    network started from it) the universal model zero-shot, the sample crops and the edge
+    study (slanted-edge MTF, lateral colour): the report's entries held_out_photos,
+    sample_crops, metrics, slanted_edge and lateral_colour."""
     from lensim.data.manifest import read_held_out, read_pairs_manifest
     from lensim.evaluate.harness import builtin_method, checkpoint_method, evaluate
     from lensim.report import edge_study, sample_crops
+    from lensim.restore.universal import model_path
+
+    bank, sensor = camera
 
     held_out = read_held_out(out / "run-model")
     manifest = read_pairs_manifest(out / "pairs")
+
     # the last checkpoints: best.pt is picked by validation PSNR on these very photos
-    methods = {
-        "model": checkpoint_method(
-            out / "run-model" / "last.pt", manifest.get("lens"), manifest.get("sensor"), device=device
-        ),
-        "plain": checkpoint_method(
-            out / "run-plain" / "last.pt", manifest.get("lens"), manifest.get("sensor"), device=device
-        ),
-        "wiener": builtin_method("wiener"),
-    }
+    def run(name: str) -> Any:
+        return checkpoint_method(
+            out / f"run-{name}" / "last.pt", manifest.get("lens"), manifest.get("sensor"), device=device
+        )
+
+    # the report's table in the order of the stages: oracle, plain from scratch, zero-shot, the demo's
+    methods = {"wiener": builtin_method("wiener"), "plain": run("plain")}
+    if settings.init is not None:
+        methods["universal"] = checkpoint_method(model_path(settings.init), device=device)
+    methods["model"] = run("model")
     metrics = evaluate(out / "pairs", methods, bank=bank, sources=held_out, progress=progress)
     samples = sample_crops(out / "pairs", manifest, held_out, methods["model"], bank, figs)
     edges = edge_study(bank, sensor, methods["model"], figs, seed=seed)

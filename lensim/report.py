@@ -225,6 +225,13 @@ def _networks_html(training: Mapping[str, Any] | None) -> str:
         return f" ({html.escape(str(network))})" if network else ""
 
     text = f" <code>model</code> is the demo's network{named('model')}."
+    model = training.get("model")
+    if isinstance(model, Mapping) and model.get("init") == "universal":
+        text = (
+            f" <code>model</code> is the demo's network{named('model')}, fine-tuned from the shipped universal "
+            "model on this lens's pairs; <code>universal</code> is that universal model zero-shot: pretrained on "
+            "a library of other lenses, never trained on this one, given this lens's PSF bank."
+        )
     if "plain" in training:
         text += (
             f" <code>plain</code> is the plain network{named('plain')}: no field-aware part (FOV channels, "

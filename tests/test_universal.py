@@ -207,3 +207,28 @@ def test_evaluate_scores_the_universal_model(shipped, camera, tmp_path, capsys, 
     summary = json.loads(out)
     assert set(summary["methods"]) == {"input", "universal"}
     assert summary["methods"]["universal"]["psnr_db"] != summary["methods"]["input"]["psnr_db"]
+
+
+def test_demo_starts_from_a_universal_model_that_serves_its_camera(shipped, camera, tmp_path, monkeypatch):
+    """lensim demo fine-tunes the shipped universal model where it serves the demo's camera:
+    its PSF-informed network (width, stem) with init "universal", and a plain baseline of its
+    size; a sensor outside its pitch range (or a non-PSF-informed demo) trains from scratch."""
+    import dataclasses
+
+    from lensim.demo import DemoSettings, plain_network, with_universal_start
+    from lensim.restore.network import count_parameters
+    from test_default_network import _demo_configs
+
+    monkeypatch.setattr(uni, "MODEL_DIR", shipped)
+    quick = DemoSettings.make(quick=True)
+    pitch = camera["sensor"].pixel_pitch_um
+    start = with_universal_start(quick, pitch, 4.0)
+    assert (start.init, start.init_width) == ("universal", 8)
+    assert with_universal_start(quick, 3 * pitch, 4.0) == quick  # outside the pitch range
+    assert with_universal_start(dataclasses.replace(quick, arch="nafnet"), pitch, 4.0).init is None
+    model, plain = _demo_configs(tmp_path, monkeypatch, [(start, False), (start, True)])
+    assert (model.arch, model.width, model.stem, model.init) == ("psfnet", 8, quick.stem, "universal")
+    assert plain.init is None and plain.width == plain_network(start)["width"]
+    with torch.device("meta"):
+        sizes = [count_parameters(build_model(c.model_kwargs())) for c in (model, plain)]
+    assert abs(sizes[0] - sizes[1]) <= 0.25 * sizes[0]
