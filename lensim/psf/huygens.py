@@ -14,9 +14,11 @@ fraction (up to what falls outside the window).
 Fast evaluation: the image window is cut into tiles; in each tile the distance is
 expanded about the tile centre, r = r_t + u.e + (|e|^2 - (u.e)^2) / (2 r_t), and the
 cross term u_x u_y e_x e_y / r_t is the only one dropped, which makes the sum separable
-in x and y: one complex matrix product per tile. The tile size is chosen so that the
-dropped phase stays below `max_phase_error` radians; tile size 1 is the exact direct sum.
-Memory is bounded by chunking the rays: about 32 * tiles * tile_size * chunk bytes.
+in x and y: one complex matrix product per tile, done as one real matrix product of
+[cos, sin] blocks (:func:`_real_blocks`). The tile size is chosen so that the dropped
+phase stays below `max_phase_error` radians, and the window is cut into the fewest tiles
+of that size with the least padding; tile size 1 is the exact direct sum. The rays are
+summed in chunks whose phase blocks stay near 8 MB (in cache).
 
 Symmetry: for a field on the y axis of a rotationally symmetric lens (every bank field) the
 wavelets are mirror images about the meridional plane x = 0, and so is the PSF;
@@ -25,8 +27,8 @@ x >= 0 are summed and mirrored (about half the work).
 
 Precision: each wavelet's amplitude and its large phase k (l_j + n' r_j) (1e5-1e6 rad) are
 computed in float64 and the phase reduced modulo 2 pi; the per-tile phases (a few hundred
-radians at most), their sines and cosines and the matrix products run in float32 /
-complex64 by default, 1.9-3.4x faster than all-float64 on a CPU. Against the complex128
+radians at most), their sines and cosines and the matrix products run in float32 by
+default, 1.9-3.4x faster than all-float64 on a CPU. Against the complex128
 evaluation, pixel kernels (5 x 5 samples binned) differ by at most 3e-7 of their peak and
 single samples by 1e-6 (the demo's sampling: Cooke triplet, 128 pupil samples, 175 x 175
 samples; benchmarks/README.md). ``dtype=torch.complex128`` gives the all-float64 sum, and
@@ -36,6 +38,7 @@ samples; benchmarks/README.md). ``dtype=torch.complex128`` gives the all-float64
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import torch
 
@@ -62,27 +65,36 @@ def _tile_size(pf: PupilField, spacing_mm: float, max_phase_error: float) -> int
     return max(1, int(2.0 * half / spacing_mm))
 
 
-def _phasors(
-    e: torch.Tensor,
-    linear: torch.Tensor,
-    quadratic: torch.Tensor,
-    real: torch.dtype,
-    weight: torch.Tensor | None = None,
-    phase: torch.Tensor | None = None,
-) -> torch.Tensor:
-    """(T, m, N) complex factors weight exp(i (e linear + e^2 quadratic + phase)) in the
-    complex type of ``real``: e (T, m) sample offsets within each tile (mm), linear and
-    quadratic (T, N) per-ray phase coefficients (rad/mm, rad/mm^2), weight and phase (T, N)
-    each ray's amplitude and phase at the tile centre (default 1 and 0)."""
+def _args(e: torch.Tensor, linear: torch.Tensor, quadratic: torch.Tensor, real: torch.dtype) -> torch.Tensor:
+    """(T, m, N) phases e linear + e^2 quadratic (rad) in ``real``: e (T, m) sample offsets
+    within each tile (mm), linear and quadratic (T, N) per-ray phase coefficients (rad/mm,
+    rad/mm^2)."""
     e = e.to(real).unsqueeze(2)
-    arg = e * linear.to(real).unsqueeze(1) + (e * e) * quadratic.to(real).unsqueeze(1)
-    if phase is not None:
-        arg += phase.to(real).unsqueeze(1)
-    cos, sin = torch.cos(arg), torch.sin(arg)
-    if weight is not None:
-        w = weight.to(real).unsqueeze(1)
-        cos, sin = cos * w, sin * w
-    return torch.complex(cos, sin)
+    return e * linear.to(real).unsqueeze(1) + (e * e) * quadratic.to(real).unsqueeze(1)
+
+
+def _real_blocks(arg_y: torch.Tensor, arg_x: torch.Tensor, weight: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """The tiles' complex products as one real matrix product: with phases arg_y (T, m, N)
+    and arg_x (T, mx, N) and ray weights (T, 1, N), A = [cos y, sin y] (T, m, 2N) and
+    B = [[w cos x, -w sin x], [w sin x, w cos x]] (T, 2 mx, 2N), so that A B^T (T, m, 2 mx)
+    holds the real parts of sum_j exp(i y_j) w_j exp(i x_j) in its first mx columns and the
+    imaginary parts in the others (one real GEMM instead of building complex tensors)."""
+    T, m, n = arg_y.shape
+    mx = arg_x.shape[1]
+    if arg_y.requires_grad or arg_x.requires_grad or weight.requires_grad:  # no out= under autograd
+        cx, sx = torch.cos(arg_x) * weight, torch.sin(arg_x) * weight
+        b = torch.cat([torch.cat([cx, -sx], -1), torch.cat([sx, cx], -1)], 1)
+        return torch.cat([torch.cos(arg_y), torch.sin(arg_y)], -1), b
+    a = torch.empty(T, m, 2 * n, dtype=arg_y.dtype, device=arg_y.device)
+    torch.cos(arg_y, out=a[:, :, :n])
+    torch.sin(arg_y, out=a[:, :, n:])
+    b = torch.empty(T, 2 * mx, 2 * n, dtype=arg_y.dtype, device=arg_y.device)
+    cos, sin = b[:, :mx, :n], b[:, mx:, :n]
+    torch.cos(arg_x, out=cos).mul_(weight)
+    torch.sin(arg_x, out=sin).mul_(weight)
+    torch.neg(sin, out=b[:, :mx, n:])
+    b[:, mx:, n:].copy_(cos)
+    return a, b
 
 
 def _axis_tiles(offsets: torch.Tensor, m: int, one_sided: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
@@ -127,6 +139,87 @@ def mirror_symmetric(pf: PupilField, x0_mm: float, rtol: float = 1e-9) -> bool:
     return all(float(d) <= rtol for d in differences)
 
 
+def _balanced(count: int, most: int) -> int:
+    """The tile size (<= most) that cuts count samples into the fewest tiles with the
+    least padding."""
+    return math.ceil(count / math.ceil(count / most))
+
+
+@dataclass
+class _Tiles:
+    """The image window cut into T = rows x cols tiles: the tiles' expansion centres
+    (T, 3) mm, each tile's sample offsets from its centre along y (T, m) and x (T, mx) mm,
+    the number of columns computed (all, or those at x >= the window centre when
+    mirrored) and the sample index of each window column among them (grid,)."""
+
+    centres: torch.Tensor
+    ey: torch.Tensor
+    ex: torch.Tensor
+    rows: int
+    cols: int
+    columns: int
+    column_index: torch.Tensor
+
+
+def _tiles(grid: int, s: float, centre: tuple[torch.Tensor, ...], most: int, mirror: bool) -> _Tiles:
+    """The tiling of a grid x grid window of spacing s (mm) centred on centre (3 0-dim
+    tensors, mm): tiles of at most `most` samples across (balanced, so the padding is
+    least); mirrored: only the columns at x >= the centre, the first tile centred on x = 0
+    (so it reaches as far with most // 2 + 1 columns)."""
+    k = torch.arange(grid) - grid // 2  # sample index from the window centre
+    ty_c, ey_t = _axis_tiles(k.to(torch.float64) * s, _balanced(grid, most))
+    if mirror:
+        columns = torch.arange(int(k.abs().max()) + 1)
+        mx = _balanced(columns.shape[0], min(most // 2 + 1, columns.shape[0]))
+        tx_c, ex_t = _axis_tiles(columns.to(torch.float64) * s, mx, one_sided=True)
+        index = k.abs()
+    else:
+        columns, tx_c, ex_t, index = k, ty_c, ey_t, torch.arange(grid)
+    rows, cols = ty_c.shape[0], tx_c.shape[0]
+    ty, tx = torch.meshgrid(ty_c, tx_c, indexing="ij")
+    cx, cy, cz = centre
+    T = rows * cols
+    centres = torch.stack([cx + tx.reshape(-1), cy + ty.reshape(-1), cz.expand(T)], -1)
+    ex = ex_t[torch.arange(cols).repeat(rows)]
+    ey = ey_t[torch.arange(rows).repeat_interleave(cols)]
+    return _Tiles(centres, ey, ex, rows, cols, columns.shape[0], index)
+
+
+def _chunk_rays(tiles: _Tiles) -> int:
+    """Rays per chunk: the chunk's phase blocks (2 x (m + 2 mx) x T x rays values) stay
+    near 2^21 values (8 MB of float32), in cache, and at most CHUNK_RAYS."""
+    per_ray = 2 * tiles.centres.shape[0] * (tiles.ey.shape[1] + 2 * tiles.ex.shape[1])
+    return max(64, min(CHUNK_RAYS, (1 << 21) // per_ray // 64 * 64))
+
+
+def _tile_fields(pf: PupilField, tiles: _Tiles, real: torch.dtype) -> torch.Tensor:
+    """The complex field of every tile's samples as (T, m, 2 mx) reals in ``real``: the
+    real parts in the first mx columns, the imaginary parts in the others (up to the
+    constant factors applied by huygens_psf), summed over the rays chunk by chunk."""
+    k_vac = 2.0 * math.pi / pf.wavelength_mm
+    kn = k_vac * pf.n_image
+    amp = _amplitudes(pf)
+    nu = (pf.chief.unsqueeze(0) - pf.points) / pf.radius
+    cos_d = (nu * pf.directions).sum(-1)
+    T, m, mx = tiles.centres.shape[0], tiles.ey.shape[1], tiles.ex.shape[1]
+    out = torch.zeros(T, m, 2 * mx, dtype=real, device=pf.points.device)
+    chunk = _chunk_rays(tiles)
+    for a in range(0, pf.points.shape[0], chunk):
+        b = a + chunk
+        v = tiles.centres.unsqueeze(1) - pf.points[a:b].unsqueeze(0)  # (T, N, 3)
+        r = torch.linalg.norm(v, dim=-1)
+        u = v / r.unsqueeze(-1)
+        kfac = 0.5 * ((u * nu[a:b].unsqueeze(0)).sum(-1) + cos_d[a:b].unsqueeze(0))
+        phase = torch.remainder(k_vac * pf.opl[a:b].unsqueeze(0) + kn * r, 2.0 * math.pi)
+        weight = (amp[a:b].unsqueeze(0) * kfac / r).to(real).unsqueeze(1)
+        ux, uy, inv2r = u[..., 0], u[..., 1], 0.5 / r
+        arg_x = _args(tiles.ex, kn * ux, kn * (1 - ux * ux) * inv2r, real)
+        arg_y = _args(tiles.ey, kn * uy, kn * (1 - uy * uy) * inv2r, real) + phase.to(real).unsqueeze(1)
+        blocks_y, blocks_x = _real_blocks(arg_y, arg_x, weight)
+        out = torch.baddbmm(out, blocks_y, blocks_x.transpose(1, 2))
+    return out
+
+
 def huygens_psf(
     pf: PupilField,
     grid: int,
@@ -140,62 +233,27 @@ def huygens_psf(
     """Huygens PSF (grid x grid, energy per sample, float64) on the image plane, sampled
     every spacing_um, centred (sample grid//2) on the chief-ray point plus offset_mm (mm;
     0-dim tensors where gradients with respect to the sensor's decentre are wanted).
-    Rows are y, columns x. dtype: the complex type of the per-tile phase factors and their
-    matrix products (complex64 or complex128; see the module's note on precision).
+    Rows are y, columns x. dtype: complex64 (float32 phase factors and products) or
+    complex128 (float64; see the module's note on precision). tile: the largest tile
+    (samples across; default from max_phase_error, rad).
     mirror: compute the columns at x >= the window centre only and mirror them, for a PSF
     symmetric about the meridional plane (about half the work); None: when
     :func:`mirror_symmetric` finds the wavelets symmetric about the window's centre line
     and no gradient flows through pf (the derivative of a symmetric PSF, say with respect
     to an x decentre, need not be symmetric)."""
     s = spacing_um * 1e-3
-    k_vac = 2.0 * math.pi / pf.wavelength_mm
-    kn = k_vac * pf.n_image
-    m = tile or min(grid, _tile_size(pf, s, max_phase_error))
     cx = pf.chief[0] + offset_mm[0]  # 0-dim tensors, so that gradients reach the chief ray
     cy = pf.chief[1] + offset_mm[1]
-    cz = pf.chief[2]
     if mirror is None:  # a symmetric PSF's gradient need not be (a decentre across the plane)
         mirror = not (cx.requires_grad or _requires_grad(pf)) and mirror_symmetric(pf, cx.item())
-    k = torch.arange(grid) - grid // 2  # sample index from the window centre
-    ty_c, ey_t = _axis_tiles(k.to(torch.float64) * s, m)
-    if mirror:  # the columns at x >= 0, the first tile reaching m // 2 from its centre at x = 0
-        columns = torch.arange(int(k.abs().max()) + 1)
-        mx = min(m // 2 + 1, columns.shape[0])
-        tx_c, ex_t = _axis_tiles(columns.to(torch.float64) * s, mx, one_sided=True)
-    else:
-        columns, mx = k, m
-        tx_c, ex_t = ty_c, ey_t
-    n_ty, n_tx = ty_c.shape[0], tx_c.shape[0]
-    amp = _amplitudes(pf)
-    nu = (pf.chief.unsqueeze(0) - pf.points) / pf.radius
-    cos_d = (nu * pf.directions).sum(-1)
-    ty, tx = torch.meshgrid(ty_c, tx_c, indexing="ij")
-    T = n_ty * n_tx
-    centres = torch.stack([cx + tx.reshape(-1), cy + ty.reshape(-1), cz.expand(T)], -1)
-    # tile t = (row ty, column tx): its x offsets and y offsets, (T, m)
-    ex = ex_t[torch.arange(n_tx).repeat(n_ty)]
-    ey = ey_t[torch.arange(n_ty).repeat_interleave(n_tx)]
+    most = tile or min(grid, _tile_size(pf, s, max_phase_error))
+    tiles = _tiles(grid, s, (cx, cy, pf.chief[2]), most, mirror)
     real = torch.float32 if dtype == torch.complex64 else torch.float64
-    out = torch.zeros(T, m, mx, dtype=dtype, device=pf.points.device)
-    for a in range(0, pf.points.shape[0], CHUNK_RAYS):
-        q = pf.points[a : a + CHUNK_RAYS]
-        v = centres.unsqueeze(1) - q.unsqueeze(0)  # (T, N, 3)
-        r = torch.linalg.norm(v, dim=-1)
-        u = v / r.unsqueeze(-1)
-        cos_r = (u * nu[a : a + CHUNK_RAYS].unsqueeze(0)).sum(-1)
-        kfac = 0.5 * (cos_r + cos_d[a : a + CHUNK_RAYS].unsqueeze(0))
-        phase = torch.remainder(k_vac * pf.opl[a : a + CHUNK_RAYS].unsqueeze(0) + kn * r, 2.0 * math.pi)
-        weight = amp[a : a + CHUNK_RAYS].unsqueeze(0) * kfac / r
-        ux, uy = u[..., 0], u[..., 1]
-        inv2r = 0.5 / r
-        bx = _phasors(ex, kn * ux, kn * (1 - ux * ux) * inv2r, real)
-        by = _phasors(ey, kn * uy, kn * (1 - uy * uy) * inv2r, real, weight, phase)
-        out += torch.bmm(by, bx.transpose(1, 2))
-    out = out.reshape(n_ty, n_tx, m, mx).permute(0, 2, 1, 3).reshape(n_ty * m, n_tx * mx)[:grid, : columns.shape[0]]
-    if mirror:
-        out = out[:, k.abs()]
-    out = out.to(torch.complex128)
-    return (out.real**2 + out.imag**2) * s * s * _obliquity(pf)
+    out = _tile_fields(pf, tiles, real).to(torch.float64)
+    m, mx = tiles.ey.shape[1], tiles.ex.shape[1]
+    power = out[..., :mx] ** 2 + out[..., mx:] ** 2  # (T, m, mx)
+    power = power.reshape(tiles.rows, tiles.cols, m, mx).permute(0, 2, 1, 3).reshape(tiles.rows * m, tiles.cols * mx)
+    return power[:grid, tiles.column_index] * s * s * _obliquity(pf)
 
 
 def _requires_grad(pf: PupilField) -> bool:
