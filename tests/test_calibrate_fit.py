@@ -63,3 +63,39 @@ def test_calibration_refuses_what_the_chart_cannot_see():
         fit(lens, obs, names=["image.focus", "image.tilt_y"], where="photo.png")
     assert e.value.field == "image.tilt_y" and str(e.value).startswith("photo.png: image.tilt_y: ")
     assert "\n" not in str(e.value)
+
+
+def test_batched_trace_is_the_single_field_trace():
+    from lensim.psf.pupil_field import focus_stacks, pupil_field
+
+    lens = perturbed_lens(load_lens("cooke_triplet", warn=False), {"e2.decentre_x": 0.02})
+    probe = lens.with_changes(field_type="paraxial_image_height", fields=[12.0])
+    stacks = focus_stacks(probe, [5.0, 12.0], [0.5, 0.6], 16)
+    for f, row in zip((5.0, 12.0), stacks, strict=True):
+        for w, at in zip((0.5, 0.6), row, strict=True):
+            a, b = at(0.0), pupil_field(probe, f, w, 16, "paraxial")
+            assert float((a.opl - b.opl).abs().max()) < 1e-12 and float((a.chief - b.chief).abs().max()) < 1e-12
+
+
+def test_sensor_change_without_a_trace_matches_the_tilted_sensor():
+    # the image focus and tilts move the sensor on one trace; the truth traces to the tilted plane
+    lens = load_lens("cooke_triplet", warn=False)
+    edges = _edges()
+    wl, w = list(lens.wavelengths_um), list(lens.wavelength_weights)
+    nominal = np.concatenate(model_mtfs(lens, edges, wl, w, 16))
+    for image in ((0.02, 0.1, -0.15), (0.0, 0.3, -0.4)):
+        names = ("image.focus", "image.tilt_x", "image.tilt_y")
+        exact = np.concatenate(model_mtfs(perturbed_lens(lens, dict(zip(names, image, strict=True))), edges, wl, w, 16))
+        fast = np.concatenate(model_mtfs(lens, edges, wl, w, 16, image=image))
+        assert np.abs(exact - nominal).max() > 0.05  # the change matters
+        assert np.abs(exact - fast).max() < 0.1 * np.abs(exact - nominal).max()
+    # the tilts' signs: turned the other way they miss by as much as they change
+    flipped = np.concatenate(model_mtfs(lens, edges, wl, w, 16, image=(0.0, -0.3, 0.4)))
+    assert np.abs(exact - flipped).max() > 0.5 * np.abs(exact - nominal).max()
+
+
+def test_degenerate_pairs_are_reported():
+    from lensim.calibrate.fit import degenerate_pairs
+
+    cov = np.array([[1.0, 0.95, 0.0], [0.95, 1.0, 0.1], [0.0, 0.1, 1.0]])
+    assert degenerate_pairs(["a", "b", "c"], cov) == [{"pair": ["a", "b"], "correlation": 0.95}]

@@ -11,10 +11,12 @@ wide with the frame's aspect, the footprint centred on it.
 Features, placed in the footprint's normalized coordinates (u = x / half-width, v = y /
 half-height, so u = v = +-h is the diagonal at normalized field h of the half-diagonal):
 * slanted-edge squares (black on white, turned by ``SLANT_DEG``) at the fields of
-  ``EDGE_FIELDS`` (the paper's Table 1 fields) along both right-hand diagonals (azimuths
-  towards the lower-right and upper-right corners), the first at the centre;
-* checkerboard patches along both left-hand diagonals at the same fields but the centre,
-  plus one near the centre (field about 0.1);
+  ``EDGE_FIELDS`` (the paper's Table 1 fields) along all four diagonals, the first at the
+  centre: 17 squares, 68 edges. Squares on both sides of the centre, left and right and
+  up and down, tell a sensor tilt (which defocuses one side and sharpens the other) from
+  a focus shift (which defocuses both); each square's sides measure across x and y;
+* checkerboard patches off the diagonals (``CHECKER_UV``): near the centre (field about
+  0.1), on the axes (about 0.3 and 0.45) and towards the sides (about 0.7 and 0.85);
 * eight ArUco markers (OpenCV's DICT_4X4_50, ids 0-7) in the free space between, so a
   photo taken with some perspective can be registered (lensim.calibrate.chart_detect).
 """
@@ -32,7 +34,7 @@ from lensim.errors import InputError
 
 #: Turn of the slanted-edge squares, degrees (ISO 12233 recommends about 5).
 SLANT_DEG = 5.0
-#: Normalized fields (of the frame's half-diagonal) of the squares along each right diagonal.
+#: Normalized fields (of the frame's half-diagonal) of the squares along each diagonal.
 EDGE_FIELDS = (0.0, 0.3, 0.5, 0.7, 0.9)
 #: Sizes as fractions of the frame footprint's height.
 SQUARE_SIDE = 0.07
@@ -138,19 +140,24 @@ def _place(u: float, v: float, half_w: float, half_h: float) -> tuple[tuple[floa
     return (x, y), math.hypot(x, y) / math.hypot(half_w, half_h), math.degrees(math.atan2(-y, x)) % 360.0
 
 
+#: Checkerboard centres in the footprint's normalized coordinates (u, v), off the diagonals:
+#: near the centre, on the axes and between the diagonals towards the sides.
+CHECKER_UV = ((-0.15, 0.0), (0.0, -0.45), (0.0, 0.45), (-0.55, 0.0), (0.55, 0.0))
+CHECKER_UV_SIDES = tuple((su * u, sv * v) for u, v in ((0.85, 0.4), (0.92, 0.65)) for su in (-1, 1) for sv in (-1, 1))
+#: The four diagonals (signs of u, v) the squares lie on beyond the centre.
+DIAGONALS = ((1.0, 1.0), (1.0, -1.0), (-1.0, -1.0), (-1.0, 1.0))
+
+
 def _features(half_w: float, half_h: float) -> tuple[list[EdgeSquare], list[CheckerPatch], list[Marker]]:
     """The features of a footprint of half-width half_w and half-height half_h (mm)."""
     fh = 2.0 * half_h
     edges: list[EdgeSquare] = []
-    checkers: list[CheckerPatch] = []
-    diagonals_right = ((1.0, 1.0), (1.0, -1.0))
     for h in EDGE_FIELDS:
-        for su, sv in diagonals_right if h > 0 else diagonals_right[:1]:
+        for su, sv in DIAGONALS if h > 0 else DIAGONALS[:1]:
             c, f, az = _place(su * h, sv * h, half_w, half_h)
             edges.append(EdgeSquare(len(edges), c, SQUARE_SIDE * fh, SLANT_DEG, f, az))
-    near_centre = [(-0.15, 0.0)]
-    left = [(-h, sv * h) for h in EDGE_FIELDS if h > 0 for sv in (1.0, -1.0)]
-    for u, v in near_centre + left:
+    checkers: list[CheckerPatch] = []
+    for u, v in CHECKER_UV + CHECKER_UV_SIDES:
         c, f, az = _place(u, v, half_w, half_h)
         checkers.append(CheckerPatch(len(checkers), c, CHECKER_SIDE * fh, CHECKS_PER_SIDE, f, az))
     markers = [Marker(i, _place(u, v, half_w, half_h)[0], MARKER_SIDE * fh) for i, (u, v) in enumerate(MARKER_UV)]

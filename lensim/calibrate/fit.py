@@ -9,14 +9,18 @@ MTFs). Parameters are perturbation names (lensim.calibrate.tolerances): "image.f
 (mm), "image.tilt_x" / "image.tilt_y" (deg), "eK.decentre_x" / "eK.decentre_y" (mm),
 "eK.tilt_x" / "eK.tilt_y" (deg).
 
-The search is derivative-free on the lens: scipy.optimize.least_squares (trust region
-reflective) with forward-difference Jacobians, each column one trace of the edges' fields
-(the differentiable tracer would give the same Jacobian, but the MTF goes through FFTs and
-the pupil grid's vignetting; finite differences at a tenth of each parameter's scale are
-exact enough for a fit whose noise is 1e-2 in MTF). Uncertainties come from the Jacobian
-at the optimum: cov = s^2 (J^T J)^-1, s^2 the residual variance. Before fitting, a
-parameter the chart's edges cannot constrain (its predicted 1-sigma uncertainty at the
-assumed noise is above its scale) is refused with a CoverageError naming it.
+The search is scipy.optimize.least_squares (trust region reflective) with forward-
+difference Jacobians (Model): a change of an element traces the lens again (one batched
+trace of every edge's point, lensim.calibrate.model.trace_points: about 2 s for 17 points
+and 3 wavelengths), a change of the image plane only moves and turns the sensor on the
+last trace (no trace; lensim.calibrate.model.mtfs_from, about 0.4 s). The MTF alone
+hardly tells a focus shift's sign, so the image parameters are first fitted alone from
+both signs of focus and the full fit runs from the best start of each sign, the smaller
+residual kept. Uncertainties come from the Jacobian at the optimum: cov = s^2 (J^T J)^-1,
+s^2 the residual variance. Before fitting, a parameter the chart's edges cannot constrain
+(its predicted 1-sigma uncertainty at the assumed noise is above its scale) is refused
+with a CoverageError naming it (and the parameter it is tied to); pairs correlated beyond
+DEGENERATE are reported.
 """
 
 from __future__ import annotations
@@ -27,7 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from lensim.calibrate.model import Edge, model_mtfs
+from lensim.calibrate.model import Edge, mtfs_from, trace_points
 from lensim.calibrate.tolerances import elements, perturbed_lens
 from lensim.errors import InputError
 from lensim.optics.lens import Lens
@@ -35,6 +39,13 @@ from lensim.optics.lens import Lens
 #: element tilt scale (deg); the other scales follow the lens (parameter_scales)
 ELEMENT_TILT_DEG = 0.05
 KINDS = ("focus", "tilt_x", "tilt_y", "decentre_x", "decentre_y")
+IMAGE_PARAMETERS = ("image.focus", "image.tilt_x", "image.tilt_y")
+#: |correlation| above which two fitted parameters are reported as a degenerate pair
+DEGENERATE = 0.9
+#: the image focus (in its scale) the fit also starts from, with both signs
+FOCUS_START = 1.5
+#: forward-difference step of the Jacobian, in each parameter's scale
+STEP = 0.05
 #: the MTF noise a chart measurement is assumed to have when coverage is checked
 NOISE_MTF = 0.01
 
@@ -74,6 +85,8 @@ class Fit:
     evaluations: int
     seconds: float
     correlation: list[list[float]] = field(default_factory=list)
+    degenerate: list[dict] = field(default_factory=list)
+    traces: int = 0
 
 
 def parameter_scales(lens: Lens, obs: Observations) -> dict[str, float]:
@@ -107,43 +120,57 @@ def scale_of(name: str, scales: dict[str, float]) -> float:
     return scales[kind]
 
 
-def _predict(lens: Lens, values: dict[str, float], obs: Observations) -> np.ndarray:
-    """The model SFRs of every edge, concatenated."""
-    moved = perturbed_lens(lens, values) if values else lens
-    mtfs = model_mtfs(moved, obs.edges, obs.wavelengths_um, obs.weights, obs.samples, obs.aiming)
-    if obs.system is not None:
-        mtfs = [m * s for m, s in zip(mtfs, obs.system, strict=True)]
-    return np.concatenate(mtfs)
+class Model:
+    """The model SFRs of the observations for parameter values (name -> mm or deg): the
+    element parameters change the traced lens (one batched trace of the edges' points,
+    lensim.calibrate.model.trace_points, kept for the last CACHE value sets), the image
+    ones only move and turn the sensor on that trace (lensim.calibrate.model.mtfs_from,
+    no trace). Counts traces and evaluations."""
 
+    CACHE = 8
 
-def jacobian(
-    lens: Lens, names: Sequence[str], obs: Observations, base: np.ndarray, scales: dict[str, float]
-) -> np.ndarray:
-    """d(model)/d(parameter / scale) at the lens as given, by forward differences of a
-    tenth of each scale (scales: parameter_scales): (observations, parameters)."""
-    cols = []
-    for name in names:
-        step = 0.1 * scale_of(name, scales)
-        cols.append((_predict(lens, {name: step}, obs) - base) / 0.1)
-    return np.stack(cols, axis=1)
+    def __init__(self, lens: Lens, obs: Observations) -> None:
+        self.lens, self.obs = lens, obs
+        self.traces = 0
+        self.evaluations = 0
+        self._stacks: dict[tuple, dict] = {}
 
+    def _traced(self, element: dict[str, float]) -> dict:
+        key = tuple(sorted(element.items()))
+        if key not in self._stacks:
+            moved = perturbed_lens(self.lens, element) if element else self.lens
+            if len(self._stacks) >= self.CACHE:
+                self._stacks.pop(next(iter(self._stacks)))
+            o = self.obs
+            self._stacks[key] = trace_points(moved, o.edges, o.wavelengths_um, o.samples, o.aiming)
+            self.traces += 1
+        return self._stacks[key]
 
-IMAGE_PARAMETERS = ("image.focus", "image.tilt_x", "image.tilt_y")
+    def predict(self, values: dict[str, float]) -> np.ndarray:
+        """The model SFRs of every edge, concatenated ((sum F_i,))."""
+        self.evaluations += 1
+        element = {n: v for n, v in values.items() if not n.startswith("image.") and v != 0.0}
+        image = tuple(values.get(n, 0.0) for n in IMAGE_PARAMETERS)
+        o = self.obs
+        mtfs = mtfs_from(self._traced(element), o.edges, o.weights, image)
+        if o.system is not None:
+            mtfs = [m * s for m, s in zip(mtfs, o.system, strict=True)]
+        return np.concatenate(mtfs)
 
 
 def sensitivity_table(
-    lens: Lens, obs: Observations, base: np.ndarray, scales: dict[str, float], progress: Progress | None = None
+    model: Model, base: np.ndarray, scales: dict[str, float], progress: Progress | None = None
 ) -> tuple[list[dict], dict[str, np.ndarray]]:
     """Every candidate parameter (image focus and tilts, each element's decentre and tilt)
     with the RMS change of the model SFRs it makes at its scale, largest first; and each
     one's change (the Jacobian column in units of its scale)."""
     names = list(IMAGE_PARAMETERS)
-    for k in range(1, len(elements(lens)) + 1):
+    for k in range(1, len(elements(model.lens)) + 1):
         names += [f"e{k}.{kind}" for kind in ("decentre_x", "decentre_y", "tilt_x", "tilt_y")]
     rows, columns = [], {}
     for i, name in enumerate(names):
         step = scale_of(name, scales)
-        columns[name] = _predict(lens, {name: step}, obs) - base
+        columns[name] = model.predict({name: step}) - base
         rows.append({"parameter": name, "scale": step, "rms_change": float(np.sqrt(np.mean(columns[name] ** 2)))})
         if progress:
             progress(i + 1, len(names))
@@ -174,25 +201,110 @@ def choose_parameters(gap: np.ndarray, columns: dict[str, np.ndarray], elements_
     return chosen
 
 
-def check_coverage(names: Sequence[str], jac: np.ndarray, where: str, scales: dict[str, float]) -> None:
-    """Refuse (CoverageError) a parameter whose predicted 1-sigma uncertainty at NOISE_MTF,
-    with the others fitted too, exceeds its scale (J in units of the scales)."""
-    info = jac.T @ jac / NOISE_MTF**2
-    try:  # a tiny ridge keeps a parameter that changes nothing at an enormous uncertainty
-        cov = np.linalg.inv(info + 1e-9 * np.eye(len(names)))
+def _covariance(jac: np.ndarray, noise: float) -> np.ndarray:
+    """(J^T J / noise^2)^-1 with a tiny ridge (a parameter that changes nothing keeps an
+    enormous variance); inf where singular."""
+    info = jac.T @ jac / noise**2
+    try:
+        return np.linalg.inv(info + 1e-9 * np.eye(info.shape[0]))
     except np.linalg.LinAlgError:
-        cov = np.full(info.shape, np.inf)
+        return np.full(info.shape, np.inf)
+
+
+def degenerate_pairs(names: Sequence[str], cov: np.ndarray, limit: float = DEGENERATE) -> list[dict]:
+    """The pairs of parameters whose estimates correlate beyond +-limit (cov: their
+    covariance): {"pair": [a, b], "correlation": r}, strongest first."""
+    d = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
+    corr = cov / np.outer(d, d)
+    pairs = [
+        {"pair": [names[i], names[j]], "correlation": round(float(corr[i, j]), 4)}
+        for i in range(len(names))
+        for j in range(i + 1, len(names))
+        if np.isfinite(corr[i, j]) and abs(corr[i, j]) > limit
+    ]
+    return sorted(pairs, key=lambda p: -abs(p["correlation"]))
+
+
+def check_coverage(names: Sequence[str], jac: np.ndarray, where: str, scales: dict[str, float]) -> list[dict]:
+    """Refuse (CoverageError) a parameter whose predicted 1-sigma uncertainty at NOISE_MTF,
+    with the others fitted too, exceeds its scale (J in units of the scales); return the
+    degenerate pairs (degenerate_pairs) of those that pass."""
+    cov = _covariance(jac, NOISE_MTF)
     for i, name in enumerate(names):
         sigma = float(np.sqrt(max(cov[i, i], 0.0))) if np.isfinite(cov[i, i]) else np.inf
         alone = float(np.sqrt(np.sum(jac[:, i] ** 2)))
         if not sigma <= 1.0 or alone == 0.0:
+            worst = degenerate_pairs(names, cov, 0.0)
+            partner = next((p["pair"] for p in worst if name in p["pair"]), None)
+            tied = "" if partner is None else f", tied to {[n for n in partner if n != name][0]}"
             raise CoverageError(
                 where,
                 name,
                 f"the chart's edges cannot constrain it (predicted uncertainty {sigma:.3g} x its scale "
-                f"{scale_of(name, scales):.3g} at MTF noise {NOISE_MTF:g}; its own effect {alone:.3g}); expected edges "
-                "at fields where it acts (both sides of the centre, and off both axes for tilts)",
+                f"{scale_of(name, scales):.3g} at MTF noise {NOISE_MTF:g}; its own effect {alone:.3g}{tied}); "
+                "expected edges at fields where it acts (both sides of the centre, and off both axes for tilts)",
             )
+    return degenerate_pairs(names, cov)
+
+
+def _solve(model: Model, names: list[str], scales: np.ndarray, measured: np.ndarray, start: np.ndarray):
+    """scipy least_squares (trust region reflective) in units of the scales from start,
+    the Jacobian by forward differences of STEP (image columns need no trace)."""
+    from scipy.optimize import least_squares
+
+    memo: dict[bytes, np.ndarray] = {}
+
+    def f(u: np.ndarray) -> np.ndarray:
+        key = u.tobytes()
+        if key not in memo:
+            memo.clear()
+            memo[key] = model.predict(dict(zip(names, (u * scales).tolist(), strict=True))) - measured
+        return memo[key]
+
+    def jac(u: np.ndarray) -> np.ndarray:
+        f0 = f(u)
+        cols = []
+        for i, name in enumerate(names):
+            v = dict(zip(names, (u * scales).tolist(), strict=True))
+            v[name] += STEP * scales[i]
+            cols.append((model.predict(v) - measured - f0) / STEP)
+        return np.stack(cols, axis=1)
+
+    return least_squares(f, start, jac=jac, bounds=(-20.0, 20.0), x_scale=1.0, max_nfev=60)
+
+
+def _starts(model: Model, names: list[str], scales: np.ndarray, measured: np.ndarray) -> list[np.ndarray]:
+    """Where the full fit starts: the MTF alone hardly tells a focus shift's sign, so the
+    image parameters are fitted first (no trace: cheap) from image focus +-FOCUS_START and
+    0 scales, and the best start of each focus sign is kept (one when both agree)."""
+    image = [i for i, n in enumerate(names) if n in IMAGE_PARAMETERS]
+    if "image.focus" not in names:
+        return [np.zeros(len(names))]
+    k = names.index("image.focus")
+    sub = [names[i] for i in image]
+    best: dict[int, tuple[float, np.ndarray]] = {}
+    for f0 in (-FOCUS_START, 0.0, FOCUS_START):
+        u0 = np.zeros(len(sub))
+        u0[sub.index("image.focus")] = f0
+        res = _solve(model, sub, scales[image], measured, u0)
+        u = np.zeros(len(names))
+        u[image] = res.x
+        sign = 1 if u[k] >= 0 else -1
+        if sign not in best or res.cost < best[sign][0]:
+            best[sign] = (float(res.cost), u)
+    starts = [u for _, u in sorted(best.values(), key=lambda t: t[0])]
+    if len(starts) == 2 and np.allclose(starts[0], starts[1], atol=0.05):
+        starts = starts[:1]
+    return starts
+
+
+def _run_summary(res, names: list[str], scales: np.ndarray) -> dict:
+    """One start's outcome: the image focus it ended at (mm, 0 when not fitted) and its RMS residual."""
+    if "image.focus" not in names:
+        return {"focus": 0.0, "rms": float(np.sqrt(np.mean(res.fun**2)))}
+    k = names.index("image.focus")
+    focus = float(res.x[k] * scales[k])
+    return {"focus": focus, "rms": float(np.sqrt(np.mean(res.fun**2)))}
 
 
 def fit(
@@ -204,39 +316,31 @@ def fit(
     progress: Progress | None = None,
 ) -> Fit:
     """Fit the parameters `names` (default: choose_parameters from the sensitivity table,
-    which is then reported; given names skip it) to the observations; returns the Fit
-    with the as-built lens (its as_built record holds the values, uncertainties and
-    residuals). where: the source named in a CoverageError."""
-    from scipy.optimize import least_squares
-
+    which is then reported; given names skip it) to the observations, from each start of
+    _starts, keeping the smallest residual; returns the Fit with the as-built lens (its
+    as_built record holds the values, uncertainties, residuals and degenerate pairs).
+    where: the source named in a CoverageError."""
     start = time.perf_counter()
+    model = Model(lens, obs)
     measured = np.concatenate(obs.measured)
-    base = _predict(lens, {}, obs)
+    base = model.predict({})
     kinds = parameter_scales(lens, obs)
     table: list[dict] = []
     columns: dict[str, np.ndarray] = {}
     if names is None:
-        table, columns = sensitivity_table(lens, obs, base, kinds, progress)
+        table, columns = sensitivity_table(model, base, kinds, progress)
     names = list(names) if names is not None else choose_parameters(measured - base, columns, elements_fitted)
     scales = np.array([scale_of(n, kinds) for n in names])
-    cols = [columns[n] if n in columns else jacobian(lens, [n], obs, base, kinds)[:, 0] for n in names]
-    check_coverage(names, np.stack(cols, axis=1), where, kinds)
-    calls = [0]
-
-    def residual(u: np.ndarray) -> np.ndarray:
-        calls[0] += 1
-        return _predict(lens, dict(zip(names, (u * scales).tolist(), strict=True)), obs) - measured
-
-    res = least_squares(residual, np.zeros(len(names)), diff_step=0.1 / 3.0, bounds=(-20.0, 20.0), x_scale=1.0)
-    jac = res.jac
+    cols = [columns[n] if n in columns else model.predict({n: scale_of(n, kinds)}) - base for n in names]
+    degenerate = check_coverage(names, np.stack(cols, axis=1), where, kinds)
+    runs = [_solve(model, names, scales, measured, u0) for u0 in _starts(model, names, scales, measured)]
+    res = min(runs, key=lambda r: r.cost)
     dof = max(measured.size - len(names), 1)
-    s2 = 2.0 * res.cost / dof
-    cov = np.linalg.pinv(jac.T @ jac) * s2
+    cov = np.linalg.pinv(res.jac.T @ res.jac) * (2.0 * res.cost / dof)
     sigma_u = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     values = {n: float(v) for n, v in zip(names, res.x * scales, strict=True)}
     sigma = {n: float(s) for n, s in zip(names, sigma_u * scales, strict=True)}
     d = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
-    corr = (cov / np.outer(d, d)).round(3).tolist()
     rms_before = float(np.sqrt(np.mean((base - measured) ** 2)))
     rms_after = float(np.sqrt(np.mean(res.fun**2)))
     record = {
@@ -246,7 +350,11 @@ def fit(
         "rms_residual_after": rms_after,
         "edges": len(obs.edges),
         "scales": {n: float(v) for n, v in zip(names, scales, strict=True)},
+        "degenerate": degenerate,
+        "starts": [_run_summary(r, names, scales) for r in runs],
     }
     as_built = perturbed_lens(lens, values, record)
-    seconds = time.perf_counter() - start
-    return Fit(values, sigma, table, rms_before, rms_after, as_built, calls[0], seconds, corr)
+    return Fit(
+        values, sigma, table, rms_before, rms_after, as_built, model.evaluations,
+        time.perf_counter() - start, (cov / np.outer(d, d)).round(3).tolist(), degenerate, model.traces,
+    )  # fmt: skip

@@ -348,3 +348,64 @@ def _on_sphere(lens: Lens, tr: _ImageRays, field: float, wavelength_um: float, p
         image_xy=pos[sel][:, :2],
         aim=tr.aim,
     )
+
+
+def focus_stacks(
+    lens: Lens,
+    fields: list[float],
+    wavelengths_um: list[float],
+    samples: int = 32,
+    aiming: Aiming = "paraxial",
+    para: ParaxialData | None = None,
+) -> list[list[Callable[[float], PupilField]]]:
+    """focus_stack of every field (F, the lens's field unit) and wavelength (W, um) from
+    one batched trace of the F x W pupil grids (and one of their chief rays): [f][w]
+    functions of an image-plane shift dz (mm, positive away from the lens). The same rays
+    as focus_stack one field and wavelength at a time; with many fields and wavelengths
+    some ten times faster (the tracer's cost is mostly per call, not per ray)."""
+    para = para or paraxial_data(lens)
+    if samples < 8:
+        raise InputError(lens.source, "pupil_samples", f"expected at least 8 pupil samples across, got {samples}")
+    launches = [object_field(lens, f, aiming, para) for f in fields]
+    pts, inside = square_grid_full(samples)
+    all_pts = torch.cat([torch.zeros(1, 2, dtype=DTYPE), pts])
+    rays, wl = generate_rays(lens, launches, all_pts, wavelengths_um, aiming, para)
+    start_pos, start_dir = rays.position[..., 1:, :], rays.direction[..., 1:, :]
+    ref = trace_chief_rays(lens, rays.select(0), wl, launches, aiming, para).rays
+    traced = trace(lens, rays.select(slice(1, None)), wl)
+    out, n_img = traced.rays, lens.indices(list(wavelengths_um))[-1]
+    direction = float(lens.directions()[-1])
+    stacks: list[list[Callable[[float], PupilField]]] = []
+    for fi, f in enumerate(fields):
+        row = []
+        for wi, w in enumerate(wavelengths_um):
+            tr = _ImageRays(
+                pts=pts,
+                inside=inside,
+                start_pos=start_pos[wi, fi],
+                start_dir=start_dir[wi, fi],
+                pos=out.position[wi, fi],
+                dirs=out.direction[wi, fi],
+                opl=out.opl[wi, fi],
+                valid=out.valid[wi, fi] & inside,
+                chief=ref.position[wi, fi, 0],
+                chief_dir=ref.direction[wi, fi, 0],
+                chief_opl=ref.opl[wi, fi, 0],
+                n_img=float(n_img[wi]),
+                samples=samples,
+                aim=None if rays.entrance_xy is None else rays.entrance_xy[wi : wi + 1, fi : fi + 1],
+                status=traced.status[wi, fi],
+                failed_at=traced.failed_at[wi, fi],
+            )
+            row.append(_stack_of(lens, tr, f, w, para, direction))
+        stacks.append(row)
+    return stacks
+
+
+def _stack_of(
+    lens: Lens, tr: _ImageRays, field: float, wavelength_um: float, para: ParaxialData, direction: float
+) -> Callable[[float], PupilField]:
+    def at(dz: float) -> PupilField:
+        return _on_sphere(lens, tr.moved(direction * dz) if dz else tr, field, wavelength_um, para)
+
+    return at
