@@ -224,3 +224,19 @@ def test_relative_illumination_spectrum_equals_one_wavelength_at_a_time():
     assert np.allclose(together, one_by_one, rtol=0, atol=1e-12)
     assert 0.3 < together.min() < 1.0
     assert np.array_equal(relative_illumination_spectrum(lens, 0.0, wavelengths, samples=16), np.ones(3))
+
+
+def test_relative_illumination_spectrum_with_a_shared_axis_is_the_same():
+    # the bank traces the on-axis normalization once for all its fields: the same values
+    from lensim.optics.field_analysis import axis_solid_angles, relative_illumination_spectrum
+
+    lens = load_lens("cooke_triplet")
+    wavelengths = [0.45, 0.55, 0.65]
+    axis = axis_solid_angles(lens, wavelengths, samples=16)
+    assert axis.shape == (3,) and (axis > 0).all()
+    for f in (0.5, 0.9):
+        field = f * lens.max_field
+        alone = relative_illumination_spectrum(lens, field, wavelengths, samples=16)
+        shared = relative_illumination_spectrum(lens, field, wavelengths, samples=16, axis=axis)
+        assert np.allclose(shared, alone, rtol=1e-13, atol=0)
+        assert not np.allclose(shared, 1.0)

@@ -219,6 +219,21 @@ def _beam_solid_angles(
     return solid, unvignetted, free.rays.position[0, :, 0].reshape(W, F, 3)
 
 
+def axis_solid_angles(
+    lens: Lens,
+    wavelengths_um: list[float],
+    samples: int = 64,
+    aiming: Aiming = "real",
+    subsamples: int = 2,
+    para: ParaxialData | None = None,
+) -> np.ndarray:
+    """The on-axis beam's projected solid angle (sr) at each wavelength (um), (W,) float64:
+    the normalization of :func:`relative_illumination_spectrum`, traced once for many fields."""
+    para = para or paraxial_data(lens)
+    solid, _, _ = _beam_solid_angles(lens, [0.0], list(wavelengths_um), samples, subsamples, aiming, para)
+    return solid[:, 0].numpy()
+
+
 def relative_illumination_spectrum(
     lens: Lens,
     field: float,
@@ -227,13 +242,19 @@ def relative_illumination_spectrum(
     aiming: Aiming = "real",
     subsamples: int = 2,
     para: ParaxialData | None = None,
+    axis: np.ndarray | None = None,
 ) -> np.ndarray:
     """:func:`relative_illumination` of one field (lens units) at several wavelengths (um),
-    each normalized on axis at its own wavelength, all traced together: (W,) float64."""
+    each normalized on axis at its own wavelength, all traced together: (W,) float64.
+    axis: the on-axis solid angles (:func:`axis_solid_angles` of the same sampling), so that
+    only this field is traced (the same values)."""
     para = para or paraxial_data(lens)
     launch = object_field(lens, field, aiming, para)
     if launch == 0.0:
         return np.ones(len(wavelengths_um))
+    if axis is not None:
+        solid, _, _ = _beam_solid_angles(lens, [launch], list(wavelengths_um), samples, subsamples, aiming, para)
+        return solid[:, 0].numpy() / axis
     solid, _, _ = _beam_solid_angles(lens, [0.0, launch], list(wavelengths_um), samples, subsamples, aiming, para)
     return (solid[:, 1] / solid[:, 0]).numpy()
 

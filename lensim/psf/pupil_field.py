@@ -55,7 +55,7 @@ class PupilField:
     transmission: float
     samples: int
     image_xy: torch.Tensor  # (N, 2) ray intercepts on the image plane (mm)
-    aim: torch.Tensor | None = None  # real aiming's solution for the whole grid (1, 1, 1 + samples^2, 2), mm
+    aim: torch.Tensor | None = None  # real aiming's solution: the chief ray, then the traced cells (1, 1, 1 + K, 2), mm
 
     @property
     def wavelength_mm(self) -> float:
@@ -150,6 +150,41 @@ class _ImageRays:
         )
 
 
+def mirrored(lens: Lens) -> bool:
+    """Whether pupil grids of lens are traced at px >= 0 only and mirrored (_GridMap): a
+    lens symmetric about the meridional plane (no decentre or tilt) with no gradient to
+    follow (a pose at zero that requires grad need not keep the symmetry)."""
+    return not (lens.has_poses or lens.requires_grad)
+
+
+class _GridMap:
+    """Which cells of an n x n pupil grid (pts (n*n, 2), inside the disc: inside) are
+    traced, and where every cell's ray comes from. For a lens symmetric about the
+    meridional plane x = 0 (no decentre or tilt, no gradient: `mirrored`) only the cells
+    at px >= 0 are traced, and a cell at px < 0 takes its mirror cell's ray with x negated
+    (the same ray to rounding, about half the tracing); otherwise every cell in the disc."""
+
+    def __init__(self, pts: torch.Tensor, inside: torch.Tensor, n: int, mirrored: bool) -> None:
+        index = torch.arange(n * n)
+        right = pts[:, 0] >= 0 if mirrored else torch.ones(n * n, dtype=torch.bool)
+        self.traced = inside & right
+        self.source = torch.where(right, index, index.reshape(n, n).flip(1).reshape(-1))
+        self.flip = ~right
+
+    def unfold(self, values: torch.Tensor, fill: torch.Tensor, vector: bool = False) -> torch.Tensor:
+        """Values (K, ...) of the traced cells on the whole grid (n * n, ...): mirrored
+        where a cell takes its mirror's ray (vector: (K, 3) positions or directions, x
+        negated), `fill` (a finite value, never used: every use of a cell is masked by the
+        disc) outside the disc."""
+        grid = fill.to(values.dtype).expand((self.traced.shape[0],) + values.shape[1:]).clone()
+        grid[self.traced] = values
+        grid = grid[self.source]
+        if vector:
+            sign = torch.tensor([-1.0, 1.0, 1.0], dtype=values.dtype)
+            grid = torch.where(self.flip.unsqueeze(-1), grid * sign, grid)
+        return grid
+
+
 def _trace_grid(
     lens: Lens,
     field: float,
@@ -163,29 +198,33 @@ def _trace_grid(
         raise InputError(lens.source, "pupil_samples", f"expected at least 8 pupil samples across, got {samples}")
     launch = object_field(lens, field, aiming, para)
     pts, inside = square_grid_full(samples)
-    all_pts = torch.cat([torch.zeros(1, 2, dtype=DTYPE), pts])
+    cells = _GridMap(pts, inside, samples, mirrored(lens))
+    all_pts = torch.cat([torch.zeros(1, 2, dtype=DTYPE), pts[cells.traced]])  # the chief ray, the traced cells
+    if start is not None and start.shape[-2] != all_pts.shape[0]:
+        start = None  # aimed on another grid
     rays, wl = generate_rays(lens, [launch], all_pts, [wavelength_um], aiming, para, start)
-    start_pos, start_dir = rays.position[0, 0, 1:].clone(), rays.direction[0, 0, 1:].clone()
     ref = trace_chief_rays(lens, rays.select(0), wl, [launch], aiming, para).rays
     traced = trace(lens, rays.select(slice(1, None)), wl)
     out = traced.rays
+    chief, chief_dir, chief_opl = ref.position[0, 0, 0], ref.direction[0, 0, 0], ref.opl[0, 0, 0]
+    launched = rays.select(0)  # the chief ray as launched
     return _ImageRays(
         pts=pts,
         inside=inside,
-        start_pos=start_pos,
-        start_dir=start_dir,
-        pos=out.position[0, 0],
-        dirs=out.direction[0, 0],
-        opl=out.opl[0, 0],
-        valid=out.valid[0, 0] & inside,
-        chief=ref.position[0, 0, 0],
-        chief_dir=ref.direction[0, 0, 0],
-        chief_opl=ref.opl[0, 0, 0],
+        start_pos=cells.unfold(rays.position[0, 0, 1:], launched.position[0, 0, 0], vector=True),
+        start_dir=cells.unfold(rays.direction[0, 0, 1:], launched.direction[0, 0, 0], vector=True),
+        pos=cells.unfold(out.position[0, 0], chief, vector=True),
+        dirs=cells.unfold(out.direction[0, 0], chief_dir, vector=True),
+        opl=cells.unfold(out.opl[0, 0], chief_opl),
+        valid=cells.unfold(out.valid[0, 0], torch.tensor(False)) & inside,
+        chief=chief,
+        chief_dir=chief_dir,
+        chief_opl=chief_opl,
         n_img=float(lens.indices([wavelength_um])[-1, 0]),
         samples=samples,
         aim=rays.entrance_xy,
-        status=traced.status[0, 0],
-        failed_at=traced.failed_at[0, 0],
+        status=cells.unfold(traced.status[0, 0], torch.tensor(OK)),
+        failed_at=cells.unfold(traced.failed_at[0, 0], torch.tensor(0)),
     )
 
 

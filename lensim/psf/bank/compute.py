@@ -9,13 +9,14 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 import torch
 
 from lensim.errors import InputError, PupilSamplingError
+from lensim.optics.field_analysis import axis_solid_angles
 from lensim.optics.lens import Lens
 from lensim.optics.lens_file import lens_to_dict
 from lensim.optics.paraxial import ParaxialData, paraxial_data, paraxial_image_height
@@ -55,6 +56,7 @@ class _Job:
     pupil_samples: int
     ri_samples: int
     aiming: str
+    ri_axis: np.ndarray | None = None  # (W,) the on-axis beam's solid angles (sr), traced once per bank
 
     @property
     def spacing_um(self) -> float:
@@ -151,8 +153,9 @@ class _FieldWork:
         all wavelengths traced together."""
         from lensim.optics.field_analysis import relative_illumination_spectrum
 
+        job = self.job
         return relative_illumination_spectrum(
-            self.lens, self.value, self.job.wavelengths_um, self.job.ri_samples, self.job.aiming, para=self.para
+            self.lens, self.value, job.wavelengths_um, job.ri_samples, job.aiming, para=self.para, axis=job.ri_axis
         )
 
 
@@ -329,12 +332,14 @@ class BankPlan:
             self.done = open_bank_directory(self.directory, self.manifest, self.fields)
 
     def tasks(self, bank: int = 0) -> list[FieldTask]:
-        """The fields still to compute, tagged with `bank`."""
-        return [
-            FieldTask(self.job, i, float(f), self.para, bank, self.label)
-            for i, f in enumerate(self.fields)
-            if i not in self.done
-        ]
+        """The fields still to compute, tagged with `bank` (the on-axis relative-illumination
+        trace done here, once for them all)."""
+        todo = [i for i in range(len(self.fields)) if i not in self.done]
+        if todo and self.job.ri_axis is None:
+            job = self.job
+            axis = axis_solid_angles(job.lens, job.wavelengths_um, job.ri_samples, job.aiming, para=self.para)  # type: ignore[arg-type]
+            self.job = replace(job, ri_axis=axis)
+        return [FieldTask(self.job, i, float(self.fields[i]), self.para, bank, self.label) for i in todo]
 
     def finish(self, bf: BankField) -> None:
         """Store a computed field (written into the directory atomically) and pass on its
