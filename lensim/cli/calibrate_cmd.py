@@ -127,6 +127,7 @@ def calibrate_command(
         "rms_residual_before": result.rms_before,
         "rms_residual_after": result.rms_after,
         "sensitivity": result.sensitivity,
+        "degenerate": result.degenerate,
         "zones_before": [z.to_dict() for z in found[0][0].comparison.zones],
         "run_time_s": time.perf_counter() - t0,
         "evaluations": result.evaluations,
@@ -136,4 +137,7 @@ def calibrate_command(
     elif not quiet:
         for n, v in result.values.items():
             console.print(f"{n:>20s} = {v:+.5f} +- {result.sigma[n]:.5f}", highlight=False)
+        for p in result.degenerate:
+            a, b = p["pair"]
+            console.print(f"degenerate: {a} and {b} (correlation {p['correlation']:+.2f})", highlight=False)
         console.print(f"wrote {output} (RMS SFR residual {result.rms_before:.4f} -> {result.rms_after:.4f})")
