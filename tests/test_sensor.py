@@ -217,3 +217,21 @@ def test_syntax_errors_unknown_names_and_csv_response(tmp_path: Path):
     (tmp_path / "resp.csv").write_text("wavelength_nm,r,g,b\n400,0.1,x,0.9\n700,0.9,0.1,0.0\n")
     with pytest.raises(InputError, match=r"resp.csv: line 2, column g"):
         load_sensor(ok)
+
+
+def test_shipped_camera_tables_are_colour_sciences():
+    # a bank reads the camera sensitivities from lensim's copy (no colour-science import):
+    # the same numbers, names and version line as the installed colour-science
+    import colour
+
+    from lensim.sensor.spectral import CAMERA_TABLES, _camera_table
+
+    shipped = json.loads(CAMERA_TABLES.read_text())
+    assert sorted(shipped["cameras"]) == sorted(colour.MSDS_CAMERA_SENSITIVITIES.keys())
+    for name, msds in colour.MSDS_CAMERA_SENSITIVITIES.items():
+        wl, table, source = _camera_table(name)
+        labels = [str(x).lower() for x in msds.labels]
+        values = np.asarray(msds.values, dtype=np.float64)[:, [labels.index(c) for c in ("red", "green", "blue")]]
+        assert np.array_equal(wl, np.asarray(msds.wavelengths, dtype=np.float64))
+        assert np.array_equal(table, values.T)
+        assert source.startswith(f"colour-science {shipped['colour_version']} MSDS_CAMERA_SENSITIVITIES[{name!r}]")

@@ -9,7 +9,8 @@ relative illumination).
 
 Sources of sensitivities:
 - a measured camera from the colour-science package's dataset
-  ``colour.MSDS_CAMERA_SENSITIVITIES`` (National Physical Laboratory measurements:
+  ``colour.MSDS_CAMERA_SENSITIVITIES``, copied into lensim/assets/sensors/
+  camera_sensitivities.json (National Physical Laboratory measurements:
   'Nikon 5100 (NPL)', 380-780 nm at 5 nm, the default; 'Sigma SDMerill (NPL)',
   400-680 nm at 10 nm);
 - a user CSV table with the header ``wavelength_nm,r,g,b`` (wavelengths in nm,
@@ -18,13 +19,13 @@ Sources of sensitivities:
 Illuminants: 'E' (equal energy, the default) or any name in
 ``colour.SDS_ILLUMINANTS`` such as 'D65' or 'A'.
 
-colour-science takes about a second to import; it is imported only when a named camera
-or a non-'E' illuminant is used.
+colour-science takes seconds to import; it is imported only for a non-'E' illuminant.
 """
 
 from __future__ import annotations
 
 import csv
+import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -68,25 +69,30 @@ class SpectralResponse:
         }
 
 
-def _camera_table(name: str) -> tuple[np.ndarray, np.ndarray, str]:
-    import colour
+#: colour-science's camera sensitivities, copied (colour-science takes seconds to import)
+CAMERA_TABLES = Path(__file__).resolve().parents[1] / "assets" / "sensors" / "camera_sensitivities.json"
 
-    data = colour.MSDS_CAMERA_SENSITIVITIES
-    if name not in data:
+
+def _camera_table(name: str) -> tuple[np.ndarray, np.ndarray, str]:
+    """A named camera's table: wavelengths (N,) nm, R, G, B sensitivities (3, N) and the
+    source line, from the copy of colour-science's MSDS_CAMERA_SENSITIVITIES in
+    CAMERA_TABLES (the same numbers; tests/test_sensor.py checks them)."""
+    tables = json.loads(CAMERA_TABLES.read_text(encoding="utf-8"))
+    cameras = tables["cameras"]
+    if name not in cameras:
         raise InputError(
             None,
             "response",
-            f"unknown camera {name!r}; expected one of {', '.join(data.keys())} "
+            f"unknown camera {name!r}; expected one of {', '.join(cameras)} "
             "or a CSV file with columns wavelength_nm,r,g,b",
         )
-    msds = data[name]
-    labels = [str(x).lower() for x in msds.labels]
-    order = [labels.index(c) for c in ("red", "green", "blue")]
+    camera = cameras[name]
     src = (
-        f"colour-science {colour.__version__} MSDS_CAMERA_SENSITIVITIES[{name!r}] "
+        f"colour-science {tables['colour_version']} MSDS_CAMERA_SENSITIVITIES[{name!r}] "
         "(camera spectral sensitivities measured by the National Physical Laboratory)"
     )
-    return np.asarray(msds.wavelengths, dtype=np.float64), np.asarray(msds.values, dtype=np.float64)[:, order].T, src
+    table = np.asarray([camera[c] for c in ("red", "green", "blue")], dtype=np.float64)
+    return np.asarray(camera["wavelengths_nm"], dtype=np.float64), table, src
 
 
 def read_response_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
