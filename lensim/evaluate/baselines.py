@@ -21,39 +21,35 @@ being the relative illumination, so the deconvolution also undoes lens shading, 
 simulated pairs (made with relative illumination) require; a capture whose ``extra``
 says ``relative_illumination: false`` gets unit-sum kernels.
 
-Tiles and blending. Kernels are taken at tile centres on a regular grid of spacing
-``tile`` pixels (0, tile, 2 tile, ... in both axes, as lensim.render.blur places them),
-at each centre's sensor position (lensim.render.kernels: ``bank.psf_at``, radially
-interpolated and rotated to the azimuth). Each centre's kernel deconvolves a window of
-2 tile + 1 pixels plus a margin of ``margin`` pixels (default: the kernel size) on every
-side, the image being
-mirrored (symmetric padding) beyond its borders; the window's centre part is weighted by
-the bilinear hat of that centre (1 at the centre, 0 at the neighbouring centres) and the
+Wiener (:func:`wiener`). Per tile of 64 pixels, with the bank's kernel at the tile's
+centre and the tile's own noise-to-signal ratio, cross-faded over 16 pixels into its
+neighbours (seamless); the computation, its prior and its speed are documented in its one
+home, lensim.evaluate.wiener_tiles (the PSF-informed network's stage runs the same). The
+NSR is that of a natural-image prior whose power spectrum falls as 1/|f|^2:
+NSR(f) = sigma_n^2 |G(f)|^2 / A, with sigma_n^2 = shot * mean(y) + read^2 + ``noise_floor``
+(the capture's noise variance at the window's mean energy, 0 without a noise draw, plus a
+floor: ``DEFAULT_NOISE_FLOOR`` = 1e-5, about ten times the variance of 8-bit sRGB
+quantization at mid-grey, 1.1e-6 in linear units, leaving room for demosaicing error; on
+noisy crops floors of 1e-6..1e-4 changed PSNR by < 0.01 dB, the capture's draw
+dominating). ``nsr`` replaces all this with one constant (frequency-flat) ratio. A flat NSR
+measured far worse on noisy dataset crops (8 crops of 64 px, Cooke triplet on the APS-C
+profile: a flat NSR of 1e-3, 1e-2, 3e-2 lost 13.6, 5.1, 1.5 dB to the input; the 1/|f|^2
+prior gained 1.8 dB).
+
+Tiles and blending (Richardson-Lucy, :func:`tiled_deconvolve`). Kernels are taken at tile
+centres on a regular grid of spacing ``tile`` pixels (0, tile, 2 tile, ... in both axes,
+as lensim.render.blur places them), at each centre's sensor position
+(lensim.render.kernels: ``bank.psf_at``, radially interpolated and rotated to the
+azimuth). Each centre's kernel deconvolves a window of 2 tile + 1 pixels plus a margin of
+``margin`` pixels (default: the kernel size) on every side, the image being mirrored
+(symmetric padding) beyond its borders; the window's centre part is weighted by the
+bilinear hat of that centre (1 at the centre, 0 at the neighbouring centres) and the
 weighted results are summed. The hats sum to 1 at every pixel, so there are no seams and
-the effective inverse varies continuously across the image.
-
-Both solvers work on the even-symmetric (mirrored) extension of each window, 2n x 2n,
-so the FFT's periodic wrap meets no intensity jump at the window's border. Beyond the
-image's own border the scene is unknown; mirroring it is an approximation whose error
-spreads some pixels inwards (on 64 px dataset crops with 35 px kernels this limits what
-any deconvolution can gain).
-
-Wiener. Per window and channel c, in the Fourier domain,
-``X = conj(H) Y / (|H|^2 + NSR(f))``, H the kernel's transfer function, with the NSR of a
-natural-image prior whose power spectrum falls as 1/|f|^2: the signal power is modelled
-as P_s(f) = A / |G(f)|^2, G the transfer function of the forward differences along x and
-y (|G|^2 = 4 sin^2(pi fx) + 4 sin^2(pi fy)), and A the window's mean squared gradient
-(the total of P_s over frequencies, by Parseval) less the noise's share 4 sigma_n^2 (at
-least 4 sigma_n^2). So NSR(f) = sigma_n^2 |G(f)|^2 / A, with sigma_n^2 = shot * mean(y)
-+ read^2 + ``noise_floor``: the capture's noise variance at the window's mean energy
-(normalized raw units, the model of lensim.sensor.isp.add_noise; 0 without a noise
-draw) plus a floor (default ``DEFAULT_NOISE_FLOOR`` = 1e-5: about ten times the variance
-of 8-bit sRGB quantization at mid-grey, 1.1e-6 in linear units, leaving room for
-demosaicing error; on noisy crops floors of 1e-6..1e-4 changed PSNR by < 0.01 dB, the
-capture's draw dominating). ``nsr`` replaces all this
-with one constant (frequency-flat) ratio. A flat NSR measured far worse on noisy dataset
-crops (8 crops of 64 px, Cooke triplet on the APS-C profile: a flat NSR of 1e-3, 1e-2,
-3e-2 lost 13.6, 5.1, 1.5 dB to the input; the 1/|f|^2 prior gained 1.8 dB).
+the effective inverse varies continuously across the image. The solver works on the
+even-symmetric (mirrored) extension of each window, 2n x 2n, so the FFT's periodic wrap
+meets no intensity jump at the window's border. Beyond the image's own border the scene
+is unknown; mirroring it is an approximation whose error spreads some pixels inwards (on
+64 px dataset crops with 35 px kernels this limits what any deconvolution can gain).
 
 Richardson-Lucy. ``iterations`` (default ``DEFAULT_RL_ITERATIONS`` = 3) multiplicative
 updates per window and channel, x <- x * (K^T (y / (K x))) / sum(K), from x0 = y / sum(K),
@@ -71,13 +67,13 @@ of ``sigma_px`` pixels (defaults 1.0 px and 0.6). It uses neither the mapping no
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
 import torch
 
+from lensim.evaluate import wiener_tiles as WT
 from lensim.psf.bank import PSFBank
 from lensim.render.kernels import check_bank_fits, kernels_at, tile_centres
 from lensim.render.mapping import SensorMapping
@@ -132,16 +128,6 @@ def _unit_sum_kernels(capture: Mapping[str, Any] | None) -> bool:
 
 # ---------------------------------------------------------------------------------------
 # tiles
-
-
-def _otf(kernels: torch.Tensor, n: int) -> torch.Tensor:
-    """Transfer functions (N, C, n, n//2+1) of (N, C, P, P) kernels whose centre pixel is the
-    source point (true convolution, as lensim.render.blur applies them)."""
-    p = kernels.shape[-1]
-    big = torch.zeros(*kernels.shape[:-2], n, n, dtype=torch.float64)
-    big[..., :p, :p] = kernels
-    big = torch.roll(big, shifts=(-(p // 2), -(p // 2)), dims=(-2, -1))
-    return torch.fft.rfft2(big)
 
 
 def tiled_deconvolve(
@@ -201,76 +187,52 @@ def tiled_deconvolve(
 # Wiener
 
 
-def noise_variance(mean_energy: torch.Tensor, capture: Mapping[str, Any] | None) -> torch.Tensor:
-    """Noise variance (normalized raw units squared) at a mean energy: shot * mean + read^2
-    from the capture's noise draw; 0 without one."""
-    shot = (capture or {}).get("shot")
-    read = (capture or {}).get("read")
-    if shot is None or read is None:
-        return torch.zeros_like(mean_energy)
-    return float(shot) * mean_energy.clamp_min(0.0) + float(read) ** 2
+def wiener(
+    image: torch.Tensor,
+    mapping: SensorMapping,
+    bank: PSFBank,
+    capture: Mapping[str, Any] | None = None,
+    tile: int = WT.DEFAULT_TILE,
+    nsr: float | None = None,
+    noise_floor: float = DEFAULT_NOISE_FLOOR,
+    ramp: int = WT.DEFAULT_RAMP,
+    margin: int = WT.DEFAULT_MARGIN,
+) -> torch.Tensor:
+    """Non-blind Wiener deconvolution with the true PSF bank (an oracle), per tile in the
+    energy domain; sRGB (3, H, W) in [0, 1] in and out. tile, ramp, margin (pixels): the
+    tiles' layout (lensim.evaluate.wiener_tiles, the computation's one home)."""
+    _check_image(image)
+    cam = _by_rows(lambda x: to_energy(x, capture), image)
+    out = WT.wiener_deconvolve(
+        cam,
+        mapping,
+        bank,
+        capture,
+        nsr=nsr,
+        noise_floor=noise_floor,
+        unit_sum=_unit_sum_kernels(capture),
+        layout=(tile, ramp, margin),
+    )
+    return _by_rows(lambda x: from_energy(x, capture), out)
+
+
+def _by_rows(fn: Callable[[torch.Tensor], torch.Tensor], image: torch.Tensor, rows: int = 256) -> torch.Tensor:
+    """A per-pixel colour conversion ``fn`` of a (3, H, W) image, ``rows`` rows at a time
+    (its float64 temporaries stay small on large frames); float32 (3, H, W)."""
+    out = torch.empty(image.shape, dtype=torch.float32)
+    for i in range(0, image.shape[-2], rows):
+        out[:, i : i + rows] = fn(image[:, i : i + rows])
+    return out
+
+
+# ---------------------------------------------------------------------------------------
+# Richardson-Lucy
 
 
 def _mirror(win: torch.Tensor) -> torch.Tensor:
     """(..., n, n) -> (..., 2n, 2n) even-symmetric extension (periodic without jumps)."""
     a = torch.cat([win, win.flip(-1)], dim=-1)
     return torch.cat([a, a.flip(-2)], dim=-2)
-
-
-def gradient_power(n: int) -> torch.Tensor:
-    """(n, n//2+1) |G(f)|^2 of the forward differences along x and y on an n x n periodic
-    grid: 4 sin^2(pi fx) + 4 sin^2(pi fy) (f in cycles per pixel)."""
-    fy = torch.fft.fftfreq(n, dtype=torch.float64)
-    fx = torch.fft.rfftfreq(n, dtype=torch.float64)
-    return 4 * torch.sin(math.pi * fy)[:, None] ** 2 + 4 * torch.sin(math.pi * fx)[None, :] ** 2
-
-
-def wiener_solver(
-    capture: Mapping[str, Any] | None = None, nsr: float | None = None, noise_floor: float = DEFAULT_NOISE_FLOOR
-) -> WindowSolver:
-    """The per-window Wiener filter (see the module docstring for its NSR)."""
-
-    def solve(win: torch.Tensor, kernels: torch.Tensor) -> torch.Tensor:
-        n = win.shape[-1]
-        ext = _mirror(win)
-        otf2 = _otf(kernels, 2 * n)
-        if nsr is not None:
-            ratio = torch.full(win.shape[:2] + (1, 1), float(nsr), dtype=torch.float64)
-        else:
-            mean = win.mean(dim=(-2, -1), keepdim=True)
-            var_n = noise_variance(mean, capture) + noise_floor
-            gx = win[..., :, 1:] - win[..., :, :-1]
-            gy = win[..., 1:, :] - win[..., :-1, :]
-            grad = (gx**2).mean(dim=(-2, -1), keepdim=True) + (gy**2).mean(dim=(-2, -1), keepdim=True)
-            amp = (grad - 4 * var_n).clamp_min(4 * var_n).clamp_min(1e-8)
-            ratio = var_n / amp * gradient_power(2 * n)
-        y = torch.fft.rfft2(ext)
-        x = otf2.conj() * y / (otf2.real**2 + otf2.imag**2 + ratio)
-        return torch.fft.irfft2(x, s=ext.shape[-2:])[..., :n, :n]
-
-    return solve
-
-
-def wiener(
-    image: torch.Tensor,
-    mapping: SensorMapping,
-    bank: PSFBank,
-    capture: Mapping[str, Any] | None = None,
-    tile: int = DEFAULT_TILE,
-    nsr: float | None = None,
-    noise_floor: float = DEFAULT_NOISE_FLOOR,
-) -> torch.Tensor:
-    """Non-blind Wiener deconvolution with the true PSF bank (an oracle), per tile in the
-    energy domain; sRGB (3, H, W) in [0, 1] in and out (see the module docstring)."""
-    cam = to_energy(image, capture)
-    out = tiled_deconvolve(
-        cam, mapping, bank, wiener_solver(capture, nsr, noise_floor), tile=tile, unit_sum=_unit_sum_kernels(capture)
-    )
-    return from_energy(out, capture)
-
-
-# ---------------------------------------------------------------------------------------
-# Richardson-Lucy
 
 
 def richardson_lucy_solver(iterations: int = DEFAULT_RL_ITERATIONS) -> WindowSolver:
@@ -282,7 +244,7 @@ def richardson_lucy_solver(iterations: int = DEFAULT_RL_ITERATIONS) -> WindowSol
         n = win.shape[-1]
         y = _mirror(win).clamp_min(1e-6)
         s = y.shape[-2:]
-        otf = _otf(kernels, s[-1])
+        otf = WT.otf(kernels, s[-1])
         ksum = kernels.sum(dim=(-2, -1), keepdim=True).clamp_min(1e-12)
         x = y / ksum
         for _ in range(iterations):

@@ -1,0 +1,238 @@
+"""The tiled, spatially varying Wiener deconvolution: the one computation behind the Wiener
+oracle (lensim.evaluate.baselines.wiener) and the PSF-informed network's stage
+(lensim.restore.psf_stage), written for speed (issue 23: the stage at several MP/s on
+2 CPU cores).
+
+Tiles. The image is cut into square tiles of ``tile`` pixels (rows and columns 0, tile,
+2 tile, ...). Each tile gets its own Wiener filter: the bank's kernel at the tile's
+centre (sensor position and azimuth, per colour channel; lensim.render.kernels
+.PolarKernels) and its own noise-to-signal ratio. Its result is used on the tile grown by
+``ramp / 2`` pixels on every side, weighted by a trapezoid: 1 inside the tile, falling
+linearly to 0 across the ``ramp`` pixels centred on each tile border, so neighbouring
+tiles cross-fade over ``ramp`` pixels and the weights sum to 1 everywhere (seamless; the
+filter changes continuously across each border). At the image's border the outermost
+tiles keep weight 1.
+
+Windows. A tile's filter is applied to a window of ``tile + ramp + 2 margin`` pixels
+(the tile's weighted part plus ``margin`` pixels of context on every side; the image is
+mirrored beyond its own border). The window's mean is subtracted and the rest is tapered
+to 0 by a raised cosine over the outer ``margin`` pixels, so the FFT's periodic wrap meets
+no jump; the mean is restored afterwards through the filter's response at zero frequency
+(mean / kernel sum for the 1/|f|^2 prior). Float32 throughout, one batched FFT per row of
+tiles.
+
+Wiener filter, per tile and channel c, in the Fourier domain:
+``X = conj(H) Y / (|H|^2 + NSR(f))`` with the natural-image prior of
+lensim.evaluate.baselines (module docstring): NSR(f) = sigma_n^2 |G(f)|^2 / A, |G|^2 =
+4 sin^2(pi fx) + 4 sin^2(pi fy), A the window's mean squared gradient less 4 sigma_n^2 (at
+least 4 sigma_n^2), sigma_n^2 = shot * mean(y) + read^2 + noise_floor at the window's mean
+energy; or a constant ``nsr``.
+
+Memory: the image, its padded copy and the output (float32, about 40 bytes per pixel),
+plus one row of tiles' windows and spectra at a time.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import torch
+
+from lensim.psf.bank import PSFBank
+from lensim.render.kernels import PolarKernels, check_bank_fits
+from lensim.render.mapping import SensorMapping
+
+DEFAULT_TILE = 64
+DEFAULT_RAMP = 16
+DEFAULT_MARGIN = 24
+
+
+def noise_variance(mean_energy: torch.Tensor, capture: Mapping[str, Any] | None) -> torch.Tensor:
+    """Noise variance (normalized raw units squared) at a mean energy: shot * mean + read^2
+    from the capture's noise draw; 0 without one."""
+    shot = (capture or {}).get("shot")
+    read = (capture or {}).get("read")
+    if shot is None or read is None:
+        return torch.zeros_like(mean_energy)
+    return float(shot) * mean_energy.clamp_min(0.0) + float(read) ** 2
+
+
+def gradient_power(n: int, dtype: torch.dtype = torch.float64) -> torch.Tensor:
+    """(n, n//2+1) |G(f)|^2 of the forward differences along x and y on an n x n periodic
+    grid: 4 sin^2(pi fx) + 4 sin^2(pi fy) (f in cycles per pixel)."""
+    fy = torch.fft.fftfreq(n, dtype=torch.float64)
+    fx = torch.fft.rfftfreq(n, dtype=torch.float64)
+    g2 = 4 * torch.sin(math.pi * fy)[:, None] ** 2 + 4 * torch.sin(math.pi * fx)[None, :] ** 2
+    return g2.to(dtype)
+
+
+def otf(kernels: torch.Tensor, n: int) -> torch.Tensor:
+    """Transfer functions (..., n, n//2+1) of (..., P, P) kernels whose centre pixel is the
+    source point (true convolution, as lensim.render.blur applies them); the kernels' dtype."""
+    p = kernels.shape[-1]
+    big = torch.zeros(*kernels.shape[:-2], n, n, dtype=kernels.dtype)
+    big[..., :p, :p] = kernels
+    big = torch.roll(big, shifts=(-(p // 2), -(p // 2)), dims=(-2, -1))
+    return torch.fft.rfft2(big)
+
+
+def tile_weights(size: int, tile: int, ramp: int) -> torch.Tensor:
+    """(T, tile + ramp) float32 trapezoid weights along one axis of ``size`` pixels, T =
+    ceil(size / tile) tiles; tile t's row covers pixels t tile - ramp/2 ... (t+1) tile +
+    ramp/2 - 1. Linear ramps of ``ramp`` pixels across each inner border (neighbours sum
+    to 1); the first tile's leading and the last tile's trailing ramp are 1."""
+    count = max(1, math.ceil(size / tile))
+    up = (torch.arange(ramp, dtype=torch.float32) + 0.5) / max(ramp, 1)
+    w = torch.ones(count, tile + ramp)
+    w[1:, :ramp] = up
+    w[:-1, tile:] = 1.0 - up
+    return w
+
+
+def _taper(n: int, width: int) -> torch.Tensor:
+    """(n,) float32: 1 in the middle, a raised cosine from ~0 to 1 over ``width`` pixels at
+    each end."""
+    t = torch.ones(n)
+    if width > 0:
+        ramp = 0.5 - 0.5 * torch.cos(math.pi * (torch.arange(width, dtype=torch.float64) + 0.5) / width)
+        t[:width] = ramp.float()
+        t[n - width :] = ramp.flip(0).float()
+    return t
+
+
+def _dft_matrices(n: int, p: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """complex64 (n, p) and (p, n//2+1) DFT matrices taking a (p, p) kernel, its centre pixel
+    at the origin, to its (n, n//2+1) transfer function: ey @ k @ ex."""
+    c = p // 2
+    pos = torch.arange(p, dtype=torch.float64) - c
+    fy = torch.arange(n, dtype=torch.float64)
+    fx = torch.arange(n // 2 + 1, dtype=torch.float64)
+    ey = torch.polar(torch.ones(n, p, dtype=torch.float64), -2 * math.pi * fy[:, None] * pos[None, :] / n)
+    ex = torch.polar(torch.ones(p, len(fx), dtype=torch.float64), -2 * math.pi * pos[:, None] * fx[None, :] / n)
+    return ey.to(torch.complex64), ex.to(torch.complex64)
+
+
+def _box_stats(strip: torch.Tensor, n: int, step: int, count: int) -> tuple[torch.Tensor, ...]:
+    """Per window of a strip (C, n, W) float32 (windows n wide, ``step`` apart, ``count`` of
+    them): mean, mean squared x- and y-difference, each (count, C, 1, 1) float32."""
+
+    start = torch.arange(count) * step
+
+    def boxes(rowsum: torch.Tensor, width: int) -> torch.Tensor:  # (C, W') -> (count, C, 1, 1) window sums
+        cum = torch.nn.functional.pad(rowsum.double().cumsum(dim=-1), (1, 0))
+        return (cum[:, start + width] - cum[:, start]).T[..., None, None]
+
+    mean = boxes(strip.sum(dim=1), n) / (n * n)
+    gx = boxes((strip[:, :, 1:] - strip[:, :, :-1]).square().sum(dim=1), n - 1) / (n * (n - 1))
+    gy = boxes((strip[:, 1:, :] - strip[:, :-1, :]).square().sum(dim=1), n) / ((n - 1) * n)
+    return mean.float(), gx.float(), gy.float()
+
+
+class _Solver:
+    """The Wiener filter of each window of a row of tiles."""
+
+    def __init__(
+        self, n: int, p: int, margin: int, capture: Mapping[str, Any] | None, nsr: float | None, floor: float
+    ) -> None:
+        self.capture, self.nsr, self.floor, self.n = capture, nsr, floor, n
+        self.g2 = gradient_power(n, torch.float32) if nsr is None else torch.ones(n, n // 2 + 1)
+        taper = _taper(n, margin)
+        self.taper = taper[:, None] * taper[None, :]
+        self.ey, self.ex = _dft_matrices(n, p)
+
+    def _ratio(self, mean: torch.Tensor, gx: torch.Tensor, gy: torch.Tensor) -> torch.Tensor:
+        """(B, C, 1, 1) NSR amplitude per window and channel (times |G|^2 unless ``nsr``)."""
+        if self.nsr is not None:
+            return torch.full_like(mean, float(self.nsr))
+        var_n = noise_variance(mean, self.capture) + self.floor
+        amp = (gx + gy - 4 * var_n).clamp_min(4 * var_n).clamp_min(1e-8)
+        return var_n / amp
+
+    def __call__(self, win: torch.Tensor, kernels: torch.Tensor, stats: tuple[torch.Tensor, ...]) -> torch.Tensor:
+        """win (B, C, n, n) float32, kernels (B, C, P, P) float32, stats: :func:`_box_stats`
+        of the windows -> restored windows (B, C, n, n) float32."""
+        mean = stats[0]
+        h = self.ey @ (kernels.to(torch.complex64) @ self.ex)
+        den = h.real.square()
+        den.addcmul_(h.imag, h.imag).addcmul_(self._ratio(*stats), self.g2)
+        y = torch.fft.rfft2((win - mean).mul_(self.taper))
+        y.mul_(h.conj()).div_(den)
+        out = torch.fft.irfft2(y, s=(self.n, self.n))
+        return out.add_(mean * (h[..., :1, :1].real / den[..., :1, :1]))
+
+
+def wiener_deconvolve(
+    cam: torch.Tensor,
+    mapping: SensorMapping,
+    bank: PSFBank,
+    capture: Mapping[str, Any] | None = None,
+    nsr: float | None = None,
+    noise_floor: float = 1e-5,
+    unit_sum: bool = False,
+    layout: tuple[int, int, int] = (DEFAULT_TILE, DEFAULT_RAMP, DEFAULT_MARGIN),
+) -> torch.Tensor:
+    """Wiener-deconvolve an energy-domain image (3, H, W) with the bank's kernels per tile
+    (module docstring); returns float32 (3, H, W). capture: its noise draw (``shot``,
+    ``read``) sets the NSR; unit_sum: kernels normalized to sum 1 (no relative
+    illumination); layout: (tile, ramp, margin) in pixels, ramp even and <= tile.
+    InputError when the bank is not at the mapping's pitch or does not reach its corners."""
+    tile, ramp, margin = (int(v) for v in layout)
+    if tile < 1 or ramp < 0 or ramp % 2 or ramp > tile or margin < 0:
+        raise ValueError(f"expected tile >= 1, an even ramp in [0, tile] and margin >= 0, got {layout}")
+    if (mapping.height, mapping.width) != tuple(cam.shape[-2:]):
+        raise ValueError(f"the mapping is for a {mapping.width}x{mapping.height} image; got {tuple(cam.shape[-2:])}")
+    check_bank_fits(bank, mapping, str(bank.directory or "<bank>"))
+    c, h, w = cam.shape
+    wy, wx = tile_weights(h, tile, ramp), tile_weights(w, tile, ramp)
+    n, off = tile + ramp + 2 * margin, ramp // 2 + margin
+    padded = _pad(cam, off, (len(wy) - 1) * tile + n - off - h, (len(wx) - 1) * tile + n - off - w)
+    kernels = _tile_kernels(bank, mapping, len(wy), len(wx), tile, unit_sum)
+    solve = _Solver(n, bank.kernel_pixels, margin, capture, nsr, noise_floor)
+    out = torch.zeros(c, (len(wy) - 1) * tile + tile + ramp, (len(wx) - 1) * tile + tile + ramp)
+    core = slice(margin, margin + tile + ramp)
+    for i in range(len(wy)):
+        strip = padded[:, i * tile : i * tile + n]
+        rows = strip.unfold(2, n, tile).permute(2, 0, 1, 3)  # (nx, C, n, n)
+        stats = _box_stats(strip, n, tile, len(wx))
+        res = solve(rows, kernels[i], stats)[..., core, core] * (wy[i][:, None] * wx[:, None, :])[:, None]
+        band = out[:, i * tile : i * tile + tile + ramp]
+        for j in range(len(wx)):
+            band[:, :, j * tile : j * tile + tile + ramp] += res[j]
+    return out[:, ramp // 2 : ramp // 2 + h, ramp // 2 : ramp // 2 + w]
+
+
+def _pad(cam: torch.Tensor, before: int, after_y: int, after_x: int) -> torch.Tensor:
+    """(C, H, W) -> float32 (C, before + H + after_y, before + W + after_x), mirrored
+    (symmetric: the border pixel repeated) beyond the image."""
+    arr = cam.detach().cpu().numpy().astype(np.float32)
+    return torch.from_numpy(np.pad(arr, ((0, 0), (before, after_y), (before, after_x)), mode="symmetric"))
+
+
+def _tile_kernels(bank: PSFBank, mapping: SensorMapping, ny: int, nx: int, tile: int, unit_sum: bool) -> torch.Tensor:
+    """(ny, nx, 3, P, P) float32 kernels at the tile centres (pixel (t + 1/2) tile - 1/2)."""
+    centre = (torch.arange(max(ny, nx), dtype=torch.float64) + 0.5) * tile - 0.5
+    rows, cols = torch.meshgrid(centre[:ny], centre[:nx], indexing="ij")
+    x, y = mapping.pixel_to_mm(rows.reshape(-1), cols.reshape(-1))
+    ks = polar_kernels(bank).at(x.numpy(), y.numpy())
+    if unit_sum:
+        ks /= ks.sum(axis=(-2, -1), keepdims=True)
+    return torch.from_numpy(ks).reshape(ny, nx, *ks.shape[1:])
+
+
+_POLAR: dict[int, tuple[Any, PolarKernels]] = {}
+
+
+def polar_kernels(bank: PSFBank) -> PolarKernels:
+    """The bank's :class:`PolarKernels`, kept while the bank lives (its nodes are computed
+    once per bank, then shared by every image restored with it)."""
+    import weakref
+
+    key = id(bank)
+    entry = _POLAR.get(key)
+    if entry is None or entry[0]() is not bank:
+        entry = (weakref.ref(bank, lambda _ref: _POLAR.pop(key, None)), PolarKernels(bank))
+        _POLAR[key] = entry
+    return entry[1]
