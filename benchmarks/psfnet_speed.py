@@ -2,13 +2,19 @@
 included, against the default network, in the same run.
 
     .venv/bin/python benchmarks/psfnet_speed.py BANK [--threads 2] [--side 1024] [--rounds 3]
+        [--old TREE --old-side 512]
 
 BANK: a PSF bank of the default sensor (benchmarks/psfnet_data.py writes the demo's). Each
 measurement runs in its own subprocess with ``--threads`` torch threads, on a synthetic
 side x side photo at the sensor's native scale (its top-left corner at the sensor's, so the
 stage's kernels span the field from the corner inwards), rounds interleaved:
 
-* ``stage``: lensim.restore.psf_stage.photo_wiener over the photo (the Wiener stage);
+* ``stage``: lensim.restore.psf_stage.photo_wiener over the photo (the Wiener stage; in a
+  fresh process, so its time includes computing the bank's polar kernel nodes for the
+  photo's part of the field);
+* ``stage-old`` (with ``--old TREE``, a checkout of lensim before the stage's fast
+  computation, e.g. ``git worktree add /tmp/old 297078e``): the same call with that
+  tree's lensim, on an ``--old-side`` photo (it is ~100 times slower; the rate is per pixel);
 * ``default``: the default network (NAFNet + FOV, stem 2, width 46) through restore_image;
 * ``psfnet``: the PSF-informed network (same body, width 46) through restore_image, given
   the stage's image (computed once beforehand, not timed here).
@@ -22,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import subprocess
 import sys
@@ -38,7 +45,7 @@ from lensim.restore.psf_stage import photo_wiener
 from lensim.restore.psfnet import PSFNet
 from lensim.sensor.profile import DEFAULT_SENSOR, load_sensor
 
-what, bank_dir, side = sys.argv[1], sys.argv[2], int(sys.argv[4])
+what, bank_dir, side = sys.argv[1].removesuffix("-old"), sys.argv[2], int(sys.argv[4])
 sensor = load_sensor(DEFAULT_SENSOR)
 gen = torch.Generator().manual_seed(0)
 photo = torch.rand(3, side, side, generator=gen)
@@ -62,9 +69,14 @@ print(json.dumps({"seconds": time.perf_counter() - t}))
 PARTS = ("stage", "default", "psfnet")
 
 
-def measure(part: str, bank: str, threads: int, side: int) -> float:
+def measure(part: str, bank: str, threads: int, side: int, tree: str | None = None) -> float:
+    env = {**os.environ, "PYTHONPATH": tree} if tree else None
     out = subprocess.run(
-        [sys.executable, "-c", CHILD, part, bank, str(threads), str(side)], check=True, capture_output=True, text=True
+        [sys.executable, "-c", CHILD, part, bank, str(threads), str(side)],
+        check=True,
+        capture_output=True,
+        text=True,
+        env=env,
     )
     return float(json.loads(out.stdout.strip().splitlines()[-1])["seconds"])
 
@@ -75,19 +87,24 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--side", type=int, default=1024)
     ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--old", help="a lensim tree before the fast stage (measured as stage-old)")
+    ap.add_argument("--old-side", type=int, default=512)
     a = ap.parse_args()
-    times: dict[str, list[float]] = {p: [] for p in PARTS}
+    parts = PARTS + (("stage-old",) if a.old else ())
+    side = {p: a.old_side if p == "stage-old" else a.side for p in parts}
+    times: dict[str, list[float]] = {p: [] for p in parts}
     for r in range(a.rounds):
-        for part in PARTS[r % 3 :] + PARTS[: r % 3]:
-            times[part].append(measure(part, a.bank, a.threads, a.side))
-    mp = a.side * a.side / 1e6
-    rate = {p: mp / statistics.median(t) for p, t in times.items()}
-    full = {p: 24.0 / rate[p] for p in PARTS}
-    print(f"{a.side}x{a.side} photo, {a.threads} threads, {a.rounds} rounds (median):")
-    for p in PARTS:
-        print(f"  {p:8s} {rate[p]:.3f} MP/s  (24 MP: {full[p]:.0f} s)")
-    total = full["stage"] + full["psfnet"]
-    print(f"  psfnet with its stage: {24.0 / total:.3f} MP/s (24 MP: {total:.0f} s)")
+        for part in parts[r % len(parts) :] + parts[: r % len(parts)]:
+            tree = a.old if part == "stage-old" else None
+            times[part].append(measure(part, a.bank, a.threads, side[part], tree))
+    rate = {p: side[p] ** 2 / 1e6 / statistics.median(t) for p, t in times.items()}
+    full = {p: 24.0 / rate[p] for p in parts}
+    print(f"{a.side}x{a.side} photo ({a.old_side} for stage-old), {a.threads} threads, {a.rounds} rounds (median):")
+    for p in parts:
+        print(f"  {p:9s} {rate[p]:.3f} MP/s  (24 MP: {full[p]:.0f} s)")
+    for stage in ("stage", "stage-old")[: 1 + bool(a.old)]:
+        total = full[stage] + full["psfnet"]
+        print(f"  psfnet with its {stage}: {24.0 / total:.3f} MP/s (24 MP: {total:.0f} s)")
     print(json.dumps({"times_s": times, "mp_per_s": rate}))
 
 

@@ -122,6 +122,12 @@ def test_stage_equals_a_direct_per_tile_wiener():
 
 def test_stage_settings_are_checked():
     assert WienerStage.from_dict(None) == WienerStage()
+    # the stage's defaults are the oracle's (one computation, lensim.evaluate.wiener_tiles)
+    from lensim.evaluate import wiener_tiles as WT
+
+    st = WienerStage()
+    assert (st.tile, st.ramp, st.margin) == (WT.DEFAULT_TILE, WT.DEFAULT_RAMP, WT.DEFAULT_MARGIN)
+    assert st.noise_floor == B.DEFAULT_NOISE_FLOOR
     assert WienerStage.from_dict({"tile": 16, "ramp": 8}).tile == 16
     # a config of the old stage (32 px mirrored windows) reads as today's stage, its noise floor kept
     assert WienerStage.from_dict({"tile": 32, "noise_floor": 1e-4}) == WienerStage(noise_floor=1e-4)

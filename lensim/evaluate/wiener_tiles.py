@@ -15,11 +15,20 @@ tiles keep weight 1.
 
 Windows. A tile's filter is applied to a window of ``tile + ramp + 2 margin`` pixels
 (the tile's weighted part plus ``margin`` pixels of context on every side; the image is
-mirrored beyond its own border). The window's mean is subtracted and the rest is tapered
-to 0 by a raised cosine over the outer ``margin`` pixels, so the FFT's periodic wrap meets
-no jump; the mean is restored afterwards through the filter's response at zero frequency
-(mean / kernel sum for the 1/|f|^2 prior). Float32 throughout, one batched FFT per row of
-tiles.
+mirrored beyond its own border); the defaults, 64 px tiles, 16 px ramps and 16 px margins,
+make 112 px windows. The window's mean is subtracted and the rest is tapered to 0 by a
+raised cosine over the outer ``margin`` pixels, so the FFT's periodic wrap meets no jump;
+the mean is restored afterwards through the filter's response at zero frequency (mean /
+kernel sum for the 1/|f|^2 prior). The kernels' transfer functions are bilinear
+combinations of those of the bank's polar nodes, computed once per bank. Float32
+throughout, one batched FFT per row of tiles.
+
+Measured choices (the demo's 132 held-out crops, 11 photos, against the earlier
+computation of 32 px-spaced centres with mirrored 135 px windows): 64 px tiles change the
+PSNR against the ground truth by -0.009..+0.028 dB per photo, the two outputs agreeing to
+56 dB PSNR; 96 and 128 px tiles lose up to 0.06 and 0.08 dB. Margins of 8..32 px changed
+noisy crops by < 0.03 dB, but a noise-free synthetic crop (noise floor 1e-7, whose inverse
+reaches far) gains 4.24 / 5.49 / 5.73 / 5.69 dB with 8 / 12 / 16 / 24 px: hence 16.
 
 Wiener filter, per tile and channel c, in the Fourier domain:
 ``X = conj(H) Y / (|H|^2 + NSR(f))`` with the natural-image prior of
@@ -29,7 +38,8 @@ least 4 sigma_n^2), sigma_n^2 = shot * mean(y) + read^2 + noise_floor at the win
 energy; or a constant ``nsr``.
 
 Memory: the image, its padded copy and the output (float32, about 40 bytes per pixel),
-plus one row of tiles' windows and spectra at a time.
+plus one row of tiles' windows and spectra at a time, and the polar nodes' transfer functions
+(about 150 kB each, kept with the bank).
 """
 
 from __future__ import annotations
@@ -47,7 +57,7 @@ from lensim.render.mapping import SensorMapping
 
 DEFAULT_TILE = 64
 DEFAULT_RAMP = 16
-DEFAULT_MARGIN = 24
+DEFAULT_MARGIN = 16
 
 
 def noise_variance(mean_energy: torch.Tensor, capture: Mapping[str, Any] | None) -> torch.Tensor:
@@ -103,18 +113,6 @@ def _taper(n: int, width: int) -> torch.Tensor:
     return t
 
 
-def _dft_matrices(n: int, p: int) -> tuple[torch.Tensor, torch.Tensor]:
-    """complex64 (n, p) and (p, n//2+1) DFT matrices taking a (p, p) kernel, its centre pixel
-    at the origin, to its (n, n//2+1) transfer function: ey @ k @ ex."""
-    c = p // 2
-    pos = torch.arange(p, dtype=torch.float64) - c
-    fy = torch.arange(n, dtype=torch.float64)
-    fx = torch.arange(n // 2 + 1, dtype=torch.float64)
-    ey = torch.polar(torch.ones(n, p, dtype=torch.float64), -2 * math.pi * fy[:, None] * pos[None, :] / n)
-    ex = torch.polar(torch.ones(p, len(fx), dtype=torch.float64), -2 * math.pi * pos[:, None] * fx[None, :] / n)
-    return ey.to(torch.complex64), ex.to(torch.complex64)
-
-
 def _box_stats(strip: torch.Tensor, n: int, step: int, count: int) -> tuple[torch.Tensor, ...]:
     """Per window of a strip (C, n, W) float32 (windows n wide, ``step`` apart, ``count`` of
     them): mean, mean squared x- and y-difference, each (count, C, 1, 1) float32."""
@@ -134,14 +132,11 @@ def _box_stats(strip: torch.Tensor, n: int, step: int, count: int) -> tuple[torc
 class _Solver:
     """The Wiener filter of each window of a row of tiles."""
 
-    def __init__(
-        self, n: int, p: int, margin: int, capture: Mapping[str, Any] | None, nsr: float | None, floor: float
-    ) -> None:
+    def __init__(self, n: int, margin: int, capture: Mapping[str, Any] | None, nsr: float | None, floor: float) -> None:
         self.capture, self.nsr, self.floor, self.n = capture, nsr, floor, n
         self.g2 = gradient_power(n, torch.float32) if nsr is None else torch.ones(n, n // 2 + 1)
         taper = _taper(n, margin)
         self.taper = taper[:, None] * taper[None, :]
-        self.ey, self.ex = _dft_matrices(n, p)
 
     def _ratio(self, mean: torch.Tensor, gx: torch.Tensor, gy: torch.Tensor) -> torch.Tensor:
         """(B, C, 1, 1) NSR amplitude per window and channel (times |G|^2 unless ``nsr``)."""
@@ -151,17 +146,59 @@ class _Solver:
         amp = (gx + gy - 4 * var_n).clamp_min(4 * var_n).clamp_min(1e-8)
         return var_n / amp
 
-    def __call__(self, win: torch.Tensor, kernels: torch.Tensor, stats: tuple[torch.Tensor, ...]) -> torch.Tensor:
-        """win (B, C, n, n) float32, kernels (B, C, P, P) float32, stats: :func:`_box_stats`
-        of the windows -> restored windows (B, C, n, n) float32."""
+    def __call__(self, win: torch.Tensor, h: torch.Tensor, stats: tuple[torch.Tensor, ...]) -> torch.Tensor:
+        """win (B, C, n, n) float32, h: the kernels' transfer functions (B, C, n, n//2+1)
+        complex64, stats: :func:`_box_stats` of the windows -> restored windows (B, C, n, n)
+        float32. Complex products are written out in real arithmetic (faster on CPU)."""
         mean = stats[0]
-        h = self.ey @ (kernels.to(torch.complex64) @ self.ex)
-        den = h.real.square()
-        den.addcmul_(h.imag, h.imag).addcmul_(self._ratio(*stats), self.g2)
-        y = torch.fft.rfft2((win - mean).mul_(self.taper))
-        y.mul_(h.conj()).div_(den)
-        out = torch.fft.irfft2(y, s=(self.n, self.n))
-        return out.add_(mean * (h[..., :1, :1].real / den[..., :1, :1]))
+        hr, hi = h.real, h.imag
+        inv = hr.square().addcmul_(hi, hi).addcmul_(self._ratio(*stats), self.g2).reciprocal_()
+        fr, fi = hr * inv, hi * inv  # the filter conj(H) / (|H|^2 + NSR) is fr - i fi
+        y = torch.view_as_real(torch.fft.rfft2((win - mean).mul_(self.taper)))
+        yr, yi = y[..., 0], y[..., 1]
+        x = torch.empty_like(y)
+        torch.mul(fr, yr, out=x[..., 0]).addcmul_(fi, yi)
+        torch.mul(fr, yi, out=x[..., 1]).addcmul_(fi, yr, value=-1.0)
+        out = torch.fft.irfft2(torch.view_as_complex(x), s=(self.n, self.n))
+        return out.add_(mean * fr[..., :1, :1])
+
+
+class _TileOTFs:
+    """The transfer functions (at window size n) of the kernels at the tile centres (pixel
+    (t + 1/2) tile - 1/2 on each axis): bilinear combinations of the bank's polar nodes'
+    transfer functions (:class:`PolarKernels`, the same weights as its kernels), each
+    node's computed once per bank and window size."""
+
+    def __init__(
+        self, bank: PSFBank, mapping: SensorMapping, shape: tuple[int, int], tile: int, n: int, unit_sum: bool
+    ) -> None:
+        ny, nx = shape
+        centre = (torch.arange(max(ny, nx), dtype=torch.float64) + 0.5) * tile - 0.5
+        rows, cols = torch.meshgrid(centre[:ny], centre[:nx], indexing="ij")
+        x, y = mapping.pixel_to_mm(rows.reshape(-1), cols.reshape(-1))
+        self.polar, cache = _polar_entry(bank)
+        self.nodes = cache.setdefault(n, {})
+        keys, weights = self.polar.stencil(x.numpy(), y.numpy())
+        self.keys, self.weights = keys.reshape(ny, nx, 4, 2), torch.from_numpy(weights).float().reshape(ny, nx, 4)
+        self.n, self.unit_sum = n, unit_sum
+
+    def _node(self, key: tuple[int, int]) -> torch.Tensor:
+        if key not in self.nodes:
+            self.nodes[key] = otf(torch.from_numpy(self.polar.node(*key)), self.n)
+        return self.nodes[key]
+
+    def row(self, i: int) -> torch.Tensor:
+        """(nx, 3, n, n//2+1) complex64 transfer functions of row i's tiles."""
+        uniq, inverse = np.unique(self.keys[i].reshape(-1, 2), axis=0, return_inverse=True)
+        stack = torch.stack([self._node((int(a), int(b))) for a, b in uniq])
+        index = torch.from_numpy(inverse.reshape(-1, 4))
+        w = self.weights[i]
+        h = stack[index[:, 0]] * w[:, 0, None, None, None]
+        for k in range(1, 4):
+            h.add_(stack[index[:, k]] * w[:, k, None, None, None])
+        if self.unit_sum:
+            h /= h[..., :1, :1].real
+        return h
 
 
 def wiener_deconvolve(
@@ -189,15 +226,15 @@ def wiener_deconvolve(
     wy, wx = tile_weights(h, tile, ramp), tile_weights(w, tile, ramp)
     n, off = tile + ramp + 2 * margin, ramp // 2 + margin
     padded = _pad(cam, off, (len(wy) - 1) * tile + n - off - h, (len(wx) - 1) * tile + n - off - w)
-    kernels = _tile_kernels(bank, mapping, len(wy), len(wx), tile, unit_sum)
-    solve = _Solver(n, bank.kernel_pixels, margin, capture, nsr, noise_floor)
+    otfs = _TileOTFs(bank, mapping, (len(wy), len(wx)), tile, n, unit_sum)
+    solve = _Solver(n, margin, capture, nsr, noise_floor)
     out = torch.zeros(c, (len(wy) - 1) * tile + tile + ramp, (len(wx) - 1) * tile + tile + ramp)
     core = slice(margin, margin + tile + ramp)
     for i in range(len(wy)):
         strip = padded[:, i * tile : i * tile + n]
         rows = strip.unfold(2, n, tile).permute(2, 0, 1, 3)  # (nx, C, n, n)
         stats = _box_stats(strip, n, tile, len(wx))
-        res = solve(rows, kernels[i], stats)[..., core, core] * (wy[i][:, None] * wx[:, None, :])[:, None]
+        res = solve(rows, otfs.row(i), stats)[..., core, core] * (wy[i][:, None] * wx[:, None, :])[:, None]
         band = out[:, i * tile : i * tile + tile + ramp]
         for j in range(len(wx)):
             band[:, :, j * tile : j * tile + tile + ramp] += res[j]
@@ -211,28 +248,19 @@ def _pad(cam: torch.Tensor, before: int, after_y: int, after_x: int) -> torch.Te
     return torch.from_numpy(np.pad(arr, ((0, 0), (before, after_y), (before, after_x)), mode="symmetric"))
 
 
-def _tile_kernels(bank: PSFBank, mapping: SensorMapping, ny: int, nx: int, tile: int, unit_sum: bool) -> torch.Tensor:
-    """(ny, nx, 3, P, P) float32 kernels at the tile centres (pixel (t + 1/2) tile - 1/2)."""
-    centre = (torch.arange(max(ny, nx), dtype=torch.float64) + 0.5) * tile - 0.5
-    rows, cols = torch.meshgrid(centre[:ny], centre[:nx], indexing="ij")
-    x, y = mapping.pixel_to_mm(rows.reshape(-1), cols.reshape(-1))
-    ks = polar_kernels(bank).at(x.numpy(), y.numpy())
-    if unit_sum:
-        ks /= ks.sum(axis=(-2, -1), keepdims=True)
-    return torch.from_numpy(ks).reshape(ny, nx, *ks.shape[1:])
+_POLAR: dict[int, tuple[Any, PolarKernels, dict[int, dict[tuple[int, int], torch.Tensor]]]] = {}
 
 
-_POLAR: dict[int, tuple[Any, PolarKernels]] = {}
-
-
-def polar_kernels(bank: PSFBank) -> PolarKernels:
-    """The bank's :class:`PolarKernels`, kept while the bank lives (its nodes are computed
-    once per bank, then shared by every image restored with it)."""
+def _polar_entry(bank: PSFBank) -> tuple[PolarKernels, dict[int, dict[tuple[int, int], torch.Tensor]]]:
+    """The bank's :class:`PolarKernels` and its nodes' transfer functions per window size,
+    kept while the bank lives (computed once per bank, then shared by every image restored
+    with it: about 150 kB per node at the default 112 px windows, a few hundred nodes on a
+    full frame)."""
     import weakref
 
     key = id(bank)
     entry = _POLAR.get(key)
     if entry is None or entry[0]() is not bank:
-        entry = (weakref.ref(bank, lambda _ref: _POLAR.pop(key, None)), PolarKernels(bank))
+        entry = (weakref.ref(bank, lambda _ref, kept=_POLAR: kept.pop(key, None)), PolarKernels(bank), {})
         _POLAR[key] = entry
-    return entry[1]
+    return entry[1], entry[2]

@@ -113,18 +113,34 @@ class PolarKernels:
         j = np.clip(np.searchsorted(radii, rc, side="right") - 1, 0, len(radii) - 2)
         return j, (rc - radii[j]) / (radii[j + 1] - radii[j])
 
-    def at(self, x_mm: np.ndarray, y_mm: np.ndarray) -> np.ndarray:
-        """(N, 3, P, P) float32 kernels at image points (x_mm, y_mm) ((N,) each, mm)."""
+    def node(self, i: int, b: int) -> np.ndarray:
+        """(3, P, P) float32 kernel of node (radius index i, azimuth step b)."""
+        return self._node(i, b)
+
+    def stencil(self, x_mm: np.ndarray, y_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The four nodes of each image point (x_mm, y_mm) ((N,) each, mm) and their
+        weights: keys (N, 4, 2) int64 (radius index, azimuth step mod ``bins``) and
+        weights (N, 4) float64 summing to 1 (a missing outer node has weight 0)."""
         x, y = np.asarray(x_mm, dtype=np.float64).ravel(), np.asarray(y_mm, dtype=np.float64).ravel()
         j, tr = self._radial_weights(np.hypot(x, y))
         pos = np.degrees(np.arctan2(y, x)) % 360.0 / (360.0 / self.bins)
         b = np.floor(pos).astype(np.int64)
         ta = pos - b
+        top = len(self.radii) - 1
+        keys = np.stack(
+            [np.stack([np.minimum(j + di, top), (b + db) % self.bins], axis=-1) for di in (0, 1) for db in (0, 1)],
+            axis=1,
+        )
+        weights = np.stack([(1 - tr) * (1 - ta), (1 - tr) * ta, tr * (1 - ta), tr * ta], axis=1)
+        return keys, weights
+
+    def at(self, x_mm: np.ndarray, y_mm: np.ndarray) -> np.ndarray:
+        """(N, 3, P, P) float32 kernels at image points (x_mm, y_mm) ((N,) each, mm)."""
+        keys, weights = self.stencil(x_mm, y_mm)
         p = self.bank.kernel_pixels
-        out = np.zeros((len(x), 3, p, p), dtype=np.float32)
-        for n in range(len(x)):
-            for di, wr in ((0, 1.0 - tr[n]), (1, tr[n])):
-                for db, wa in ((0, 1.0 - ta[n]), (1, ta[n])):
-                    if wr * wa > 0 and j[n] + di < len(self.radii):
-                        out[n] += np.float32(wr * wa) * self._node(int(j[n]) + di, int(b[n]) + db)
+        out = np.zeros((len(keys), 3, p, p), dtype=np.float32)
+        for n in range(len(keys)):
+            for (i, b), wt in zip(keys[n], weights[n]):
+                if wt > 0:
+                    out[n] += np.float32(wt) * self._node(int(i), int(b))
         return out

@@ -80,7 +80,7 @@ class WienerStage:
     tile: int = 64
     noise_floor: float = 1e-5
     ramp: int = 16
-    margin: int = 8
+    margin: int = 16
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
