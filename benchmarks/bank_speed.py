@@ -3,12 +3,14 @@ throughput (banks per hour) at the demo's sampling and at a coarse "library" sam
 
 Run by hand from the repository root (10-20 minutes on 2 cores):
 
-    .venv/bin/python benchmarks/bank_speed.py --before REV [--repeats 1] [--cases demo,library,demo-2w]
+    .venv/bin/python benchmarks/bank_speed.py --before REV [--before REV2 ...] [--repeats 1] \
+        [--cases demo,library,demo-2w]
 
 Each bank is one `lensim psf bank` subprocess (the lensim of a checkout on PYTHONPATH), timed
-from start to exit, into a fresh folder. Runs alternate between the two checkouts (before,
-after, after, before, ...), so a busy machine slows both alike; the ratio is what holds.
-``--before REV`` checks REV out into a temporary git worktree (removed at the end).
+from start to exit, into a fresh folder. Runs alternate between the checkouts (each before,
+then after; the next repeat in the reverse order), so a busy machine slows them alike; the
+ratios are what hold. Each ``--before REV`` is checked out into a temporary git worktree
+(removed at the end).
 
 Cases (the built-in Cooke triplet on the APS-C sensor, 3.92 um pixels, its spectral response):
 * demo: the demo's bank: 12 fields, 400-700 nm every 25 nm (13 wavelengths), 128 pupil
@@ -20,14 +22,16 @@ Cases (the built-in Cooke triplet on the APS-C sensor, 3.92 um pixels, its spect
 Accuracy: every kernel (field x channel) of the new bank against the old one: the worst
 Pearson correlation (NCC) and the worst absolute difference relative to the kernel's peak.
 
-Prints a markdown table: case, seconds before / after (each run), the ratio of the medians,
-banks per hour after (and per worker for demo-2w), and the accuracy figures.
+Prints a markdown table per earlier revision: case, seconds before / after (each run), the
+ratio of the medians, banks per hour after (and per worker for demo-2w), and the accuracy
+figures against that revision's bank.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import resource
 import shutil
 import statistics
 import subprocess
@@ -48,13 +52,17 @@ CASES = {
 WORKERS = {"demo": 1, "library": 1, "demo-2w": 2}
 
 
-def run_bank(checkout: Path, case: str, out: Path) -> float:
-    """Seconds for one `lensim psf bank` of `case` with the lensim of `checkout`."""
+def run_bank(checkout: Path, case: str, out: Path) -> tuple[float, float]:
+    """Wall-clock seconds and CPU seconds (user + system, the process and the workers it
+    waited for) of one `lensim psf bank` of `case` with the lensim of `checkout`."""
     env = dict(os.environ, PYTHONPATH=str(checkout))
     cmd = [sys.executable, "-m", "lensim", "psf", "bank", *BASE, *CASES[case], "--workers", str(WORKERS[case])]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t = time.perf_counter()
     subprocess.run([*cmd, "-o", str(out)], env=env, check=True, cwd=checkout)
-    return time.perf_counter() - t
+    wall = time.perf_counter() - t
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
 def kernels(bank_dir: Path) -> list[np.ndarray]:
@@ -73,41 +81,59 @@ def compare(old: Path, new: Path) -> tuple[float, float]:
     return worst_ncc, worst_diff
 
 
+def _table(rev: str, cases: list[str], times: dict, accuracy: dict) -> str:
+    """The markdown table of one earlier revision against this checkout."""
+    lines = [
+        f"before: {rev}; after: this checkout; {os.cpu_count()} CPUs\n",
+        "| case | before (s) | after (s) | speed-up | CPU s before / after | speed-up (CPU) "
+        "| banks/hour after | worst kernel NCC | worst diff / peak |",
+        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+    ]
+    for case in cases:
+        old, new = [t for t, _ in times[case][rev]], [t for t, _ in times[case]["after"]]
+        cpu_old, cpu_new = (statistics.median(c for _, c in times[case][w]) for w in (rev, "after"))
+        per_hour = 3600.0 / statistics.median(new)
+        per_worker = f" ({per_hour / WORKERS[case]:.0f} per worker)" if WORKERS[case] > 1 else ""
+        ncc, diff = accuracy[case][rev]
+        lines.append(
+            f"| {case} | {' / '.join(f'{t:.1f}' for t in old)} | {' / '.join(f'{t:.1f}' for t in new)} "
+            f"| {statistics.median(old) / statistics.median(new):.2f}x | {cpu_old:.1f} / {cpu_new:.1f} "
+            f"| {cpu_old / cpu_new:.2f}x | {per_hour:.0f}{per_worker} "
+            f"| {ncc:.7f} | {diff:.1e} |"
+        )
+    return "\n".join(lines)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--before", required=True, help="git revision to compare against")
+    parser.add_argument("--before", required=True, action="append", help="git revision to compare against (repeatable)")
     parser.add_argument("--repeats", type=int, default=1)
     parser.add_argument("--cases", default="demo,library,demo-2w")
     args = parser.parse_args()
     cases = args.cases.split(",")
     work = Path(tempfile.mkdtemp(prefix="lensim-bank-speed-"))
-    before = work / "before"
-    subprocess.run(["git", "worktree", "add", "--detach", "-q", str(before), args.before], cwd=REPO, check=True)
+    checkouts = {rev: work / f"before-{i}" for i, rev in enumerate(args.before)}
+    for rev, path in checkouts.items():
+        subprocess.run(["git", "worktree", "add", "--detach", "-q", str(path), rev], cwd=REPO, check=True)
+    checkouts["after"] = REPO
     try:
-        rows = []
+        times: dict = {case: {which: [] for which in checkouts} for case in cases}
+        accuracy: dict = {case: {} for case in cases}
         for case in cases:
-            times: dict[str, list[float]] = {"before": [], "after": []}
-            order = ["before", "after"]
+            order = list(checkouts)
             for r in range(args.repeats):
                 for which in order if r % 2 == 0 else order[::-1]:
-                    out = work / f"{case}-{which}-{r}"
-                    times[which].append(run_bank(before if which == "before" else REPO, case, out))
-                    print(f"{case} {which} run {r}: {times[which][-1]:.1f} s", file=sys.stderr, flush=True)
-            ncc, diff = compare(work / f"{case}-before-0", work / f"{case}-after-0")
-            old, new = statistics.median(times["before"]), statistics.median(times["after"])
-            per_hour = 3600.0 / new
-            per_worker = f" ({per_hour / WORKERS[case]:.0f} per worker)" if WORKERS[case] > 1 else ""
-            rows.append(
-                f"| {case} | {' / '.join(f'{t:.1f}' for t in times['before'])} "
-                f"| {' / '.join(f'{t:.1f}' for t in times['after'])} | {old / new:.2f}x "
-                f"| {per_hour:.0f}{per_worker} | {ncc:.7f} | {diff:.1e} |"
-            )
-        print(f"before: {args.before}; after: this checkout; {os.cpu_count()} CPUs\n")
-        print("| case | before (s) | after (s) | speed-up | banks/hour after | worst kernel NCC | worst diff / peak |")
-        print("| --- | ---: | ---: | ---: | ---: | ---: | ---: |")
-        print("\n".join(rows))
+                    out = work / f"{case}-{list(checkouts).index(which)}-{r}"
+                    times[case][which].append(run_bank(checkouts[which], case, out))
+                    wall, cpu = times[case][which][-1]
+                    print(f"{case} {which} run {r}: {wall:.1f} s ({cpu:.1f} s CPU)", file=sys.stderr, flush=True)
+            after = work / f"{case}-{len(checkouts) - 1}-0"
+            for i, rev in enumerate(args.before):
+                accuracy[case][rev] = compare(work / f"{case}-{i}-0", after)
+        print("\n\n".join(_table(rev, cases, times, accuracy) for rev in args.before))
     finally:
-        subprocess.run(["git", "worktree", "remove", "--force", str(before)], cwd=REPO, check=False)
+        for rev in args.before:
+            subprocess.run(["git", "worktree", "remove", "--force", str(checkouts[rev])], cwd=REPO, check=False)
         shutil.rmtree(work, ignore_errors=True)
     return 0
 
