@@ -240,3 +240,19 @@ def test_relative_illumination_spectrum_with_a_shared_axis_is_the_same():
         shared = relative_illumination_spectrum(lens, field, wavelengths, samples=16, axis=axis)
         assert np.allclose(shared, alone, rtol=1e-13, atol=0)
         assert not np.allclose(shared, 1.0)
+
+
+def test_relative_illumination_mirrored_half_equals_the_whole_pupil(monkeypatch):
+    # a symmetric lens: the pupil points at px >= 0 traced and mirrored give the values of
+    # the whole pupil traced, to rounding (what the bank's fields use)
+    from lensim.optics.field_analysis import relative_illumination_spectrum
+    from lensim.optics.lens import Lens
+
+    lens = load_lens("cooke_triplet")
+    wavelengths = [0.45, 0.65]
+    assert lens.meridional_mirror
+    half = relative_illumination_spectrum(lens, 0.9 * lens.max_field, wavelengths, samples=16)
+    monkeypatch.setattr(Lens, "meridional_mirror", property(lambda self: False))
+    whole = relative_illumination_spectrum(lens, 0.9 * lens.max_field, wavelengths, samples=16)
+    assert np.allclose(half, whole, rtol=1e-12, atol=0)
+    assert half.min() < 0.95

@@ -243,14 +243,12 @@ def test_pupil_field_aimed_from_another_wavelength_is_the_same(name):
 def test_mirrored_pupil_field_equals_the_whole_trace(monkeypatch):
     # a meridional field of a symmetric lens: the px >= 0 half traced and mirrored is the
     # whole grid traced, to rounding (the bank's pupils); a decentred lens traces it all
-    import lensim.psf.pupil_field as P
-
     for name in ("cooke_triplet", "phone_wide"):
         lens = load_lens(name)
-        assert P.mirrored(lens)
+        assert lens.meridional_mirror
         half = pupil_field(lens, 0.8 * lens.max_field, 0.5, 48, "real")
         with monkeypatch.context() as m:
-            m.setattr(P, "mirrored", lambda lens: False)
+            m.setattr(Lens, "meridional_mirror", property(lambda self: False))
             whole = pupil_field(lens, 0.8 * lens.max_field, 0.5, 48, "real")
         assert half.aim.shape[2] < whole.aim.shape[2]
         assert torch.equal(half.pupil_xy, whole.pupil_xy)
@@ -262,4 +260,4 @@ def test_mirrored_pupil_field_equals_the_whole_trace(monkeypatch):
     lens = load_lens("cooke_triplet")
     surfaces = list(lens.surfaces)
     surfaces[2] = replace(surfaces[2], pose=(0.01, 0.0, 0.0, 0.0))
-    assert not P.mirrored(lens.with_changes(surfaces=surfaces))
+    assert not lens.with_changes(surfaces=surfaces).meridional_mirror

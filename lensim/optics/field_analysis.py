@@ -186,6 +186,35 @@ def _by_field(res: TraceResult) -> TraceResult:
     )
 
 
+class _MirrorHalf:
+    """Pupil points (P, 2) symmetric about px = 0, of which only those at px >= 0 are
+    traced (`traced`, (K, 2)) for a lens whose rays mirror about the meridional plane
+    (`mirror`; every point otherwise): each point's ray is its own or its mirror image's
+    with x negated (the same ray to rounding)."""
+
+    def __init__(self, points: torch.Tensor, mirror: bool) -> None:
+        keep = points[:, 0] >= 0 if mirror else torch.ones(points.shape[0], dtype=torch.bool)
+        self.traced = points[keep]
+        where = {(round(x * 1e9), round(y * 1e9)): i for i, (x, y) in enumerate(self.traced.tolist())}
+        self.source = torch.tensor([where[(round(abs(x) * 1e9), round(y * 1e9))] for x, y in points.tolist()])
+        self.flip = ~keep
+
+    def unfold(self, res: TraceResult, skip: int = 0) -> TraceResult:
+        """A (1, B, skip + K) trace of the traced points (after `skip` other rays, kept) as
+        one of all P points, (1, B, skip + P)."""
+        index = torch.cat([torch.arange(skip), skip + self.source])
+        flip = torch.cat([torch.zeros(skip, dtype=torch.bool), self.flip]).unsqueeze(-1)
+        sign = torch.tensor([-1.0, 1.0, 1.0], dtype=DTYPE)
+        r = res.rays
+
+        def mirrored(v: torch.Tensor) -> torch.Tensor:
+            v = v[:, :, index]
+            return torch.where(flip, v * sign, v)
+
+        rays = Rays(mirrored(r.position), mirrored(r.direction), r.opl[:, :, index], r.valid[:, :, index])
+        return TraceResult(rays, res.status[:, :, index], res.failed_at[:, :, index])
+
+
 def _beam_solid_angles(
     lens: Lens,
     launch: list[float],
@@ -199,11 +228,13 @@ def _beam_solid_angles(
     together: the projected solid angles (W, F) (sr), the unvignetted fractions of the pupil
     disc (W, F) and the chief-ray image points (W, F, 3) (mm)."""
     cells = _PupilCells(samples, subsamples)
-    pupil = torch.cat([torch.zeros(1, 2, dtype=DTYPE), cells.nodes, cells.sub])
+    mirror = lens.meridional_mirror  # trace the points at x >= 0, mirror the others
+    nodes, subs = _MirrorHalf(cells.nodes, mirror), _MirrorHalf(cells.sub, mirror)
+    pupil = torch.cat([torch.zeros(1, 2, dtype=DTYPE), nodes.traced, subs.traced])
     rays, wlt = generate_rays(lens, launch, pupil, wavelengths_um, aiming, para)
-    n_nodes = cells.nodes.shape[0]
-    free = _by_field(trace(lens, rays.select(slice(0, 1 + n_nodes)), wlt, apertures=False))
-    blocked = _by_field(trace(lens, rays.select(slice(1 + n_nodes, None)), wlt))
+    n_nodes = nodes.traced.shape[0]
+    free = nodes.unfold(_by_field(trace(lens, rays.select(slice(0, 1 + n_nodes)), wlt, apertures=False)), 1)
+    blocked = subs.unfold(_by_field(trace(lens, rays.select(slice(1 + n_nodes, None)), wlt)))
     chief_ok = free.rays.valid[0, :, 0]
     if not bool(chief_ok.all()):
         fi = int(torch.nonzero(~chief_ok)[0, 0])

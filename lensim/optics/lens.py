@@ -305,6 +305,14 @@ class Lens:
         """Whether a surface parameter or the image defocus is a tensor that requires grad."""
         return any(s.requires_grad for s in self.surfaces) or bool(getattr(self.image_defocus, "requires_grad", False))
 
+    @property
+    def meridional_mirror(self) -> bool:
+        """Whether the rays of a field on the y axis are mirror images about the meridional
+        plane x = 0, so that pupil grids may be traced at px >= 0 only and mirrored: no
+        surface or sensor pose, and no gradient to follow (a pose at zero that requires grad
+        need not keep the symmetry)."""
+        return not (self.has_poses or self.requires_grad)
+
     def media(self) -> list[Material]:
         """Medium before surface 0, then after every surface (length N+1).
         A mirror keeps the medium it reflects in."""

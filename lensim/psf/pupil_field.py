@@ -150,13 +150,6 @@ class _ImageRays:
         )
 
 
-def mirrored(lens: Lens) -> bool:
-    """Whether pupil grids of lens are traced at px >= 0 only and mirrored (_GridMap): a
-    lens symmetric about the meridional plane (no decentre or tilt) with no gradient to
-    follow (a pose at zero that requires grad need not keep the symmetry)."""
-    return not (lens.has_poses or lens.requires_grad)
-
-
 class _GridMap:
     """Which cells of an n x n pupil grid (pts (n*n, 2), inside the disc: inside) are
     traced, and where every cell's ray comes from. For a lens symmetric about the
@@ -198,7 +191,7 @@ def _trace_grid(
         raise InputError(lens.source, "pupil_samples", f"expected at least 8 pupil samples across, got {samples}")
     launch = object_field(lens, field, aiming, para)
     pts, inside = square_grid_full(samples)
-    cells = _GridMap(pts, inside, samples, mirrored(lens))
+    cells = _GridMap(pts, inside, samples, lens.meridional_mirror)
     all_pts = torch.cat([torch.zeros(1, 2, dtype=DTYPE), pts[cells.traced]])  # the chief ray, the traced cells
     if start is not None and start.shape[-2] != all_pts.shape[0]:
         start = None  # aimed on another grid
