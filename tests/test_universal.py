@@ -232,3 +232,15 @@ def test_demo_starts_from_a_universal_model_that_serves_its_camera(shipped, came
     with torch.device("meta"):
         sizes = [count_parameters(build_model(c.model_kwargs())) for c in (model, plain)]
     assert abs(sizes[0] - sizes[1]) <= 0.25 * sizes[0]
+
+
+def test_init_ignores_settings_that_do_not_shape_the_weights(shipped):
+    """A psfnet without deformable blocks starts from the universal model whatever its
+    (unused) deformable_scales says: the demo's and `lensim train`'s default is 2, the
+    shipped model records 1."""
+    model_config = torch.load(shipped / "model.pt", weights_only=True)["model_config"]
+    for scales in (1, 2):
+        model = build_model({**model_config, "deformable_scales": scales})
+        uni.load_init(model, shipped / "model.pt")
+    with pytest.raises(InputError, match="width"):
+        uni.load_init(build_model({**model_config, "width": 16}), shipped / "model.pt")

@@ -386,8 +386,7 @@ def load_init(model: torch.nn.Module, init: str | Path) -> None:
     path = model_path(NAME) if str(init) == NAME else resolve_checkpoint(init)
     ckpt = read_checkpoint(path)
     config: dict[str, Any] = getattr(model, "config")  # noqa: B009  (every lensim network has one)
-    mine = {k: v for k, v in config.items() if k != "dcn_backend"}
-    theirs = {k: v for k, v in build_config(ckpt["model_config"]).items() if k != "dcn_backend"}
+    mine, theirs = _weights_config(config), _weights_config(build_config(ckpt["model_config"]))
     if mine != theirs:
         differ = sorted(k for k in set(mine) | set(theirs) if mine.get(k) != theirs.get(k))
         raise InputError(
@@ -397,6 +396,17 @@ def load_init(model: torch.nn.Module, init: str | Path) -> None:
             f"{', '.join(f'{k} {mine.get(k)!r}' for k in differ)}); expected the same network",
         )
     model.load_state_dict(ckpt["model_state"])
+
+
+#: Config keys that do not shape a network's weights: the DCN backend, and the deformable
+#: blocks' settings of a network without deformable blocks.
+_DEFORMABLE_KEYS = ("deformable_groups", "deformable_scales")
+
+
+def _weights_config(config: dict[str, Any]) -> dict[str, Any]:
+    """The part of a network's config that decides its weights (what --init must match)."""
+    drop = {"dcn_backend", *(() if config.get("use_deformable") else _DEFORMABLE_KEYS)}
+    return {k: v for k, v in config.items() if k not in drop}
 
 
 def build_config(config: dict[str, Any]) -> dict[str, Any]:
