@@ -7,14 +7,14 @@ PSF bank, mosaic, shot and read noise, AHD demosaic, develop) and calibrated as
 the fit). A perturbed lens is not rotationally symmetric and a PSF bank rotates its +y
 PSFs to every azimuth, so a perturbed camera is rendered with one bank per diagonal of the
 chart (the lens turned to that azimuth, lensim.calibrate.tolerance_report.lens_at_azimuth):
-the upper half of the frame through the upper-right diagonal's bank, the lower half
-through the lower-right one's (the chart's edge squares lie on those two diagonals). The
-calibrated camera is rendered the same way.
+each quadrant of the frame through its diagonal's bank (the chart's edge squares lie on
+the four diagonals). The calibrated camera is rendered the same way.
 
 Reported per camera: the MTF-area ratio simulation/photo per zone before (nominal lens)
 and after (as-built lens) calibration, the NCC of the as-built (and nominal) Huygens PSFs
-against the true ones at the centre, 0.7 and the corner (lower-right diagonal, 550 nm),
-the fitted parameters against the truth, the fit's run time.
+against the true ones at the centre, 0.7 and the corner (550 nm; on the lower-right
+diagonal, and the worst of the four diagonals), the fitted parameters against the truth,
+the degenerate pairs, the fit's run time, model evaluations and traces.
 
 Camera "held_out" is draw 0 of seed 2024 of HELD_OUT_TOLERANCES (element tilts and
 spacings the fit does not model included); it was not run while the method was developed.
@@ -55,10 +55,14 @@ from lensim.sensor.profile import load_sensor
 LENS, SENSOR, DISTANCE_M = "phone_wide", "phone", 1.0
 ROWS, COLS = 720, 960
 WAVELENGTHS_NM = (450.0, 550.0, 650.0)
+#: the frame's quadrants: (bottom half?, right half?) of the photo, named by their corner
+QUADRANTS = {"ur": (0, 1), "lr": (1, 1), "ul": (0, 0), "ll": (1, 0)}
 CAMERAS = {
     "focus_decentre": {"image.focus": 0.006, "e3.decentre_x": 0.004},
     "focus_tilt_decentre": {"image.focus": -0.005, "image.tilt_x": 0.12, "e2.decentre_y": -0.004},
 }
+#: elements whose decentres are fitted (lensim calibrate --elements)
+ELEMENTS_FITTED = 1
 HELD_OUT_TOLERANCES = {
     "elements": {"all": {"decentre_mm": 0.004, "tilt_deg": 0.05, "spacing_mm": 0.002}},
     "image": {"focus_mm": 0.006, "tilt_deg": 0.1},
@@ -92,12 +96,11 @@ class World:
         self.settings = BankSettings(fields=7, wavelengths_nm=WAVELENGTHS_NM, pupil_samples=64, cache_dir=cache)
         self.spectrum = luminance_spectrum(self.sensor, WAVELENGTHS_NM)
         p = self.mapping.pitch_um * 1e-3
-        corner = (self.mapping.x0_mm + (COLS - 1) * p, self.mapping.y0_mm)  # upper right
-        self.azimuths = {
-            "up": math.degrees(math.atan2(-corner[0], corner[1])),
-            "down": math.degrees(math.atan2(-corner[0], -corner[1])),
-        }
-        self.half_diagonal = math.hypot(*corner)
+        self.azimuths = {}
+        for key, (row, col) in QUADRANTS.items():
+            x, y = self.mapping.x0_mm + col * (COLS - 1) * p, self.mapping.y0_mm + row * (ROWS - 1) * p
+            self.azimuths[key] = math.degrees(math.atan2(-x, y))
+        self.half_diagonal = math.hypot(self.mapping.x0_mm, self.mapping.y0_mm)
 
     def bank(self, lens):
         return get_bank(lens, self.mapping.pitch_um, self.settings, response=self.sensor.spectral_response)
@@ -105,14 +108,19 @@ class World:
     def banks(self, lens) -> dict:
         """One bank per diagonal (the lens turned to its azimuth); one for a symmetric lens."""
         if not lens.has_poses:
-            b = self.bank(lens)
-            return {"up": b, "down": b}
+            return {"all": self.bank(lens)}
         return {k: self.bank(lens_at_azimuth(lens, a)) for k, a in self.azimuths.items()}
 
 
-def _compose(up: np.ndarray, down: np.ndarray) -> np.ndarray:
-    out = np.array(down, copy=True)
-    out[:, : ROWS // 2] = up[:, : ROWS // 2]
+def _compose(images: dict[str, np.ndarray]) -> np.ndarray:
+    """Each quadrant from its diagonal's image (one image for a symmetric lens)."""
+    if "all" in images:
+        return images["all"]
+    out = np.array(images["lr"], copy=True)
+    for key, (row, col) in QUADRANTS.items():
+        rows = slice(ROWS // 2, None) if row else slice(None, ROWS // 2)
+        cols = slice(COLS // 2, None) if col else slice(None, COLS // 2)
+        out[:, rows, cols] = images[key][:, rows, cols]
     return out
 
 
@@ -125,7 +133,7 @@ def photograph(world: World, lens, seed: int) -> np.ndarray:
         img, _ = simulate(scene, bank, world.sensor, torch.Generator().manual_seed(seed), mapping=world.mapping,
                           bits=16, kelvin=5000.0)  # fmt: skip
         shots[k] = img.double().numpy()
-    return _compose(shots["up"], shots["down"])
+    return _compose(shots)
 
 
 def ratios(world: World, photo: np.ndarray, lens, det) -> list[dict]:
@@ -134,7 +142,7 @@ def ratios(world: World, photo: np.ndarray, lens, det) -> list[dict]:
     for k, bank in world.banks(lens).items():
         sims[k], _ = simulate_chart(photo, world.layout, det, bank, world.sensor, world.mapping,
                                     generator=torch.Generator().manual_seed(5), noise=True)  # fmt: skip
-    cmp = compare_images(photo, _compose(sims["up"], sims["down"]), world.layout, det, world.mapping.pitch_um)
+    cmp = compare_images(photo, _compose(sims), world.layout, det, world.mapping.pitch_um)
     return [{"zone": z.zone, "edges": z.edges, "ratio": z.mtf_area_ratio} for z in cmp.zones]
 
 
@@ -144,18 +152,25 @@ def _ncc(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def psf_nccs(world: World, truth, others: dict) -> list[dict]:
-    """NCC of each lens's Huygens PSF (550 nm) against the truth's at centre, 0.7, corner."""
+    """NCC of each lens's Huygens PSF (550 nm) against the truth's at centre, 0.7, corner:
+    on the lower-right diagonal, and the worst of the four diagonals ("<name> worst")."""
     rows = []
-    az = world.azimuths["down"]
     for label, frac in (("centre", 0.0), ("0.7", 0.7), ("corner", 0.95)):
         r = frac * world.half_diagonal
+        row: dict = {"field": label}
+        for az_key, az in world.azimuths.items() if r else [("lr", 0.0)]:
 
-        def psf(lens, r=r):
-            turned = lens_at_azimuth(lens, az).with_changes(field_type="paraxial_image_height", fields=[r or 1e-9])
-            return compute_psf(turned, 1.0, 0.55, pupil_samples=64, grid=64, spacing_um=0.25, aiming="real").data
+            def psf(lens, r=r, az=az):
+                turned = lens_at_azimuth(lens, az).with_changes(field_type="paraxial_image_height", fields=[r or 1e-9])
+                return compute_psf(turned, 1.0, 0.55, pupil_samples=64, grid=64, spacing_um=0.25, aiming="real").data
 
-        t = psf(truth)
-        rows.append({"field": label, **{k: _ncc(psf(v), t) for k, v in others.items()}})
+            t = psf(truth)
+            for k, v in others.items():
+                ncc = _ncc(psf(v), t)
+                if az_key == "lr":
+                    row[k] = ncc
+                row[f"{k} worst"] = min(row.get(f"{k} worst", 1.0), ncc)
+        rows.append(row)
     return rows
 
 
@@ -168,7 +183,7 @@ def run_camera(world: World, name: str, truth, out: Path) -> dict:
     nominal_bank = world.bank(world.lens)
     t0 = time.perf_counter()
     data = chart_data(photo, world.layout, world.lens, nominal_bank, world.sensor, world.mapping, world.spectrum, name)
-    fitted = calibrate_charts(world.lens, [data], world.spectrum, where=name)
+    fitted = calibrate_charts(world.lens, [data], world.spectrum, elements_fitted=ELEMENTS_FITTED, where=name)
     seconds = time.perf_counter() - t0
     as_built = fitted.lens
     result = {
@@ -181,6 +196,10 @@ def run_camera(world: World, name: str, truth, out: Path) -> dict:
         "edges": len(data.edges),
         "calibration_seconds": seconds,
         "evaluations": fitted.evaluations,
+        "traces": fitted.traces,
+        "degenerate": fitted.degenerate,
+        "starts": fitted.lens.as_built.get("starts", []),
+        "elements_fitted": ELEMENTS_FITTED,
         "before": ratios(world, photo, world.lens, det),
         "after": ratios(world, photo, as_built, det),
         "psf_ncc": psf_nccs(world, truth, {"nominal": world.lens, "calibrated": as_built}),
@@ -195,10 +214,18 @@ def table(results: list[dict]) -> str:
         after = {z["zone"]: z["ratio"] for z in r["after"]}
         for z in r["before"]:
             lines.append(f"| {r['camera']} | {z['zone']:g} | {z['ratio']:.3f} | {after.get(z['zone'], math.nan):.3f} |")
-    lines += ["", "| camera | field | PSF NCC nominal | PSF NCC calibrated |", "| --- | --- | --- | --- |"]
+    lines += [
+        "",
+        "| camera | field | PSF NCC nominal | PSF NCC calibrated | worst diagonal: nominal | calibrated |",
+        "| --- | --- | --- | --- | --- | --- |",
+    ]
     for r in results:
         for row in r["psf_ncc"]:
-            lines.append(f"| {r['camera']} | {row['field']} | {row['nominal']:.4f} | {row['calibrated']:.4f} |")
+            worst = [row.get(f"{k} worst", math.nan) for k in ("nominal", "calibrated")]
+            lines.append(
+                f"| {r['camera']} | {row['field']} | {row['nominal']:.4f} | {row['calibrated']:.4f} "
+                f"| {worst[0]:.4f} | {worst[1]:.4f} |"
+            )
     lines += ["", "| camera | parameter | truth | fitted +- 1 sigma |", "| --- | --- | --- | --- |"]
     for r in results:
         names = sorted(set(r["truth"]) | set(r["fitted"]))
@@ -207,13 +234,22 @@ def table(results: list[dict]) -> str:
             lines.append(f"| {r['camera']} | {n} | {r['truth'].get(n, 0.0):+.5f} | {fit} |")
     lines += [
         "",
-        "| camera | edges | RMS residual before -> after | evaluations | calibration s |",
-        "| --- | --- | --- | --- | --- |",
+        "| camera | edges | RMS residual before -> after | evaluations | traces | calibration s |",
+        "| --- | --- | --- | --- | --- | --- |",
     ]
     for r in results:
         b, a = r["rms_residual"]
-        runs = f"{r['evaluations']} | {r['calibration_seconds']:.0f}"
+        runs = f"{r['evaluations']} | {r.get('traces', r['evaluations'])} | {r['calibration_seconds']:.0f}"
         lines.append(f"| {r['camera']} | {r['edges']} | {b:.4f} -> {a:.4f} | {runs} |")
+    lines += [
+        "",
+        "| camera | degenerate pairs (correlation beyond 0.9) | starts: focus mm -> RMS |",
+        "| --- | --- | --- |",
+    ]
+    for r in results:
+        pairs = ", ".join(f"{p['pair'][0]} ~ {p['pair'][1]} ({p['correlation']:+.2f})" for p in r.get("degenerate", []))
+        starts = ", ".join(f"{s['focus']:+.4f} -> {s['rms']:.4f}" for s in r.get("starts", []))
+        lines.append(f"| {r['camera']} | {pairs or 'none'} | {starts or '-'} |")
     return "\n".join(lines) + "\n"
 
 
