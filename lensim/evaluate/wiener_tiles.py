@@ -261,6 +261,10 @@ def _polar_entry(bank: PSFBank) -> tuple[PolarKernels, dict[int, dict[tuple[int,
     key = id(bank)
     entry = _POLAR.get(key)
     if entry is None or entry[0]() is not bank:
-        entry = (weakref.ref(bank, lambda _ref, kept=_POLAR: kept.pop(key, None)), PolarKernels(bank), {})
+
+        def forget(_ref: weakref.ReferenceType[Any]) -> None:
+            _POLAR.pop(key, None)
+
+        entry = (weakref.ref(bank, forget), PolarKernels(bank), {})
         _POLAR[key] = entry
     return entry[1], entry[2]
