@@ -244,3 +244,31 @@ def test_init_ignores_settings_that_do_not_shape_the_weights(shipped):
         uni.load_init(model, shipped / "model.pt")
     with pytest.raises(InputError, match="width"):
         uni.load_init(build_model({**model_config, "width": 16}), shipped / "model.pt")
+
+
+def test_init_universal_builds_its_network_unless_told_otherwise(shipped, camera, tmp_path, capsys, monkeypatch):
+    """`lensim train --init universal` with no network options builds the universal model's
+    network (psfnet of its width) and starts from its weights; a --width that differs from
+    it is one line naming init."""
+    monkeypatch.setattr(uni, "MODEL_DIR", shipped)
+    pairs, run = camera["folders"][0], tmp_path / "run"
+    args = [
+        "train",
+        str(pairs),
+        "-o",
+        str(run),
+        "--init",
+        "universal",
+        "--epochs",
+        "1",
+        "--threads",
+        "1",
+        "--crop",
+        "32",
+    ]
+    code, _, err = run_cli([*args, "--steps-per-epoch", "1", "--quiet"], capsys, monkeypatch)
+    assert code == 0, err
+    config = torch.load(run / "last.pt", weights_only=True)["model_config"]
+    assert (config["arch"], config["width"]) == ("psfnet", 8)
+    code, _, err = run_cli([*args, "-o", str(tmp_path / "r2"), "--width", "12"], capsys, monkeypatch)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "width" in err, err

@@ -153,7 +153,8 @@ def train_command(
         None,
         "--init",
         help="Start from these weights instead of a random initialisation: 'universal' (the shipped "
-        "universal model; fine-tuning) or a run folder / checkpoint of the same network.",
+        "universal model; fine-tuning) or a run folder / checkpoint. The run builds their network "
+        "(architecture, width, stem, FOV, deformable and context switches) where no option says otherwise.",
     ),
     device: str = typer.Option(_D.device, "--device", help="cpu, cuda or cuda:N (mixed precision on CUDA)."),
     no_amp: bool = typer.Option(not _D.amp, "--no-amp", help="Full float32 on CUDA."),
@@ -231,6 +232,11 @@ def train_command(
     }
     if resume:  # the checkpoint's settings, changed only where an option is given
         overrides = {k: v for k, v in overrides.items() if _given(ctx, _OPTION_OF.get(k, k))}
+    elif init is not None:  # the network of the weights it starts from, where no option says otherwise
+        from lensim.restore.universal import init_network
+
+        given = init_network(init)
+        overrides.update({k: v for k, v in given.items() if not _given(ctx, _OPTION_OF.get(k, k))})
     prog, callback = _progress(epochs, show=not quiet and not json_out)
     try:  # a new run that fails before its first checkpoint leaves no folder (train removes it)
         result = _train(train, dataset, output, resume, callback, overrides)

@@ -398,6 +398,20 @@ def load_init(model: torch.nn.Module, init: str | Path) -> None:
     model.load_state_dict(ckpt["model_state"])
 
 
+#: The TrainConfig fields that say which network a run builds (what --init must match).
+NETWORK_FIELDS = ("arch", "width", "stem", "use_fov", "use_deformable", "use_context")
+
+
+def init_network(init: str | Path) -> dict[str, Any]:
+    """The network of checkpoint ``init`` ("universal": the shipped model) as TrainConfig
+    fields (:data:`NETWORK_FIELDS`): what a run started from it builds unless told otherwise."""
+    from lensim.restore.checkpoint import read_checkpoint, resolve_checkpoint
+
+    path = model_path(NAME) if str(init) == NAME else resolve_checkpoint(init)
+    config = build_config(read_checkpoint(path)["model_config"])
+    return {k: config[k] for k in NETWORK_FIELDS if k in config}
+
+
 #: Config keys that do not shape a network's weights: the DCN backend, and the deformable
 #: blocks' settings of a network without deformable blocks.
 _DEFORMABLE_KEYS = ("deformable_groups", "deformable_scales")
