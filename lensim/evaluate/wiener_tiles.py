@@ -262,8 +262,8 @@ def _polar_entry(bank: PSFBank) -> tuple[PolarKernels, dict[int, dict[tuple[int,
     entry = _POLAR.get(key)
     if entry is None or entry[0]() is not bank:
 
-        def forget(_ref: weakref.ReferenceType[Any]) -> None:
-            _POLAR.pop(key, None)
+        def forget(_ref: weakref.ReferenceType[Any], kept: dict[int, Any] = _POLAR) -> None:
+            kept.pop(key, None)  # the dict bound here: at interpreter exit the module's globals may be gone
 
         entry = (weakref.ref(bank, forget), PolarKernels(bank), {})
         _POLAR[key] = entry
