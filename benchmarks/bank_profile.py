@@ -14,7 +14,11 @@ function that does it, over the whole bank's time:
   `relative_illumination`);
 * the Huygens superposition (`huygens_psf`) and the sampling check (`check_sampling`);
 * pixel integration (`integrate_pixels`); the Strehl ratio (`strehl_ratio`);
-* the rest (set-up, the spectral response, the manifest).
+* the spectral response; the kernels turned to other azimuths (`azimuth_kernels`);
+* the rest (set-up, the manifest).
+
+Times are CPU seconds of this process (cProfile with time.process_time), which other jobs
+on a shared machine disturb less than wall-clock time.
 
 Prints a markdown table.
 """
@@ -29,13 +33,14 @@ import time
 
 STAGES = [
     ("pupil tracing (pupil_field)", ("pupil_field",)),
-    ("  of which ray aiming (generate_rays in pupil_field)", ("generate_rays",)),
+    ("  of which ray aiming (generate_rays in _trace_grid)", ("generate_rays",)),
     ("relative illumination", ("relative_illumination_spectrum", "relative_illumination")),
     ("Huygens superposition (huygens_psf)", ("huygens_psf",)),
     ("sampling check (check_sampling)", ("check_sampling",)),
     ("pixel integration (integrate_pixels)", ("integrate_pixels",)),
     ("Strehl ratio (strehl_ratio)", ("strehl_ratio",)),
-    ("spectral response (spectral_response: colour-science's tables)", ("spectral_response",)),
+    ("spectral response (spectral_response)", ("spectral_response",)),
+    ("azimuth kernels (azimuth_kernels)", ("azimuth_kernels",)),
 ]
 TOP_LEVEL = {"pupil_field", "relative_illumination_spectrum", "relative_illumination", "huygens_psf"}
 
@@ -72,8 +77,8 @@ def main() -> int:
     lens = load_lens("cooke_triplet")
     sensor = load_sensor("apsc_mirrorless")
     fields = [((i / (args.fields - 1)) ** 0.5) for i in range(args.fields)]
-    profiler = cProfile.Profile()
-    start = time.perf_counter()
+    profiler = cProfile.Profile(time.process_time)
+    start = time.process_time()
     profiler.enable()
     settings = BankSettings(
         fields=tuple(fields),
@@ -83,16 +88,17 @@ def main() -> int:
     )
     get_bank(lens, sensor.pixel_pitch_um, settings, response=sensor.spectral_response, memory_only=True)
     profiler.disable()
-    total = time.perf_counter() - start
+    total = time.process_time() - start
     stats = pstats.Stats(profiler)
     print(
-        f"bank: {args.fields} fields x 13 wavelengths, {args.pupil_samples} pupil samples, one thread: {total:.1f} s\n"
+        f"bank: {args.fields} fields x 13 wavelengths, {args.pupil_samples} pupil samples, one thread: "
+        f"{total:.1f} s CPU\n"
     )
     print("| stage | seconds | share |")
     print("| --- | ---: | ---: |")
     accounted = 0.0
     for label, names in STAGES:
-        t = cumulative(stats, names, "pupil_field" if names == ("generate_rays",) else None)
+        t = cumulative(stats, names, "_trace_grid" if names == ("generate_rays",) else None)
         if names[0] in TOP_LEVEL:
             accounted += t
         print(f"| {label} | {t:.1f} | {100 * t / total:.0f} % |")
