@@ -228,6 +228,7 @@ def test_demo_starts_from_a_universal_model_that_serves_its_camera(shipped, came
     assert with_universal_start(dataclasses.replace(quick, arch="nafnet"), pitch, 4.0).init is None
     model, plain = _demo_configs(tmp_path, monkeypatch, [(start, False), (start, True)])
     assert (model.arch, model.width, model.stem, model.init) == ("psfnet", 8, quick.stem, "universal")
+    assert model.lr < plain.lr  # fine-tuning rate for the start, the scratch rate for the plain network
     assert plain.init is None and plain.width == plain_network(start)["width"]
     with torch.device("meta"):
         sizes = [count_parameters(build_model(c.model_kwargs())) for c in (model, plain)]
