@@ -86,6 +86,7 @@ def measure(part: str, bank: str, threads: int, side: int, tree: str | None = No
         capture_output=True,
         text=True,
         env=env,
+        cwd=tree,  # python -c puts the working folder first on sys.path: the tree's lensim, not this one
     )
     got = json.loads(out.stdout.strip().splitlines()[-1])
     if "warm" in got:
