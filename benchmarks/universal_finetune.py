@@ -52,24 +52,17 @@ def training_pairs(out: Path, bank_dir: Path, sensor_file: Path) -> Path:
 
 def train_run(pairs: Path, run: Path, minutes: float, init: str | None) -> dict:
     """One run on the universal model's network (made once: RUN/done.json)."""
-    from lensim.restore.checkpoint import read_checkpoint
     from lensim.restore.train import train
-    from lensim.restore.universal import NAME, model_path
+    from lensim.restore.universal import NAME, init_network
 
     if (run / "done.json").exists():
         return json.loads((run / "done.json").read_text())
     if run.exists():
         shutil.rmtree(run)
-    config = read_checkpoint(model_path(NAME))["model_config"]
     res = train(
         pairs,
         run,
-        arch="psfnet",
-        width=int(config["width"]),
-        stem=int(config["stem"]),
-        use_fov=True,
-        use_deformable=False,
-        use_context=False,
+        **init_network(NAME),  # psfnet, its width and stem, FOV on, no deformable or context block
         epochs=100_000,
         batch_size=8,
         lr=5e-4 if init is None else 2e-4,

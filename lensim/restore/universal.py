@@ -378,12 +378,20 @@ def zero_shot_bank(
         )
 
 
+def init_path(init: str | Path) -> Path:
+    """The checkpoint file a run starts from: the shipped model for "universal", else the
+    run folder's or checkpoint's (lensim.restore.checkpoint.resolve_checkpoint)."""
+    from lensim.restore.checkpoint import resolve_checkpoint
+
+    return model_path(NAME) if str(init) == NAME else resolve_checkpoint(init)
+
+
 def load_init(model: torch.nn.Module, init: str | Path) -> None:
     """Load the weights of checkpoint `init` ("universal": the shipped model) into `model`
     (a new run's network); InputError naming "init" when they are another network's."""
-    from lensim.restore.checkpoint import read_checkpoint, resolve_checkpoint
+    from lensim.restore.checkpoint import read_checkpoint
 
-    path = model_path(NAME) if str(init) == NAME else resolve_checkpoint(init)
+    path = init_path(init)
     ckpt = read_checkpoint(path)
     config: dict[str, Any] = getattr(model, "config")  # noqa: B009  (every lensim network has one)
     mine, theirs = _weights_config(config), _weights_config(build_config(ckpt["model_config"]))
@@ -405,10 +413,9 @@ NETWORK_FIELDS = ("arch", "width", "stem", "use_fov", "use_deformable", "use_con
 def init_network(init: str | Path) -> dict[str, Any]:
     """The network of checkpoint ``init`` ("universal": the shipped model) as TrainConfig
     fields (:data:`NETWORK_FIELDS`): what a run started from it builds unless told otherwise."""
-    from lensim.restore.checkpoint import read_checkpoint, resolve_checkpoint
+    from lensim.restore.checkpoint import read_checkpoint
 
-    path = model_path(NAME) if str(init) == NAME else resolve_checkpoint(init)
-    config = build_config(read_checkpoint(path)["model_config"])
+    config = build_config(read_checkpoint(init_path(init))["model_config"])
     return {k: config[k] for k in NETWORK_FIELDS if k in config}
 
 
