@@ -250,6 +250,14 @@ def _retry_from(
         return x, conv
     sub, idx = _subset(pb, todo)
     xs, ok = _newton(sub, start[idx], target.expand(todo.shape + (2,))[idx])
+    return _write_back(x, conv, idx, xs, ok)
+
+
+def _write_back(
+    x: torch.Tensor, conv: torch.Tensor, idx: tuple[torch.Tensor, ...], xs: torch.Tensor, ok: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Copies of (x, conv) with the rays at idx that converged again (ok) replaced by xs, and
+    their convergence flags set to ok."""
     x, conv = x.clone(), conv.clone()
     x[idx] = torch.where(ok.unsqueeze(-1), xs, x[idx])
     conv[idx] = ok
@@ -284,10 +292,7 @@ def _continue_from_chief(
         alive = alive.index_copy(0, live, ok)
         if not bool(alive.any()):
             break
-    x, conv = x.clone(), conv.clone()
-    x[idx] = torch.where(alive.unsqueeze(-1), xk, x[idx])
-    conv[idx] = alive
-    return x, conv
+    return _write_back(x, conv, idx, xk, alive)
 
 
 def aim_real(
