@@ -10,6 +10,11 @@ chart (the lens turned to that azimuth, lensim.calibrate.tolerance_report.lens_a
 each quadrant of the frame through its diagonal's bank (the chart's edge squares lie on
 the four diagonals). The calibrated camera is rendered the same way.
 
+The calibration is lensim calibrate's: the fit with the nominal lens's system transfer,
+then up to REFRESH_ROUNDS transfer refreshes at the fitted lens (lensim.calibrate.refresh;
+the first fit and each round are checkpointed in OUT/<camera>.first.json and
+OUT/<camera>.rounds.json, so a killed run resumes after the last round).
+
 Reported per camera: the MTF-area ratio simulation/photo per zone before (nominal lens)
 and after (as-built lens) calibration, the NCC of the as-built (and nominal) Huygens PSFs
 against the true ones at the centre, 0.7 and the corner (550 nm; on the lower-right
@@ -36,11 +41,13 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from lensim.calibrate.calibrate import calibrate_charts, chart_data, luminance_spectrum
+from lensim.calibrate.calibrate import calibrate_charts, chart_data, luminance_spectrum, observations
 from lensim.calibrate.chart import design_chart
 from lensim.calibrate.chart_detect import detect_chart
 from lensim.calibrate.chart_draw import render_view
 from lensim.calibrate.compare import compare_images, simulate_chart
+from lensim.calibrate.fit import Fit
+from lensim.calibrate.refresh import chart_simulator, compose_quadrants, posed_banks, quadrant_azimuths, refine
 from lensim.calibrate.tolerance_report import lens_at_azimuth
 from lensim.calibrate.tolerances import drawn_lens, perturbed_lens, tolerances_from_dict
 from lensim.optics.lens_file import load_lens
@@ -55,14 +62,14 @@ from lensim.sensor.profile import load_sensor
 LENS, SENSOR, DISTANCE_M = "phone_wide", "phone", 1.0
 ROWS, COLS = 720, 960
 WAVELENGTHS_NM = (450.0, 550.0, 650.0)
-#: the frame's quadrants: (bottom half?, right half?) of the photo, named by their corner
-QUADRANTS = {"ur": (0, 1), "lr": (1, 1), "ul": (0, 0), "ll": (1, 0)}
 CAMERAS = {
     "focus_decentre": {"image.focus": 0.006, "e3.decentre_x": 0.004},
     "focus_tilt_decentre": {"image.focus": -0.005, "image.tilt_x": 0.12, "e2.decentre_y": -0.004},
 }
 #: elements whose decentres are fitted (lensim calibrate --elements)
 ELEMENTS_FITTED = 1
+#: most transfer refreshes (lensim calibrate --refresh-rounds)
+REFRESH_ROUNDS = 4
 HELD_OUT_TOLERANCES = {
     "elements": {"all": {"decentre_mm": 0.004, "tilt_deg": 0.05, "spacing_mm": 0.002}},
     "image": {"focus_mm": 0.006, "tilt_deg": 0.1},
@@ -95,11 +102,7 @@ class World:
         self.h = _homography(self.layout.frame_mm)
         self.settings = BankSettings(fields=7, wavelengths_nm=WAVELENGTHS_NM, pupil_samples=64, cache_dir=cache)
         self.spectrum = luminance_spectrum(self.sensor, WAVELENGTHS_NM)
-        p = self.mapping.pitch_um * 1e-3
-        self.azimuths = {}
-        for key, (row, col) in QUADRANTS.items():
-            x, y = self.mapping.x0_mm + col * (COLS - 1) * p, self.mapping.y0_mm + row * (ROWS - 1) * p
-            self.azimuths[key] = math.degrees(math.atan2(-x, y))
+        self.azimuths = quadrant_azimuths(self.mapping)
         self.half_diagonal = math.hypot(self.mapping.x0_mm, self.mapping.y0_mm)
 
     def bank(self, lens):
@@ -107,21 +110,7 @@ class World:
 
     def banks(self, lens) -> dict:
         """One bank per diagonal (the lens turned to its azimuth); one for a symmetric lens."""
-        if not lens.has_poses:
-            return {"all": self.bank(lens)}
-        return {k: self.bank(lens_at_azimuth(lens, a)) for k, a in self.azimuths.items()}
-
-
-def _compose(images: dict[str, np.ndarray]) -> np.ndarray:
-    """Each quadrant from its diagonal's image (one image for a symmetric lens)."""
-    if "all" in images:
-        return images["all"]
-    out = np.array(images["lr"], copy=True)
-    for key, (row, col) in QUADRANTS.items():
-        rows = slice(ROWS // 2, None) if row else slice(None, ROWS // 2)
-        cols = slice(COLS // 2, None) if col else slice(None, COLS // 2)
-        out[:, rows, cols] = images[key][:, rows, cols]
-    return out
+        return posed_banks(lens, self.mapping, self.bank)
 
 
 def photograph(world: World, lens, seed: int) -> np.ndarray:
@@ -133,7 +122,7 @@ def photograph(world: World, lens, seed: int) -> np.ndarray:
         img, _ = simulate(scene, bank, world.sensor, torch.Generator().manual_seed(seed), mapping=world.mapping,
                           bits=16, kelvin=5000.0)  # fmt: skip
         shots[k] = img.double().numpy()
-    return _compose(shots)
+    return compose_quadrants(shots)
 
 
 def ratios(world: World, photo: np.ndarray, lens, det) -> list[dict]:
@@ -142,7 +131,7 @@ def ratios(world: World, photo: np.ndarray, lens, det) -> list[dict]:
     for k, bank in world.banks(lens).items():
         sims[k], _ = simulate_chart(photo, world.layout, det, bank, world.sensor, world.mapping,
                                     generator=torch.Generator().manual_seed(5), noise=True)  # fmt: skip
-    cmp = compare_images(photo, _compose(sims), world.layout, det, world.mapping.pitch_um)
+    cmp = compare_images(photo, compose_quadrants(sims), world.layout, det, world.mapping.pitch_um)
     return [{"zone": z.zone, "edges": z.edges, "ratio": z.mtf_area_ratio} for z in cmp.zones]
 
 
@@ -183,29 +172,91 @@ def run_camera(world: World, name: str, truth, out: Path) -> dict:
     nominal_bank = world.bank(world.lens)
     t0 = time.perf_counter()
     data = chart_data(photo, world.layout, world.lens, nominal_bank, world.sensor, world.mapping, world.spectrum, name)
-    fitted = calibrate_charts(world.lens, [data], world.spectrum, elements_fitted=ELEMENTS_FITTED, where=name)
-    seconds = time.perf_counter() - t0
-    as_built = fitted.lens
+    log(f"{name}: chart data {time.perf_counter() - t0:.0f} s, {len(data.edges)} edges")
+    first = _first_fit(world, name, data, out)
+    seconds = first.seconds + time.perf_counter() - t0
+    sim = chart_simulator(photo, world.layout, det, data, world.sensor, world.mapping, world.bank)
+    state = out / f"{name}.rounds.json"
+    done = json.loads(state.read_text()) if state.exists() else []
+
+    def checkpoint(rounds: list[dict]) -> None:
+        state.write_text(json.dumps(rounds, indent=1))
+        r = rounds[-1]
+        rms = f"rms {r['rms_at_start']:.4f} -> {r['rms_after']:.4f}, moved {r['moved_sigma']:.1f} sigma"
+        cost = f"{r['simulate_s']:.0f}+{r['fit_s']:.0f} s"
+        log(f"{name}: round {r['round']} ({r['start_from']}): {_short(r['values'])} {rms}; {cost}")
+
+    obs = observations([data], world.spectrum)
+    refined = refine(world.lens, obs, [sim], first, REFRESH_ROUNDS, name, done=done, on_round=checkpoint)
+    rounds_s = sum(r["simulate_s"] + r["fit_s"] for r in refined.rounds)
+    log(f"{name}: refined ({'converged' if refined.converged else 'not converged'}); ratios and PSFs")
     result = {
         "camera": name,
         "truth": truth.as_built["parameters"],
-        "fitted": fitted.values,
-        "sigma": fitted.sigma,
-        "sensitivity_top": fitted.sensitivity[:8],
-        "rms_residual": [fitted.rms_before, fitted.rms_after],
+        "fitted": refined.values,
+        "sigma": refined.sigma,
+        "first_fit": first.values,
+        "first_fit_sigma": first.sigma,
+        "refresh_rounds": refined.rounds,
+        "refresh_converged": refined.converged,
+        "sensitivity_top": first.sensitivity[:8],
+        "rms_residual": [first.rms_before, first.rms_after, refined.rms_after],
         "edges": len(data.edges),
-        "calibration_seconds": seconds,
-        "evaluations": fitted.evaluations,
-        "traces": fitted.traces,
-        "degenerate": fitted.degenerate,
-        "starts": fitted.lens.as_built.get("starts", []),
+        "calibration_seconds": seconds + rounds_s,
+        "first_fit_seconds": seconds,
+        "evaluations": first.evaluations + sum(r["evaluations"] for r in refined.rounds),
+        "traces": first.traces + sum(r["traces"] for r in refined.rounds),
+        "degenerate": first.degenerate,
+        "starts": first.lens.as_built.get("starts", []),
         "elements_fitted": ELEMENTS_FITTED,
         "before": ratios(world, photo, world.lens, det),
-        "after": ratios(world, photo, as_built, det),
-        "psf_ncc": psf_nccs(world, truth, {"nominal": world.lens, "calibrated": as_built}),
+        "after": ratios(world, photo, refined.lens, det),
+        "psf_ncc": psf_nccs(world, truth, {"nominal": world.lens, "first fit": first.lens, "calibrated": refined.lens}),
     }
     path.write_text(json.dumps(result, indent=1))
     return result
+
+
+def log(line: str) -> None:
+    print(f"{time.strftime('%H:%M:%S')} {line}", flush=True)
+
+
+def _short(values: dict) -> str:
+    return ", ".join(f"{k} {v:+.5f}" for k, v in values.items())
+
+
+def _first_fit(world: World, name: str, data, out: Path) -> Fit:
+    """The fit with the nominal transfer (lensim calibrate's first step), kept in
+    OUT/<camera>.first.json so that a killed run resumes after it."""
+    path = out / f"{name}.first.json"
+    if path.exists():
+        d = json.loads(path.read_text())
+        lens = perturbed_lens(world.lens, d["values"], d["as_built"])
+        return Fit(d["values"], d["sigma"], d["sensitivity"], d["rms_before"], d["rms_after"], lens,
+                   d["evaluations"], d["seconds"], d["correlation"], d["degenerate"], d["traces"])  # fmt: skip
+    f = calibrate_charts(world.lens, [data], world.spectrum, elements_fitted=ELEMENTS_FITTED, where=name)
+    record = {k: v for k, v in f.lens.as_built.items() if k != "parameters"}
+    keep = {k: getattr(f, k) for k in ("values", "sigma", "sensitivity", "rms_before", "rms_after", "evaluations",
+                                      "seconds", "correlation", "degenerate", "traces")}  # fmt: skip
+    path.write_text(json.dumps(keep | {"as_built": record}, indent=1))
+    log(f"{name}: first fit {_short(f.values)}, rms {f.rms_after:.4f}, {f.seconds:.0f} s")
+    return f
+
+
+def _rounds_table(results: list[dict]) -> list[str]:
+    """The transfer refreshes: per round where it started, the fitted values, RMS and cost."""
+    lines = [
+        "",
+        "| camera | round | start | fitted | RMS at start -> after | moved (sigma) | simulate + fit s | evaluations |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for r in results:
+        for x in r.get("refresh_rounds", []):
+            fitted = ", ".join(f"{k} {v:+.5f}" for k, v in x["values"].items())
+            cost = f"{x['moved_sigma']:.1f} | {x['simulate_s']:.0f} + {x['fit_s']:.0f} | {x['evaluations']}"
+            rms = f"{x['rms_at_start']:.4f} -> {x['rms_after']:.4f}"
+            lines.append(f"| {r['camera']} | {x['round']} | {x['start_from']} | {fitted} | {rms} | {cost} |")
+    return lines
 
 
 def table(results: list[dict]) -> str:
@@ -216,16 +267,15 @@ def table(results: list[dict]) -> str:
             lines.append(f"| {r['camera']} | {z['zone']:g} | {z['ratio']:.3f} | {after.get(z['zone'], math.nan):.3f} |")
     lines += [
         "",
-        "| camera | field | PSF NCC nominal | PSF NCC calibrated | worst diagonal: nominal | calibrated |",
-        "| --- | --- | --- | --- | --- | --- |",
+        "| camera | field | PSF NCC nominal | first fit | calibrated | worst diagonal: nominal | first | calibrated |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
+    kinds = ("nominal", "first fit", "calibrated")
     for r in results:
         for row in r["psf_ncc"]:
-            worst = [row.get(f"{k} worst", math.nan) for k in ("nominal", "calibrated")]
-            lines.append(
-                f"| {r['camera']} | {row['field']} | {row['nominal']:.4f} | {row['calibrated']:.4f} "
-                f"| {worst[0]:.4f} | {worst[1]:.4f} |"
-            )
+            lr = " | ".join(f"{row.get(k, math.nan):.4f}" for k in kinds)
+            worst = " | ".join(f"{row.get(f'{k} worst', math.nan):.4f}" for k in kinds)
+            lines.append(f"| {r['camera']} | {row['field']} | {lr} | {worst} |")
     lines += ["", "| camera | parameter | truth | fitted +- 1 sigma |", "| --- | --- | --- | --- |"]
     for r in results:
         names = sorted(set(r["truth"]) | set(r["fitted"]))
@@ -238,9 +288,10 @@ def table(results: list[dict]) -> str:
         "| --- | --- | --- | --- | --- | --- |",
     ]
     for r in results:
-        b, a = r["rms_residual"]
+        rms = " -> ".join(f"{v:.4f}" for v in r["rms_residual"])
         runs = f"{r['evaluations']} | {r.get('traces', r['evaluations'])} | {r['calibration_seconds']:.0f}"
-        lines.append(f"| {r['camera']} | {r['edges']} | {b:.4f} -> {a:.4f} | {runs} |")
+        lines.append(f"| {r['camera']} | {r['edges']} | {rms} | {runs} |")
+    lines += _rounds_table(results)
     lines += [
         "",
         "| camera | degenerate pairs (correlation beyond 0.9) | starts: focus mm -> RMS |",
@@ -276,7 +327,7 @@ def main() -> None:
             truth = perturbed_lens(world.lens, CAMERAS[name])
         results.append(run_camera(world, name, truth, args.out))
         (args.out / "table.md").write_text(table(results))
-        print(f"{name} done", flush=True)
+        log(f"{name} done")
 
 
 if __name__ == "__main__":

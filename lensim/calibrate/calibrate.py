@@ -16,7 +16,7 @@ ratio is noise there).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -27,6 +27,7 @@ from lensim.optics.lens import Lens
 
 if TYPE_CHECKING:
     from lensim.calibrate.chart import ChartLayout
+    from lensim.calibrate.chart_measure import EdgeRegion
     from lensim.calibrate.compare import ChartComparison
     from lensim.psf.bank import PSFBank
     from lensim.render.mapping import SensorMapping
@@ -42,13 +43,17 @@ LUMA = (0.2126, 0.7152, 0.0722)
 
 @dataclass
 class ChartData:
-    """One photo's observations: edges, photo SFRs and system transfers (each (F_i,)), and
-    the nominal comparison (per-zone MTF-area ratios before calibration)."""
+    """One photo's observations: edges, photo SFRs and system transfers (each (F_i,)), the
+    nominal comparison (per-zone MTF-area ratios before calibration), and where each edge
+    was measured (its region, and the pitch in um: lensim.calibrate.refresh measures a
+    simulation there again)."""
 
     edges: list[Edge]
     measured: list[np.ndarray]
     system: list[np.ndarray]
     comparison: ChartComparison
+    regions: list[EdgeRegion] = field(default_factory=list)
+    pitch_um: float = 0.0
 
 
 def luminance_spectrum(sensor: SensorProfile, wavelengths_nm: Sequence[float]) -> tuple[list[float], list[float]]:
@@ -85,7 +90,7 @@ def chart_data(
     centres: dict[int, list[tuple[float, float]]] = {}
     for p in cmp.photo.edges:
         centres.setdefault(p.region.square, []).append(p.region.centre_px)
-    edges, measured, system = [], [], []
+    edges, measured, system, regions = [], [], [], []
     for p, s in zip(cmp.photo.edges, cmp.sim.edges, strict=True):
         if p.sfr is None or s.sfr is None:
             continue
@@ -102,7 +107,8 @@ def chart_data(
         edges.append(Edge(full.x_mm, full.y_mm, angle, tuple(np.asarray(full.frequencies_lp_mm)[keep].tolist())))
         measured.append(photo_sfr)
         system.append(sim_sfr / optical[keep])
-    return ChartData(edges, measured, system, cmp)
+        regions.append(p.region)
+    return ChartData(edges, measured, system, cmp, regions, mapping.pitch_um)
 
 
 def calibrate_charts(
@@ -116,7 +122,15 @@ def calibrate_charts(
     progress: Progress | None = None,
 ) -> Fit:
     """Fit the lens (at the photos' settings) to every photo's observations together."""
-    obs = Observations(
+    return fit(lens, observations(data, spectrum, samples), names, elements_fitted, where, progress)
+
+
+def observations(
+    data: Sequence[ChartData], spectrum: tuple[list[float], list[float]], samples: int = 32
+) -> Observations:
+    """Every photo's edges, SFRs and transfers in one set (photos in order); spectrum:
+    (wavelengths um, weights); samples: pupil samples across of the model."""
+    return Observations(
         edges=[e for d in data for e in d.edges],
         measured=[m for d in data for m in d.measured],
         system=[s for d in data for s in d.system],
@@ -124,4 +138,3 @@ def calibrate_charts(
         weights=list(spectrum[1]),
         samples=samples,
     )
-    return fit(lens, obs, names, elements_fitted, where, progress)

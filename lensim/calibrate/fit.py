@@ -314,13 +314,15 @@ def fit(
     elements_fitted: int = 1,
     where: str = "chart",
     progress: Progress | None = None,
+    start: dict[str, float] | None = None,
 ) -> Fit:
     """Fit the parameters `names` (default: choose_parameters from the sensitivity table,
     which is then reported; given names skip it) to the observations, from each start of
     _starts, keeping the smallest residual; returns the Fit with the as-built lens (its
     as_built record holds the values, uncertainties, residuals and degenerate pairs).
-    where: the source named in a CoverageError."""
-    start = time.perf_counter()
+    where: the source named in a CoverageError. start: values (mm or deg) to start from
+    instead of _starts (a refit near a known solution; needs names)."""
+    t0 = time.perf_counter()
     model = Model(lens, obs)
     measured = np.concatenate(obs.measured)
     base = model.predict({})
@@ -333,7 +335,11 @@ def fit(
     scales = np.array([scale_of(n, kinds) for n in names])
     cols = [columns[n] if n in columns else model.predict({n: scale_of(n, kinds)}) - base for n in names]
     degenerate = check_coverage(names, np.stack(cols, axis=1), where, kinds)
-    runs = [_solve(model, names, scales, measured, u0) for u0 in _starts(model, names, scales, measured)]
+    if start is None:
+        starts = _starts(model, names, scales, measured)
+    else:
+        starts = [np.array([start.get(n, 0.0) for n in names]) / scales]
+    runs = [_solve(model, names, scales, measured, u0) for u0 in starts]
     res = min(runs, key=lambda r: r.cost)
     dof = max(measured.size - len(names), 1)
     cov = np.linalg.pinv(res.jac.T @ res.jac) * (2.0 * res.cost / dof)
@@ -356,5 +362,5 @@ def fit(
     as_built = perturbed_lens(lens, values, record)
     return Fit(
         values, sigma, table, rms_before, rms_after, as_built, model.evaluations,
-        time.perf_counter() - start, (cov / np.outer(d, d)).round(3).tolist(), degenerate, model.traces,
+        time.perf_counter() - t0, (cov / np.outer(d, d)).round(3).tolist(), degenerate, model.traces,
     )  # fmt: skip

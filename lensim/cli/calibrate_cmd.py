@@ -28,17 +28,20 @@ from lensim.errors import InputError
 
 if TYPE_CHECKING:
     from lensim.calibrate.calibrate import ChartData
+    from lensim.calibrate.refresh import Simulator
     from lensim.optics.lens import Lens
     from lensim.sensor.profile import SensorProfile
 
 
 def _photo_data(
     photo: Path, layout: Any, lens_file: str, sensor: SensorProfile, given: Any, settings: Any, options: dict
-) -> tuple[ChartData, Lens, dict | None]:
-    """One photo's chart observations, the nominal lens at its settings and distance, and
-    those settings as records keep them."""
+) -> tuple[ChartData, Lens, dict | None, Simulator]:
+    """One photo's chart observations, the nominal lens at its settings and distance,
+    those settings as records keep them, and the photo's chart simulated through a lens
+    (the transfer refreshes)."""
     from lensim.calibrate.calibrate import chart_data, luminance_spectrum
     from lensim.calibrate.chart_detect import detect_chart, estimate_pose
+    from lensim.calibrate.refresh import chart_simulator
     from lensim.cli.bank_options import lens_and_record
     from lensim.cli.chart_cmd import _read_photo
     from lensim.cli.simulate_cmd import _photo_bank
@@ -55,10 +58,13 @@ def _photo_data(
     object_m = given.object_m if given.object_m is not None else pose.distance_m
     shooting = replace(given, object_m=object_m, focus_m=given.focus_m if given.focus_m is not None else object_m)
     lens, described = lens_and_record(lens_file, shooting)
-    bank = _photo_bank(photo, (cols, rows), mapping.pitch_um, lens, sensor, settings, False, 1, options["quiet"])
+
+    def bank_of(at: Lens) -> Any:
+        return _photo_bank(photo, (cols, rows), mapping.pitch_um, at, sensor, settings, False, 1, options["quiet"])
+
     spectrum = luminance_spectrum(sensor, settings.wavelengths_nm)
-    data = chart_data(img, layout, lens, bank, sensor, mapping, spectrum, str(photo), options["samples"])
-    return data, lens, described
+    data = chart_data(img, layout, lens, bank_of(lens), sensor, mapping, spectrum, str(photo), options["samples"])
+    return data, lens, described, chart_simulator(img, layout, detection, data, sensor, mapping, bank_of)
 
 
 def calibrate_command(
@@ -79,6 +85,12 @@ def calibrate_command(
     wavelengths: str = wavelengths_option(),
     pupil_samples: int = pupil_samples_option(),
     model_samples: int = typer.Option(32, "--model-samples", help="Pupil samples across for the fit's MTF model."),
+    refresh_rounds: int = typer.Option(
+        4,
+        "--refresh-rounds",
+        help="Most rounds of: simulate the chart through the fitted lens, take the system transfer there, refit "
+        "(0: the transfer of the nominal lens only).",
+    ),
     cache: Path = cache_option(),
     quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
     json_out: bool = typer.Option(False, "--json", help="Print the fit as JSON."),
@@ -88,12 +100,16 @@ def calibrate_command(
     analysis ranks them), from each chart edge's SFR against lensim's simulation of the
     nominal lens at the photo's pose. Writes a lens file every command takes, its
     as_built record holding the fitted values, their 1-sigma uncertainties and the
-    residuals. A parameter the chart's edges cannot constrain is refused (exit status 2).
+    residuals. The system transfer (pixel, mosaic, develop) is then taken again from the
+    chart simulated through the fitted lens and the fit repeated, until no parameter
+    moves by its 1-sigma uncertainty (the rounds are recorded). A parameter the chart's
+    edges cannot constrain is refused (exit status 2).
 
     Example: lensim calibrate IMG_1.dng IMG_2.dng --lens my.yaml --sensor cam.yaml --chart chart.json -o as_built.yaml
     """
-    from lensim.calibrate.calibrate import calibrate_charts, luminance_spectrum
+    from lensim.calibrate.calibrate import calibrate_charts, luminance_spectrum, observations
     from lensim.calibrate.chart import load_chart
+    from lensim.calibrate.refresh import refine
     from lensim.calibrate.tolerances import perturbed_lens
     from lensim.optics.lens_file import load_lens, save_lens
     from lensim.sensor.profile import load_sensor
@@ -104,6 +120,7 @@ def calibrate_command(
     output_file(output)
     in_range(elements, 0, 4, "--elements", what="a number of elements")
     at_least(model_samples, 16, "--model-samples", what="a number of pupil samples")
+    in_range(refresh_rounds, 0, 20, "--refresh-rounds", what="a number of rounds")
     settings = bank_settings(fields, wavelengths, pupil_samples, cache)
     given = shooting_settings(fno, object_m, focus_m, config)
     layout = load_chart(input_file(chart, "--chart", "chart layout"))
@@ -113,31 +130,35 @@ def calibrate_command(
     found = [_photo_data(p, layout, lens_file, sensor, given, settings, options) for p in photos]
     spectrum = luminance_spectrum(sensor, settings.wavelengths_nm)
     where = str(photos[0]) if len(photos) == 1 else f"{len(photos)} photos"
+    data = [d for d, _, _, _ in found]
     with progress_bar("calibrate", "parameters", quiet or json_out) as cb:
-        result = calibrate_charts(
-            found[0][1], [d for d, _, _ in found], spectrum, None, elements, model_samples, where, cb
-        )
-    record = {**result.lens.as_built, "photos": [str(p) for p in photos], "settings": found[0][2]}
+        result = calibrate_charts(found[0][1], data, spectrum, None, elements, model_samples, where, cb)
+    obs = observations(data, spectrum, model_samples)
+    refined = refine(found[0][1], obs, [s for _, _, _, s in found], result, refresh_rounds, where)
+    record = {**refined.lens.as_built, "photos": [str(p) for p in photos], "settings": found[0][2]}
     record["sensitivity"] = result.sensitivity
-    save_lens(perturbed_lens(base, result.values, record), output)
+    save_lens(perturbed_lens(base, refined.values, record), output)
     report = {
         "output": str(output),
-        "values": result.values,
-        "sigma": result.sigma,
+        "values": refined.values,
+        "sigma": refined.sigma,
         "rms_residual_before": result.rms_before,
-        "rms_residual_after": result.rms_after,
+        "rms_residual_after": refined.rms_after,
         "sensitivity": result.sensitivity,
         "degenerate": result.degenerate,
+        "refresh": {"rounds": refined.rounds, "converged": refined.converged, "first_fit": result.values},
         "zones_before": [z.to_dict() for z in found[0][0].comparison.zones],
         "run_time_s": time.perf_counter() - t0,
-        "evaluations": result.evaluations,
+        "evaluations": result.evaluations + sum(r["evaluations"] for r in refined.rounds),
     }
     if json_out:
         print_json(report)
     elif not quiet:
-        for n, v in result.values.items():
-            console.print(f"{n:>20s} = {v:+.5f} +- {result.sigma[n]:.5f}", highlight=False)
+        for n, v in refined.values.items():
+            console.print(f"{n:>20s} = {v:+.5f} +- {refined.sigma[n]:.5f}", highlight=False)
         for p in result.degenerate:
             a, b = p["pair"]
             console.print(f"degenerate: {a} and {b} (correlation {p['correlation']:+.2f})", highlight=False)
-        console.print(f"wrote {output} (RMS SFR residual {result.rms_before:.4f} -> {result.rms_after:.4f})")
+        state = "converged" if refined.converged else "not converged"
+        console.print(f"transfer refreshed {len(refined.rounds)} times ({state})", highlight=False)
+        console.print(f"wrote {output} (RMS SFR residual {result.rms_before:.4f} -> {refined.rms_after:.4f})")

@@ -1,0 +1,102 @@
+"""The system transfer refreshed at the fitted lens (lensim.calibrate.refresh): where the
+nominal transfer biases the fit, the refreshed rounds bring it back to the truth."""
+
+import math
+
+import numpy as np
+import pytest
+
+from lensim.calibrate.fit import Observations, fit
+from lensim.calibrate.model import Edge, model_mtfs
+from lensim.calibrate.refresh import compose_quadrants, next_start, quadrant_azimuths, refine
+from lensim.calibrate.tolerances import perturbed_lens
+from lensim.optics.lens_file import load_lens
+from lensim.render.mapping import SensorMapping
+
+FREQ = (10.0, 25.0, 40.0, 55.0, 70.0)
+SAMPLES = 16
+
+
+def _edges() -> list[Edge]:
+    out = [Edge(0.0, 0.0, 0.0, FREQ), Edge(0.0, 0.0, 90.0, FREQ)]
+    for r in (12.0,):
+        for a in (45.0, 135.0, 225.0, 315.0):
+            x, y = r * math.cos(math.radians(a)), r * math.sin(math.radians(a))
+            out += [Edge(x, y, 0.0, FREQ), Edge(x, y, 90.0, FREQ)]
+    return out
+
+
+def _camera(lens, edges, wl, w):
+    """A 'pipeline' whose SFR is not the optical MTF times a fixed transfer: a pixel-like
+    factor times the optical MTF to the power 1.5 (a tone curve steepens blurred edges
+    less than sharp ones)."""
+
+    def simulate(moved):
+        mtfs = model_mtfs(moved, edges, wl, w, SAMPLES)
+        return [np.sinc(np.asarray(e.frequencies_lp_mm) / 300.0) * m**1.5 for e, m in zip(edges, mtfs, strict=True)]
+
+    return simulate
+
+
+def test_refreshed_transfer_removes_the_bias_of_the_nominal_one():
+    lens = load_lens("cooke_triplet", warn=False)
+    wl, w = list(lens.wavelengths_um), list(lens.wavelength_weights)
+    edges = _edges()
+    truth = {"image.focus": 0.03, "e2.decentre_x": 0.02}
+    names = ["image.focus", "e2.decentre_x", "e2.decentre_y"]
+    simulate = _camera(lens, edges, wl, w)
+    measured = simulate(perturbed_lens(lens, truth))
+    nominal_sim = simulate(lens)
+    optical = model_mtfs(lens, edges, wl, w, SAMPLES)
+    system = [s / np.maximum(o, 1e-12) for s, o in zip(nominal_sim, optical, strict=True)]
+    obs = Observations(edges, measured, system, wl, w, samples=SAMPLES)
+    first = fit(lens, obs, names)
+    # the nominal transfer biases the fit (the case must be one where refreshing matters)
+    assert abs(first.values["image.focus"] - truth["image.focus"]) > 0.004
+    refined = refine(lens, obs, [simulate], first, rounds=6)
+    assert refined.converged and 2 <= len(refined.rounds) <= 6
+    for name in names:
+        assert refined.values[name] == pytest.approx(truth.get(name, 0.0), abs=0.002 if "focus" in name else 0.003), (
+            name
+        )
+    assert refined.rms_after < 0.5 * first.rms_after
+    record = refined.lens.as_built["refresh"]
+    assert record["converged"] and len(record["rounds"]) == len(refined.rounds)
+    assert refined.lens.as_built["parameters"] == pytest.approx(refined.values)
+    assert all(r["simulate_s"] >= 0 and r["evaluations"] > 0 for r in refined.rounds)
+    # resuming from the recorded rounds does no more work and gives the same answer
+    again = refine(lens, obs, [lambda _: pytest.fail("simulated again")], first, rounds=6, done=refined.rounds)
+    assert again.values == refined.values
+
+
+def test_anderson_start_is_exact_for_a_linear_contraction():
+    star, rho = np.array([0.006, 0.004]), 0.73
+    names, scales = ["image.focus", "e3.decentre_x"], {"image.focus": 0.002, "e3.decentre_x": 0.002}
+    u = np.array([0.0126, -0.001])
+    rounds = []
+    for _ in range(2):
+        g = star + rho * (u - star)
+        rounds.append(
+            {
+                "start": dict(zip(names, u.tolist(), strict=True)),
+                "values": dict(zip(names, g.tolist(), strict=True)),
+                "scales": scales,
+            }
+        )
+        u = g
+    start, how = next_start(rounds)
+    assert how == "anderson"
+    assert [start[n] for n in names] == pytest.approx(star.tolist(), abs=1e-12)
+    plain, how = next_start(rounds, accelerate=False)
+    assert how == "plain" and plain == rounds[-1]["values"]
+
+
+def test_quadrants_are_composed_where_their_azimuths_are():
+    mapping = SensorMapping(4, 6, 1000.0, -3.0, -2.0)
+    az = quadrant_azimuths(mapping)
+    # upper-right corner (x > 0, y < 0 on the rows' axis) and the others, each in its own quadrant
+    assert az["ur"] == pytest.approx(math.degrees(math.atan2(-2.0, -2.0)))
+    assert az["ll"] == pytest.approx(math.degrees(math.atan2(3.0, 1.0)))
+    images = {k: np.full((3, 4, 6), i, dtype=float) for i, k in enumerate(("ur", "lr", "ul", "ll"))}
+    out = compose_quadrants(images)
+    assert out[0, 0, 5] == 0 and out[0, 3, 5] == 1 and out[0, 0, 0] == 2 and out[0, 3, 0] == 3
