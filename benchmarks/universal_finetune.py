@@ -10,6 +10,11 @@ Scored on the zero-shot benchmark's pairs of that lens (benchmarks/universal_zer
 the 11 unseen photos, 33 crops), per zone: input, the Wiener oracle, the universal model
 zero-shot, fine-tuned, from scratch.
 
+Budget: ``--minutes`` of wall-clock training each (the cosine schedule over the time), or
+``--steps`` optimizer steps each (the cosine schedule over the steps; the GPU check uses it
+to give each run the steps of a 30-minute CPU run, benchmarks/gpu_check.sh). ``--device
+cuda`` trains on the GPU (mixed precision); pairs and scores are made on the CPU.
+
 Resumable: pairs and each finished run are kept in OUT (a killed run is trained again).
 
     OMP_NUM_THREADS=1 nice -n 15 python benchmarks/universal_finetune.py --library LIBDIR \\
@@ -50,8 +55,26 @@ def training_pairs(out: Path, bank_dir: Path, sensor_file: Path) -> Path:
     return pairs
 
 
-def train_run(pairs: Path, run: Path, minutes: float, init: str | None) -> dict:
-    """One run on the universal model's network (made once: RUN/done.json)."""
+BATCH = 8
+
+
+def budget(pairs: Path, minutes: float, steps: int | None) -> dict:
+    """train()'s budget settings: a time budget, or ``steps`` steps rounded up to whole
+    epochs of the pairs folder (every crop trains; a last partial batch is dropped)."""
+    if steps is None:
+        return {"epochs": 100_000, "time_budget_s": minutes * 60.0}
+    from lensim.data.manifest import read_pairs_manifest
+
+    crops = sum(len(r.get("crops", [])) for r in read_pairs_manifest(pairs)["records"])
+    per_epoch = max(1, crops // BATCH)
+    return {"epochs": -(-steps // per_epoch), "time_budget_s": None}
+
+
+def train_run(pairs: Path, run: Path, limits: dict, init: str | None, device: str = "cpu") -> dict:
+    """One run on the universal model's network (made once: RUN/done.json); limits:
+    :func:`budget`'s."""
+    import time
+
     from lensim.restore.train import train
     from lensim.restore.universal import NAME, init_network
 
@@ -59,21 +82,22 @@ def train_run(pairs: Path, run: Path, minutes: float, init: str | None) -> dict:
         return json.loads((run / "done.json").read_text())
     if run.exists():
         shutil.rmtree(run)
+    start = time.perf_counter()
     res = train(
         pairs,
         run,
         **init_network(NAME),  # psfnet, its width and stem, FOV on, no deformable or context block
-        epochs=100_000,
-        batch_size=8,
+        **limits,
+        batch_size=BATCH,
         lr=5e-4 if init is None else 2e-4,
         lr_schedule="cosine",
         crop=96,
-        time_budget_s=minutes * 60.0,
         val_fraction=0.0,
         seed=0,
         init=init,
+        device=device,
     )
-    info = {"steps": res.step, "seconds": minutes * 60.0, "init": init}
+    info = {"steps": res.step, "seconds": round(time.perf_counter() - start, 1), "init": init, "device": device}
     (run / "done.json").write_text(json.dumps(info))
     return info
 
@@ -84,6 +108,9 @@ def main() -> None:
     ap.add_argument("--lens", required=True, help="a held-out library lens")
     ap.add_argument("--eval-pairs", type=Path, required=True, help="the zero-shot benchmark's pairs of that lens")
     ap.add_argument("--minutes", type=float, default=5.0)
+    ap.add_argument("--steps", type=int, default=None, help="steps per run instead of --minutes")
+    ap.add_argument("--device", default="cpu")
+    ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("-o", "--output", type=Path, required=True)
     args = ap.parse_args()
 
@@ -92,12 +119,13 @@ def main() -> None:
     from lensim.evaluate import harness
     from lensim.restore.universal import NAME, model_path
 
-    torch.set_num_threads(1)
+    torch.set_num_threads(args.threads)
     out = args.output
     planned, bank_dir, sensor_file = lens_bank(args.library, args.lens)
     pairs = training_pairs(out, bank_dir, sensor_file)
     runs = {"fine-tuned": ("tuned", NAME), "scratch": ("scratch", None)}
-    info = {name: train_run(pairs, out / f"run-{d}", args.minutes, init) for name, (d, init) in runs.items()}
+    limits = budget(pairs, args.minutes, args.steps)
+    info = {name: train_run(pairs, out / f"run-{d}", limits, init, args.device) for name, (d, init) in runs.items()}
     methods = {
         "wiener": harness.builtin_method("wiener"),
         "universal": harness.checkpoint_method(model_path(NAME), tile=128, overlap=0),
@@ -105,7 +133,14 @@ def main() -> None:
     for name, (d, _) in runs.items():
         methods[name] = harness.checkpoint_method(out / f"run-{d}" / "last.pt", tile=128, overlap=0)
     scores = harness.evaluate(args.eval_pairs, methods)["methods"]
-    result = {"lens": args.lens, "bank": planned.id, "minutes": args.minutes, "runs": info, "methods": scores}
+    result = {
+        "lens": args.lens,
+        "bank": planned.id,
+        "minutes": None if args.steps else args.minutes,
+        "steps": args.steps,
+        "runs": info,
+        "methods": scores,
+    }
     (out / "result.json").write_text(json.dumps(result, indent=1))
     lines = ["| method | PSNR (dB) | SSIM | centre | middle | edge |", "| --- | ---: | ---: | ---: | ---: | ---: |"]
     for name, m in scores.items():

@@ -273,3 +273,12 @@ def test_init_universal_builds_its_network_unless_told_otherwise(shipped, camera
     assert (config["arch"], config["width"]) == ("psfnet", 8)
     code, _, err = run_cli([*args, "-o", str(tmp_path / "r2"), "--width", "12"], capsys, monkeypatch)
     assert code == 2 and len(err.strip().splitlines()) == 1 and "width" in err, err
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="a machine with CUDA serves --device cuda")
+def test_pretraining_on_a_device_this_machine_lacks_is_one_line(tmp_path, capsys, monkeypatch):
+    folder = _pairs(tmp_path / "p", 0)
+    args = ["library", "pretrain", str(folder), "-o", str(tmp_path / "run"), "--device", "cuda", "--quiet"]
+    code, _, err = run_cli(args, capsys, monkeypatch)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "--device" in err and "CUDA" in err, err
+    assert not (tmp_path / "run").exists()

@@ -10,6 +10,7 @@ from rich.table import Table
 from lensim.cli.bank_options import scheduler_option, workers_option
 from lensim.cli.common import console, print_json, progress_bar
 from lensim.cli.validate import at_least, choice, positive, scheduler_address
+from lensim.cli.validate import device as checked_device_option
 from lensim.errors import InputError
 
 library_app = typer.Typer(
@@ -186,6 +187,9 @@ def pretrain_command(
     batch_size: int = typer.Option(8, "--batch-size", help="Crops per step."),
     lr: float = typer.Option(5e-4, "--lr", help="Adam learning rate."),
     seed: int = typer.Option(0, "--seed", help="Seed of initialisation, data order and augmentation."),
+    max_steps: int = typer.Option(0, "--max-steps", help="Stop after this many optimizer steps in all (0: no limit)."),
+    device: str = typer.Option("cpu", "--device", help="cpu, cuda or cuda:N (mixed precision on CUDA)."),
+    no_amp: bool = typer.Option(False, "--no-amp", help="Full float32 on CUDA."),
     ship_to: Path = typer.Option(None, "--ship", help="Write the model for inference into this folder at the end."),
     quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
 ) -> None:
@@ -204,8 +208,18 @@ def pretrain_command(
     for value, option in ((width, "--width"), (crop, "--crop"), (batch_size, "--batch-size")):
         at_least(value, 1, option, what="a count")
     positive(lr, "--lr")
+    at_least(max_steps, 0, "--max-steps", what="a count")
     cfg = PretrainConfig(
-        width=width, crop=crop, batch_size=batch_size, lr=lr, time_budget_s=minutes * 60.0, seed=seed, arch=arch
+        width=width,
+        crop=crop,
+        batch_size=batch_size,
+        lr=lr,
+        time_budget_s=minutes * 60.0,
+        max_steps=max_steps or None,
+        seed=seed,
+        arch=arch,
+        device=checked_device_option(device),
+        amp=not no_amp,
     )
     cfg.network()  # an unknown --arch is one line before any work
     folders = _pair_folders(pairs)

@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import torch
 
+from lensim.errors import InputError
+
 
 @dataclass
 class Ranks:
@@ -99,6 +101,17 @@ def shutdown(ranks: Ranks) -> None:
         dist.destroy_process_group()
 
 
+def checked_device(name: str) -> torch.device:
+    """The torch device ``name`` ("cpu", "cuda" or "cuda:N"); a CUDA device on a machine
+    without CUDA is an InputError naming the parameter ``device``."""
+    if name.startswith("cuda") and not torch.cuda.is_available():
+        raise InputError(None, "device", f"{name!r} requested but CUDA is not available; expected 'cpu'")
+    try:
+        return torch.device(name)
+    except RuntimeError:
+        raise InputError(None, "device", f"expected cpu, cuda or cuda:N, got {name!r}") from None
+
+
 def amp_dtype(device: torch.device, enabled: bool) -> torch.dtype | None:
     """Autocast dtype for mixed precision on CUDA (bfloat16 where supported, else
     float16), or None (CPU, or disabled)."""
@@ -110,6 +123,7 @@ def amp_dtype(device: torch.device, enabled: bool) -> torch.dtype | None:
 __all__ = [
     "Ranks",
     "amp_dtype",
+    "checked_device",
     "barrier",
     "init_distributed",
     "mean_over_ranks",

@@ -67,6 +67,7 @@ from lensim.restore.distributed import (
     Ranks,
     amp_dtype,
     barrier,
+    checked_device,
     init_distributed,
     mean_over_ranks,
     rank0_decides,
@@ -224,9 +225,7 @@ def _frozen_differences(saved: TrainConfig, overrides: dict[str, Any]) -> list[s
 def _device(cfg: TrainConfig) -> tuple[Ranks, torch.device]:
     """This process's ranks and device (torchrun's environment; CUDA checked)."""
     ranks, name = init_distributed(cfg.device)
-    if name.startswith("cuda") and not torch.cuda.is_available():
-        raise InputError(None, "device", f"{name!r} requested but CUDA is not available; expected 'cpu'")
-    return ranks, torch.device(name)
+    return ranks, checked_device(name)
 
 
 @dataclass

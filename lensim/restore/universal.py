@@ -57,7 +57,9 @@ class PretrainConfig:
     only); width, stem: its NAFNet body (FOV channels on); crop: training sub-crop
     (pixels); batch_size; lr: Adam's learning rate; time_budget_s: seconds of training in
     all (every call's; None: until max_steps); max_steps: optimizer steps in all (None: no
-    limit); checkpoint_every_s: seconds between checkpoints; seed."""
+    limit); checkpoint_every_s: seconds between checkpoints; seed; device: "cpu", "cuda" or
+    "cuda:N"; amp: mixed precision on CUDA (lensim.restore.distributed.amp_dtype; float16
+    with a grad scaler where bfloat16 is unsupported)."""
 
     width: int = 32
     stem: int = 2
@@ -69,6 +71,8 @@ class PretrainConfig:
     checkpoint_every_s: float = 120.0
     seed: int = 0
     arch: str = "psfnet"
+    device: str = "cpu"
+    amp: bool = True
 
     def network(self) -> dict[str, Any]:
         """The network's config (lensim.restore.models.build_model)."""
@@ -140,12 +144,26 @@ def _ranges(folders: Sequence[str | Path]) -> dict[str, Any]:
 
 
 def _new_state(cfg: PretrainConfig) -> dict[str, Any]:
+    from lensim.restore.distributed import amp_dtype, checked_device
     from lensim.restore.models import build_model
 
+    device = checked_device(cfg.device)
     torch.manual_seed(cfg.seed)
-    model = build_model(cfg.network())
+    model = build_model(cfg.network()).to(device)
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
-    return {"model": model, "opt": opt, "step": 0, "epoch": 0, "batch": 0, "seconds": 0.0}
+    autocast = amp_dtype(device, cfg.amp)
+    scaler = torch.amp.GradScaler("cuda", enabled=autocast == torch.float16)
+    return {
+        "model": model,
+        "opt": opt,
+        "step": 0,
+        "epoch": 0,
+        "batch": 0,
+        "seconds": 0.0,
+        "device": device,
+        "autocast": autocast,
+        "scaler": scaler,
+    }
 
 
 def _resume(run: Path, cfg: PretrainConfig) -> dict[str, Any]:
@@ -205,14 +223,16 @@ def _done(state: dict[str, Any], cfg: PretrainConfig) -> bool:
 def _step(state: dict[str, Any], batch: dict[str, torch.Tensor]) -> float:
     from lensim.restore.batches import model_inputs
 
-    model, opt = state["model"], state["opt"]
-    out = model(*model_inputs(batch, torch.device("cpu")))
-    loss = torch.nn.functional.mse_loss(out, batch["target"])
+    model, opt, device, scaler = state["model"], state["opt"], state["device"], state["scaler"]
+    with torch.autocast(device.type, dtype=state["autocast"], enabled=state["autocast"] is not None):
+        out = model(*model_inputs(batch, device))
+    loss = torch.nn.functional.mse_loss(out.float(), batch["target"].to(device, non_blocking=True))
     if not torch.isfinite(loss):
         raise InputError(None, "lr", f"the loss is {float(loss)} at step {state['step']}; expected a lower lr")
     opt.zero_grad(set_to_none=True)
-    loss.backward()
-    opt.step()
+    scaler.scale(loss).backward()
+    scaler.step(opt)
+    scaler.update()
     state["step"] += 1
     return loss.item()
 
