@@ -91,7 +91,8 @@ def _homography(frame_mm: tuple[float, float], fill: float = 0.97) -> np.ndarray
 class World:
     """The sensor, mapping, nominal lens at the chart distance, chart and bank settings."""
 
-    def __init__(self, cache: Path) -> None:
+    def __init__(self, cache: Path, candidates: int = 1) -> None:
+        self.candidates = candidates
         self.sensor = load_sensor(SENSOR)
         self.mapping = map_to_sensor(ROWS, COLS, self.sensor)
         self.base = load_lens(LENS, warn=False)
@@ -187,7 +188,9 @@ def run_camera(world: World, name: str, truth, out: Path) -> dict:
         log(f"{name}: round {r['round']} ({r['start_from']}): {_short(r['values'])} {rms}; {cost}")
 
     obs = observations([data], world.spectrum)
-    refined = refine(world.lens, obs, [sim], first, REFRESH_ROUNDS, name, done=done, on_round=checkpoint)
+    refined = refine(
+        world.lens, obs, [sim], first, REFRESH_ROUNDS, name, done=done, on_round=checkpoint, candidates=world.candidates
+    )
     rounds_s = sum(r["simulate_s"] + r["fit_s"] for r in refined.rounds)
     log(f"{name}: refined ({'converged' if refined.converged else 'not converged'}); ratios and PSFs")
     result = {
@@ -209,6 +212,7 @@ def run_camera(world: World, name: str, truth, out: Path) -> dict:
         "degenerate": first.degenerate,
         "starts": first.lens.as_built.get("starts", []),
         "elements_fitted": ELEMENTS_FITTED,
+        "candidates": world.candidates,
         "before": ratios(world, photo, world.lens, det),
         "after": ratios(world, photo, refined.lens, det),
         "psf_ncc": psf_nccs(world, truth, {"nominal": world.lens, "first fit": first.lens, "calibrated": refined.lens}),
@@ -234,7 +238,9 @@ def _first_fit(world: World, name: str, data, out: Path) -> Fit:
         lens = perturbed_lens(world.lens, d["values"], d["as_built"])
         return Fit(d["values"], d["sigma"], d["sensitivity"], d["rms_before"], d["rms_after"], lens,
                    d["evaluations"], d["seconds"], d["correlation"], d["degenerate"], d["traces"])  # fmt: skip
-    f = calibrate_charts(world.lens, [data], world.spectrum, elements_fitted=ELEMENTS_FITTED, where=name)
+    f = calibrate_charts(
+        world.lens, [data], world.spectrum, elements_fitted=ELEMENTS_FITTED, where=name, candidates=world.candidates
+    )
     record = {k: v for k, v in f.lens.as_built.items() if k != "parameters"}
     keep = {k: getattr(f, k) for k in ("values", "sigma", "sensitivity", "rms_before", "rms_after", "evaluations",
                                       "seconds", "correlation", "degenerate", "traces")}  # fmt: skip
@@ -309,6 +315,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("benchmarks/results/calibration"))
     ap.add_argument("--cameras", default="focus_decentre,focus_tilt_decentre,held_out")
     ap.add_argument("--cache", type=Path, default=Path("benchmarks/results/calibration-cache"), help="bank cache")
+    ap.add_argument("--candidates", type=int, default=1, help="elements fitted in full for the choice (--candidates)")
     ap.add_argument("--table-only", action="store_true", help="only gather OUT/*.json into OUT/table.md")
     args = ap.parse_args()
     if args.table_only:
@@ -317,7 +324,7 @@ def main() -> None:
         return
     torch.set_num_threads(1)
     args.out.mkdir(parents=True, exist_ok=True)
-    world = World(args.cache)
+    world = World(args.cache, args.candidates)
     results = []
     for name in args.cameras.split(","):
         if name == "held_out":

@@ -13,6 +13,7 @@ from cli_runner import run_cli
         (["-o", "{tmp}/as_built.yaml", "--elements", "9"], "--elements"),
         (["-o", "{tmp}/as_built.yaml", "--model-samples", "4"], "--model-samples"),
         (["-o", "{tmp}/as_built.yaml", "--refresh-rounds", "-1"], "--refresh-rounds"),
+        (["-o", "{tmp}/as_built.yaml", "--candidates", "0"], "--candidates"),
     ],
 )
 def test_calibrate_refuses_bad_options_in_one_line(tmp_path, capsys, monkeypatch, extra, expected):

@@ -38,7 +38,8 @@ def _camera(lens, edges, wl, w):
     return simulate
 
 
-def test_refreshed_transfer_removes_the_bias_of_the_nominal_one():
+@pytest.mark.parametrize("candidates", [1, pytest.param(2, marks=pytest.mark.slow)])
+def test_refreshed_transfer_removes_the_bias_of_the_nominal_one(candidates):
     lens = load_lens("cooke_triplet", warn=False)
     wl, w = list(lens.wavelengths_um), list(lens.wavelength_weights)
     edges = _edges()
@@ -53,8 +54,11 @@ def test_refreshed_transfer_removes_the_bias_of_the_nominal_one():
     first = fit(lens, obs, names)
     # the nominal transfer biases the fit (the case must be one where refreshing matters)
     assert abs(first.values["image.focus"] - truth["image.focus"]) > 0.004
-    refined = refine(lens, obs, [simulate], first, rounds=6)
+    refined = refine(lens, obs, [simulate], first, rounds=6, candidates=candidates)
     assert refined.converged and 2 <= len(refined.rounds) <= 6
+    # with candidates, every round tried that many elements' decentres and kept the true one
+    assert all(len(r.get("candidates", [None])) == candidates for r in refined.rounds)
+    assert all("e2.decentre_x" in r["values"] for r in refined.rounds)
     for name in names:
         assert refined.values[name] == pytest.approx(truth.get(name, 0.0), abs=0.002 if "focus" in name else 0.003), (
             name

@@ -120,9 +120,12 @@ def calibrate_charts(
     samples: int = 32,
     where: str = "chart",
     progress: Progress | None = None,
+    candidates: int = 1,
 ) -> Fit:
-    """Fit the lens (at the photos' settings) to every photo's observations together."""
-    return fit(lens, observations(data, spectrum, samples), names, elements_fitted, where, progress)
+    """Fit the lens (at the photos' settings) to every photo's observations together
+    (candidates: elements fitted in full for the choice, lensim.calibrate.fit.fit)."""
+    obs = observations(data, spectrum, samples)
+    return fit(lens, obs, names, elements_fitted, where, progress, candidates=candidates)
 
 
 def observations(

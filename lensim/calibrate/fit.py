@@ -177,28 +177,69 @@ def sensitivity_table(
     return sorted(rows, key=lambda r: -r["rms_change"]), columns
 
 
-def choose_parameters(gap: np.ndarray, columns: dict[str, np.ndarray], elements_fitted: int) -> list[str]:
-    """The image focus and tilts, and the decentres (x, y) of the `elements_fitted`
-    elements that, fitted with the image parameters in the linear model (the columns),
-    leave the smallest residual of gap (measured - nominal model); ties go to the more
-    sensitive element."""
+def element_ranking(gap: np.ndarray, columns: dict[str, np.ndarray], chosen: Sequence[str]) -> list[str]:
+    """The elements not yet in `chosen`, ordered by the residual of gap (measured - nominal
+    model) that their decentres (x, y) leave when fitted with `chosen` in the linear model
+    (the columns), smallest first; ties keep the elements' order."""
     targets = sorted({n.partition(".")[0] for n in columns if n.startswith("e")}, key=lambda t: int(t[1:]))
-    chosen = list(IMAGE_PARAMETERS)
-    for _ in range(elements_fitted):
-        best, best_cost = None, np.inf
-        for t in targets:
-            if f"{t}.decentre_x" in chosen:
-                continue
-            names = [*chosen, f"{t}.decentre_x", f"{t}.decentre_y"]
-            a = np.stack([columns[n] for n in names], axis=1)
-            coef, *_ = np.linalg.lstsq(a, gap, rcond=None)
-            cost = float(np.sum((a @ coef - gap) ** 2))
-            if cost < best_cost:
-                best, best_cost = t, cost
-        if best is None:
+    costs = []
+    for t in targets:
+        if f"{t}.decentre_x" in chosen:
+            continue
+        a = np.stack([columns[n] for n in [*chosen, f"{t}.decentre_x", f"{t}.decentre_y"]], axis=1)
+        coef, *_ = np.linalg.lstsq(a, gap, rcond=None)
+        costs.append((float(np.sum((a @ coef - gap) ** 2)), t))
+    return [t for _, t in sorted(costs, key=lambda c: c[0])]
+
+
+def choose_parameters(
+    gap: np.ndarray,
+    columns: dict[str, np.ndarray],
+    elements_fitted: int,
+    first: str | None = None,
+    image: Sequence[str] = IMAGE_PARAMETERS,
+) -> list[str]:
+    """The image parameters (default: focus and tilts), and the decentres (x, y) of the
+    `elements_fitted` elements that, fitted with them in the linear model (the columns),
+    leave the smallest residual of gap (measured - nominal model), chosen one after the
+    other (element_ranking); first: the first element, when it is given."""
+    chosen = list(image)
+    for i in range(elements_fitted):
+        ranking = [first] if i == 0 and first is not None else element_ranking(gap, columns, chosen)
+        if not ranking:
             break
-        chosen += [f"{best}.decentre_x", f"{best}.decentre_y"]
+        chosen += [f"{ranking[0]}.decentre_x", f"{ranking[0]}.decentre_y"]
     return chosen
+
+
+def candidate_sets(
+    gap: np.ndarray,
+    columns: dict[str, np.ndarray],
+    elements_fitted: int,
+    candidates: int,
+    image: Sequence[str] = IMAGE_PARAMETERS,
+) -> list[list[str]]:
+    """The parameter sets fitted in full: choose_parameters with each of the `candidates`
+    best-ranked first elements (element_ranking), the linear choice first."""
+    if elements_fitted < 1 or candidates <= 1:
+        return [choose_parameters(gap, columns, elements_fitted, image=image)]
+    firsts = element_ranking(gap, columns, image)[:candidates]
+    return [choose_parameters(gap, columns, elements_fitted, t, image) for t in firsts]
+
+
+def _parameter_sets(
+    model: Model, names: Sequence[str] | None, elements_fitted: int, candidates: int, context: dict
+) -> tuple[list[dict], list[list[str]]]:
+    """The sensitivity table (empty when names are given and candidates is 1) and the
+    parameter sets to fit: names as given; or candidate_sets, with the image parameters
+    and the number of elements of names when they are given (the elements chosen again)."""
+    if names is not None and candidates <= 1:
+        return [], [list(names)]
+    table, context["columns"] = sensitivity_table(model, context["base"], context["kinds"], context.get("progress"))
+    image = IMAGE_PARAMETERS if names is None else [n for n in names if n.startswith("image.")]
+    count = elements_fitted if names is None else len({n.partition(".")[0] for n in names if n not in image})
+    gap = context["measured"] - context["base"]
+    return table, candidate_sets(gap, context["columns"], count, candidates, image)
 
 
 def _covariance(jac: np.ndarray, noise: float) -> np.ndarray:
@@ -307,6 +348,50 @@ def _run_summary(res, names: list[str], scales: np.ndarray) -> dict:
     return {"focus": focus, "rms": float(np.sqrt(np.mean(res.fun**2)))}
 
 
+@dataclass
+class _Outcome:
+    """One parameter set fitted: its names, scales, degenerate pairs and the runs (one per start)."""
+
+    names: list[str]
+    scales: np.ndarray
+    degenerate: list[dict]
+    runs: list
+
+    @property
+    def best(self):
+        return min(self.runs, key=lambda r: r.cost)
+
+
+def _fit_set(model: Model, names: list[str], context: dict, start: dict[str, float] | None) -> _Outcome:
+    """Check the coverage of one parameter set and fit it from each start (_starts, or
+    `start`); context: kinds (scales by kind), columns (known Jacobian columns), base
+    (nominal model), measured, where."""
+    kinds, base, measured = context["kinds"], context["base"], context["measured"]
+    scales = np.array([scale_of(n, kinds) for n in names])
+    cols = [context["columns"].get(n) for n in names]
+    cols = [
+        c if c is not None else model.predict({n: scale_of(n, kinds)}) - base for n, c in zip(names, cols, strict=True)
+    ]
+    degenerate = check_coverage(names, np.stack(cols, axis=1), context["where"], kinds)
+    if start is None:
+        starts = _starts(model, names, scales, measured)
+    else:
+        starts = [np.array([start.get(n, 0.0) for n in names]) / scales]
+    return _Outcome(names, scales, degenerate, [_solve(model, names, scales, measured, u0) for u0 in starts])
+
+
+def _fit_sets(model: Model, sets: list[list[str]], context: dict, start: dict[str, float] | None) -> list[_Outcome]:
+    """_fit_set of each set; a set after the first that the chart cannot constrain is skipped."""
+    out = []
+    for i, names in enumerate(sets):
+        try:
+            out.append(_fit_set(model, names, context, start))
+        except CoverageError:
+            if i == 0:
+                raise
+    return out
+
+
 def fit(
     lens: Lens,
     obs: Observations,
@@ -315,32 +400,28 @@ def fit(
     where: str = "chart",
     progress: Progress | None = None,
     start: dict[str, float] | None = None,
+    candidates: int = 1,
 ) -> Fit:
     """Fit the parameters `names` (default: choose_parameters from the sensitivity table,
     which is then reported; given names skip it) to the observations, from each start of
     _starts, keeping the smallest residual; returns the Fit with the as-built lens (its
     as_built record holds the values, uncertainties, residuals and degenerate pairs).
     where: the source named in a CoverageError. start: values (mm or deg) to start from
-    instead of _starts (a refit near a known solution; needs names)."""
+    instead of _starts (a refit near a known solution; missing ones start at 0).
+    candidates: the number of first elements fitted in full (candidate_sets: the linear
+    model at the nominal lens can rank the wrong element first), the smallest residual
+    kept (each candidate's RMS in as_built.candidates); with names, their image parameters
+    and number of elements are kept and the elements chosen again."""
     t0 = time.perf_counter()
     model = Model(lens, obs)
     measured = np.concatenate(obs.measured)
     base = model.predict({})
     kinds = parameter_scales(lens, obs)
-    table: list[dict] = []
-    columns: dict[str, np.ndarray] = {}
-    if names is None:
-        table, columns = sensitivity_table(model, base, kinds, progress)
-    names = list(names) if names is not None else choose_parameters(measured - base, columns, elements_fitted)
-    scales = np.array([scale_of(n, kinds) for n in names])
-    cols = [columns[n] if n in columns else model.predict({n: scale_of(n, kinds)}) - base for n in names]
-    degenerate = check_coverage(names, np.stack(cols, axis=1), where, kinds)
-    if start is None:
-        starts = _starts(model, names, scales, measured)
-    else:
-        starts = [np.array([start.get(n, 0.0) for n in names]) / scales]
-    runs = [_solve(model, names, scales, measured, u0) for u0 in starts]
-    res = min(runs, key=lambda r: r.cost)
+    context = {"kinds": kinds, "columns": {}, "base": base, "measured": measured, "where": where, "progress": progress}
+    table, sets = _parameter_sets(model, names, elements_fitted, candidates, context)
+    outcomes = _fit_sets(model, sets, context, start)
+    chosen = min(outcomes, key=lambda o: o.best.cost)
+    names, scales, res = chosen.names, chosen.scales, chosen.best
     dof = max(measured.size - len(names), 1)
     cov = np.linalg.pinv(res.jac.T @ res.jac) * (2.0 * res.cost / dof)
     sigma_u = np.sqrt(np.clip(np.diag(cov), 0.0, None))
@@ -356,11 +437,15 @@ def fit(
         "rms_residual_after": rms_after,
         "edges": len(obs.edges),
         "scales": {n: float(v) for n, v in zip(names, scales, strict=True)},
-        "degenerate": degenerate,
-        "starts": [_run_summary(r, names, scales) for r in runs],
+        "degenerate": chosen.degenerate,
+        "starts": [_run_summary(r, names, scales) for r in chosen.runs],
     }
+    if len(outcomes) > 1:
+        record["candidates"] = [
+            {"parameters": o.names, "rms": float(np.sqrt(np.mean(o.best.fun**2)))} for o in outcomes
+        ]
     as_built = perturbed_lens(lens, values, record)
     return Fit(
         values, sigma, table, rms_before, rms_after, as_built, model.evaluations,
-        time.perf_counter() - t0, (cov / np.outer(d, d)).round(3).tolist(), degenerate, model.traces,
+        time.perf_counter() - t0, (cov / np.outer(d, d)).round(3).tolist(), chosen.degenerate, model.traces,
     )  # fmt: skip

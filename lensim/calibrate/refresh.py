@@ -168,11 +168,12 @@ def _vector(values: dict[str, float], names: Sequence[str], scales: dict[str, fl
 
 def next_start(rounds: Sequence[dict], accelerate: bool = True) -> tuple[dict[str, float], str]:
     """Where the next round starts, and how it was chosen: the last round's fitted values
-    ("plain"), or with accelerate and two rounds done their Anderson (depth 1) mix in units
-    of the parameters' scales ("anderson"; its step beyond the plain one limited to
-    EXTRAPOLATION plain steps)."""
+    ("plain"), or with accelerate and two rounds done with the same parameters their
+    Anderson (depth 1) mix in units of the parameters' scales ("anderson"; its step beyond
+    the plain one limited to EXTRAPOLATION plain steps)."""
     last = rounds[-1]
-    if not accelerate or len(rounds) < 2:
+    same = len(rounds) >= 2 and set(rounds[-2]["values"]) == set(last["values"]) == set(last["start"])
+    if not accelerate or not same:
         return dict(last["values"]), "plain"
     names, scales = list(last["values"]), last["scales"]
     u1, g1 = _vector(last["start"], names, scales), _vector(last["values"], names, scales)
@@ -189,8 +190,19 @@ def next_start(rounds: Sequence[dict], accelerate: bool = True) -> tuple[dict[st
     return {n: float(v * scales[n]) for n, v in zip(names, u, strict=True)}, "anderson"
 
 
-def _round(lens: Lens, obs: Observations, simulators: Sequence[Simulator], start: dict[str, float], where: str) -> dict:
-    """One refresh: simulate through the lens at start, refresh the transfers, refit."""
+def _moved_sigma(start: dict[str, float], values: dict[str, float], sigma: dict[str, float]) -> float:
+    """The largest move of a parameter in its 1 sigma; inf when the parameters changed."""
+    if set(start) != set(values):
+        return math.inf
+    return max(abs(values[n] - start[n]) / max(sigma[n], 1e-300) for n in start)
+
+
+def _round(
+    lens: Lens, obs: Observations, simulators: Sequence[Simulator], start: dict[str, float], options: dict
+) -> dict:
+    """One refresh: simulate through the lens at start, refresh the transfers, refit
+    (options: where, and candidates: with more than 1, every round chooses the element
+    again among that many, each fitted from start: lensim.calibrate.fit.fit)."""
     t0 = time.perf_counter()
     moved = perturbed_lens(lens, start)
     simulated = np.concatenate([s for sim in simulators for s in sim(moved)])
@@ -199,8 +211,8 @@ def _round(lens: Lens, obs: Observations, simulators: Sequence[Simulator], start
     new = Observations(obs.edges, obs.measured, system, obs.wavelengths_um, obs.weights, obs.samples, obs.aiming)
     measured = np.concatenate(obs.measured)
     rms_start = float(np.sqrt(np.mean((Model(lens, new).predict(start) - measured) ** 2)))
-    result = fit(lens, new, list(start), where=where, start=start)
-    sigma = {n: max(s, 1e-300) for n, s in result.sigma.items()}
+    k = options.get("candidates", 1)
+    result = fit(lens, new, list(start), where=options.get("where", "chart"), start=start, candidates=k)
     record = {
         "start": dict(start),
         "values": result.values,
@@ -208,12 +220,14 @@ def _round(lens: Lens, obs: Observations, simulators: Sequence[Simulator], start
         "scales": result.lens.as_built["scales"],
         "rms_at_start": rms_start,
         "rms_after": result.rms_after,
-        "moved_sigma": max(abs(result.values[n] - start[n]) / sigma[n] for n in start),
+        "moved_sigma": _moved_sigma(start, result.values, result.sigma),
         "simulate_s": t_sim,
         "fit_s": result.seconds,
         "evaluations": result.evaluations,
         "traces": result.traces,
     }
+    if "candidates" in result.lens.as_built:
+        record["candidates"] = result.lens.as_built["candidates"]
     return record
 
 
@@ -227,18 +241,22 @@ def refine(
     accelerate: bool = True,
     done: Sequence[dict] = (),
     on_round: Callable[[list[dict]], None] | None = None,
+    candidates: int = 1,
 ) -> Refined:
     """Refresh the system transfer at the fitted lens and refit, up to `rounds` times (the
     module docstring). lens: the nominal lens the fit perturbs; obs: the observations of
     the first fit (all photos, in the simulators' order); simulators: one per photo;
     first: the fit to start from (its parameters are kept). done: rounds recorded by an
     earlier call (on_round's list), continued from; on_round: called with the rounds
-    after each one (a long calibration checkpoints them)."""
+    after each one (a long calibration checkpoints them). candidates: with more than 1,
+    each round fits that many elements' decentres (the best-ranked in the linear model,
+    lensim.calibrate.fit.candidate_sets) from the current image values and keeps the
+    smallest residual, so a choice the nominal transfer biased can change."""
     history = [dict(r) for r in done]
     converged = bool(history) and history[-1]["moved_sigma"] < 1.0
     while not converged and len(history) < rounds:
         start, how = next_start(history, accelerate) if history else (dict(first.values), "first fit")
-        record = _round(lens, obs, simulators, start, where)
+        record = _round(lens, obs, simulators, start, {"where": where, "candidates": candidates})
         history.append(record | {"round": len(history) + 1, "start_from": how})
         converged = record["moved_sigma"] < 1.0
         if on_round is not None:

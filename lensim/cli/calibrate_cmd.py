@@ -74,6 +74,12 @@ def calibrate_command(
     lens_file: str = typer.Option(assets.DEFAULT_LENS, "--lens", help="Lens file or built-in lens name."),
     sensor_file: str = typer.Option(None, "--sensor", help="Sensor profile file or built-in name (default: built-in)."),
     elements: int = typer.Option(1, "--elements", help="Elements whose decentre (x, y) is fitted (the best-fitting)."),
+    candidates: int = typer.Option(
+        1,
+        "--candidates",
+        help="Elements tried for the first decentre, each fitted in full (the best-ranked by the linear model); "
+        "the smallest residual is kept, in every refresh round too.",
+    ),
     wb: str = typer.Option("as-shot", "--wb", help="Raw photos: white balance to develop with."),
     fno: str = fno_option(),
     focus_m: str = focus_m_option(),
@@ -121,6 +127,7 @@ def calibrate_command(
     in_range(elements, 0, 4, "--elements", what="a number of elements")
     at_least(model_samples, 16, "--model-samples", what="a number of pupil samples")
     in_range(refresh_rounds, 0, 20, "--refresh-rounds", what="a number of rounds")
+    in_range(candidates, 1, 20, "--candidates", what="a number of elements")
     settings = bank_settings(fields, wavelengths, pupil_samples, cache)
     given = shooting_settings(fno, object_m, focus_m, config)
     layout = load_chart(input_file(chart, "--chart", "chart layout"))
@@ -132,9 +139,10 @@ def calibrate_command(
     where = str(photos[0]) if len(photos) == 1 else f"{len(photos)} photos"
     data = [d for d, _, _, _ in found]
     with progress_bar("calibrate", "parameters", quiet or json_out) as cb:
-        result = calibrate_charts(found[0][1], data, spectrum, None, elements, model_samples, where, cb)
+        result = calibrate_charts(found[0][1], data, spectrum, None, elements, model_samples, where, cb, candidates)
     obs = observations(data, spectrum, model_samples)
-    refined = refine(found[0][1], obs, [s for _, _, _, s in found], result, refresh_rounds, where)
+    sims = [s for _, _, _, s in found]
+    refined = refine(found[0][1], obs, sims, result, refresh_rounds, where, candidates=candidates)
     record = {**refined.lens.as_built, "photos": [str(p) for p in photos], "settings": found[0][2]}
     record["sensitivity"] = result.sensitivity
     save_lens(perturbed_lens(base, refined.values, record), output)
