@@ -53,6 +53,7 @@ from lensim.errors import InputError, ParameterError
 from lensim.images import READ_SUFFIXES, read_image, write_image
 from lensim.io import atomic_write_json, folder_lock, read_json
 from lensim.psf.bank import GridBank, PSFBank
+from lensim.psf.bank.store import load_bank_cached
 from lensim.render.mapping import native_mapping
 from lensim.render.pipeline import simulate
 from lensim.sensor.isp import expose
@@ -154,7 +155,7 @@ def make_pairs_for_image(job: PairJob) -> dict:
     torch.set_num_threads(1)
     out = Path(job.out_dir)
     sensor = load_sensor(job.sensor)
-    bank = PSFBank.load(job.bank_dir)
+    bank = load_bank_cached(job.bank_dir)  # once per process, not per photo
     img, bits = read_image(job.path)
     gen = torch.Generator().manual_seed(job.seed)
     _, h, w = img.shape

@@ -37,7 +37,7 @@ def kernels_at(bank: PSFBank, mapping: SensorMapping, rows: Any, cols: Any, unit
     unit_sum each channel is normalized to sum 1 (no relative illumination: no lens
     shading); otherwise a kernel's sum is its relative illumination."""
     x, y = mapping.pixel_to_mm(torch.as_tensor(rows, dtype=torch.float64), torch.as_tensor(cols, dtype=torch.float64))
-    ks = np.stack([bank.psf_at(float(a), float(b)) for a, b in zip(x.tolist(), y.tolist())]).astype(np.float64)
+    ks = bank.psfs_at(x.numpy(), y.numpy()).astype(np.float64)
     if unit_sum:
         ks /= ks.sum(axis=(-2, -1), keepdims=True)
     return torch.from_numpy(ks)

@@ -61,23 +61,38 @@ def supported(reference_deg: float) -> bool:
     return _mirror_axis(reference_deg) is not None
 
 
+def azimuth_turn(offset_deg: float) -> tuple[int, float, bool, int]:
+    """How the kernel at an azimuth offset_deg (deg) from the bank's direction is reached:
+    (i, rest, mirrored, quarter): start from stored kernel i (0: the bank's own, i >= 1:
+    AZIMUTHS_DEG[i - 1]), turn it by rest degrees (|rest| <= AZIMUTH_STEP_DEG / 2), mirror
+    it about the bank's direction when mirrored, then turn it by quarter x 90 degrees."""
+    alpha = math.remainder(offset_deg, 360.0)  # -180..180
+    quarter = round(alpha / 90.0)
+    beta = alpha - 90.0 * quarter  # -45..45
+    i = round(abs(beta) / AZIMUTH_STEP_DEG)
+    return i, abs(beta) - AZIMUTH_STEP_DEG * i, beta < 0, quarter
+
+
+def finish_turn(kernel: np.ndarray, mirrored: bool, quarter: int, reference_deg: float) -> np.ndarray:
+    """The last steps of :func:`azimuth_turn` on a (3, P, P) kernel: the mirror about the
+    bank's direction (reference_deg, along +-x or +-y), then the quarter turns."""
+    axis = _mirror_axis(reference_deg)
+    if axis is None:
+        raise ValueError(f"azimuth kernels need a bank direction along x or y, got {reference_deg} deg")
+    k = np.flip(kernel, axis) if mirrored else kernel  # K(-b) = M K(b): the mirror about the bank's direction
+    return np.ascontiguousarray(np.rot90(k, -quarter, axes=(-2, -1)))  # np.rot90(., -1): +90 deg
+
+
 def kernel_at_azimuth(stack: np.ndarray, offset_deg: float, reference_deg: float) -> np.ndarray:
     """(3, P, P) float64 kernel at an azimuth offset_deg from the bank's direction
     (reference_deg, along +-x or +-y: see ``supported``), from stack (1 + A, 3, P, P): the
     bank's own kernel and those at AZIMUTHS_DEG (radially interpolated alike)."""
     from lensim.render.rotation import rotate_kernel
 
-    axis = _mirror_axis(reference_deg)
-    if axis is None:
+    if _mirror_axis(reference_deg) is None:
         raise ValueError(f"azimuth kernels need a bank direction along x or y, got {reference_deg} deg")
-    alpha = math.remainder(offset_deg, 360.0)  # -180..180
-    quarter = round(alpha / 90.0)
-    beta = alpha - 90.0 * quarter  # -45..45
-    i = round(abs(beta) / AZIMUTH_STEP_DEG)
+    i, rest, mirrored, quarter = azimuth_turn(offset_deg)
     k = np.asarray(stack[i], dtype=np.float64)
-    rest = abs(beta) - AZIMUTH_STEP_DEG * i
     if abs(rest) > 1e-9:
         k = rotate_kernel(k, rest)
-    if beta < 0:
-        k = np.flip(k, axis)  # K(-b) = M K(b): the mirror about the bank's direction
-    return np.ascontiguousarray(np.rot90(k, -quarter, axes=(-2, -1)))  # np.rot90(., -1): +90 deg
+    return finish_turn(k, mirrored, quarter, reference_deg)

@@ -193,3 +193,34 @@ def load_bank(directory: str | Path) -> PSFBank:
             )
         flds.append(_read_field(p, manifest, i))
     return PSFBank(manifest, flds, d)
+
+
+#: banks loaded by :func:`load_bank_cached` in this process: folder -> (its files' stamp, bank)
+_LOADED: dict[Path, tuple[tuple, PSFBank]] = {}
+_LOADED_MAX = 16  # banks kept (a grid's or a tolerance study's banks: a few MB each)
+
+
+def _stamp(directory: Path) -> tuple:
+    """(name, size, mtime_ns) of every file in a bank folder: changes when any is rewritten."""
+    try:
+        entries = sorted((e.name, e.stat().st_size, e.stat().st_mtime_ns) for e in directory.iterdir() if e.is_file())
+    except OSError:
+        return ()
+    return tuple(entries)
+
+
+def load_bank_cached(directory: str | Path) -> PSFBank:
+    """:func:`load_bank`, once per process: the bank loaded earlier from the same folder
+    when none of its files changed since (sizes and modification times), else loaded
+    again. For jobs that each need a bank (training pairs: one job per photo). The bank
+    returned is shared: callers must not change it."""
+    d = Path(directory).resolve()
+    stamp = _stamp(d)
+    hit = _LOADED.get(d)
+    if hit is not None and stamp and hit[0] == stamp:
+        return hit[1]
+    bank = load_bank(directory)
+    if len(_LOADED) >= _LOADED_MAX:
+        _LOADED.pop(next(iter(_LOADED)))
+    _LOADED[d] = (stamp, bank)
+    return bank

@@ -234,3 +234,56 @@ class PSFBank:
             stack = self._radial(r, lambda f: np.concatenate([f.rgb[None], f.rgb_azimuths]))  # type: ignore[list-item]
             return kernel_at_azimuth(stack, angle, reference).astype(np.float32)
         return rotate_kernel(self.radial_kernel(r), angle).astype(np.float32)
+
+    def psfs_at(self, x_mm: np.ndarray, y_mm: np.ndarray) -> np.ndarray:
+        """(N, 3, P, P) float32 kernels at image points (x_mm, y_mm) ((N,) each, mm):
+        :func:`psf_at` at each point, with the spline turns of all points done in one pass
+        (lensim.render.rotation.rotate_kernels) and only each point's own stored azimuth
+        kernel interpolated. Equal to psf_at to rounding (tests/test_render_kernels.py);
+        banks without azimuth kernels take psf_at point by point."""
+        from lensim.psf.bank.azimuth import supported
+
+        xs = [float(v) for v in np.asarray(x_mm, dtype=np.float64).ravel()]
+        ys = [float(v) for v in np.asarray(y_mm, dtype=np.float64).ravel()]
+        if len(xs) != len(ys):
+            raise ValueError(f"expected as many x as y positions, got {len(xs)} and {len(ys)}")
+        if not xs:
+            return np.zeros((0, 3, self.kernel_pixels, self.kernel_pixels), np.float32)
+        if not (supported(self.reference_azimuth_deg()) and all(f.rgb_azimuths is not None for f in self.fields)):
+            return np.stack([self.psf_at(x, y) for x, y in zip(xs, ys, strict=True)])
+        return self._turned_kernels(xs, ys)
+
+    def _turned_kernels(self, xs: list[float], ys: list[float]) -> np.ndarray:
+        """psfs_at for a bank with azimuth kernels: per point the radially interpolated
+        stored kernel nearest its azimuth (as psf_at), then all the small turns at once,
+        then each point's mirror and quarter turns."""
+        from lensim.psf.bank.azimuth import azimuth_turn, finish_turn
+        from lensim.render.rotation import rotate_kernels
+
+        reference = self.reference_azimuth_deg()
+        kernels: list[np.ndarray] = []
+        turns: list[tuple[float, bool, int] | None] = []
+        for x, y in zip(xs, ys, strict=True):
+            r = math.hypot(x, y)
+            if r == 0:  # the axis: no turn (psf_at)
+                kernels.append(self.radial_kernel(r))
+                turns.append(None)
+                continue
+            i, rest, mirrored, quarter = azimuth_turn(math.degrees(math.atan2(y, x)) - reference)
+            kernels.append(self._radial(r, _stored_azimuth(i)))
+            turns.append((rest, mirrored, quarter))
+        batch = np.stack(kernels)
+        rests = np.array([0.0 if t is None else t[0] for t in turns])
+        small = np.abs(rests) > 1e-9
+        batch[small] = rotate_kernels(batch[small], rests[small])
+        out = [k if t is None else finish_turn(k, t[1], t[2], reference) for k, t in zip(batch, turns, strict=True)]
+        return np.stack(out).astype(np.float32)
+
+
+def _stored_azimuth(i: int) -> Callable[[BankField], np.ndarray]:
+    """A field's stored kernel i: 0 its own (rgb), i >= 1 rgb_azimuths[i - 1]."""
+
+    def part(f: BankField) -> np.ndarray:
+        return f.rgb if i == 0 else f.rgb_azimuths[i - 1]  # type: ignore[index]
+
+    return part
