@@ -130,7 +130,7 @@ def _axis_tiles(offsets: torch.Tensor, m: int, one_sided: bool = False) -> tuple
     sample (so a tile of m samples reaches as far from its centre as one of 2m - 1)."""
     n = math.ceil(offsets.shape[0] / m)
     step = float(offsets[1] - offsets[0]) if offsets.shape[0] > 1 else 0.0
-    padded = (offsets[0] + torch.arange(n * m, dtype=torch.float64) * step).reshape(n, m)
+    padded = (offsets[0] + torch.arange(n * m, dtype=torch.float64, device=offsets.device) * step).reshape(n, m)
     centres = padded.mean(1)
     if one_sided:
         centres[0] = padded[0, 0]
@@ -148,13 +148,14 @@ def mirror_symmetric(pf: PupilField, x0_mm: float, rtol: float = 1e-9) -> bool:
     ij = torch.round((pf.pupil_xy + 1.0) * (n / 2.0) - 0.5).long()
     if bool((ij < 0).any() or (ij >= n).any()):
         return False
-    index = torch.full((n, n), -1, dtype=torch.long)
-    index[ij[:, 1], ij[:, 0]] = torch.arange(ij.shape[0])
+    index = torch.full((n, n), -1, dtype=torch.long, device=ij.device)
+    index[ij[:, 1], ij[:, 0]] = torch.arange(ij.shape[0], device=ij.device)
     partner = index[ij[:, 1], n - 1 - ij[:, 0]]
     if bool((partner < 0).any()):
         return False
-    flip = torch.tensor([-1.0, 1.0, 1.0], dtype=pf.points.dtype)
-    mirrored = (pf.points - torch.tensor([2.0 * x0_mm, 0.0, 0.0], dtype=pf.points.dtype)) * flip
+    like = {"dtype": pf.points.dtype, "device": pf.points.device}
+    flip = torch.tensor([-1.0, 1.0, 1.0], **like)
+    mirrored = (pf.points - torch.tensor([2.0 * x0_mm, 0.0, 0.0], **like)) * flip
     differences = (  # each relative to its scale
         (mirrored - pf.points[partner]).abs().max() / pf.radius,
         (pf.directions * flip - pf.directions[partner]).abs().max(),
@@ -192,23 +193,25 @@ def _tiles(grid: int, s: float, centre: tuple[torch.Tensor, ...], most: int, mir
     tensors, mm): tiles of at most `most` samples across (balanced, so the padding is
     least); mirrored: only the columns at x >= the centre, the first tile centred on x = 0
     (so it reaches as far with most // 2 + 1 columns); fold > 0 (mirrored): one tile across
-    all those columns, centred on x = 0, and tiles of at most `fold` rows."""
-    k = torch.arange(grid) - grid // 2  # sample index from the window centre
+    all those columns, centred on x = 0, and tiles of at most `fold` rows. The tensors are
+    on the centre's device."""
+    device = centre[0].device
+    k = torch.arange(grid, device=device) - grid // 2  # sample index from the window centre
     ty_c, ey_t = _axis_tiles(k.to(torch.float64) * s, _balanced(grid, fold or most))
     if mirror:
-        columns = torch.arange(int(k.abs().max()) + 1)
+        columns = torch.arange(int(k.abs().max()) + 1, device=device)
         mx = columns.shape[0] if fold else _balanced(columns.shape[0], min(most // 2 + 1, columns.shape[0]))
         tx_c, ex_t = _axis_tiles(columns.to(torch.float64) * s, mx, one_sided=True)
         index = k.abs()
     else:
-        columns, tx_c, ex_t, index = k, ty_c, ey_t, torch.arange(grid)
+        columns, tx_c, ex_t, index = k, ty_c, ey_t, torch.arange(grid, device=device)
     rows, cols = ty_c.shape[0], tx_c.shape[0]
     ty, tx = torch.meshgrid(ty_c, tx_c, indexing="ij")
     cx, cy, cz = centre
     T = rows * cols
     centres = torch.stack([cx + tx.reshape(-1), cy + ty.reshape(-1), cz.expand(T)], -1)
-    ex = ex_t[torch.arange(cols).repeat(rows)]
-    ey = ey_t[torch.arange(rows).repeat_interleave(cols)]
+    ex = ex_t[torch.arange(cols, device=device).repeat(rows)]
+    ey = ey_t[torch.arange(rows, device=device).repeat_interleave(cols)]
     return _Tiles(centres, ey, ex, rows, cols, columns.shape[0], index)
 
 
