@@ -111,6 +111,12 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=None, help="steps per run instead of --minutes")
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument(
+        "--runs",
+        default="fine-tuned,scratch",
+        help="the runs this call trains (two calls may train one each, side by side, once the pairs exist); "
+        "every finished run in OUT is scored",
+    )
     ap.add_argument("-o", "--output", type=Path, required=True)
     args = ap.parse_args()
 
@@ -125,7 +131,11 @@ def main() -> None:
     pairs = training_pairs(out, bank_dir, sensor_file)
     runs = {"fine-tuned": ("tuned", NAME), "scratch": ("scratch", None)}
     limits = budget(pairs, args.minutes, args.steps)
-    info = {name: train_run(pairs, out / f"run-{d}", limits, init, args.device) for name, (d, init) in runs.items()}
+    for name in args.runs.split(","):
+        d, init = runs[name]
+        train_run(pairs, out / f"run-{d}", limits, init, args.device)
+    runs = {name: r for name, r in runs.items() if (out / f"run-{r[0]}" / "done.json").exists()}
+    info = {name: json.loads((out / f"run-{d}" / "done.json").read_text()) for name, (d, _) in runs.items()}
     methods = {
         "wiener": harness.builtin_method("wiener"),
         "universal": harness.checkpoint_method(model_path(NAME), tile=128, overlap=0),
