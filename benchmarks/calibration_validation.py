@@ -93,6 +93,7 @@ class World:
 
     def __init__(self, cache: Path, candidates: int = 1) -> None:
         self.candidates = candidates
+        self.rounds = REFRESH_ROUNDS
         self.sensor = load_sensor(SENSOR)
         self.mapping = map_to_sensor(ROWS, COLS, self.sensor)
         self.base = load_lens(LENS, warn=False)
@@ -189,7 +190,7 @@ def run_camera(world: World, name: str, truth, out: Path) -> dict:
 
     obs = observations([data], world.spectrum)
     refined = refine(
-        world.lens, obs, [sim], first, REFRESH_ROUNDS, name, done=done, on_round=checkpoint, candidates=world.candidates
+        world.lens, obs, [sim], first, world.rounds, name, done=done, on_round=checkpoint, candidates=world.candidates
     )
     rounds_s = sum(r["simulate_s"] + r["fit_s"] for r in refined.rounds)
     log(f"{name}: refined ({'converged' if refined.converged else 'not converged'}); ratios and PSFs")
@@ -315,6 +316,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("benchmarks/results/calibration"))
     ap.add_argument("--cameras", default="focus_decentre,focus_tilt_decentre,held_out")
     ap.add_argument("--cache", type=Path, default=Path("benchmarks/results/calibration-cache"), help="bank cache")
+    ap.add_argument("--rounds", type=int, default=REFRESH_ROUNDS, help="most transfer refreshes (--refresh-rounds)")
     ap.add_argument("--candidates", type=int, default=1, help="elements fitted in full for the choice (--candidates)")
     ap.add_argument("--table-only", action="store_true", help="only gather OUT/*.json into OUT/table.md")
     args = ap.parse_args()
@@ -325,6 +327,7 @@ def main() -> None:
     torch.set_num_threads(1)
     args.out.mkdir(parents=True, exist_ok=True)
     world = World(args.cache, args.candidates)
+    world.rounds = args.rounds
     results = []
     for name in args.cameras.split(","):
         if name == "held_out":

@@ -93,6 +93,12 @@ def test_anderson_start_is_exact_for_a_linear_contraction():
     assert [start[n] for n in names] == pytest.approx(star.tolist(), abs=1e-12)
     plain, how = next_start(rounds, accelerate=False)
     assert how == "plain" and plain == rounds[-1]["values"]
+    # a parameter that drifts by the same step each round is no contraction: plain start
+    drift = [
+        {"start": {"image.focus": 0.0}, "values": {"image.focus": 0.001}, "scales": {"image.focus": 0.002}},
+        {"start": {"image.focus": 0.001}, "values": {"image.focus": 0.00205}, "scales": {"image.focus": 0.002}},
+    ]
+    assert next_start(drift)[1] == "plain"
 
 
 def test_quadrants_are_composed_where_their_azimuths_are():

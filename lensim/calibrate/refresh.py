@@ -22,7 +22,8 @@ The plain iteration converges linearly (one round moved focus_decentre's focus a
 the way back to the truth). With accelerate, from the second round on the next lens is
 the Anderson (depth 1) mix of the last two rounds, in units of the parameters' scales:
 exact for a linear contraction, its step beyond the plain one at most EXTRAPOLATION times
-the plain step.
+the plain step, and not taken where the rounds do not look like a contraction
+(next_start).
 """
 
 from __future__ import annotations
@@ -52,7 +53,7 @@ if TYPE_CHECKING:
 Simulator = Callable[[Lens], list[np.ndarray]]
 #: the frame's quadrants: (bottom half?, right half?) of the photo, named by their corner
 QUADRANTS = {"ur": (0, 1), "lr": (1, 1), "ul": (0, 0), "ll": (1, 0)}
-#: the largest accelerated step beyond the plain one, in plain steps
+#: the largest accelerated step beyond the plain one, in plain steps (and the largest -theta)
 EXTRAPOLATION = 4.0
 #: below this optical MTF (the fitted lens's) an edge frequency keeps its previous transfer
 MIN_OPTICAL_MTF = 0.08
@@ -169,8 +170,12 @@ def _vector(values: dict[str, float], names: Sequence[str], scales: dict[str, fl
 def next_start(rounds: Sequence[dict], accelerate: bool = True) -> tuple[dict[str, float], str]:
     """Where the next round starts, and how it was chosen: the last round's fitted values
     ("plain"), or with accelerate and two rounds done with the same parameters their
-    Anderson (depth 1) mix in units of the parameters' scales ("anderson"; its step beyond
-    the plain one limited to EXTRAPOLATION plain steps)."""
+    Anderson (depth 1) mix in units of the parameters' scales ("anderson": u = g1 - theta
+    (g1 - g0), theta = f1.(f1 - f0) / |f1 - f0|^2, f = g - u the rounds' moves). For a
+    linear map of rate rho in (-1, 1), theta = rho / (rho - 1) lies in (-inf, 0.5): a
+    theta outside [-EXTRAPOLATION, 0.5) means the rounds do not contract alike in every
+    parameter (a parameter drifting while another converges), and the plain start is
+    taken; the step beyond the plain one is also limited to EXTRAPOLATION plain steps."""
     last = rounds[-1]
     same = len(rounds) >= 2 and set(rounds[-2]["values"]) == set(last["values"]) == set(last["start"])
     if not accelerate or not same:
@@ -179,9 +184,10 @@ def next_start(rounds: Sequence[dict], accelerate: bool = True) -> tuple[dict[st
     u1, g1 = _vector(last["start"], names, scales), _vector(last["values"], names, scales)
     u0, g0 = _vector(rounds[-2]["start"], names, scales), _vector(rounds[-2]["values"], names, scales)
     f1, df = g1 - u1, (g1 - u1) - (g0 - u0)
-    if float(df @ df) <= 1e-24:
+    theta = float(f1 @ df) / max(float(df @ df), 1e-300)
+    if not -EXTRAPOLATION <= theta < 0.5:
         return dict(last["values"]), "plain"
-    extra = -float(f1 @ df) / float(df @ df) * (g1 - g0)
+    extra = -theta * (g1 - g0)
     limit = EXTRAPOLATION * float(np.linalg.norm(f1))
     norm = float(np.linalg.norm(extra))
     if norm > limit:
