@@ -174,9 +174,10 @@ def run_camera(world: World, name: str, truth, out: Path) -> dict:
     nominal_bank = world.bank(world.lens)
     t0 = time.perf_counter()
     data = chart_data(photo, world.layout, world.lens, nominal_bank, world.sensor, world.mapping, world.spectrum, name)
-    log(f"{name}: chart data {time.perf_counter() - t0:.0f} s, {len(data.edges)} edges")
+    data_s = time.perf_counter() - t0
+    log(f"{name}: chart data {data_s:.0f} s, {len(data.edges)} edges")
     first = _first_fit(world, name, data, out)
-    seconds = first.seconds + time.perf_counter() - t0
+    seconds = data_s + first.seconds
     sim = chart_simulator(photo, world.layout, det, data, world.sensor, world.mapping, world.bank)
     state = out / f"{name}.rounds.json"
     done = json.loads(state.read_text()) if state.exists() else []
