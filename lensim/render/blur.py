@@ -5,12 +5,23 @@ pixels). Each tile centre gets its own RGB kernel (the bank's PSF at that sensor
 rotated to its azimuth). A source pixel's energy is spread with a bilinear blend of the
 kernels of the four surrounding tile centres: out = sum_t k_t * (w_t . image), where the
 w_t are bilinear hat functions (they sum to 1 everywhere), so the effective PSF varies
-continuously from pixel to pixel and no tile seam can appear. Each term is computed on the
-hat's support only (2*tile pixels plus the kernel) with batched FFTs, and the results are
-overlap-added. Energy is conserved: each source pixel's energy times its kernels' sum.
+continuously from pixel to pixel and no tile seam can appear. Energy is conserved: each
+source pixel's energy times its kernels' sum.
+
+Computed cell by cell (issue 29): a cell is the tile x tile square between four centres,
+where each of the four hats is a product of linear ramps. The cell's four weighted copies
+are transformed (FFT of the cell plus the kernel's width), multiplied by their centres'
+kernel spectra and summed in the frequency domain, so each cell takes one inverse
+transform; the cells' results are overlap-added. This is the same sum as one FFT
+convolution per centre over its hat's whole support (2 tile + 1 pixels: four cells), in
+about half the transform work; results agree to float32 rounding (tests/test_render.py
+checks it against a per-pixel reference, tests/test_render_kernels.py against the
+per-support computation).
 """
 
 from __future__ import annotations
+
+import math
 
 import torch
 import torch.nn.functional as F
@@ -48,10 +59,10 @@ def spatially_variant_blur(
 
     kernel_at(rows, cols) takes tile-centre pixel coordinates (float64 tensors, (N,)) and
     returns (N, C, P, P) kernels (P odd, centre pixel = the source point). Computation in
-    float32; returns (C, H, W) in the input's dtype. ``chunk`` tiles are transformed at a
-    time (16: the FFT buffers stay small; measured faster than all tiles at once, and the
-    result does not depend on it). Memory: about chunk * C * n^2 * 16 bytes at a time (n:
-    the FFT length, about 2 tile + P) plus the padded image and output.
+    float32; returns (C, H, W) in the input's dtype. ``chunk`` cells are transformed at a
+    time. Memory: about chunk * C * n^2 * 24 bytes (n: the FFT length, about tile + P) and
+    two rows of kernel spectra (2 * centres per row * C * n^2 * 4 bytes) at a time, plus
+    the padded image and output.
     """
     if image.dim() != 3:
         raise ValueError("expected a (C, H, W) image")
@@ -62,40 +73,38 @@ def spatially_variant_blur(
     p = kernels.shape[-1]
     if kernels.shape[-2] != p or p % 2 == 0 or kernels.shape[1] != c or kernels.shape[0] != ny * nx:
         raise ValueError(f"kernel_at must return ({ny * nx}, {c}, P, P) with P odd, got {tuple(kernels.shape)}")
-    supports, wy, wx = _supports(image, tile, ny, nx)
-    block = 2 * tile + p  # full linear convolution of a support patch (2 tile + 1) with a kernel
+    my, mx = math.ceil(h / tile), math.ceil(w / tile)  # cells down and across
+    block = tile + p - 1  # full linear convolution of a cell with a kernel
     n_fft = _fast_len(block)
-    # overlap-add: block of tile (ty, tx) starts at padded coordinate (ty*tile - r, tx*tile - r);
-    # blocks are added last tile first, the order in which F.fold (col2im) adds them
-    out = torch.zeros(c, (ny - 1) * tile + block, (nx - 1) * tile + block, dtype=torch.float32)
-    for a in reversed(range(0, ny * nx, chunk)):
-        idx = torch.arange(a, min(a + chunk, ny * nx))
-        ty, tx = idx // nx, idx % nx
-        wgt = wy[ty].unsqueeze(2) * wx[tx].unsqueeze(1)  # (N, S, S)
-        patch = (supports[:, ty, tx] * wgt.unsqueeze(0)).permute(1, 0, 2, 3)  # (N, C, S, S)
-        pf = torch.fft.rfft2(patch, s=(n_fft, n_fft))
-        kf = torch.fft.rfft2(kernels[idx].float(), s=(n_fft, n_fft))
-        conv = torch.fft.irfft2(pf * kf, s=(n_fft, n_fft))
-        for j in reversed(range(len(idx))):
-            y0, x0 = int(ty[j]) * tile, int(tx[j]) * tile
-            out[:, y0 : y0 + block, x0 : x0 + block] += conv[j, :, :block, :block]
-    # out index 0 = padded coordinate -r; image row 0 = padded coordinate tile
-    r = p // 2
-    return out[:, tile + r : tile + r + h, tile + r : tile + r + w].to(image.dtype)
+    kernels = kernels.float().reshape(ny, nx, c, p, p)
+    cells = F.pad(image.float(), (0, mx * tile - w, 0, my * tile - h)).unfold(1, tile, tile).unfold(2, tile, tile)
+    u = torch.arange(tile, dtype=torch.float64) / tile
+    ramps = torch.stack([1.0 - u, u]).float()  # (2, T): a cell's weights of its first and second centre
+    weights = [ramps[dy].unsqueeze(1) * ramps[dx].unsqueeze(0) for dy in (0, 1) for dx in (0, 1)]
+    out = torch.zeros(c, (my - 1) * tile + block, (mx - 1) * tile + block, dtype=torch.float32)
+    below = _spectra(kernels, 0, mx, n_fft)
+    for i in range(my):
+        above, below = below, _spectra(kernels, i + 1, mx, n_fft)
+        for a in range(0, mx, chunk):
+            js = range(a, min(a + chunk, mx))
+            patch = cells[:, i, a : js[-1] + 1].transpose(0, 1)  # (N, C, T, T)
+            acc = torch.zeros(len(js), c, n_fft, n_fft // 2 + 1, dtype=torch.complex64)
+            for k, (spec, dx) in enumerate(((above, 0), (above, 1), (below, 0), (below, 1))):
+                acc += torch.fft.rfft2(patch * weights[k], s=(n_fft, n_fft)) * spec[a + dx : js[-1] + 1 + dx]
+            conv = torch.fft.irfft2(acc, s=(n_fft, n_fft))
+            for n, j in enumerate(js):
+                out[:, i * tile : i * tile + block, j * tile : j * tile + block] += conv[n, :, :block, :block]
+    r = p // 2  # out index 0 = image row -r
+    return out[:, r : r + h, r : r + w].to(image.dtype)
 
 
-def _supports(image: torch.Tensor, tile: int, ny: int, nx: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Every tile centre's hat support of the (C, H, W) image, S x S pixels (S = 2 tile + 1,
-    tile apart, the image zero-padded by tile before and enough after), as a view
-    (C, ny, nx, S, S) float32, and each centre's hat weights on its support along rows
-    (ny, S) and columns (nx, S)."""
-    _, h, w = image.shape
-    support = 2 * tile + 1
-    pad_y, pad_x = ny * tile + 1 - h, nx * tile + 1 - w
-    img_p = F.pad(image.float(), (tile, pad_x, tile, pad_y))
-    hy_p = F.pad(_hat(h, tile).float(), (tile, pad_y))
-    hx_p = F.pad(_hat(w, tile).float(), (tile, pad_x))
-    supports = img_p.unfold(1, support, tile).unfold(2, support, tile)
-    wy = hy_p.unfold(1, support, tile).diagonal().T
-    wx = hx_p.unfold(1, support, tile).diagonal().T
-    return supports, wy, wx
+def _spectra(kernels: torch.Tensor, row: int, cells: int, n_fft: int) -> torch.Tensor:
+    """(cells + 1, C, n, n // 2 + 1) spectra of the kernels of centre row ``row`` (kernels:
+    (ny, nx, C, P, P) float32), zero-padded to n x n; zero beyond the grid (a centre past
+    the image's last pixel weighs nothing there)."""
+    ny, nx, c = kernels.shape[:3]
+    out = torch.zeros(cells + 1, c, n_fft, n_fft // 2 + 1, dtype=torch.complex64)
+    if row < ny:
+        k = min(nx, cells + 1)
+        out[:k] = torch.fft.rfft2(kernels[row, :k], s=(n_fft, n_fft))
+    return out
