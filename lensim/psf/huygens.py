@@ -153,9 +153,8 @@ def mirror_symmetric(pf: PupilField, x0_mm: float, rtol: float = 1e-9) -> bool:
     partner = index[ij[:, 1], n - 1 - ij[:, 0]]
     if bool((partner < 0).any()):
         return False
-    like = {"dtype": pf.points.dtype, "device": pf.points.device}
-    flip = torch.tensor([-1.0, 1.0, 1.0], **like)
-    mirrored = (pf.points - torch.tensor([2.0 * x0_mm, 0.0, 0.0], **like)) * flip
+    flip = pf.points.new_tensor([-1.0, 1.0, 1.0])
+    mirrored = (pf.points - pf.points.new_tensor([2.0 * x0_mm, 0.0, 0.0])) * flip
     differences = (  # each relative to its scale
         (mirrored - pf.points[partner]).abs().max() / pf.radius,
         (pf.directions * flip - pf.directions[partner]).abs().max(),
