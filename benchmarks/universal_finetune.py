@@ -70,7 +70,7 @@ def budget(pairs: Path, minutes: float, steps: int | None) -> dict:
     return {"epochs": -(-steps // per_epoch), "time_budget_s": None}
 
 
-def train_run(pairs: Path, run: Path, limits: dict, init: str | None, device: str = "cpu") -> dict:
+def train_run(pairs: Path, run: Path, limits: dict, init: str | None, device: str = "cpu", amp: bool = True) -> dict:
     """One run on the universal model's network (made once: RUN/done.json); limits:
     :func:`budget`'s."""
     import time
@@ -96,6 +96,7 @@ def train_run(pairs: Path, run: Path, limits: dict, init: str | None, device: st
         seed=0,
         init=init,
         device=device,
+        amp=amp,
     )
     info = {"steps": res.step, "seconds": round(time.perf_counter() - start, 1), "init": init, "device": device}
     (run / "done.json").write_text(json.dumps(info))
@@ -111,6 +112,7 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=None, help="steps per run instead of --minutes")
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--no-amp", action="store_true", help="float32 on CUDA (faster for this small network)")
     ap.add_argument(
         "--runs",
         default="fine-tuned,scratch",
@@ -133,7 +135,7 @@ def main() -> None:
     limits = budget(pairs, args.minutes, args.steps)
     for name in args.runs.split(","):
         d, init = runs[name]
-        train_run(pairs, out / f"run-{d}", limits, init, args.device)
+        train_run(pairs, out / f"run-{d}", limits, init, args.device, not args.no_amp)
     runs = {name: r for name, r in runs.items() if (out / f"run-{r[0]}" / "done.json").exists()}
     info = {name: json.loads((out / f"run-{d}" / "done.json").read_text()) for name, (d, _) in runs.items()}
     methods = {
