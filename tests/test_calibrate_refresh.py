@@ -99,6 +99,12 @@ def test_anderson_start_is_exact_for_a_linear_contraction():
         {"start": {"image.focus": 0.001}, "values": {"image.focus": 0.00205}, "scales": {"image.focus": 0.002}},
     ]
     assert next_start(drift)[1] == "plain"
+    # a round that changed the element: plain start from its values
+    switched = [
+        {"start": {"e1.decentre_x": 0.0}, "values": {"e3.decentre_x": 0.005}, "scales": {"e3.decentre_x": 0.002}},
+        {"start": {"e3.decentre_x": 0.005}, "values": {"e3.decentre_x": 0.004}, "scales": {"e3.decentre_x": 0.002}},
+    ]
+    assert next_start(switched) == ({"e3.decentre_x": 0.004}, "plain")
 
 
 def test_quadrants_are_composed_where_their_azimuths_are():

@@ -177,7 +177,7 @@ def next_start(rounds: Sequence[dict], accelerate: bool = True) -> tuple[dict[st
     parameter (a parameter drifting while another converges), and the plain start is
     taken; the step beyond the plain one is also limited to EXTRAPOLATION plain steps."""
     last = rounds[-1]
-    same = len(rounds) >= 2 and set(rounds[-2]["values"]) == set(last["values"]) == set(last["start"])
+    same = len(rounds) >= 2 and len({frozenset(r[k]) for r in rounds[-2:] for k in ("start", "values")}) == 1
     if not accelerate or not same:
         return dict(last["values"]), "plain"
     names, scales = list(last["values"]), last["scales"]
