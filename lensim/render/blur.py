@@ -53,7 +53,7 @@ def spatially_variant_blur(
     image: torch.Tensor,
     kernel_at: KernelFn,
     tile: int = 64,
-    chunk: int = 16,
+    chunk: int = 8,
 ) -> torch.Tensor:
     """Blur a (C, H, W) image with kernels that vary over the image.
 

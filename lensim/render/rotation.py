@@ -78,20 +78,27 @@ def _cubic_weights(coord: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return f.astype(np.int64) - 1, w
 
 
-def rotate_kernels(kernels: np.ndarray, angles_deg: np.ndarray) -> np.ndarray:
+def rotate_kernels(kernels: np.ndarray, angles_deg: np.ndarray, chunk: int = 8) -> np.ndarray:
     """:func:`rotate_kernel` (cubic spline) of many kernels at once, each by its own angle:
     kernels (N, C, P, Q), angles_deg (N,) degrees; returns (N, C, P, Q) float64. The same
     arithmetic (scipy's zero padding and spline prefilter, cubic B-spline weights, negative
     lobes clipped, channel sums kept) vectorized over the batch: equal to rotate_kernel's
     result to rounding (about 1e-16 of the kernel's peak; tests/test_render_kernels.py).
     Kernels whose turn samples beyond scipy's padding (a large turn of a large kernel) are
-    turned one by one with rotate_kernel."""
+    turned one by one with rotate_kernel. ``chunk`` kernels at a time (their arrays stay
+    in the processor's cache)."""
+    k = np.asarray(kernels, dtype=np.float64)
+    angles = np.asarray(angles_deg, dtype=np.float64).ravel()
+    if len(k) == 0:
+        return k.copy()
+    return np.concatenate([_rotate_batch(k[a : a + chunk], angles[a : a + chunk]) for a in range(0, len(k), chunk)])
+
+
+def _rotate_batch(k: np.ndarray, angles_deg: np.ndarray) -> np.ndarray:
+    """rotate_kernels of (N, C, P, Q) float64 kernels, all at once."""
     from scipy.ndimage import spline_filter1d
 
-    k = np.asarray(kernels, dtype=np.float64)
     n, c, p, q = k.shape
-    if n == 0:
-        return k.copy()
     pad = _SPLINE_PAD
     coef = np.pad(k, ((0, 0), (0, 0), (pad, pad), (pad, pad)))
     for axis in (-2, -1):  # scipy's spline_filter: axis by axis, rows first
