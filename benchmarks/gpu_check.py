@@ -34,7 +34,6 @@ import statistics
 import time
 import traceback
 from collections.abc import Callable
-from dataclasses import fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -176,11 +175,6 @@ def restore_section(device: torch.device, tiny: bool) -> dict:
     return out
 
 
-def _pupil_on(pf: Any, device: torch.device) -> Any:
-    moved = {f.name: getattr(pf, f.name) for f in fields(pf)}
-    return replace(pf, **{k: v.to(device) for k, v in moved.items() if isinstance(v, torch.Tensor)})
-
-
 def huygens_section(device: torch.device, tiny: bool) -> dict:
     from lensim.optics.lens_file import load_lens
     from lensim.optics.paraxial import paraxial_data
@@ -196,7 +190,7 @@ def huygens_section(device: torch.device, tiny: bool) -> dict:
     out: dict[str, Any] = {"pupil_samples": samples, "grid": grid, "cpu_threads": torch.get_num_threads()}
     out["huygens_cpu"] = {"seconds": cpu, "psfs_per_s": 1.0 / cpu}
     if device.type == "cuda":
-        gpf = _pupil_on(pf, device)
+        gpf = pf.to(device)
         huygens_psf(gpf, grid, 0.5)  # warm-up
         sec = timed_blocks(lambda: huygens_psf(gpf, grid, 0.5), device, 5, 5)
         got = huygens_psf(gpf, grid, 0.5).cpu()

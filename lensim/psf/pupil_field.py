@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import Any
 
 import torch
 
@@ -60,6 +61,11 @@ class PupilField:
     @property
     def wavelength_mm(self) -> float:
         return self.wavelength_um * 1e-3
+
+    def to(self, device: torch.device | str) -> PupilField:
+        """The same field with every tensor on ``device`` (the Huygens sum then runs there)."""
+        moved: dict[str, Any] = {k: v.to(device) for k, v in vars(self).items() if isinstance(v, torch.Tensor)}
+        return replace(self, **moved)
 
     def working_fno(self) -> float:
         """Effective image-space F-number from the beam's extent on the sphere."""

@@ -112,6 +112,13 @@ def checked_device(name: str) -> torch.device:
         raise InputError(None, "device", f"expected cpu, cuda or cuda:N, got {name!r}") from None
 
 
+def mixed_precision(device: torch.device, enabled: bool) -> tuple[torch.dtype | None, torch.amp.GradScaler]:
+    """(autocast dtype or None, grad scaler) of a training run: :func:`amp_dtype`, and a
+    scaler that acts only for float16 (a no-op otherwise)."""
+    autocast = amp_dtype(device, enabled)
+    return autocast, torch.amp.GradScaler("cuda", enabled=autocast == torch.float16)
+
+
 def amp_dtype(device: torch.device, enabled: bool) -> torch.dtype | None:
     """Autocast dtype for mixed precision on CUDA (bfloat16 where supported, else
     float16), or None (CPU, or disabled)."""
@@ -127,6 +134,7 @@ __all__ = [
     "barrier",
     "init_distributed",
     "mean_over_ranks",
+    "mixed_precision",
     "rank0_decides",
     "shutdown",
     "wrap_model",

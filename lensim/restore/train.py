@@ -65,11 +65,11 @@ from lensim.restore.config import TrainConfig
 from lensim.restore.dataset import PairDataset, crop_refs, sensor_hw, split_sources
 from lensim.restore.distributed import (
     Ranks,
-    amp_dtype,
     barrier,
     checked_device,
     init_distributed,
     mean_over_ranks,
+    mixed_precision,
     rank0_decides,
     shutdown,
     wrap_model,
@@ -283,8 +283,7 @@ def _build_state(
         raise InputError(None, "config", f"cannot build the {cfg.arch} network ({e})") from None
     optimizer = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     lr = LearningRate(optimizer, cfg.lr_schedule, cfg.lr, cfg.lr_halve_every, cfg.epochs)
-    autocast = amp_dtype(device, cfg.amp)
-    scaler = torch.amp.GradScaler("cuda", enabled=autocast == torch.float16)
+    autocast, scaler = mixed_precision(device, cfg.amp)
     state = TrainingState(model, optimizer, lr.scheduler, scaler)
     if ckpt is not None:
         state.resume_from(ckpt, source)

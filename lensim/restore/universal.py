@@ -144,15 +144,14 @@ def _ranges(folders: Sequence[str | Path]) -> dict[str, Any]:
 
 
 def _new_state(cfg: PretrainConfig) -> dict[str, Any]:
-    from lensim.restore.distributed import amp_dtype, checked_device
+    from lensim.restore.distributed import checked_device, mixed_precision
     from lensim.restore.models import build_model
 
     device = checked_device(cfg.device)
     torch.manual_seed(cfg.seed)
     model = build_model(cfg.network()).to(device)
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
-    autocast = amp_dtype(device, cfg.amp)
-    scaler = torch.amp.GradScaler("cuda", enabled=autocast == torch.float16)
+    autocast, scaler = mixed_precision(device, cfg.amp)
     return {
         "model": model,
         "opt": opt,
