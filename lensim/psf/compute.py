@@ -23,7 +23,7 @@ from lensim.optics.paraxial import paraxial_data, paraxial_image_height
 from lensim.psf.defaults import PsfMethod, psf_method
 from lensim.psf.fourier import direction_scale, fft_psf, geometric_psf
 from lensim.psf.huygens import huygens_psf
-from lensim.psf.metrics import encircled_energy_radius, rms_spot_radius_um, strehl_ratio
+from lensim.psf.metrics import encircled_energy_radii, rms_spot_radius_um, strehl_ratio
 from lensim.psf.pupil_field import PupilField, pupil_field
 
 
@@ -147,11 +147,12 @@ def compute_psf(
     launch = object_field(lens, value, aiming, para)
     para_y = paraxial_image_height(lens.launch_lens(), launch, para)
     arr = data.numpy()
+    ee50, ee80 = encircled_energy_radii(arr, spacing_um, (0.5, 0.8), method != "geometric")
     figures = {
         "strehl": strehl_ratio(data, pf, spacing_um) if method != "geometric" else None,
         "rms_spot_radius_um": rms_spot_radius_um(pf),
-        "ee50_radius_um": encircled_energy_radius(arr, spacing_um, 0.5, method != "geometric"),
-        "ee80_radius_um": encircled_energy_radius(arr, spacing_um, 0.8, method != "geometric"),
+        "ee50_radius_um": ee50,
+        "ee80_radius_um": ee80,
         "energy_in_window": float(arr.sum()),
         "transmission": pf.transmission,
         "chief_ray_xy_mm": [float(pf.chief[0]), float(pf.chief[1])],

@@ -23,14 +23,16 @@ def rms_spot_radius_um(pf: PupilField) -> float:
     return float(torch.sqrt((((pf.image_xy - c) ** 2).sum(-1) * w).sum()) * 1e3)
 
 
-def encircled_energy_radius(psf: np.ndarray, spacing_um: float, fraction: float, band_limited: bool = True) -> float:
-    """Radius (um) around the PSF centroid holding `fraction` of the window's energy
-    (enclosed_energy's curve, every 1/8 sample; band_limited as there)."""
+def encircled_energy_radii(
+    psf: np.ndarray, spacing_um: float, fractions: tuple[float, ...], band_limited: bool = True
+) -> tuple[float, ...]:
+    """Radii (um) around the PSF centroid holding each of `fractions` of the window's
+    energy, from one enclosed_energy curve (every 1/8 sample; band_limited as there)."""
     psf = np.asarray(psf, dtype=np.float64)
     radii = np.arange(0.0, 0.5 * math.hypot(*psf.shape) + 1.0, 0.125) * spacing_um
     curve = enclosed_energy(psf, spacing_um, radii, "circle", band_limited=band_limited)
-    found = size_at_fraction(radii, curve, fraction)
-    return float(radii[-1]) if found is None else found
+    found = [size_at_fraction(radii, curve, f) for f in fractions]
+    return tuple(float(radii[-1]) if r is None else r for r in found)
 
 
 def _sub_samples(
