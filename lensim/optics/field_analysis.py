@@ -195,9 +195,16 @@ class _MirrorHalf:
     def __init__(self, points: torch.Tensor, mirror: bool) -> None:
         keep = points[:, 0] >= 0 if mirror else torch.ones(points.shape[0], dtype=torch.bool)
         self.traced = points[keep]
-        where = {(round(x * 1e9), round(y * 1e9)): i for i, (x, y) in enumerate(self.traced.tolist())}
-        self.source = torch.tensor([where[(round(abs(x) * 1e9), round(y * 1e9))] for x, y in points.tolist()])
+        order, keys = torch.sort(self._keys(self.traced))
+        mirrored = torch.stack([points[:, 0].abs(), points[:, 1]], -1)
+        self.source = keys[torch.searchsorted(order, self._keys(mirrored))]
         self.flip = ~keep
+
+    @staticmethod
+    def _keys(points: torch.Tensor) -> torch.Tensor:
+        """One int64 per pupil point (coordinates in [-1, 1], to 1e-9): equal for equal points."""
+        ix, iy = torch.round(points.to(DTYPE) * 1e9).to(torch.int64).unbind(-1)
+        return ix * (2_000_000_001) + (iy + 1_000_000_000)
 
     def unfold(self, res: TraceResult, skip: int = 0) -> TraceResult:
         """A (1, B, skip + K) trace of the traced points (after `skip` other rays, kept) as

@@ -405,7 +405,10 @@ def _index_groups(
     n: torch.Tensor, wavelength_um: torch.Tensor, batch: torch.Size
 ) -> list[tuple[int, int, list | torch.Tensor]]:
     """Split the flattened batch into (start, stop, media indices) with one wavelength per
-    block where the layout allows it (indices as Python floats), else per-ray tensors."""
+    block where the layout allows it and the blocks are long (indices as Python floats),
+    else per-ray tensors: many short blocks (a pupil of a few thousand rays at each of 13
+    wavelengths) would each be a chunk of its own, and a chunk's fixed cost per operation
+    outweighs the per-ray index products."""
     S1 = n.shape[0]
     B = int(np.prod(batch)) if len(batch) else 1
     wl_shape = tuple(wavelength_um.shape)
@@ -416,7 +419,7 @@ def _index_groups(
         a = max(i for i, v in enumerate(ws) if v > 1)
         if all(ws[i] == batch[i] for i in range(a + 1)):
             block = int(np.prod(batch[a + 1 :])) if a + 1 < len(batch) else 1
-            if block >= 256:
+            if block >= CHUNK_RAYS // 4:
                 cols = n.reshape(S1, -1).detach().cpu().numpy()
                 return [(b * block, (b + 1) * block, [float(v) for v in cols[:, b]]) for b in range(B // block)]
     full = n.reshape((S1,) + (1,) * (len(batch) - len(wl_shape)) + wl_shape).expand((S1,) + tuple(batch))
