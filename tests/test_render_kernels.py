@@ -18,7 +18,7 @@ from lensim.psf.bank import BankField, PSFBank
 from lensim.psf.bank.azimuth import AZIMUTHS_DEG
 from lensim.psf.bank.store import load_bank_cached
 from lensim.render.blur import _fast_len, _hat, spatially_variant_blur, tile_centres
-from lensim.render.rotation import rotate_kernel, rotate_kernel_angles, rotate_kernels
+from lensim.render.rotation import rotate_kernel, rotate_kernels
 
 
 def test_rotate_kernels_equals_rotate_kernel_one_by_one() -> None:
@@ -32,25 +32,6 @@ def test_rotate_kernels_equals_rotate_kernel_one_by_one() -> None:
     big = rng.random((2, 1, 61, 61))
     ref = np.stack([rotate_kernel(big[0], 45.0), rotate_kernel(big[1], 1.0)])
     assert np.abs(rotate_kernels(big, np.array([45.0, 1.0])) - ref).max() < 1e-12
-
-
-def test_rotate_kernel_angles_equals_rotate_kernel_per_angle() -> None:
-    """One prefilter for every turn (the bank's azimuth kernels) equals scipy's turn angle
-    by angle. Within scipy's 12 zeros of padding (15 px): to rounding. Where a turn samples
-    beyond them (61 px at 45 degrees), the wider padding changes the spline only through
-    the kernel's edge values: to 1e-8 of the peak for a PSF-like kernel whose tails fall
-    to 1e-4 of it at the edge."""
-    rng = np.random.default_rng(1)
-    small = rng.random((3, 15, 15)) ** 3
-    y, x = np.mgrid[-30:31, -30:31]
-    psf_like = np.stack([np.exp(-((x - 2 * c) ** 2 + y**2 / 2) / (2 * 7.0**2)) for c in range(3)])
-    psf_like += 1e-4 * rng.random(psf_like.shape)
-    for k, angles, tol in ((small, [3.75, -7.5, 30.0, 90.0], 1e-12), (psf_like, [1.0, 22.5, 45.0], 1e-8)):
-        direct = np.stack([rotate_kernel(k, a) for a in angles])
-        turned = rotate_kernel_angles(k, np.array(angles))
-        assert turned.shape == (len(angles),) + k.shape
-        assert np.abs(turned - direct).max() < tol * direct.max()
-        assert np.abs(turned - direct).max() < 1e-3 * np.abs(direct[-1] - k).max()  # a mix-up of turns shows
 
 
 def _bank(p: int = 11) -> PSFBank:

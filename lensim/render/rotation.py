@@ -94,74 +94,33 @@ def rotate_kernels(kernels: np.ndarray, angles_deg: np.ndarray, chunk: int = 8) 
     return np.concatenate([_rotate_batch(k[a : a + chunk], angles[a : a + chunk]) for a in range(0, len(k), chunk)])
 
 
-def _spline_coefficients(k: np.ndarray, pad: int) -> np.ndarray:
-    """Cubic spline coefficients (..., P + 2 pad, Q + 2 pad) of (..., P, Q) kernels padded
-    with pad zeros on every side (scipy's prefilter for mode "grid-constant" at pad 12)."""
+def _rotate_batch(k: np.ndarray, angles_deg: np.ndarray) -> np.ndarray:
+    """rotate_kernels of (N, C, P, Q) float64 kernels, all at once."""
     from scipy.ndimage import spline_filter1d
 
-    coef = np.pad(k, [(0, 0)] * (k.ndim - 2) + [(pad, pad), (pad, pad)])
+    n, c, p, q = k.shape
+    pad = _SPLINE_PAD
+    coef = np.pad(k, ((0, 0), (0, 0), (pad, pad), (pad, pad)))
     for axis in (-2, -1):  # scipy's spline_filter: axis by axis, rows first
         coef = spline_filter1d(coef, 3, axis=axis, output=np.float64, mode="grid-constant")
-    return coef
-
-
-def rotate_kernel_angles(kernel: np.ndarray, angles_deg: np.ndarray) -> np.ndarray:
-    """:func:`rotate_kernel` (cubic spline) of one (C, P, Q) kernel by each of A angles:
-    (A, C, P, Q) float64. The spline prefilter runs once, on zero padding wide enough for
-    the largest turn (at least scipy's 12 zeros), and scipy's map_coordinates samples it.
-    Within scipy's padding the result equals rotate_kernel's to rounding; a turn that
-    samples beyond it (a large kernel turned by 45 degrees) differs only through the
-    kernel's edge values (1e-9 of the peak for tails at 1e-4 of it;
-    tests/test_render_kernels.py)."""
-    k = np.asarray(kernel, dtype=np.float64)
-    rows, cols = _turn_coordinates(np.asarray(angles_deg, dtype=np.float64).ravel(), *k.shape[-2:])
-    beyond = max(-rows.min(), rows.max() - (k.shape[-2] - 1), -cols.min(), cols.max() - (k.shape[-1] - 1), 0.0)
-    pad = max(_SPLINE_PAD, math.ceil(beyond) + 3)
-    from scipy.ndimage import map_coordinates
-
-    coef = _spline_coefficients(k, pad)
-    at = np.stack([rows + pad, cols + pad])  # (2, A, P, Q)
-    out = np.stack([map_coordinates(plane, at, order=3, prefilter=False, mode="grid-constant") for plane in coef], 1)
-    return _keep_sums(k[None], np.clip(out, 0.0, None))
-
-
-def _spline_sample(coef: np.ndarray, rows: np.ndarray, cols: np.ndarray, pad: int) -> np.ndarray:
-    """Cubic-spline values (N, C, p, q) at the input coordinates rows, cols (N, p, q) of
-    each turn, from spline coefficients (C, H, W) shared by every turn or (N, C, H, W) one
-    set per turn, padded by pad; negative lobes clipped."""
-    n, p, q = rows.shape
-    c, h, w = coef.shape[-3:]
+    rows, cols = _turn_coordinates(angles_deg, p, q)
     ry, wy = _cubic_weights(rows + pad)
     rx, wx = _cubic_weights(cols + pad)
-    ry, rx = np.clip(ry, 0, h - 4), np.clip(rx, 0, w - 4)
-    planes = np.arange(c) if coef.ndim == 3 else np.arange(n * c).reshape(n, c)
-    first = (ry * w + rx).reshape(n, 1, p * q) + (planes * h * w).reshape(-1, c, 1)  # (N, C, pq)
+    inside = (ry.min((1, 2)) >= 0) & (rx.min((1, 2)) >= 0)
+    inside &= (ry.max((1, 2)) + 3 < p + 2 * pad) & (rx.max((1, 2)) + 3 < q + 2 * pad)
+    ry, rx = np.clip(ry, 0, p + 2 * pad - 4), np.clip(rx, 0, q + 2 * pad - 4)
+    width, plane = q + 2 * pad, (p + 2 * pad) * (q + 2 * pad)
+    first = (ry * width + rx).reshape(n, 1, p * q) + (np.arange(n * c) * plane).reshape(n, c, 1)  # (N, C, PQ)
     flat = coef.reshape(-1)
     out = np.zeros((n, c, p * q))
     for a in range(4):
         row = np.zeros((n, c, p * q))
         for b in range(4):
-            row += wx[b].reshape(n, 1, p * q) * flat.take(first + (a * w + b))
+            row += wx[b].reshape(n, 1, p * q) * flat.take(first + (a * width + b))
         out += wy[a].reshape(n, 1, p * q) * row
-    return np.clip(out.reshape(n, c, p, q), 0.0, None)
-
-
-def _keep_sums(k: np.ndarray, out: np.ndarray) -> np.ndarray:
-    """out (N, C, P, Q) rescaled so each kernel keeps the sum of its original in k
-    (broadcasting against out); a kernel turned to nothing stays zero."""
+    out = np.clip(out.reshape(n, c, p, q), 0.0, None)
     total, got = k.sum(axis=(-2, -1), keepdims=True), out.sum(axis=(-2, -1), keepdims=True)
-    return np.where(got > 0, out * (total / np.where(got > 0, got, 1.0)), out)
-
-
-def _rotate_batch(k: np.ndarray, angles_deg: np.ndarray) -> np.ndarray:
-    """rotate_kernels of (N, C, P, Q) float64 kernels, all at once."""
-    n, c, p, q = k.shape
-    pad = _SPLINE_PAD
-    rows, cols = _turn_coordinates(angles_deg, p, q)
-    out = _keep_sums(k, _spline_sample(_spline_coefficients(k, pad), rows, cols, pad))
-    first_r, first_c = np.floor(rows + pad) - 1, np.floor(cols + pad) - 1  # each sample's first coefficient
-    inside = (first_r.min((1, 2)) >= 0) & (first_r.max((1, 2)) + 3 < p + 2 * pad)
-    inside &= (first_c.min((1, 2)) >= 0) & (first_c.max((1, 2)) + 3 < q + 2 * pad)
+    out = np.where(got > 0, out * (total / np.where(got > 0, got, 1.0)), out)
     for i in np.flatnonzero(~inside):
         out[i] = rotate_kernel(k[i], float(angles_deg[i]))
     return out

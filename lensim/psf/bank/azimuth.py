@@ -39,10 +39,10 @@ def azimuth_kernels(rgb_fine: np.ndarray, k: int) -> np.ndarray:
     PSF of one field (energy per fine sample; kP = k P, the centre sample on the reference
     point): each channel turned on the fine grid, then integrated over k x k blocks. Each
     keeps its channel's sum (energy leaving the window is given back in proportion)."""
-    from lensim.render.rotation import rotate_kernel_angles  # the one home of the spline turn
+    from lensim.render.rotation import rotate_kernel  # the one home of the spline turn
 
-    turned = rotate_kernel_angles(np.asarray(rgb_fine, dtype=np.float64), np.array(AZIMUTHS_DEG))
-    return np.stack([integrate_pixels(t, k) for t in turned])
+    fine = np.asarray(rgb_fine, dtype=np.float64)
+    return np.stack([integrate_pixels(rotate_kernel(fine, a), k) for a in AZIMUTHS_DEG])
 
 
 def _mirror_axis(reference_deg: float) -> int | None:
