@@ -54,6 +54,32 @@ def sqrt_nonneg(u: torch.Tensor) -> torch.Tensor:
     return u * torch.rsqrt(torch.clamp(u, min=1e-300))
 
 
+def narrow(hit: torch.Tensor | None, mask: torch.Tensor) -> torch.Tensor:
+    """hit & mask (in place on hit), where hit None stands for every ray."""
+    return mask if hit is None else hit.logical_and_(mask)
+
+
+def with_sign_of(v: torch.Tensor, s: torch.Tensor) -> torch.Tensor:
+    """v >= 0 with the sign of s, in place (copysign); where s has one sign throughout (one
+    reduction) a negation or nothing, cheaper than torch's copysign."""
+    if float(s.amin()) > 0.0:
+        return v
+    if float(s.amax()) < 0.0:
+        return v.neg_()
+    return v.copysign_(s)
+
+
+def _steep(N: torch.Tensor) -> bool:
+    """Whether every direction cosine N is farther than _FLAT_DZ from 0 (one or two
+    reductions); False also where some N is NaN."""
+    return float(N.amin()) > _FLAT_DZ or float(N.amax()) < -_FLAT_DZ
+
+
+def _finite(t: torch.Tensor) -> bool:
+    """Whether every value of t is finite (a finite sum says so; one reduction)."""
+    return math.isfinite(float(t.sum()))
+
+
 def _split_powers(asphere: dict[int, float], shift: int) -> tuple[dict[int, float], dict[int, float]]:
     """{power: a} -> (even, odd) Horner terms of sum a * r^(power - shift) in r2 = r^2:
     even {m: a} for power - shift = 2m, odd {m: a} for power - shift = 2m + 1 (times r).
@@ -172,11 +198,10 @@ class Geometry:
         L: torch.Tensor,
         M: torch.Tensor,
         N: torch.Tensor,
-        live: torch.Tensor,
-    ) -> tuple[torch.Tensor, torch.Tensor]:
+    ) -> tuple[torch.Tensor, torch.Tensor | None]:
         """Path length t (mm) from the points (x, y, z), z local to the vertex, along the
-        directions (L, M, N) to the surface, and the hit mask (the inputs are not changed).
-        live: the rays still traced (an iteration need only converge for those)."""
+        directions (L, M, N) to the surface, and the hit mask, None where every ray hits
+        (the inputs are not changed)."""
         raise NotImplementedError
 
     def normal_chunk(self, x: torch.Tensor, y: torch.Tensor, z: torch.Tensor) -> Normal | None:
@@ -284,10 +309,10 @@ class Conic(Geometry):
         every hit, nor for 1 + k <= 0, whose domain is the whole plane."""
         return self.conic > -1.0
 
-    def hit_chunk(self, x: T, y: T, z: T, L: T, M: T, N: T, live: T) -> tuple[T, T]:
+    def hit_chunk(self, x: T, y: T, z: T, L: T, M: T, N: T) -> tuple[T, T | None]:
         c, k = self.curvature, self.conic
         t = torch.div(z, N).neg_()  # to the vertex plane
-        ok_dir = N.abs() > _FLAT_DZ
+        hit = None if _steep(N) else N.abs() > _FLAT_DZ
         x1 = torch.addcmul(x, t, L)
         y1 = torch.addcmul(y, t, M)
         r2 = x1 * x1
@@ -301,19 +326,22 @@ class Conic(Geometry):
             a = N * N
             a.mul_(c * k).add_(c)
             disc.addcmul_(a, r2, value=-c)
-        hit = disc >= 0.0
-        hit &= ok_dir
-        denom = sqrt_nonneg(disc.clamp_(min=0.0)).copysign_(b).add_(b)
+        if not float(disc.amin()) >= 0.0:
+            hit = narrow(hit, disc >= 0.0)
+            disc.clamp_(min=0.0)
+        denom = with_sign_of(sqrt_nonneg(disc), b).add_(b)
         t1 = r2.mul_(-c).div_(denom)  # conic root measured from the vertex plane
-        t1, hit = self.refine_chunk(x1, y1, L, M, N, t1, hit, live)
+        t1, hit = self.refine_chunk(x1, y1, L, M, N, t1, hit)
         t.add_(t1)
-        hit &= torch.isfinite(t)
+        if not _finite(t):
+            hit = narrow(hit, torch.isfinite(t))
         if self._leaves_domain():
             xn = torch.addcmul(x, t, L)
             yn = torch.addcmul(y, t, M)
             rn = xn * xn
             rn.addcmul_(yn, yn)
-            hit &= self.in_domain(rn)
+            if not bool(self.in_domain(rn.amax())):  # the domain is a disc about the axis
+                hit = narrow(hit, self.in_domain(rn))
         return t, hit
 
     def refine_chunk(
@@ -324,10 +352,10 @@ class Conic(Geometry):
         M: torch.Tensor,
         N: torch.Tensor,
         t1: torch.Tensor,
-        hit: torch.Tensor,
-        live: torch.Tensor,
-    ) -> tuple[torch.Tensor, torch.Tensor]:
-        """hit_chunk's root t1 from the vertex-plane points (x1, y1, 0): as is for a conic."""
+        hit: torch.Tensor | None,
+    ) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """hit_chunk's root t1 from the vertex-plane points (x1, y1, 0) (hit: None where every
+        ray hits): as is for a conic."""
         return t1, hit
 
     def normal_chunk(self, x: T, y: T, z: T) -> Normal | None:
@@ -354,8 +382,8 @@ class Plane(Conic):
     def __repr__(self) -> str:
         return "Plane()"
 
-    def hit_chunk(self, x: T, y: T, z: T, L: T, M: T, N: T, live: T) -> tuple[T, T]:
-        return torch.div(z, N).neg_(), N.abs() > _FLAT_DZ
+    def hit_chunk(self, x: T, y: T, z: T, L: T, M: T, N: T) -> tuple[T, T | None]:
+        return torch.div(z, N).neg_(), None if _steep(N) else N.abs() > _FLAT_DZ
 
     def normal_chunk(self, x: T, y: T, z: T) -> Normal | None:
         return None
@@ -460,9 +488,11 @@ class EvenAsphere(Conic):
                 break
         return t, valid & converged & (fp.abs() > 1e-12)
 
-    def refine_chunk(self, x1: T, y1: T, L: T, M: T, N: T, t1: T, hit: T, live: T) -> tuple[T, T]:
-        t1 = torch.where(torch.isfinite(t1), t1, torch.zeros_like(t1))
-        live = live & hit
+    def refine_chunk(self, x1: T, y1: T, L: T, M: T, N: T, t1: T, hit: T | None) -> tuple[T, T | None]:
+        if not _finite(t1):
+            t1 = torch.where(torch.isfinite(t1), t1, torch.zeros_like(t1))
+        converged: T | None = None
+        fp_ok: T | None = None
         for _ in range(NEWTON_MAX_ITER):
             xx = torch.addcmul(x1, t1, L)
             yy = torch.addcmul(y1, t1, M)
@@ -471,13 +501,19 @@ class EvenAsphere(Conic):
             f = t1 * N
             f.sub_(self.sag(rr))
             fp = xx.mul_(L).addcmul_(yy, M).mul_(self.sag_slope_over_r(rr)).neg_().add_(N)
-            fp_ok = fp.abs() > 1e-12
-            step = f.div_(torch.where(fp_ok, fp, torch.ones_like(fp)))
+            fp_ok = None if float(fp.abs().amin()) > 1e-12 else fp.abs() > 1e-12
+            step = f.div_(fp if fp_ok is None else torch.where(fp_ok, fp, torch.ones_like(fp)))
             t1 = t1 - step
-            converged = step.abs() < NEWTON_TOL_MM
-            if bool(converged[live].all()):
+            size = step.abs()
+            if float(size.amax()) < NEWTON_TOL_MM:
+                converged = None
                 break
-        return t1, hit & converged & fp_ok
+            converged = size < NEWTON_TOL_MM
+            if bool(converged.all() if hit is None else converged[hit].all()):
+                break
+        if converged is not None:
+            hit = narrow(hit, converged)
+        return t1, hit if fp_ok is None else narrow(hit, fp_ok)
 
     def normal_chunk(self, x: T, y: T, z: T) -> Normal | None:
         r2 = x * x

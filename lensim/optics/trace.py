@@ -19,18 +19,16 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from lensim.optics.geometry import Geometry, sqrt_nonneg
 from lensim.optics.lens import Lens
 from lensim.optics.pose import to_global, to_local
 from lensim.optics.surfaces import Surface
+from lensim.optics.trace_chunk import MISSED, OK, TIR, VIGNETTED, Live, Sink, chunk_indices, steps, trace_chunk
 
 DTYPE = torch.float64
 
-# status codes (per ray)
-OK = 0
-MISSED = 1  # the ray does not meet the surface (or travels backwards to it where that is not allowed)
-TIR = 2  # total internal reflection
-VIGNETTED = 3  # blocked by a clear aperture or obscuration
+# status codes (per ray): OK, MISSED (the ray does not meet the surface, or travels backwards
+# to it where that is not allowed), TIR (total internal reflection), VIGNETTED (blocked by a
+# clear aperture or obscuration); defined with the fast tracer's loop
 STATUS_TEXT = {
     OK: "ok",
     MISSED: "misses the surface",
@@ -229,176 +227,13 @@ def trace_reference(
 # ---------------------------------------------------------------------------------------
 # The fast path. Rays are flattened and cut into chunks of CHUNK_RAYS; each chunk runs
 # through every surface as separate contiguous x, y, z, L, M, N, OPL vectors with in-place
-# operations, so its working set stays in cache and no large temporaries are allocated.
-# Chunks are smaller than torch's intra-op grain size, so each operation runs on one core,
-# and the chunks run in parallel threads (torch releases the GIL inside its kernels), one
-# per torch thread. Each surface's geometry (lensim.optics.geometry) meets and bends the
-# rays with its kind's shortest exact formulas (its chunk methods).
-# Per-ray failures are recorded as (surface index + 1) * 4 + status code.
+# operations, so its working set stays in cache and no large temporaries are allocated
+# (lensim.optics.trace_chunk: rays that fail leave the vectors). Chunks are smaller than
+# torch's intra-op grain size, so each operation runs on one core, and the chunks run in
+# parallel threads (torch releases the GIL inside its kernels), one per torch thread.
 
 CHUNK_RAYS = 32767  # just below torch's GRAIN_SIZE (32768): each operation stays on one core
 _EXECUTORS: dict[int, ThreadPoolExecutor] = {}
-
-
-@dataclass(frozen=True)
-class _Step:
-    """One surface (or the image plane) as the fast tracer sees it."""
-
-    index: int  # surface index; lens.num_surfaces for the image plane
-    shift: float  # mm from the previous vertex (subtracted from the local z)
-    geometry: Geometry
-    surface: Surface
-    r2_max: float | None
-    r2_min: float | None
-    interact: bool
-    backwards_ok: bool  # the first step (rays start anywhere) and virtual steps (Lens.virtual_steps)
-
-
-def _steps(lens: Lens, start: int, end: int, to_image: bool, apertures: bool) -> list[_Step]:
-    zv = lens.vertex_z()
-    virtual = lens.virtual_steps()
-    steps = []
-    surfaces = [(i, lens.surfaces[i], True) for i in range(start, end)]
-    if to_image and end == lens.num_surfaces:
-        surfaces.append((end, Surface(clear_radius=lens.image_clear_radius), False))
-    for j, (i, s, interact) in enumerate(surfaces):
-        r2_max = s.clear_radius**2 * (1 + 1e-12) if (apertures and s.clear_radius is not None) else None
-        r2_min = s.obscuration_radius**2 if (apertures and s.obscuration_radius is not None) else None
-        shift = 0.0 if j == 0 else float(zv[i] - zv[surfaces[j - 1][0]])
-        steps.append(_Step(i, shift, s.geometry, s, r2_max, r2_min, interact, j == 0 or bool(virtual[i])))
-    return steps
-
-
-def _trace_chunk(
-    steps: list[_Step],
-    comps: list[torch.Tensor],
-    n: list,
-    fail: torch.Tensor,
-    record: list[torch.Tensor] | None,
-    zv: np.ndarray,
-) -> None:
-    """Trace one chunk in place: comps = [x, y, z (local to steps[0]'s vertex), L, M, N,
-    opl, valid]; n: index of every medium (floats or per-ray tensors); fail: int16 codes.
-    While every ray of the chunk is valid the masking steps are skipped."""
-    x, y, z, valid = comps[0], comps[1], comps[2], comps[7]
-    all_valid = bool(valid.all())
-    for j, st in enumerate(steps):
-        code = (st.index + 1) * 4
-        all_valid = _move_chunk_to_surface(st, comps, n[st.index], fail, code, all_valid)
-        if record is not None:
-            record[j][:, 0].copy_(x)
-            record[j][:, 1].copy_(y)
-            torch.add(z, float(zv[st.index]), out=record[j][:, 2])
-        if not st.interact:
-            continue
-        if st.surface.is_mirror:
-            _reflect_chunk(st, comps, all_valid)
-        else:
-            all_valid = _refract_chunk(st, comps, n[st.index], n[st.index + 1], fail, code, all_valid)
-
-
-def _stop_rays(lost: torch.Tensor, valid: torch.Tensor, fail: torch.Tensor, code: int) -> None:
-    """Mark the valid rays in ``lost`` as failed with ``code`` (in place)."""
-    lost &= valid
-    fail.masked_fill_(lost, code)
-    valid ^= lost
-
-
-def _move_chunk_to_surface(
-    st: _Step, comps: list[torch.Tensor], n1: float | torch.Tensor, fail: torch.Tensor, code: int, all_valid: bool
-) -> bool:
-    """Carry the rays of a chunk to surface st (in place): intersection, optical path in
-    medium n1, clear aperture and obscuration. Returns whether every ray is still valid."""
-    x, y, z, L, M, N, opl, valid = comps
-    if st.shift:
-        z.sub_(st.shift)
-    t, hit = st.geometry.hit_chunk(x, y, z, L, M, N, valid)
-    if not st.backwards_ok:
-        hit &= t > -1e-9
-    if not (all_valid and bool(hit.all())):
-        _stop_rays(~hit, valid, fail, code + MISSED)
-        t = torch.where(valid, t, 0.0)
-        all_valid = False
-    x.addcmul_(t, L)
-    y.addcmul_(t, M)
-    z.addcmul_(t, N)
-    if isinstance(n1, torch.Tensor):
-        opl.addcmul_(t, n1)
-    else:
-        opl.add_(t, alpha=n1)
-    if st.r2_max is not None or st.r2_min is not None:
-        rr = x * x
-        rr.addcmul_(y, y)
-        out = rr > st.r2_max if st.r2_max is not None else torch.zeros_like(valid)
-        if st.r2_min is not None:
-            out |= rr < st.r2_min
-        if not (all_valid and not bool(out.any())):
-            _stop_rays(out, valid, fail, code + VIGNETTED)
-            all_valid = False
-    return all_valid
-
-
-def _reflect_chunk(st: _Step, comps: list[torch.Tensor], all_valid: bool) -> None:
-    """Mirror reflection of the chunk's directions at surface st (in place); invalid
-    rays keep their direction."""
-    x, y, z, L, M, N, _, valid = comps
-    nrm = st.geometry.normal_chunk(x, y, z)
-    if nrm is None:
-        if all_valid:
-            N.neg_()
-        else:
-            N.copy_(torch.where(valid, -N, N))
-        return
-    nx, ny, nz = nrm
-    dn = L * nx
-    dn.addcmul_(M, ny).addcmul_(N, nz).mul_(-2.0)
-    if not all_valid:
-        dn = torch.where(valid, dn, 0.0)
-    L.addcmul_(dn, nx)
-    M.addcmul_(dn, ny)
-    N.addcmul_(dn, nz)
-
-
-def _refract_chunk(
-    st: _Step,
-    comps: list[torch.Tensor],
-    n1: float | torch.Tensor,
-    n2: float | torch.Tensor,
-    fail: torch.Tensor,
-    code: int,
-    all_valid: bool,
-) -> bool:
-    """Snell refraction of the chunk's directions at surface st from index n1 to n2 (in
-    place); totally internally reflected rays are stopped. Returns whether every ray is
-    still valid."""
-    x, y, z, L, M, N, _, valid = comps
-    scalar = not isinstance(n1, torch.Tensor) and not isinstance(n2, torch.Tensor)
-    if scalar and n1 == n2:
-        return all_valid  # no refraction (air to air, a dummy or stop surface)
-    mu = n1 / n2
-    cos_i, nrm = st.geometry.cos_incidence_chunk(x, y, z, L, M, N)
-    ct = cos_i * cos_i
-    if scalar:
-        ct.mul_(mu * mu).add_(1.0 - mu * mu)
-    else:
-        mu2 = mu * mu
-        ct.mul_(mu2).sub_(mu2).add_(1.0)
-    if not (scalar and mu <= 1.0):  # TIR needs n1 > n2
-        tir = ct < 0.0
-        if not (all_valid and not bool(tir.any())):
-            _stop_rays(tir, valid, fail, code + TIR)
-            all_valid = False
-    kk = sqrt_nonneg(ct.clamp_(min=0.0)).copysign_(cos_i).sub_(cos_i.mul_(mu))
-    if all_valid:
-        scale = mu
-    else:
-        kk = torch.where(valid, kk, 0.0)
-        scale = valid.to(x.dtype).mul_(mu - 1.0).add_(1.0)  # 1 for invalid rays: they keep their direction
-    L.mul_(scale)
-    M.mul_(scale)
-    N.mul_(scale)
-    st.geometry.bend_chunk(kk, nrm, x, y, z, L, M, N)
-    return all_valid
 
 
 def _index_groups(
@@ -484,7 +319,7 @@ def trace(
         return trace_reference(lens, rays, wavelength_um, start, end, to_image, record, apertures, indices)
     n = media_indices(lens, wavelength_um) if indices is None else indices
     zv = lens.vertex_z()
-    steps = _steps(lens, start, end, to_image, apertures)
+    chunk_steps = steps(lens, start, end, to_image, apertures)
     batch = tuple(rays.shape)
     device = rays.opl.device
     B = int(np.prod(batch)) if len(batch) else 1
@@ -500,37 +335,19 @@ def trace(
     out_valid = torch.empty(B, dtype=torch.bool, device=device)
     status = torch.empty(B, dtype=torch.int8, device=device)
     failed_at = torch.empty(B, dtype=torch.int16, device=device)
-    rec = torch.empty(len(steps), B, 3, dtype=DTYPE, device=device) if record and steps else None
-    z0, z_last = float(zv[start]) if start < len(zv) else 0.0, float(zv[steps[-1].index]) if steps else 0.0
+    rec = torch.empty(len(chunk_steps), B, 3, dtype=DTYPE, device=device) if record and chunk_steps else None
+    z0 = float(zv[start]) if start < len(zv) else 0.0
 
     def run(task) -> None:
         a, b, nv = task
         p, d, o, v = (src.get(a, b) for src in sources)
-        comps = [
-            p[:, 0].clone(),
-            p[:, 1].clone(),
-            p[:, 2] - z0,
-            d[:, 0].clone(),
-            d[:, 1].clone(),
-            d[:, 2].clone(),
-            o.clone(),
-            v.clone(),
-        ]
-        nn = nv if isinstance(nv, list) else [nv[i, a:b] for i in range(nv.shape[0])]
-        chunk_rec = [rec[j, a:b] for j in range(len(steps))] if rec is not None else None
-        fail = torch.zeros(b - a, dtype=torch.int16, device=device)
-        if steps:
-            _trace_chunk(steps, comps, nn, fail, chunk_rec, zv)
-            comps[2].add_(z_last)
-        else:
-            comps[2].add_(z0)
-        for k in range(3):
-            out_pos[a:b, k].copy_(comps[k])
-            out_dir[a:b, k].copy_(comps[3 + k])
-        out_opl[a:b].copy_(comps[6])
-        out_valid[a:b].copy_(comps[7])
-        status[a:b].copy_(fail % 4)
-        failed_at[a:b].copy_(torch.div(fail, 4, rounding_mode="floor").sub_(1))
+        rows = [rec[j, a:b] for j in range(len(chunk_steps))] if rec is not None else None
+        sink = Sink(out_pos[a:b], out_dir[a:b], out_opl[a:b], out_valid[a:b], status[a:b], failed_at[a:b], rows)
+        if not chunk_steps:
+            sink.pos.copy_(p), sink.dirs.copy_(d), sink.opl.copy_(o), sink.valid.copy_(v)
+            sink.status.zero_(), sink.failed_at.fill_(-1)
+            return
+        trace_chunk(chunk_steps, Live.start(p, d, o, v, z0, chunk_indices(nv, a, b), sink), sink)
 
     chunk = CHUNK_RAYS if device.type == "cpu" else max(B, 1)
     tasks = []
@@ -555,5 +372,5 @@ def trace(
         out_opl.reshape(batch),
         out_valid.reshape(batch),
     )
-    surface_positions = rec.reshape((len(steps),) + tuple(batch) + (3,)) if rec is not None else None
+    surface_positions = rec.reshape((len(chunk_steps),) + tuple(batch) + (3,)) if rec is not None else None
     return TraceResult(out, status, failed_at, surface_positions)

@@ -26,9 +26,9 @@ def launch_at(
     fld, ex, ey = torch.broadcast_tensors(field, ep_xy[..., 0], ep_xy[..., 1])
     ez = z_ep.expand_as(ex) if isinstance(z_ep, torch.Tensor) else torch.full_like(ex, z_ep)
     through = torch.stack([ex, ey, ez], -1)
-    if lens.infinite_object:
-        a = torch.deg2rad(fld)
-        return through, torch.stack([torch.zeros_like(a), torch.sin(a), torch.cos(a)], -1)
+    if lens.infinite_object:  # one direction per field value: computed once, expanded over the points
+        a = torch.deg2rad(field)
+        return through, torch.stack([torch.zeros_like(a), torch.sin(a), torch.cos(a)], -1).expand(through.shape)
     d = lens.object_distance
     h = -(d + z_ep) * torch.tan(torch.deg2rad(fld)) if lens.launch_field_type == "angle" else fld
     src = torch.stack([torch.zeros_like(h), h, torch.full_like(h, -d)], -1)
@@ -48,8 +48,9 @@ def launch(
 def object_rays(lens: Lens, position: torch.Tensor, direction: torch.Tensor, n_object: torch.Tensor) -> Rays:
     """Rays with their starting OPL: plane wavefront through the origin for an object at
     infinity, zero at the object point otherwise."""
-    if lens.infinite_object:
-        opl = n_object * (position * direction).sum(-1)
+    if lens.infinite_object:  # the dot product term by term (a sum over a last axis of 3 is slow on CPU)
+        p, d = position.unbind(-1), direction.unbind(-1)
+        opl = n_object * (p[0] * d[0] + p[1] * d[1] + p[2] * d[2])
     else:
         opl = torch.zeros(position.shape[:-1], dtype=DTYPE, device=position.device) + 0 * n_object
     valid = torch.ones(opl.shape, dtype=torch.bool, device=position.device)
