@@ -87,7 +87,12 @@ def restore_command(
         "pixel at native scale (default: the image is a full frame).",
     ),
     tile: int = typer.Option(512, "--tile", help="Largest tile side in pixels."),
-    overlap: int = typer.Option(192, "--overlap", help="Least overlap of neighbouring tiles in pixels."),
+    overlap: int = typer.Option(
+        None,
+        "--overlap",
+        help="Least overlap of neighbouring tiles in pixels (default: the network's: 96 for NAFNet and the "
+        "PSF-informed network, 192 for the UNet).",
+    ),
     bits: int = typer.Option(0, "--bits", help="Output bit depth 8 or 16 (0: that of the input)."),
     device: str = typer.Option("cpu", "--device", help="cpu, cuda or cuda:N."),
     engine: str = typer.Option(
@@ -196,6 +201,11 @@ def restore_command(
     model, info, sensor_data, (sensor_w, sensor_h) = _load_model(
         checkpoint, None if zero_shot else lens_file, sensor_file, device, engine, threads
     )
+    if overlap is None:
+        from lensim.restore.infer import default_overlap
+
+        overlap = default_overlap(model)
+        _check_tiling(tile, overlap, default=True)
     lens_obj = check_zero_shot(info, sensor_data, lens_file, fno) if zero_shot else None
     _check_photos(photos, offset, (sensor_w, sensor_h), getattr(model, "uses_wiener", False))
     bank_dir: Path | None = bank
@@ -258,10 +268,23 @@ def _tile_memory(workers: int) -> Iterator[None]:
         ) from None
 
 
+def _check_tiling(tile: int, overlap: int | None, default: bool = False) -> None:
+    """--tile and --overlap (default: the network's overlap, checked once it is loaded)."""
+    if overlap is None:
+        overlap = 0
+    if tile < 16 or not 0 <= overlap < tile:
+        given = f"the network's default overlap {overlap}" if default else f"overlap {overlap}"
+        raise InputError(
+            "--tile/--overlap",
+            None,
+            f"expected a tile of at least 16 pixels and 0 <= overlap < tile, got tile {tile}, {given}",
+        )
+
+
 def _check_options(
     bits: int,
     tile: int,
-    overlap: int,
+    overlap: int | None,
     workers: int,
     threads: int,
     device: str,
@@ -275,12 +298,7 @@ def _check_options(
     choice(engine, ENGINES, "--engine")
     if bits not in (0, 8, 16):
         raise InputError("--bits", None, f"expected 8 or 16, got {bits}")
-    if tile < 16 or not 0 <= overlap < tile:
-        raise InputError(
-            "--tile/--overlap",
-            None,
-            f"expected a tile of at least 16 pixels and 0 <= overlap < tile, got tile {tile}, overlap {overlap}",
-        )
+    _check_tiling(tile, overlap)
     at_least(workers, 1, "--workers", what="a number of processes")
     at_least(threads, 0, "--threads", what="a number of threads (0: PyTorch's default)")
     if engine == "torch":

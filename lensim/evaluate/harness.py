@@ -131,7 +131,7 @@ def checkpoint_method(
     sensor: Mapping[str, Any] | None = None,
     device: str = "cpu",
     tile: int = 512,
-    overlap: int = 192,
+    overlap: int | None = None,
     arch: str | None = None,
 ) -> Method:
     """A trained network (`lensim train` run folder or checkpoint) as a method: each crop is

@@ -77,7 +77,7 @@ class RestoreSettings:
     checkpoint: str
     sensor: dict[str, Any]
     tile: int = 512
-    overlap: int = 192
+    overlap: int | None = None  # None: the network's (lensim.restore.infer.default_overlap)
     device: str = "cpu"
     allow_other_camera: bool = False
     shooting: dict[str, float] = field(default_factory=dict)

@@ -60,8 +60,9 @@ class OnnxEngine:
         source: the name used in error messages (default: the file name).
 
     Attributes: ``metadata`` (lensim.restore.export.onnx_metadata), size_multiple,
-    use_fov, settings_dim, uses_wiener and stage (the PSF-informed network's WienerStage,
-    else None); device/dtype are CPU float32 (the tiles' host arrays).
+    use_fov, settings_dim, uses_wiener, tile_overlap (the overlap the metadata records, the
+    default of lensim.restore.infer.default_overlap) and stage (the PSF-informed network's
+    WienerStage, else None); device/dtype are CPU float32 (the tiles' host arrays).
     """
 
     def __init__(
@@ -95,6 +96,7 @@ class OnnxEngine:
         self.use_fov = bool(self.metadata["use_fov"])
         self.settings_dim = int(self.metadata["settings_dim"])
         self.uses_wiener = bool(self.metadata["uses_wiener"])
+        self.tile_overlap = int((self.metadata.get("tiling") or {}).get("overlap") or 0) or None
         self.stage = None
         if self.uses_wiener:
             from lensim.restore.psf_stage import WienerStage

@@ -160,7 +160,7 @@ def _fov_metadata(sensor: Any) -> dict[str, Any]:
 def onnx_metadata(model: nn.Module, info: dict[str, Any], opset: int) -> dict[str, Any]:
     """The JSON metadata of an export: ``model`` the network, ``info`` what
     lensim.restore.checkpoint.load_checkpoint returned with it."""
-    from lensim.restore.infer import DEFAULT_OVERLAP, DEFAULT_TILE, default_margin
+    from lensim.restore.infer import DEFAULT_TILE, default_margin, default_overlap
 
     config = dict(getattr(model, "config", {}))
     graph = OnnxGraph(model)
@@ -213,8 +213,8 @@ def onnx_metadata(model: nn.Module, info: dict[str, Any], opset: int) -> dict[st
         "conditioning": info.get("conditioning"),
         "tiling": {
             "tile": DEFAULT_TILE,
-            "overlap": DEFAULT_OVERLAP,
-            "margin": default_margin(DEFAULT_OVERLAP),
+            "overlap": default_overlap(model),
+            "margin": default_margin(default_overlap(model)),
             "tile_origin_multiple": graph.multiple,
         },
     }

@@ -27,8 +27,9 @@ than the overlap, with a warning; below that an OutOfMemory names the tile. Meas
 CPU: a 512-pixel tile of the paper's UNet peaks at about 1.3 GB (the full-resolution
 deformable conv lays its 9 samples out as a (C, 3H, 3W) image), a width-8 network at about
 0.4 GB; a 24-megapixel image takes 0.29 GB each for input and output. Smaller tiles cut
-the tile term (roughly with the tile area) at the cost of more overlap work: with the
-default tile 512 / overlap 192 each pixel is computed about 2.6 times.
+the tile term (roughly with the tile area) at the cost of more overlap work: with tiles of
+512 px each pixel is computed about 2.6 times at overlap 192 (the UNet's default) and 1.5
+times at overlap 96 (NAFNet's and the PSF-informed network's: :func:`default_overlap`).
 
 Sensor mapping (:func:`image_sensor_geometry`): a photo is assumed to be a full sensor
 frame mapped like lensim.render.mapping.map_to_sensor (fitted inside the sensor, centred, the
@@ -48,9 +49,18 @@ from lensim.errors import OutOfMemory, out_of_memory
 from lensim.restore.conditioning import batch_settings
 from lensim.restore.fov import fov_channels
 
-#: `lensim restore`'s tiling defaults (pixels)
+#: `lensim restore`'s tiling defaults (pixels); DEFAULT_OVERLAP is for a network that names
+#: no overlap of its own (the paper's UNet: margin 72 px > its 58 px receptive field)
 DEFAULT_TILE = 512
 DEFAULT_OVERLAP = 192
+
+
+def default_overlap(model: object) -> int:
+    """The tile overlap (pixels) restore_image uses for a network or engine by default: its
+    ``tile_overlap`` when it names one (NAFNet and the PSF-informed network: 96, see
+    lensim.restore.nafnet; an exported model: the overlap its metadata records), else
+    DEFAULT_OVERLAP."""
+    return int(getattr(model, "tile_overlap", None) or DEFAULT_OVERLAP)
 
 
 def default_margin(overlap: int) -> int:
@@ -96,6 +106,7 @@ class TorchEngine:
         self.size_multiple = int(getattr(model, "size_multiple", 1))
         self.use_fov = bool(getattr(model, "use_fov", True))
         self.settings_dim = int(getattr(model, "settings_dim", 0) or 0)
+        self.tile_overlap = default_overlap(model)
         self.device = param.device
         self.dtype = param.dtype
 
@@ -205,7 +216,7 @@ def restore_image(
     sensor_top_left: tuple[float, float],
     sensor_size: tuple[float, float],
     tile: int = DEFAULT_TILE,
-    overlap: int = DEFAULT_OVERLAP,
+    overlap: int | None = None,
     margin: int | None = None,
     progress: Callable[[int, int], None] | None = None,
     settings: torch.Tensor | None = None,
@@ -223,7 +234,8 @@ def restore_image(
         sensor_size: (height, width) of the sensor in image pixels.
         tile: largest tile side in pixels (rounded down to a multiple of model.size_multiple);
             halved while a tile runs out of memory (smaller_tile; a UserWarning says so).
-        overlap: least overlap of neighbouring tiles in pixels (< tile).
+        overlap: least overlap of neighbouring tiles in pixels (< tile); None: the
+            network's (:func:`default_overlap`).
         margin: pixels next to an inner tile edge given weight 0 (default
             (overlap - overlap // 4) // 2, i.e. a linear ramp over the middle quarter).
         progress: called with (tiles done, tiles total).
@@ -254,6 +266,8 @@ def restore_image(
         raise ValueError(f"wiener must have the image's shape {tuple(image.shape)}, got {tuple(wiener.shape)}")
     m = engine.size_multiple
     tile = max(m, tile // m * m)
+    if overlap is None:
+        overlap = default_overlap(engine)
     if not 0 <= overlap < tile:
         raise ValueError(f"overlap must be in [0, tile={tile}), got {overlap}")
     if margin is None:
