@@ -252,11 +252,11 @@ def _index_groups(
     if len(wl_shape) <= len(batch):
         ws = (1,) * (len(batch) - len(wl_shape)) + wl_shape
         a = max(i for i, v in enumerate(ws) if v > 1)
-        if all(ws[i] == batch[i] for i in range(a + 1)):
-            block = int(np.prod(batch[a + 1 :])) if a + 1 < len(batch) else 1
-            if block >= CHUNK_RAYS // 4:
-                cols = n.reshape(S1, -1).detach().cpu().numpy()
-                return [(b * block, (b + 1) * block, [float(v) for v in cols[:, b]]) for b in range(B // block)]
+        block = int(np.prod(batch[a + 1 :])) if a + 1 < len(batch) else 1
+        if block >= CHUNK_RAYS // 4:  # each block's wavelength, also where leading axes broadcast
+            cols = n.reshape(S1, -1).detach().cpu().numpy()
+            which = np.broadcast_to(np.arange(cols.shape[1]).reshape(ws[: a + 1]), batch[: a + 1]).reshape(-1)
+            return [(b * block, (b + 1) * block, [float(v) for v in cols[:, w]]) for b, w in enumerate(which)]
     full = n.reshape((S1,) + (1,) * (len(batch) - len(wl_shape)) + wl_shape).expand((S1,) + tuple(batch))
     return [(0, B, full.reshape(S1, B))]
 

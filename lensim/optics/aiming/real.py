@@ -63,17 +63,16 @@ class _Problem:
         )
         return res.rays.position[..., :2], res.rays.valid
 
-    def jacobian(self, x: torch.Tensor, s0: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """d(stop xy)/d(x) (..., 2, 2) by forward differences, and where both probes traced."""
+    def probe(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """stop_xy at x (..., 2) and its Jacobian d(stop xy)/d(x) (..., 2, 2) by forward
+        differences, from one trace of x and its two probes (a small batch costs about as
+        much as a single ray): (stop xy, reached, Jacobian, both probes reached)."""
         h = 1e-7 * self.scale
-        cols, ok = [], torch.ones(x.shape[:-1], dtype=torch.bool, device=x.device)
-        for k in range(2):
-            dx = torch.zeros_like(x)
-            dx[..., k] = h
-            s, v = self.stop_xy(x + dx)
-            cols.append((s - s0) / h)
-            ok = ok & v
-        return torch.stack(cols, -1), ok
+        pts = torch.stack([x, x, x])
+        pts[1, ..., 0] += h
+        pts[2, ..., 1] += h
+        s, v = self.stop_xy(pts)
+        return s[0], v[0], torch.stack([(s[1] - s[0]) / h, (s[2] - s[0]) / h], -1), v[1] & v[2]
 
 
 def _solve2(jac: torch.Tensor, r: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -93,7 +92,7 @@ def _newton(pb: _Problem, x: torch.Tensor, target: torch.Tensor, max_iter: int =
     to rounding); one whose full steps gain nothing STALL_ITERATIONS times is given up (a
     target out of its reach). Once fewer than a quarter of the rays still move, only those
     are traced. Returns (x, converged)."""
-    s0, v0 = pb.stop_xy(x)
+    s0, v0, jac, probes_ok = pb.probe(x)  # each trace probes the Jacobian at its points too
     miss = (s0 - target).abs().amax(-1)
     final = torch.zeros_like(v0)  # polished to rounding, or no step keeps the ray
     stall = torch.zeros(v0.shape, dtype=torch.int16, device=v0.device)  # iterations without progress
@@ -108,7 +107,6 @@ def _newton(pb: _Problem, x: torch.Tensor, target: torch.Tensor, max_iter: int =
             x, conv = x.clone(), v0 & (miss < pb.tol)
             x[idx], conv[idx] = xs, ok
             return x, conv
-        jac, probes_ok = pb.jacobian(x, s0)
         step, inv_ok = _solve2(jac, s0 - target)
         norm = torch.linalg.norm(step, dim=-1, keepdim=True)
         limit = 0.5 * pb.scale  # far from the solution the map can be strongly non-linear
@@ -118,10 +116,10 @@ def _newton(pb: _Problem, x: torch.Tensor, target: torch.Tensor, max_iter: int =
         if not bool(active.any()):
             break
         cand = torch.where(active.unsqueeze(-1), x - step, x)
-        sc, vc = pb.stop_xy(cand)
+        sc, vc, jac_c, ok_c = pb.probe(cand)
         lost = active & ~vc
         if bool(lost.any()):
-            cand, sc, vc = _backtrack(pb, x, step, lost, cand, sc, vc)
+            cand, sc, vc, jac_c, ok_c = _backtrack(pb, x, step, lost, (cand, sc, vc, jac_c, ok_c))
         miss_c = (sc - target).abs().amax(-1)
         accept = active & vc & ((miss_c < miss) | (miss >= pb.tol))  # within tolerance: only improvements
         progress = accept & (clipped | (miss_c < 0.9 * miss))  # a damped step is progress
@@ -129,6 +127,8 @@ def _newton(pb: _Problem, x: torch.Tensor, target: torch.Tensor, max_iter: int =
         final = final | (active & ~accept) | (stall >= STALL_ITERATIONS)  # a target out of reach: give up
         x = torch.where(accept.unsqueeze(-1), cand, x)
         s0 = torch.where(accept.unsqueeze(-1), sc, s0)
+        jac = torch.where(accept.unsqueeze(-1).unsqueeze(-1), jac_c, jac)
+        probes_ok = torch.where(accept, ok_c, probes_ok)
         miss = torch.where(accept, miss_c, miss)
     return x, v0 & (miss < pb.tol)
 
@@ -138,29 +138,29 @@ def _backtrack(
     x: torch.Tensor,
     step: torch.Tensor,
     lost: torch.Tensor,
-    cand: torch.Tensor,
-    sc: torch.Tensor,
-    vc: torch.Tensor,
-) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    probed: tuple[torch.Tensor, ...],
+) -> tuple[torch.Tensor, ...]:
     """Halve the steps of the rays that a full step lost (lost: a mask over x's batch) until
     their rays trace again, at most BACKTRACK_HALVINGS times, tracing only those rays.
-    Returns updated copies of (cand, sc, vc)."""
+    probed: the full steps' (candidates, stop xy, reached, Jacobian, probes reached);
+    returns updated copies, the lost rays' taken at their shortened steps."""
     sub, idx = _subset(pb, lost)
     xs, ss = x[idx], step[idx]
     found = torch.zeros(xs.shape[:-1], dtype=torch.bool, device=x.device)
-    s_found = torch.zeros_like(xs)
     for _ in range(BACKTRACK_HALVINGS):
         ss = torch.where(found.unsqueeze(-1), ss, 0.5 * ss)
-        s_try, v_try = sub.stop_xy(xs - ss)
-        s_found = torch.where((v_try & ~found).unsqueeze(-1), s_try, s_found)
+        _, v_try = sub.stop_xy(xs - ss)
         found = found | v_try
         if bool(found.all()):
             break
-    cand, sc, vc = cand.clone(), sc.clone(), vc.clone()
+    cand, sc, vc, jac, ok = (t.clone() for t in probed)
     cand[idx] = torch.where(found.unsqueeze(-1), xs - ss, cand[idx])
-    sc[idx] = torch.where(found.unsqueeze(-1), s_found, sc[idx])
-    vc[idx] = found
-    return cand, sc, vc
+    s_new, v_new, jac_new, ok_new = sub.probe(cand[idx])  # the Jacobian at the shortened steps
+    sc[idx] = torch.where(found.unsqueeze(-1), s_new, sc[idx])
+    vc[idx] = found & v_new
+    jac[idx] = jac_new
+    ok[idx] = ok_new
+    return cand, sc, vc, jac, ok
 
 
 def _first_surface_reach(lens: Lens, para: ParaxialData) -> float:
@@ -320,8 +320,7 @@ def aim_real(
         if bool(conv.all()):
             return x, conv
     chief, chief_ok = _aim_chief(lens, field, wl, n, para)
-    s_chief, _ = pb.stop_xy(chief)
-    jac, jac_ok = pb.jacobian(chief, s_chief)
+    _, _, jac, jac_ok = pb.probe(chief)
     model, inv_ok = _solve2(jac, target.reshape(1, 1, P, 2))  # the chief ray's linear pupil model
     use_model = (chief_ok & jac_ok & inv_ok).expand(W, F, P)
     paraxial = (pupil.to(DTYPE) * (para.epd_mm / 2.0)).expand(W, F, P, 2)
