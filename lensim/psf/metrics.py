@@ -38,18 +38,19 @@ def encircled_energy_radii(
 def _sub_samples(
     psf: np.ndarray, spacing_um: float, sub: int, band_limited: bool
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """x, y (um, from the window's centre sample grid//2) and energy of sub x sub points
-    per sample, the total energy kept. band_limited: the PSF read as samples of a
-    band-limited irradiance (a diffraction PSF sampled finer than lambda N / 2, as
-    lensim's are), Fourier-interpolated onto the points (zero-padded FFT); otherwise (a
-    ray histogram) each sample's energy shared evenly over the points inside its cell."""
+    """The x (columns) and y (rows) axes (um, from the window's centre sample grid//2) of
+    sub x sub points per sample, and their energy (rows y, columns x), the total energy
+    kept. band_limited: the PSF read as samples of a band-limited irradiance (a
+    diffraction PSF sampled finer than lambda N / 2, as lensim's are), Fourier-interpolated
+    onto the points (zero-padded FFT); otherwise (a ray histogram) each sample's energy
+    shared evenly over the points inside its cell."""
     n_y, n_x = psf.shape
-    if band_limited:
-        spec = np.fft.fftshift(np.fft.fft2(psf))
+    if band_limited:  # the spectrum zero-padded about frequency 0, in FFT order
+        rows = np.fft.fftfreq(n_y, 1.0 / n_y).astype(np.int64) % (n_y * sub)
+        cols = np.fft.fftfreq(n_x, 1.0 / n_x).astype(np.int64) % (n_x * sub)
         big = np.zeros((n_y * sub, n_x * sub), dtype=np.complex128)
-        y0, x0 = n_y * sub // 2 - n_y // 2, n_x * sub // 2 - n_x // 2
-        big[y0 : y0 + n_y, x0 : x0 + n_x] = spec
-        e = np.clip(np.fft.ifft2(np.fft.ifftshift(big)).real, 0.0, None)
+        big[np.ix_(rows, cols)] = np.fft.fft2(psf)
+        e = np.clip(np.fft.ifft2(big).real, 0.0, None)
         fx, fy = np.arange(n_x * sub) / sub, np.arange(n_y * sub) / sub  # in samples
     else:
         e = np.repeat(np.repeat(psf, sub, axis=0), sub, axis=1)
@@ -57,9 +58,7 @@ def _sub_samples(
         fx = (np.arange(n_x)[:, None] + off[None, :]).ravel()
         fy = (np.arange(n_y)[:, None] + off[None, :]).ravel()
     e = e * (psf.sum() / e.sum()) if e.sum() > 0 else e
-    x = np.broadcast_to(((fx - n_x // 2) * spacing_um)[None, :], e.shape)
-    y = np.broadcast_to(((fy - n_y // 2) * spacing_um)[:, None], e.shape)
-    return x.ravel(), y.ravel(), e.ravel()
+    return (fx - n_x // 2) * spacing_um, (fy - n_y // 2) * spacing_um, e
 
 
 def psf_centroid_um(psf: np.ndarray, spacing_um: float) -> tuple[float, float]:
@@ -94,27 +93,26 @@ def enclosed_energy(
     cx, cy = psf_centroid_um(psf, spacing_um) if centre_um is None else centre_um
     x, y, e = _sub_samples(psf, spacing_um, sub, band_limited)
     if shape == "circle":
-        d = np.hypot(x - cx, y - cy)
+        d = np.sqrt(((x - cx) ** 2)[None, :] + ((y - cy) ** 2)[:, None])
     elif shape == "square":
-        d = np.maximum(np.abs(x - cx), np.abs(y - cy))
+        d = np.maximum(np.abs(x - cx)[None, :], np.abs(y - cy)[:, None])
     else:
         raise ValueError(f"expected shape 'circle' or 'square', got {shape!r}")
     # each point's energy spread evenly over +-h/2 in distance (h the point spacing), so
     # that the curve does not step with the lattice: EE(r) = (A(r + h/2) - A(r - h/2)) / h,
-    # A(t) = sum_i e_i max(t - d_i, 0)
-    order = np.argsort(d)
-    d, e = d[order], e[order]
-    cum_e = np.concatenate([[0.0], np.cumsum(e)])
-    cum_ed = np.concatenate([[0.0], np.cumsum(e * d)])
+    # A(t) = sum_i e_i max(t - d_i, 0) = t E(t) - D(t), with E and D the sums of e_i and
+    # e_i d_i over d_i <= t: binned at the sorted distinct t (no sort of the points)
+    d, e = d.ravel(), e.ravel()
     h = spacing_um / sub
-
-    def antiderivative(t: np.ndarray) -> np.ndarray:
-        k = np.searchsorted(d, t, side="right")
-        return t * cum_e[k] - cum_ed[k]
-
     r = np.asarray(sizes_um, dtype=np.float64)
-    enclosed = (antiderivative(r + h / 2) - antiderivative(np.maximum(r - h / 2, 0.0))) / h
-    enclosed = np.where(r > 0, enclosed, 0.0)
+    t_all = np.concatenate([r + h / 2, np.maximum(r - h / 2, 0.0)])
+    ts = np.unique(t_all)
+    first = np.searchsorted(ts, d, side="left")  # the first t with d_i <= t
+    cum_e = np.cumsum(np.bincount(first, weights=e, minlength=ts.size + 1))[: ts.size]
+    cum_ed = np.cumsum(np.bincount(first, weights=e * d, minlength=ts.size + 1))[: ts.size]
+    area = ts * cum_e - cum_ed
+    a_hi, a_lo = np.split(area[np.searchsorted(ts, t_all)], 2)
+    enclosed = np.where(r > 0, (a_hi - a_lo) / h, 0.0)
     return enclosed / (psf.sum() if total is None else total)
 
 
