@@ -94,6 +94,7 @@ def test_entry(entry: LibraryLens):
     assert abs(launch[-1]) == pytest.approx(entry.half_field_deg, abs=0.02)
     height = abs(chief_ray_image_height(lens, launch[-1], "real", para))
     assert height == pytest.approx(entry.image_height_mm, rel=1e-3, abs=1e-3)
+    assert abs(lens.total_track) == pytest.approx(entry.track_mm, abs=1e-3)
 
     rays, wl = generate_rays(lens, launch, hexapolar(3), list(lens.wavelengths_um), "real", para)
     result = trace(lens, rays, wl)

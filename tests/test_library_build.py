@@ -89,6 +89,9 @@ def test_plan_of_other_settings_is_refused(tmp_path, monkeypatch):
 def test_near_focus_and_pitches_are_physical():
     e = library_entry("cooke_triplet")
     assert lb.near_focus_m(e) == pytest.approx(1.0)
+    fisheye = library_entry("laikin_fisheye_170deg_f1.8")  # f = 5.2 mm, 197 mm long
+    assert lb.near_focus_m(fisheye) == pytest.approx(2.0 * fisheye.track_mm / 1000.0, abs=1e-3)
+    assert lb.near_focus_m(fisheye) > fisheye.track_mm / 1000.0 > 20 * fisheye.focal_mm / 1000.0
     (w1, p1), (w2, p2) = lb.plan_pitches(e)
     assert p2 / p1 == pytest.approx(w1 / w2, rel=0.01)
     assert not math.isinf(lb.bank_plan([e])[-1].focus_m)

@@ -5,7 +5,8 @@ on a cluster by address), resumable.
 The plan (:func:`bank_plan`): each library entry (lensim.assets.library) at
 
 * two F-numbers: wide open (the entry's F-number) and two stops down (twice it);
-* two focus distances: infinity and a near distance of 20 focal lengths (at least 0.1 m);
+* two focus distances: infinity and a near distance of 20 focal lengths (at least 0.1 m and
+  twice the lens's length);
 * two pixel pitches: the entry is used on a 3:2 sensor of its own format (the largest that
   its image circle covers, at most full frame, 21.63 mm half diagonal), at 6000 and at
   4000 pixels across (a 24 MP and a 10 MP sensor of that format), so the blur in pixels is
@@ -63,9 +64,12 @@ SENSOR_WIDTHS_PX = (6000, 4000)
 MAX_HALF_DIAGONAL_MM = 21.63
 #: how far down from wide open the second F-number is (a factor: 2 = two stops)
 STOPPED_DOWN = 2.0
-#: near focus distance in focal lengths, and its floor (m)
+#: near focus distance in focal lengths, and its floors: in m, and in lengths of the lens
+#: (first vertex to image plane: the 197 mm fisheye of f = 5.2 mm would otherwise focus at
+#: 0.104 m, inside its own front element)
 NEAR_FOCAL_LENGTHS = 20.0
 NEAR_MIN_M = 0.1
+NEAR_MIN_TRACKS = 2.0
 #: the smallest pitch (um) of the first and of the second width: tiny image circles
 #: (long catadioptrics) go on sensors of fewer pixels, not on pixels smaller than a phone's
 MIN_PITCH_UM = (0.7, 1.05)
@@ -117,8 +121,10 @@ def plan_pitches(entry: LibraryLens) -> list[tuple[int, float]]:
 
 
 def near_focus_m(entry: LibraryLens) -> float:
-    """The near focus distance (m): NEAR_FOCAL_LENGTHS focal lengths, at least NEAR_MIN_M."""
-    return round(max(NEAR_MIN_M, NEAR_FOCAL_LENGTHS * entry.focal_mm / 1000.0), 3)
+    """The near focus distance (m, from the image plane): NEAR_FOCAL_LENGTHS focal lengths,
+    at least NEAR_MIN_M and NEAR_MIN_TRACKS lengths of the lens (entry.track_mm)."""
+    near_mm = max(1000.0 * NEAR_MIN_M, NEAR_FOCAL_LENGTHS * entry.focal_mm, NEAR_MIN_TRACKS * entry.track_mm)
+    return round(near_mm / 1000.0, 3)
 
 
 def bank_id(lens: str, pitch_um: float, fno: float, focus_m: float) -> str:

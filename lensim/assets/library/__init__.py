@@ -57,7 +57,8 @@ class LibraryLens:
     """One library entry. focal_mm: the source's focal length (mm, see ``focal_basis``);
     fno: the F-number the entry is traced at (its maximum aperture); half_field_deg: the
     half field of view (deg) at its largest field; image_height_mm: the largest real
-    image height (mm) the entry is traced to; config: the zoom configuration (None for a
+    image height (mm) the entry is traced to; track_mm: the lens's length (mm, its first
+    vertex's distance from the image plane); config: the zoom configuration (None for a
     lens without configurations)."""
 
     name: str
@@ -70,6 +71,7 @@ class LibraryLens:
     fno: float
     half_field_deg: float
     image_height_mm: float
+    track_mm: float
     holdout: bool
     config: str | None = None
 
@@ -91,6 +93,7 @@ _FIELDS = {
     "fno": float,
     "half_field_deg": float,
     "image_height_mm": float,
+    "track_mm": float,
     "holdout": bool,
 }
 
