@@ -47,10 +47,13 @@ Normal = tuple[T, T, T]
 _KINDS: list[type[Geometry]] = []  # every subclass of Geometry, in the order defined
 
 
-def sqrt_nonneg(u: torch.Tensor) -> torch.Tensor:
+def sqrt_nonneg(u: torch.Tensor, positive: bool = False) -> torch.Tensor:
     """Square root of u >= 0, computed as u * rsqrt(u): torch's CPU sqrt kernel splits any
     tensor above 2048 elements across threads (its rsqrt does not), and on a busy 2-core
-    machine every such parallel region waits milliseconds for a descheduled thread."""
+    machine every such parallel region waits milliseconds for a descheduled thread.
+    positive: every u is known to exceed 1e-300 (rsqrt needs no clamp)."""
+    if positive:
+        return torch.rsqrt(u).mul_(u)
     return u * torch.rsqrt(torch.clamp(u, min=1e-300))
 
 
@@ -62,11 +65,23 @@ def narrow(hit: torch.Tensor | None, mask: torch.Tensor) -> torch.Tensor:
 def with_sign_of(v: torch.Tensor, s: torch.Tensor) -> torch.Tensor:
     """v >= 0 with the sign of s, in place (copysign); where s has one sign throughout (one
     reduction) a negation or nothing, cheaper than torch's copysign."""
-    if float(s.amin()) > 0.0:
+    lo, hi = (float(m) for m in torch.aminmax(s))
+    if lo > 0.0:
         return v
-    if float(s.amax()) < 0.0:
+    if hi < 0.0:
         return v.neg_()
     return v.copysign_(s)
+
+
+def plus_with_sign_of(b: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+    """b + copysign(v, b) for v >= 0 (a quadratic's root away from cancellation): a
+    difference or a sum where b has one sign throughout (one reduction)."""
+    lo, hi = (float(m) for m in torch.aminmax(b))
+    if hi < 0.0:
+        return torch.sub(b, v)
+    if lo > 0.0:
+        return torch.add(b, v)
+    return v.copysign_(b).add_(b)
 
 
 def _steep(N: torch.Tensor) -> bool:
@@ -311,10 +326,10 @@ class Conic(Geometry):
 
     def hit_chunk(self, x: T, y: T, z: T, L: T, M: T, N: T) -> tuple[T, T | None]:
         c, k = self.curvature, self.conic
-        t = torch.div(z, N).neg_()  # to the vertex plane
+        back = torch.div(z, N)  # minus the path to the vertex plane
         hit = None if _steep(N) else N.abs() > _FLAT_DZ
-        x1 = torch.addcmul(x, t, L)
-        y1 = torch.addcmul(y, t, M)
+        x1 = torch.addcmul(x, back, L, value=-1.0)
+        y1 = torch.addcmul(y, back, M, value=-1.0)
         r2 = x1 * x1
         r2.addcmul_(y1, y1)
         b = x1 * L
@@ -326,13 +341,14 @@ class Conic(Geometry):
             a = N * N
             a.mul_(c * k).add_(c)
             disc.addcmul_(a, r2, value=-c)
-        if not float(disc.amin()) >= 0.0:
+        low = float(disc.amin())
+        if not low >= 0.0:
             hit = narrow(hit, disc >= 0.0)
             disc.clamp_(min=0.0)
-        denom = with_sign_of(sqrt_nonneg(disc), b).add_(b)
+        denom = plus_with_sign_of(b, sqrt_nonneg(disc, positive=low > 1e-300))
         t1 = r2.mul_(-c).div_(denom)  # conic root measured from the vertex plane
         t1, hit = self.refine_chunk(x1, y1, L, M, N, t1, hit)
-        t.add_(t1)
+        t = t1.sub_(back)
         if not _finite(t):
             hit = narrow(hit, torch.isfinite(t))
         if self._leaves_domain():

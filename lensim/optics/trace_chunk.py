@@ -283,7 +283,8 @@ def _refract(st: Step, live: Live, sink: Sink, j: int) -> None:
     else:
         mu2 = mu * mu
         ct.mul_(mu2).sub_(mu2).add_(1.0)
-    if not (scalar and mu <= 1.0) and not float(ct.amin()) >= 0.0:  # TIR needs n1 > n2
+    low = 1.0 - mu * mu if scalar and mu <= 1.0 else float(ct.amin())  # TIR needs n1 > n2
+    if not low >= 0.0:
         tir = ct < 0.0
         if bool(tir.any()):
             kept = live.drop(tir, TIR, st, sink, j + 1, [ct, cos_i, mu, *(nrm or ())])
@@ -292,7 +293,7 @@ def _refract(st: Step, live: Live, sink: Sink, j: int) -> None:
             if not len(live):
                 return
         ct.clamp_(min=0.0)
-    kk = with_sign_of(sqrt_nonneg(ct), cos_i).sub_(cos_i.mul_(mu))
+    kk = with_sign_of(sqrt_nonneg(ct, positive=low > 1e-300), cos_i).sub_(cos_i.mul_(mu))
     live.L.mul_(mu)
     live.M.mul_(mu)
     live.N.mul_(mu)

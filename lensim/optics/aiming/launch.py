@@ -50,7 +50,12 @@ def object_rays(lens: Lens, position: torch.Tensor, direction: torch.Tensor, n_o
     infinity, zero at the object point otherwise."""
     if lens.infinite_object:  # the dot product term by term (a sum over a last axis of 3 is slow on CPU)
         p, d = position.unbind(-1), direction.unbind(-1)
-        opl = n_object * (p[0] * d[0] + p[1] * d[1] + p[2] * d[2])
+        if position.requires_grad or direction.requires_grad or n_object.requires_grad:
+            opl = n_object * (p[0] * d[0] + p[1] * d[1] + p[2] * d[2])
+        else:  # the same sums with two temporaries (each fresh multi-MB tensor costs page faults)
+            opl, term = p[0] * d[0], p[1] * d[1]
+            opl.add_(term).add_(torch.mul(p[2], d[2], out=term))
+            opl = n_object * opl
     else:
         opl = torch.zeros(position.shape[:-1], dtype=DTYPE, device=position.device) + 0 * n_object
     valid = torch.ones(opl.shape, dtype=torch.bool, device=position.device)
