@@ -535,3 +535,13 @@ def test_a_demo_folder_refuses_other_shooting_settings(tmp_path, capsys, monkeyp
     code, _, err = run_cli(["demo", "--quick", "--fno", "8", "-o", str(tmp_path)], capsys, monkeypatch)
     assert code == 2 and "demo.json" in err and "shooting=None" in err and err.count("\n") == 1
     assert sorted(p.name for p in tmp_path.iterdir()) == ["demo.json"]
+
+
+def test_lens_at_settings_saves_as_yaml(tmp_path) -> None:
+    """A lens at shooting settings (numpy numbers in its surfaces) writes as YAML and reads back."""
+    from lensim.optics.lens_file import save_lens
+
+    lens = lens_at(load_lens("phone_wide", warn=False), ShootingSettings(object_m=1.0, focus_m=1.0))
+    save_lens(lens, tmp_path / "at1m.yaml")
+    again = load_lens(tmp_path / "at1m.yaml", warn=False)
+    assert lens_to_dict(again) == lens_to_dict(lens)

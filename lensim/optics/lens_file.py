@@ -508,7 +508,8 @@ def keep_model_glasses(lens: Lens) -> Lens:
 def save_lens(lens: Lens, path: str | Path) -> None:
     """Write a lens in the native format (.json, or .yaml/.yml), atomically."""
     path = Path(path)
-    data = lens_to_dict(lens)
+    # numpy scalars (a lens at shooting settings carries them) as plain numbers: YAML's safe dumper refuses them
+    data = json.loads(json.dumps(lens_to_dict(lens), default=lambda v: v.item()))
     if path.suffix.lower() in (".yaml", ".yml"):
         import yaml
 
