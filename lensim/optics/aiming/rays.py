@@ -66,14 +66,9 @@ def generate_rays(
     fld = _tensor(np.atleast_1d(np.asarray(field, dtype=np.float64)), device)
     wl = _tensor(np.atleast_1d(np.asarray(wavelength_um, dtype=np.float64)), device).reshape(-1, 1, 1)
     n = media_indices(lens, wl)
-    r_ep = para.epd_mm / 2.0
-    ep_xy = pupil.to(DTYPE) * r_ep
-    W, F, P = wl.shape[0], fld.shape[0], pupil.shape[0]
+    W, F = wl.shape[0], fld.shape[0]
     if aiming == "paraxial":
-        pos, dirs = launch(lens, fld, ep_xy, para)
-        pos = pos.unsqueeze(0).expand(W, F, P, 3)
-        dirs = dirs.unsqueeze(0).expand(W, F, P, 3)
-        return object_rays(lens, pos, dirs, n[0]), wl
+        return _paraxial_rays(lens, fld, pupil, para, n[0], W), wl
     if aiming != "real":
         raise InputError(None, "aiming", f"expected 'paraxial' or 'real', got {aiming!r}")
     solved, converged = aim_real(lens, fld, pupil, wl, n, para, start)
@@ -82,6 +77,44 @@ def generate_rays(
     rays.valid = rays.valid & converged
     rays.entrance_xy = solved
     return rays, wl
+
+
+#: pupil points x fields x wavelengths per piece of a paraxial launch: below torch's grain
+#: size (32768), so each operation runs on one core (no OpenMP region whose threads spin
+#: while another process holds a core)
+LAUNCH_PIECE = 8192
+
+
+def _paraxial_rays(
+    lens: Lens, fld: torch.Tensor, pupil: torch.Tensor, para: ParaxialData, n0: torch.Tensor, W: int
+) -> Rays:
+    """Paraxially aimed rays (W, F, P) of fields fld (F,) through pupil points (P, 2),
+    launched and given their starting OPL (media index n0, (W, 1, 1)) in pieces of the
+    pupil of LAUNCH_PIECE elements (whole, where gradients flow or off the CPU)."""
+    F, P = fld.shape[0], pupil.shape[0]
+    r_ep = para.epd_mm / 2.0
+    step = max(1, LAUNCH_PIECE // (W * F))
+    whole = P <= step or pupil.device.type != "cpu" or pupil.requires_grad
+    if whole or isinstance(para.entrance_pupil_z_mm, torch.Tensor):
+        pos, dirs = launch(lens, fld, pupil.to(DTYPE) * r_ep, para)
+        return object_rays(lens, pos.unsqueeze(0).expand(W, F, P, 3), dirs.unsqueeze(0).expand(W, F, P, 3), n0)
+    pos = torch.empty(F, P, 3, dtype=DTYPE)
+    opl = torch.empty(W, F, P, dtype=DTYPE)
+    valid = torch.empty(W, F, P, dtype=torch.bool)
+    dirs: torch.Tensor | None = None
+    for a in range(0, P, step):
+        b = min(a + step, P)
+        pp, dd = launch(lens, fld, pupil[a:b].to(DTYPE) * r_ep, para)
+        if dirs is None:  # one direction per field (an object at infinity) stays expanded
+            dirs = dd[:, :1].expand(F, P, 3) if dd.stride(-2) == 0 else torch.empty(F, P, 3, dtype=DTYPE)
+        if dirs.stride(-2) != 0:
+            dirs[:, a:b].copy_(dd)
+        pos[:, a:b].copy_(pp)
+        piece = object_rays(lens, pp.unsqueeze(0).expand(W, F, b - a, 3), dd.unsqueeze(0).expand(W, F, b - a, 3), n0)
+        opl[..., a:b].copy_(piece.opl)
+        valid[..., a:b].fill_(True)
+    assert dirs is not None
+    return Rays(pos.unsqueeze(0).expand(W, F, P, 3), dirs.unsqueeze(0).expand(W, F, P, 3), opl, valid)
 
 
 def object_field(lens: Lens, value: float, aiming: Aiming = "paraxial", para: ParaxialData | None = None) -> float:
