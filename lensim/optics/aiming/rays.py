@@ -96,8 +96,8 @@ def _paraxial_rays(
     step = max(1, LAUNCH_PIECE // (W * F))
     whole = P <= step or pupil.device.type != "cpu" or pupil.requires_grad
     if whole or isinstance(para.entrance_pupil_z_mm, torch.Tensor):
-        pos, dirs = launch(lens, fld, pupil.to(DTYPE) * r_ep, para)
-        return object_rays(lens, pos.unsqueeze(0).expand(W, F, P, 3), dirs.unsqueeze(0).expand(W, F, P, 3), n0)
+        p_all, d_all = launch(lens, fld, pupil.to(DTYPE) * r_ep, para)
+        return object_rays(lens, p_all.unsqueeze(0).expand(W, F, P, 3), d_all.unsqueeze(0).expand(W, F, P, 3), n0)
     pos = torch.empty(F, P, 3, dtype=DTYPE)
     opl = torch.empty(W, F, P, dtype=DTYPE)
     valid = torch.empty(W, F, P, dtype=torch.bool)
