@@ -136,7 +136,7 @@ class Live:
         new = lost if self.dead is None else lost & ~self.dead
         idx = torch.nonzero(new)[:, 0]
         rows = idx if self.ids is None else self.ids[idx]
-        pos = self.xyz(st.z_vertex)[idx]
+        pos = torch.stack([self.x[idx], self.y[idx], self.z[idx] + st.z_vertex], -1)
         sink.pos.index_copy_(0, rows, pos)
         sink.dirs.index_copy_(0, rows, torch.stack([self.L[idx], self.M[idx], self.N[idx]], -1))
         sink.opl.index_copy_(0, rows, self.opl[idx])
