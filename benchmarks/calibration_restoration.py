@@ -253,16 +253,36 @@ def table(res: dict) -> str:
         for p in res["per_photo"]["input"]:
             cells = [res["per_photo"][n].get(p, {}).get(zone, float("nan")) for n in names]
             lines.append(f"| {p} | " + " | ".join(f"{c:.2f}" for c in cells) + " |")
+    lines += ["", "| network (trained on) | Wiener stage's bank | all | centre | middle | edge |"]
+    lines.append("| --- | --- | --- | --- | --- | --- |")
+    for m, by_stage in res.get("stage_swap", {}).items():
+        for stage, v in by_stage.items():
+            mark = " (its own)" if stage == MODELS[m] else ""
+            cells = " | ".join(f"{v[k]:.2f}" for k in ("all", *ZONES))
+            lines.append(f"| {m} | {stage}{mark} | {cells} |")
     lines += ["", "| model | steps | epochs | trained s | val PSNR |", "| --- | --- | --- | --- | --- |"]
     for n, t in res["training"].items():
         lines.append(f"| {n} | {t['steps']} | {t['epochs_done']} | {t['seconds']:.0f} | {t['val_psnr_db']:.2f} |")
     return "\n".join(lines) + "\n"
 
 
+def stage_swap(out: Path) -> dict[str, dict[str, dict]]:
+    """Each network's PSNR (all and per zone) with each stage bank evaluated so far."""
+    swap: dict[str, dict[str, dict]] = {}
+    for m, own in MODELS.items():
+        for stage in ("nominal", "calibrated", "truth"):
+            d = out / "evals" / (m if stage == own else f"{m}@{stage}") / "metrics.json"
+            if d.exists():
+                v = json.loads(d.read_text())["methods"]["model"]
+                swap.setdefault(m, {})[stage] = {"all": v["psnr_db"], **{z: v["zones"][z]["psnr_db"] for z in ZONES}}
+    return swap
+
+
 def report(out: Path, results: Path | None, runs: dict[str, dict], s: dict, seconds: float) -> None:
     """OUT/restoration.json and OUT/table.md from the stages done so far (copied to results)."""
     res = gather(out, runs, seconds)
     res["settings"] = s
+    res["stage_swap"] = stage_swap(out)
     (out / "restoration.json").write_text(json.dumps(res, indent=1))
     (out / "table.md").write_text(table(res))
     if results:
@@ -298,6 +318,12 @@ def main() -> None:
         runs[m] = train(args.out, m, pairs[m], s["budget"], s["train_crop"])
         evaluate(args.out, m, test, "input,model", bank_of(pairs[stage_lens]), args.out / "runs" / m)
         report(args.out, args.results, runs, s, before + time.perf_counter() - t0)
+    banks = {"nominal": bank_of(pairs["nominal"]), "calibrated": bank_of(pairs["calibrated"]), "truth": bank_of(test)}
+    for m in MODELS:  # every network with every stage bank: what the training pairs do, what the stage does
+        for stage, bank in banks.items():
+            if stage != MODELS[m]:
+                evaluate(args.out, f"{m}@{stage}", test, "input,model", bank, args.out / "runs" / m)
+    report(args.out, args.results, runs, s, before + time.perf_counter() - t0)
     elapsed.write_text(json.dumps({"seconds": before + time.perf_counter() - t0}))
     log("done")
 
