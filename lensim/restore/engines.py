@@ -96,7 +96,7 @@ class OnnxEngine:
         self.use_fov = bool(self.metadata["use_fov"])
         self.settings_dim = int(self.metadata["settings_dim"])
         self.uses_wiener = bool(self.metadata["uses_wiener"])
-        self.tile_overlap = int((self.metadata.get("tiling") or {}).get("overlap") or 0) or None
+        self.tile_overlap = (self.metadata.get("tiling") or {}).get("overlap")
         self.stage = None
         if self.uses_wiener:
             from lensim.restore.psf_stage import WienerStage

@@ -164,6 +164,7 @@ def onnx_metadata(model: nn.Module, info: dict[str, Any], opset: int) -> dict[st
 
     config = dict(getattr(model, "config", {}))
     graph = OnnxGraph(model)
+    overlap = default_overlap(model)
     sensor = info.get("sensor")
     inputs = {"rgb": "(N, 3, H, W) float32 sRGB in [0, 1]"}
     if graph.use_fov:
@@ -213,8 +214,8 @@ def onnx_metadata(model: nn.Module, info: dict[str, Any], opset: int) -> dict[st
         "conditioning": info.get("conditioning"),
         "tiling": {
             "tile": DEFAULT_TILE,
-            "overlap": default_overlap(model),
-            "margin": default_margin(default_overlap(model)),
+            "overlap": overlap,
+            "margin": default_margin(overlap),
             "tile_origin_multiple": graph.multiple,
         },
     }
