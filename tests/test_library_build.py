@@ -123,3 +123,50 @@ def test_a_spot_too_large_for_the_huygens_window_gets_geometric_psfs(tmp_path, m
     r = lb.compute_library_banks(tmp_path, [planned])
     assert (r.computed, r.failed) == (1, 0)
     assert PSFBank.load(lb.bank_dir(tmp_path, planned.id)).manifest["method"] == "geometric"
+
+
+def test_side_by_side_jobs_cross_process_boundaries(tmp_path):
+    """The jobs --workers N sends to Dask workers are plain picklable data with module-level
+    functions (the spawn test below is slow)."""
+    import pickle
+
+    from lensim.data import library_pairs as lp
+
+    planned = lb.bank_plan([library_entry("cooke_triplet")])[0]
+    job = (tmp_path, planned, TINY)
+    assert pickle.loads(pickle.dumps(job)) == job
+    pairs_job = lp._PairsJob(tmp_path, tmp_path, tmp_path, tmp_path / "s.yaml", LibraryPairsSettings())
+    assert pickle.loads(pickle.dumps(pairs_job)) == pairs_job
+    assert pickle.loads(pickle.dumps(lb._bank_job)) is lb._bank_job
+    assert pickle.loads(pickle.dumps(lp._bank_pairs)) is lp._bank_pairs
+
+
+@pytest.mark.slow
+def test_banks_and_pairs_side_by_side_on_workers_match_one_process(tmp_path, monkeypatch):
+    """--workers 2: whole banks (and whole banks' pairs) computed side by side in Dask worker
+    processes give the same files as one process, and a bank the lens cannot give is still
+    recorded (not raised)."""
+    import numpy as np
+
+    monkeypatch.setattr(lb, "LIBRARY_BANK_SETTINGS", TINY)
+    cooke = lb.bank_plan([library_entry("cooke_triplet")])
+    bad = dataclasses.replace(cooke[0], id="cooke_too_fast", fno=1.0)
+    plan = [cooke[0], cooke[2], bad]
+    settings = LibraryPairsSettings(photos_per_bank=1, placements=1, crops=1, size=32, photo_size=64)
+    runs = {}
+    for workers in (1, 2):
+        lib = tmp_path / f"lib{workers}"
+        seen = []
+        r = lb.compute_library_banks(lib, plan, workers=workers, progress=lambda d, t, seen=seen: seen.append((d, t)))
+        assert (r.computed, r.failed, r.todo) == (2, 1, 0)
+        assert seen[0] == (0, 3) and seen[-1] == (3, 3)
+        assert lb.bank_state(lib, bad.id) == "failed"
+        p = make_library_pairs(lib, tmp_path / f"pairs{workers}", settings, workers=workers)
+        assert (p.made, p.pairs) == (2, 2)
+        runs[workers] = lib
+    for planned in plan[:2]:
+        one, two = (PSFBank.load(lb.bank_dir(runs[w], planned.id)) for w in (1, 2))
+        assert np.array_equal(one.fields[-1].rgb_azimuths, two.fields[-1].rgb_azimuths)
+        for name in ("000000_000_input.png", "000000_000_target.png"):
+            a, b = (tmp_path / f"pairs{w}" / "pairs" / planned.id / "pairs" / name for w in (1, 2))
+            assert a.read_bytes() == b.read_bytes()

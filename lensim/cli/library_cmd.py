@@ -72,8 +72,9 @@ def banks_command(
     infinity and near, on two pixel pitches of its format (352 banks; lensim.data.library_banks).
 
     Resumable: a rerun skips the banks already done (and those the lens cannot give,
-    listed in failed/) and finishes the rest. The fields are computed here (--workers 1),
-    on a local Dask cluster (--workers N) or on an existing one (--scheduler ADDRESS).
+    listed in failed/) and finishes the rest. The banks are computed here (--workers 1),
+    side by side on a local Dask cluster (--workers N: one whole bank per worker at a time),
+    or each bank's fields on an existing cluster (--scheduler ADDRESS).
 
     Example: lensim library banks -o library/ --workers 2
     """
@@ -121,6 +122,7 @@ def pairs_command(
     training photos (never the unseen test photos), one pairs folder per bank.
 
     Resumable: a rerun skips the banks whose pairs are complete and adds banks computed since.
+    --workers N makes N banks' pairs side by side on a local Dask cluster.
 
     Example: lensim library pairs library/ -o library-pairs/
     """

@@ -35,12 +35,11 @@ keeps its finished fields). Units: pitches um, distances m, lengths mm.
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import math
 import shutil
 import warnings
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -240,12 +239,11 @@ def _get(out_dir: Path, planned: PlannedBank, settings: BankSettings, workers: i
     return bank
 
 
-def _one(out_dir: Path, planned: PlannedBank, workers: int, scheduler: str | None) -> bool:
-    """Compute one bank: Huygens PSFs (LIBRARY_BANK_SETTINGS), or geometric ones where the
-    spot is too large for the Huygens window of 64 pupil samples (the Huygens PSF of such a
-    blur is its geometric envelope); False (and its failed/ record) when the lens cannot
-    give the bank at all."""
-    settings = LIBRARY_BANK_SETTINGS
+def _one(out_dir: Path, planned: PlannedBank, workers: int, scheduler: str | None, settings: BankSettings) -> bool:
+    """Compute one bank: Huygens PSFs (settings: LIBRARY_BANK_SETTINGS), or geometric ones
+    where the spot is too large for the Huygens window of 64 pupil samples (the Huygens PSF
+    of such a blur is its geometric envelope); False (and its failed/ record) when the lens
+    cannot give the bank at all."""
     folder = bank_dir(out_dir, planned.id)
     if (folder / MANIFEST).exists() and read_json(folder / MANIFEST, "bank manifest").get("method") == "geometric":
         settings = dataclasses.replace(settings, method="geometric")  # resuming a fallback bank
@@ -290,9 +288,14 @@ def compute_library_banks(
 ) -> LibraryBanksResult:
     """Compute the library's banks into out_dir (module docstring), resuming: banks done or
     failed are skipped. plan: the banks (None: out_dir's plan.json, else bank_plan());
-    workers, scheduler: as get_banks' (each bank's fields spread over them); limit: at most
-    this many banks in this call (None: all); progress(done, total) counts banks
-    (done: complete or failed), once at the start and after each bank."""
+    workers > 1 (no scheduler): a local Dask cluster of that many processes computes whole
+    banks side by side, one bank per worker at a time (the library folder is theirs too);
+    scheduler: the cluster at that address computes each bank's fields, one bank after
+    another (its workers need not see the folder); limit: at most this many banks in this
+    call (None: all); progress(done, total) counts banks (done: complete or failed), once at
+    the start and after each bank."""
+    if workers < 1:
+        raise InputError(None, "workers", f"expected at least 1 worker, got {workers}")
     out = Path(out_dir)
     if plan is None:
         plan = read_plan(out) if (out / PLAN).exists() else bank_plan()
@@ -305,37 +308,32 @@ def compute_library_banks(
     if progress:
         progress(settled, len(plan))
     todo = [b for b in plan if state[b.id] == "todo"]
-    with _cluster(workers, scheduler, bool(todo)) as (n, address):
-        for k, planned in enumerate(todo):
-            if limit is not None and k >= limit:
-                result.todo = len(todo) - k
-                break
-            if _one(out, planned, n, address):
-                result.computed += 1
-            else:
-                result.failed += 1
-            settled += 1
-            if progress:
-                progress(settled, len(plan))
+    if limit is not None and len(todo) > limit:
+        result.todo = len(todo) - limit
+        todo = todo[:limit]
+
+    def settle(_: object, computed: bool) -> None:
+        nonlocal settled
+        result.computed += computed
+        result.failed += not computed
+        settled += 1
+        if progress:
+            progress(settled, len(plan))
+
+    if scheduler is None and workers > 1:
+        from lensim.workers import run_jobs
+
+        run_jobs(_bank_job, [(out, planned, LIBRARY_BANK_SETTINGS) for planned in todo], workers, None, settle)
+    else:
+        for planned in todo:
+            settle(planned, _one(out, planned, workers, scheduler, LIBRARY_BANK_SETTINGS))
     return result
 
 
-@contextlib.contextmanager
-def _cluster(workers: int, scheduler: str | None, needed: bool) -> Iterator[tuple[int, str | None]]:
-    """(workers, scheduler) for each bank's get_banks: a local Dask cluster of `workers`
-    processes started once for all the banks (workers > 1, no scheduler), else as given."""
-    if workers < 1:
-        raise InputError(None, "workers", f"expected at least 1 worker, got {workers}")
-    if scheduler is not None or workers <= 1 or not needed:
-        yield workers, scheduler
-        return
-    from lensim.workers import _local_cluster
-
-    cluster = _local_cluster(workers)
-    try:
-        yield workers, cluster.scheduler_address
-    finally:
-        cluster.close()
+def _bank_job(job: tuple[Path, PlannedBank, BankSettings]) -> bool:
+    """One whole bank in this process (a Dask worker's job): _one with one worker."""
+    out, planned, settings = job
+    return _one(out, planned, 1, None, settings)
 
 
 def library_banks(out_dir: str | Path, holdout: bool | None = None) -> list[tuple[PlannedBank, Path, Path]]:

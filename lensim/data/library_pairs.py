@@ -114,11 +114,10 @@ def make_library_pairs(
 ) -> LibraryPairsResult:
     """Pairs for every complete bank of the library folder (module docstring): the
     trainable lenses' banks (holdout False) or the held-out ones' (True); limit: at most
-    this many banks' pairs in this call. progress(done, total) counts banks."""
-    from lensim.data.pairs import make_dataset
-    from lensim.psf.bank import PSFBank
-    from lensim.sensor.profile import load_sensor
-
+    this many banks' pairs in this call; workers > 1 (no scheduler): a local Dask cluster of
+    that many processes makes whole banks' pairs side by side; scheduler: each bank's
+    photos are spread over the cluster at that address, one bank after another.
+    progress(done, total) counts banks."""
     s = settings or LibraryPairsSettings()
     s.check()
     banks = library_banks(library_dir, holdout=holdout)
@@ -126,35 +125,72 @@ def make_library_pairs(
         raise InputError(str(library_dir), None, "holds no complete library bank; expected a library bank build first")
     photos = training_photos(out_dir, s.photo_size)
     result = LibraryPairsResult(0, 0, 0)
-    for k, (planned, bdir, sensor_path) in enumerate(banks):
-        if progress:
-            progress(k, len(banks))
+    jobs: list[_PairsJob] = []
+    for planned, bdir, sensor_path in banks:
         target = pairs_dir(out_dir, planned.id)
         if (target / MANIFEST).exists():
             result.done += 1
-            continue
-        if limit is not None and result.made >= limit:
-            continue
-        folder = Path(out_dir) / "photos" / planned.id
-        _link_photos(folder, bank_photos(planned.id, photos, s.photos_per_bank, s.seed))
-        manifest = make_dataset(
-            folder,
-            target,
-            PSFBank.load(bdir),
-            str(sensor_path),
-            load_sensor(sensor_path),
-            crops=s.crops,
-            size=s.size,
-            seed=s.seed,
-            placements=s.placements,
-            workers=workers,
-            scheduler=scheduler,
-        )
+        elif limit is None or len(jobs) < limit:
+            folder = Path(out_dir) / "photos" / planned.id
+            _link_photos(folder, bank_photos(planned.id, photos, s.photos_per_bank, s.seed))
+            jobs.append(_PairsJob(folder, target, bdir, sensor_path, s))
+    settled = result.done
+    if progress:
+        progress(settled, len(banks))
+
+    def made(_: object, pairs: int) -> None:
+        nonlocal settled
         result.made += 1
-        result.pairs += int(manifest["pairs"])
+        result.pairs += pairs
+        settled += 1
+        if progress:
+            progress(settled, len(banks))
+
+    if scheduler is None and workers > 1:
+        from lensim.workers import run_jobs
+
+        run_jobs(_bank_pairs, jobs, workers, None, made)
+    else:
+        for job in jobs:
+            made(job, _bank_pairs(job, workers, scheduler))
     if progress:
         progress(len(banks), len(banks))
     return result
+
+
+@dataclass(frozen=True)
+class _PairsJob:
+    """One bank's pairs: its photos' folder, the pairs folder, the bank folder, its sensor
+    file and the settings."""
+
+    photos: Path
+    target: Path
+    bank: Path
+    sensor: Path
+    settings: LibraryPairsSettings
+
+
+def _bank_pairs(job: _PairsJob, workers: int = 1, scheduler: str | None = None) -> int:
+    """Make one bank's pairs folder (lensim.data.pairs.make_dataset); the pairs made."""
+    from lensim.data.pairs import make_dataset
+    from lensim.psf.bank import PSFBank
+    from lensim.sensor.profile import load_sensor
+
+    s = job.settings
+    manifest = make_dataset(
+        job.photos,
+        job.target,
+        PSFBank.load(job.bank),
+        str(job.sensor),
+        load_sensor(job.sensor),
+        crops=s.crops,
+        size=s.size,
+        seed=s.seed,
+        placements=s.placements,
+        workers=workers,
+        scheduler=scheduler,
+    )
+    return int(manifest["pairs"])
 
 
 def library_pair_folders(out_dir: str | Path) -> list[Path]:
