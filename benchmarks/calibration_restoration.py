@@ -17,8 +17,10 @@ The test pairs are simulated through the true perturbed lens from photos no trai
 contains (every TEST_EVERY-th built-in sample photo; the others are the training photos).
 Each network's Wiener stage uses the bank its user would have: the nominal lens's for (a)
 and (c), the calibrated lens's for (b) (`lensim evaluate --bank`); the Wiener oracle uses
-the true lens's bank. Scored by `lensim evaluate` per field zone (centre, middle, edge)
-and per photo.
+the true lens's bank. In training, (c)'s stage of each pair uses the bank of the draw the
+pair went through (lensim's rule for tolerance pairs; before, every pair's was draw 0's,
+and this script computed them all with the nominal lens's). Scored by `lensim evaluate`
+per field zone (centre, middle, edge) and per photo.
 
 A lens with decentres is not rotationally symmetric; its PSF bank is computed along +y
 and rotated to every azimuth like any bank (the test camera "is" that bank; the chart
@@ -154,17 +156,6 @@ def make_pairs(out: Path, name: str, photos: Path, lens: Path, s: dict, toleranc
 
 def bank_of(pairs: Path) -> str:
     return json.loads((pairs / "manifest.json").read_text())["bank"]
-
-
-def stage_with(pairs: Path, bank: str) -> None:
-    """The tolerance pairs' Wiener stage cache computed with `bank` (the nominal lens's, the
-    one the model's user has) before training, where lensim would take the first draw's."""
-    from lensim.restore.checkpoint import read_checkpoint
-    from lensim.restore.psf_stage import WienerStage, ensure_wiener_cache
-    from lensim.restore.universal import NAME, model_path
-
-    config = read_checkpoint(model_path(NAME))["model_config"]
-    ensure_wiener_cache(pairs, WienerStage.from_dict(config.get("stage")), bank=bank)
 
 
 def train(out: Path, name: str, pairs: Path, budget: float, crop: int) -> dict:
@@ -312,7 +303,6 @@ def main() -> None:
     for m, stage_lens in MODELS.items():  # one model after the other: a partial run reports what it has
         if m == "tolerances":
             pairs[m] = make_pairs(args.out, m, train_photos, lenses["nominal"], s, lenses["tolerances"])
-            stage_with(pairs[m], bank_of(pairs["nominal"]))
         elif m not in pairs:
             pairs[m] = make_pairs(args.out, m, train_photos, lenses[m], s)
         runs[m] = train(args.out, m, pairs[m], s["budget"], s["train_crop"])

@@ -254,3 +254,62 @@ def test_dataset_make_draws_pairs_through_perturbed_lenses(tmp_path, capsys, mon
     bad = [*args[:-6], "--tolerances", str(tol), "--fno", "4,5.6"]
     code, _, err = run_cli(bad, capsys, monkeypatch)
     assert code == 2 and "--tolerances" in err and err.count("\n") == 1
+    _stage_is_each_draws_own(tmp_path / "data", args, capsys, monkeypatch)
+
+
+def _stage_is_each_draws_own(data, args, capsys, monkeypatch):
+    """The Wiener stage of each tolerance pair is computed with its own draw's bank (not
+    draw 0's, as lensim did, nor the nominal lens's); the pairs' "bank" is the nominal lens's
+    (what a restoration has). A manifest from before (draw 0's bank as "bank") gets the same
+    stage, and making the pairs again rewrites it."""
+    import json
+    import shutil
+
+    from cli_runner import run_cli
+    from lensim.data.pairs import crop_capture
+    from lensim.images import read_image
+    from lensim.psf.bank import PSFBank
+    from lensim.render.mapping import native_mapping
+    from lensim.restore.psf_stage import cached_path, ensure_wiener_cache, wiener_channels
+    from lensim.sensor.profile import sensor_from_dict
+
+    manifest = json.loads((data / "manifest.json").read_text())
+    assert manifest["stage_bank"] == "tolerance_draw"
+    nominal = PSFBank.load(manifest["bank"])
+    draws = [PSFBank.load(d["bank"]) for d in manifest["tolerances"]["draws"]]
+    assert "as_built" not in nominal.manifest["lens"]
+    assert nominal.manifest["lens"]["surfaces"] == manifest["lens"]["surfaces"]
+    sensor = sensor_from_dict(manifest["sensor"])
+
+    def check(folder):
+        for rec in manifest["records"]:
+            crop = rec["crops"][0]
+            x, _ = read_image(data / crop["input"])
+            stored, _ = read_image(cached_path(folder, data / crop["input"]))
+            mapping = native_mapping(*x.shape[1:], sensor, crop["sensor_top"], crop["sensor_left"])
+            own, first, nom = (
+                wiener_channels(x, mapping, b, crop_capture(rec, crop)).clamp(0, 1)
+                for b in (draws[rec["tolerance_draw"]], draws[0], nominal)
+            )
+            assert (stored - own).abs().max() < 1.0 / 65535 + 1e-6
+            assert (stored - nom).abs().max() > 100 / 65535
+            if rec["tolerance_draw"] != 0:
+                assert (stored - first).abs().max() > 100 / 65535
+
+    folder = ensure_wiener_cache(data)
+    check(folder)
+    old = {k: v for k, v in manifest.items() if k != "stage_bank"}
+    old["bank"] = manifest["tolerances"]["draws"][0]["bank"]  # what lensim recorded before
+    (data / "manifest.json").write_text(json.dumps(old))
+    shutil.rmtree(data / "wiener")
+    assert ensure_wiener_cache(data) == folder
+    check(folder)
+    with pytest.raises(InputError, match="tolerance draws") as e:
+        ensure_wiener_cache(data, bank=nominal)
+    assert "\n" not in str(e.value)
+    settings = json.loads((data / "settings.json").read_text())
+    settings.pop("stage_bank")
+    (data / "settings.json").write_text(json.dumps({**settings, "bank": old["bank"]}))
+    code, _, err = run_cli(args, capsys, monkeypatch)
+    assert code == 0, err
+    assert json.loads((data / "manifest.json").read_text()) == manifest

@@ -142,7 +142,9 @@ def make(
 
     With --tolerances: --tolerance-draws perturbed lenses (draws 0..K-1 of --seed), one
     cached bank each; each photo goes through one of them, every draw equally often; records
-    carry "tolerance_draw", the manifest every draw's parameters.
+    carry "tolerance_draw", the manifest every draw's parameters. The pairs' bank (what a
+    restoration uses by default) is the nominal lens's; the PSF-informed network's Wiener
+    stage of each pair uses its own draw's bank.
 
     Example: lensim dataset make photos/ --lens double_gauss --sensor full_frame --fno 2,2.8,4 --focus-m inf,3 -o data/
 
@@ -267,9 +269,9 @@ def _tolerance_banks(
     quiet: bool,
     scheduler: str | None,
 ) -> ToleranceBanks:
-    """The banks of draws 0..draws-1 of `seed` (cached: a rerun or a killed run reuses
-    every field computed), computed together once the photos are known to work.
-    job: (folder of sharp photos, crop size, sensor, bank settings)."""
+    """The nominal lens's bank and the banks of draws 0..draws-1 of `seed` (cached: a rerun
+    or a killed run reuses every field computed), computed together once the photos are
+    known to work. job: (folder of sharp photos, crop size, sensor, bank settings)."""
     from lensim.calibrate.tolerances import drawn_lens, load_tolerances
     from lensim.data.pairs import ToleranceBanks, check_photos, list_images
     from lensim.optics.lens_file import lens_to_dict, load_lens
@@ -280,9 +282,10 @@ def _tolerance_banks(
     tol = load_tolerances(tolerances, lens)
     check_response(settings, sensor.spectral_response, sensor=sensor)
     check_photos(list_images(sharp_dir), size)
-    lenses = [drawn_lens(lens, tol, seed, k) for k in range(draws)]
+    lenses = [lens] + [drawn_lens(lens, tol, seed, k) for k in range(draws)]
     requests = [BankRequest(m, sensor.pixel_pitch_um, settings, response=sensor.spectral_response) for m in lenses]
-    with progress_bar("PSF banks (tolerance draws)", "fields", quiet) as report:
+    with progress_bar("PSF banks (nominal lens, tolerance draws)", "fields", quiet) as report:
         banks = get_banks(requests, workers=workers, scheduler=scheduler, progress=report)
-    records = [{k: m.as_built[k] for k in ("seed", "draw", "parameters")} for m in lenses]
-    return ToleranceBanks([b for b in banks if isinstance(b, PSFBank)], lens_to_dict(lens), str(tolerances), records)
+    records = [{k: m.as_built[k] for k in ("seed", "draw", "parameters")} for m in lenses[1:]]
+    single = [b for b in banks if isinstance(b, PSFBank)]
+    return ToleranceBanks(single[1:], lens_to_dict(lens), str(tolerances), records, single[0])

@@ -82,17 +82,27 @@ class PairJob:
     tolerance_draw: int | None = None  # the perturbed lens's index in a ToleranceBanks
 
 
+#: A pairs manifest's "stage_bank" when each record's Wiener stage (lensim.restore.psf_stage)
+#: uses its own tolerance draw's bank, tolerances.draws[record["tolerance_draw"]].bank.
+STAGE_PER_DRAW = "tolerance_draw"
+
+
 @dataclass
 class ToleranceBanks:
     """Banks of perturbed copies of one lens (lensim.calibrate.tolerances.drawn_lens),
     one per draw: each photo is simulated through one of them, every draw equally often
     (seeded, as grid settings are: grid_settings_of_photos). lens: the nominal lens (native
-    mapping); tolerances: the tolerance file; draws: per bank {"seed", "draw", "parameters"}."""
+    mapping); tolerances: the tolerance file; draws: per bank {"seed", "draw", "parameters"};
+    nominal: the nominal lens's bank, the pairs' "bank": what a restoration has at inference,
+    where the unit's draw is unknown. The PSF-informed network's Wiener stage of each pair
+    uses the bank of its own draw (the manifest's "stage_bank": STAGE_PER_DRAW;
+    lensim.restore.psf_stage.stage_bank_entry)."""
 
     banks: list[PSFBank]
     lens: dict
     tolerances: str
     draws: list[dict]
+    nominal: PSFBank
 
 
 def image_seed(seed: int, index: int, name: str) -> int:
@@ -241,14 +251,17 @@ class _BankUse:
 
 def _tolerance_use(banks: ToleranceBanks, photos: int, seed: int) -> _BankUse:
     """Each photo's perturbed lens's bank (balanced and seeded); grid_settings holds the
-    draw's index per photo."""
-    if any(b.directory is None for b in banks.banks) or not banks.banks:
+    draw's index per photo. The recorded "bank" is the nominal lens's (ToleranceBanks),
+    each draw's bank is in "tolerances", and "stage_bank" says that each pair's Wiener
+    stage uses its draw's."""
+    if any(b.directory is None for b in [*banks.banks, banks.nominal]) or not banks.banks:
         raise InputError(None, "bank", "expected banks stored on disk (workers load them)")
     picks = grid_settings_of_photos(seed, photos, len(banks.banks))
     dirs = [str(b.directory) for b in banks.banks]
     recorded = {
         "lens": banks.lens,
-        "bank": dirs[0],
+        "bank": str(banks.nominal.directory),
+        "stage_bank": STAGE_PER_DRAW,
         "tolerances": {
             "file": banks.tolerances,
             "draws": [{**d, "bank": b} for d, b in zip(banks.draws, dirs, strict=True)],
@@ -319,7 +332,8 @@ def make_dataset(
     grid_settings_of_photos); its records carry "settings" (describe()'s numbers) and
     "grid_setting" (the index), the manifest a "grid" summary. ToleranceBanks (perturbed
     lenses) likewise: records carry "tolerance_draw", the manifest "tolerances" (each
-    draw's parameters and photo count). exposure_ev: the range of
+    draw's parameters, bank and photo count), its "bank" is the nominal lens's and its
+    "stage_bank" STAGE_PER_DRAW (ToleranceBanks). exposure_ev: the range of
     exposure changes in stops drawn per placement (module docstring)."""
     if size < 16 or size % 2:
         raise InputError(None, "size", f"expected an even crop size of at least 16 pixels, got {size}")
@@ -450,7 +464,7 @@ def check_photos(files: list[Path], size: int) -> None:
 
 def _claim_folder(out: Path, settings: dict) -> bool:
     """Record the dataset's settings in OUT/settings.json, or check them against those
-    already recorded there (a one-line InputError naming what differs; the bank folder
+    already recorded there (a one-line InputError naming what differs; the bank folders
     may move). True when this call made the record (a new dataset)."""
     path = out / "settings.json"
     if not path.exists():
@@ -464,7 +478,9 @@ def _claim_folder(out: Path, settings: dict) -> bool:
             f"expected the {FORMAT!r} settings record of `lensim dataset make`; "
             "delete the file (or choose a new output folder) to start afresh",
         )
-    diff = sorted(k for k in settings if k != "bank" and prev.get(k) != settings[k])
+    # the bank folders may move; an older tolerance folder (draw 0's bank as "bank", no
+    # "stage_bank") resumes, its photos being the same, and gets today's manifest
+    diff = sorted(k for k in settings if k not in ("bank", "stage_bank") and prev.get(k) != settings[k])
     if diff:
         raise InputError(
             str(out),

@@ -23,12 +23,20 @@ computed once and read by the training crops. Layout:
                                                   that input crop (quantisation 1/65535)
     DATASET/wiener/<key>/stage.json               {"format": "lensim-wiener-cache",
                                                   "version": 2, "stage": WienerStage.to_dict(),
-                                                  "bank": the manifest's bank entry,
+                                                  "bank": stage_bank_entry(manifest),
                                                   "crops": how many} written last
 
-``key`` is a digest of the stage's settings and the manifest's bank entry, so a change of
-either computes a new cache beside the old one. Every file is written atomically and an
-existing one is kept: a killed computation resumes where it stopped.
+The stage of a crop is computed with the bank its photo was simulated with
+(:func:`stage_bank_entry`): the manifest's "bank" (a grid's bank of the record's setting),
+and for pairs made through tolerance draws (``lensim dataset make --tolerances``; their
+manifest says "stage_bank": "tolerance_draw") the bank of the record's draw, not the
+nominal lens's, which is their "bank" (what a restoration has at inference). Measured
+(docs/calibration.md, section 6): a network fine-tuned with each draw's own stage restores
+a perturbed unit with the nominal lens's stage 0.1-0.6 dB better (centre to edge) than one
+fine-tuned with the nominal lens's stage on every pair. ``key`` is a digest of the stage's
+settings and its banks, so a change of either computes a new cache beside the old one.
+Every file is written atomically and an existing one is kept: a killed computation
+resumes where it stopped.
 
 Whole photos (:func:`photo_wiener`): the stage runs on the whole photo (it is tiled and
 seamless itself) before the network's tiles are cut, so each network tile reads the same
@@ -220,8 +228,64 @@ def network_bank(info: Mapping[str, Any], bank: Any = None) -> Any:
 # ----------------------------------------------------------------------------- cache
 
 
+def stage_bank_entry(manifest: Mapping[str, Any]) -> Any:
+    """What the Wiener stage of a pairs folder is computed with, as its cache key records
+    it: the manifest's "bank" (for a grid, each record's setting's bank), or for pairs made
+    through tolerance draws ("stage_bank": "tolerance_draw"; older manifests have their
+    "tolerances" only) {"tolerance_draw": [each draw's bank folder]}: each record's stage
+    uses the bank of the draw its photo went through (its "tolerance_draw")."""
+    from lensim.data.pairs import STAGE_PER_DRAW
+
+    if manifest.get("stage_bank") == STAGE_PER_DRAW or "tolerances" in manifest:
+        tol = manifest.get("tolerances")
+        draws = tol.get("draws") if isinstance(tol, Mapping) else None
+        return {STAGE_PER_DRAW: [d.get("bank") if isinstance(d, Mapping) else None for d in draws or []]}
+    return manifest.get("bank")
+
+
+def _stage_banks(entry: Any, root: Path, bank: Any, where: str) -> Callable[[int, Mapping[str, Any]], Any]:
+    """(record index, record) -> the PSF bank of that record's stage, for a stage bank entry
+    (:func:`stage_bank_entry`); ``bank`` (given, else the entry's folder) for one bank or a
+    grid. One-line InputErrors naming ``where`` (the manifest) for a bank not found or a
+    record without a valid draw."""
+    from functools import lru_cache
+
+    from lensim.data.pairs import STAGE_PER_DRAW
+    from lensim.evaluate.harness import _load_bank, _record_bank
+
+    def found(folder: Any, given: Any = None) -> Any:
+        b = _load_bank({"bank": folder}, root, given)
+        if b is None:
+            raise InputError(
+                where,
+                "bank",
+                f"names the bank {folder!r}, which was not found; the PSF-informed "
+                "network needs the bank the pairs were made with",
+            )
+        return b
+
+    if not isinstance(entry, dict):
+        the_bank = found(entry, bank)
+        return lambda i, rec: _record_bank(the_bank, rec, f"{where}: records[{i}]")
+    folders = entry[STAGE_PER_DRAW]
+    draw_bank = lru_cache(maxsize=2)(lambda k: found(folders[k]))  # records come grouped by draw
+
+    def pick(i: int, rec: Mapping[str, Any]) -> Any:
+        k = rec.get("tolerance_draw")
+        if isinstance(k, bool) or not isinstance(k, int) or not 0 <= k < len(folders):
+            raise InputError(
+                f"{where}: records[{i}]",
+                "tolerance_draw",
+                f"expected one of the {len(folders)} draws' index, got {k!r}",
+            )
+        return draw_bank(k)
+
+    return pick
+
+
 def cache_key(stage: WienerStage, bank_entry: Any) -> str:
-    """The cache folder name of a stage on a pairs folder whose manifest names ``bank_entry``."""
+    """The cache folder name of a stage on a pairs folder whose stage bank is ``bank_entry``
+    (:func:`stage_bank_entry`)."""
     text = json.dumps({"stage": stage.to_dict(), "bank": bank_entry, "version": CACHE_VERSION}, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:12]
 
@@ -231,7 +295,7 @@ def cache_folder(dataset_dir: str | Path, stage: WienerStage | None = None) -> P
     from lensim.data.manifest import read_pairs_manifest
 
     manifest = read_pairs_manifest(dataset_dir)
-    return Path(dataset_dir) / CACHE_DIR / cache_key(stage or WienerStage(), manifest.get("bank"))
+    return Path(dataset_dir) / CACHE_DIR / cache_key(stage or WienerStage(), stage_bank_entry(manifest))
 
 
 def cached_path(folder: Path, input_path: Path) -> Path:
@@ -247,11 +311,13 @@ def ensure_wiener_cache(
 ) -> Path:
     """Compute the stage of every crop of a pairs folder that is not cached yet (module
     docstring); returns the cache folder. bank: the PSF bank (or grid) the pairs were made
-    with, or its folder (default: the manifest's). A bank that cannot be found is a
-    one-line InputError naming the pairs folder. progress(done, total) counts crops."""
+    with, loaded already or its folder if it moved (default: the manifest's; the cache is
+    named after the manifest's, so give no other; none for pairs made through tolerance
+    draws, each record's is its draw's: :func:`stage_bank_entry`). A bank that cannot be
+    found is a one-line InputError naming the pairs folder. progress(done, total) counts
+    crops."""
     from lensim.data.manifest import MANIFEST, read_pairs_manifest
     from lensim.data.pairs import crop_capture
-    from lensim.evaluate.harness import _load_bank, _record_bank
     from lensim.images import read_image, write_image
     from lensim.io import atomic_write_json
     from lensim.render.mapping import native_mapping
@@ -260,26 +326,27 @@ def ensure_wiener_cache(
     root = Path(dataset_dir)
     st = stage or WienerStage()
     manifest = read_pairs_manifest(root)
-    folder = root / CACHE_DIR / cache_key(st, manifest.get("bank"))
+    entry = stage_bank_entry(manifest)
+    if bank is not None and isinstance(entry, dict):
+        raise InputError(
+            str(root / MANIFEST),
+            "bank",
+            "names pairs made through tolerance draws, whose Wiener stage uses each draw's bank; "
+            "expected no other bank",
+        )
+    folder = root / CACHE_DIR / cache_key(st, entry)
     sensor = sensor_from_dict(manifest["sensor"], str(root / MANIFEST))
     crops = [(i, rec, cr) for i, rec in enumerate(manifest["records"]) for cr in rec.get("crops", [])]
     todo = [(i, rec, cr) for i, rec, cr in crops if not cached_path(folder, root / cr["input"]).exists()]
     if todo or not (folder / STAGE_JSON).is_file():
-        the_bank = _load_bank(manifest, root, bank)
-        if the_bank is None:
-            raise InputError(
-                str(root / MANIFEST),
-                "bank",
-                f"names the bank {manifest.get('bank')!r}, which was not found; the PSF-informed "
-                "network needs the bank the pairs were made with",
-            )
+        bank_of = _stage_banks(entry, root, bank, str(root / MANIFEST))
         folder.mkdir(parents=True, exist_ok=True)
+        todo.sort(key=lambda t: str(t[1].get("tolerance_draw", "")))  # one draw's bank after the other
         for done, (i, rec, cr) in enumerate(todo, 1):
             x, _ = read_image(root / cr["input"])
             _, h, w = x.shape
             mapping = native_mapping(h, w, sensor, int(cr["sensor_top"]), int(cr["sensor_left"]))
-            rec_bank = _record_bank(the_bank, rec, f"{root / MANIFEST}: records[{i}]")
-            out = wiener_channels(x, mapping, rec_bank, crop_capture(rec, cr), st)
+            out = wiener_channels(x, mapping, bank_of(i, rec), crop_capture(rec, cr), st)
             write_image(cached_path(folder, root / cr["input"]), out.clamp(0.0, 1.0), bits=16)
             if progress is not None:
                 progress(done, len(todo))
@@ -287,7 +354,7 @@ def ensure_wiener_cache(
             "format": CACHE_FORMAT,
             "version": CACHE_VERSION,
             "stage": st.to_dict(),
-            "bank": manifest.get("bank"),
+            "bank": entry,
             "crops": len(crops),
         }
         atomic_write_json(folder / STAGE_JSON, info)
@@ -312,6 +379,7 @@ __all__ = [
     "ensure_wiener_cache",
     "network_bank",
     "photo_wiener",
+    "stage_bank_entry",
     "stage_of",
     "training_cache",
     "wiener_channels",
