@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import warnings
 from pathlib import Path
 
@@ -150,6 +151,21 @@ def test_other_lens_or_sensor_warns(run_dir: Path):
         load_checkpoint(run_dir, lens={"name": "other"})
     with pytest.warns(UserWarning, match="trained for sensor 'test sensor 640x480'"):
         load_checkpoint(run_dir, sensor={"name": "test sensor", "resolution": [320, 240]})
+
+
+def test_another_unit_of_the_same_lens_warns_what_differs(run_dir: Path):
+    """Same name (a nominal lens and an as-built unit of it): the line names the fields that
+    differ and a digest of each lens, not the one name twice."""
+    unit = json.loads(json.dumps(LENS))
+    unit["surfaces"][0]["decentre"] = [0.004, 0.0]
+    unit["as_built"] = {"kind": "calibration"}
+    with pytest.warns(UserWarning) as caught:
+        load_checkpoint(run_dir, lens=unit)
+    (line,) = [str(w.message) for w in caught if "trained for lens" in str(w.message)]
+    assert "\n" not in line
+    assert "differ in surfaces[0].decentre, as_built; lens digests " in line
+    digests = re.search(r"lens digests (\w{8}) \(trained\) and (\w{8}) \(used\)", line)
+    assert digests and digests[1] != digests[2]
 
 
 def test_corrupt_and_mismatched_checkpoints_are_one_line_errors(run_dir: Path, tmp_path: Path):

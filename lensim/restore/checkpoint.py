@@ -31,6 +31,7 @@ raises lensim.restore.divergence.NonFinite instead).
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import math
 import pickle
@@ -129,6 +130,33 @@ def _canonical(d: Any) -> str:
     return json.dumps(d, sort_keys=True, default=str)
 
 
+def _differing(a: Any, b: Any, path: str = "", depth: int = 3) -> list[str]:
+    """The paths (such as ``surfaces[5].decentre``, at most ``depth`` levels deep) where two
+    JSON-like values differ."""
+    if _canonical(a) == _canonical(b):
+        return []
+    if depth and isinstance(a, dict) and isinstance(b, dict):
+        keys = sorted(set(a) | set(b), key=str)
+        return [p for k in keys for p in _differing(a.get(k), b.get(k), f"{path}.{k}" if path else str(k), depth - 1)]
+    if depth and isinstance(a, list) and isinstance(b, list) and len(a) == len(b):
+        return [
+            p for i, (x, y) in enumerate(zip(a, b, strict=True)) for p in _differing(x, y, f"{path}[{i}]", depth - 1)
+        ]
+    return [path or "the whole"]
+
+
+def lens_difference(trained: Any, used: Any, most: int = 3) -> str:
+    """What differs between two lens dicts, for one line: the first ``most`` differing
+    fields and, when the two have the same name, a digest of each (two units of one
+    design, say a nominal and an as-built lens)."""
+    paths = sorted(_differing(trained, used), key=lambda p: p.startswith("as_built"))  # the optics first
+    text = ", ".join(paths[:most]) + (f" and {len(paths) - most} more" if len(paths) > most else "")
+    if _describe_lens(trained) == _describe_lens(used):
+        digest = [hashlib.sha256(_canonical(d).encode()).hexdigest()[:8] for d in (trained, used)]
+        text += f"; lens digests {digest[0]} (trained) and {digest[1]} (used)"
+    return text
+
+
 def warn_other_camera(
     source: str, trained: dict[str, Any], lens: dict[str, Any] | None, sensor: dict[str, Any] | None
 ) -> None:
@@ -138,7 +166,8 @@ def warn_other_camera(
     if lens is not None and trained.get("lens") is not None and _canonical(lens) != _canonical(trained["lens"]):
         warnings.warn(
             f"{source}: trained for lens {_describe_lens(trained['lens'])!r}, used for lens "
-            f"{_describe_lens(lens)!r}; the restoration may be wrong",
+            f"{_describe_lens(lens)!r} (they differ in {lens_difference(trained['lens'], lens)}); "
+            "the restoration may be wrong",
             UserWarning,
             stacklevel=3,
         )
@@ -370,5 +399,6 @@ __all__ = [
     "run_folder",
     "rng_state",
     "set_rng_state",
+    "lens_difference",
     "warn_other_camera",
 ]
