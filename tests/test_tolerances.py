@@ -259,14 +259,15 @@ def test_dataset_make_draws_pairs_through_perturbed_lenses(tmp_path, capsys, mon
 
 def _stage_is_each_draws_own(data, args, capsys, monkeypatch):
     """The Wiener stage of each tolerance pair is computed with its own draw's bank (not
-    draw 0's, as lensim did, nor the nominal lens's); the pairs' "bank" is the nominal lens's
-    (what a restoration has). A manifest from before (draw 0's bank as "bank") gets the same
-    stage, and making the pairs again rewrites it."""
+    draw 0's, as lensim did, nor the nominal lens's), and evaluate's methods get it too; the
+    pairs' "bank" is the nominal lens's (what a restoration has). A manifest from before
+    (draw 0's bank as "bank") gets the same stage, and making the pairs again rewrites it."""
     import json
     import shutil
 
     from cli_runner import run_cli
     from lensim.data.pairs import crop_capture
+    from lensim.evaluate import harness
     from lensim.images import read_image
     from lensim.psf.bank import PSFBank
     from lensim.render.mapping import native_mapping
@@ -298,6 +299,12 @@ def _stage_is_each_draws_own(data, args, capsys, monkeypatch):
 
     folder = ensure_wiener_cache(data)
     check(folder)
+    # lensim evaluate's methods (the Wiener oracle, the network's stage) get each record's
+    # draw's bank too, or the bank given
+    for given, want in ((None, lambda r: draws[r["tolerance_draw"]]), (nominal, lambda r: nominal)):
+        seen: list = []
+        harness.evaluate_rows(data, {"spy": lambda image, ctx, seen=seen: seen.append(ctx) or image}, bank=given)
+        assert seen and all(str(c.bank.directory) == str(want(manifest["records"][c.record]).directory) for c in seen)
     old = {k: v for k, v in manifest.items() if k != "stage_bank"}
     old["bank"] = manifest["tolerances"]["draws"][0]["bank"]  # what lensim recorded before
     (data / "manifest.json").write_text(json.dumps(old))

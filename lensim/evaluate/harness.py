@@ -237,6 +237,52 @@ def _record_bank(bank: PSFBank | GridBank | None, record: Mapping[str, Any], whe
     return bank.bank(k)
 
 
+def tolerance_draw_banks(manifest: Mapping[str, Any]) -> list[Any] | None:
+    """Each draw's bank folder (as the manifest names it) of pairs made through tolerance
+    draws (lensim.data.pairs.ToleranceBanks: the manifest's "tolerances"), else None."""
+    tol = manifest.get("tolerances")
+    if not isinstance(tol, Mapping):
+        return None
+    draws = tol.get("draws")
+    return [d.get("bank") if isinstance(d, Mapping) else None for d in (draws if isinstance(draws, list) else [])]
+
+
+def record_banks(
+    manifest: Mapping[str, Any], pairs_dir: Path, bank: PSFBank | GridBank | str | Path | None = None
+) -> Callable[[int, Mapping[str, Any]], PSFBank | None]:
+    """(record index, record) -> the PSF bank that record's photo was simulated with
+    (CropContext.bank): the manifest's bank, a grid's bank of the record's setting, or for
+    pairs made through tolerance draws the bank of the record's draw (its "tolerance_draw";
+    the manifest's "bank" is then the nominal lens's). ``bank`` (a bank, grid or folder)
+    replaces the manifest's when given. None where the bank is not found; a record without
+    a valid setting or draw is a one-line InputError naming the manifest."""
+    from functools import lru_cache
+
+    where = str(pairs_dir / MANIFEST)
+    draws = tolerance_draw_banks(manifest) if bank is None else None
+    if draws is None:
+        the_bank = _load_bank(manifest, pairs_dir, bank)
+        return lambda i, rec: _record_bank(the_bank, rec, f"{where}: records[{i}]")
+    folders = draws
+
+    @lru_cache(maxsize=2)  # records are read grouped by draw, or two draws alternate
+    def load(k: int) -> PSFBank | None:
+        found = _load_bank({"bank": folders[k]}, pairs_dir, None)
+        return found if isinstance(found, PSFBank) else None
+
+    def pick(i: int, rec: Mapping[str, Any]) -> PSFBank | None:
+        k = rec.get("tolerance_draw")
+        if isinstance(k, bool) or not isinstance(k, int) or not 0 <= k < len(folders):
+            raise InputError(
+                f"{where}: records[{i}]",
+                "tolerance_draw",
+                f"expected one of the {len(folders)} draws' index, got {k!r}",
+            )
+        return load(k)
+
+    return pick
+
+
 def _record_settings(record: Mapping[str, Any], pairs_dir: Path, index: int) -> dict[str, float] | None:
     """A record's shooting settings for the methods (None when it has none)."""
     from lensim.restore.conditioning import record_settings
@@ -258,8 +304,9 @@ def evaluate_rows(
 
     methods: name -> method (``input`` is added first when absent). bank: the PSF bank
     (object or folder; default the one the manifest names, if it exists), or a grid of
-    banks (each record then uses its setting's bank, its grid_setting). sources: keep
-    only records whose source photo's file name (or full path) is listed (e.g. the
+    banks (each record then uses its setting's bank, its grid_setting); by default, pairs
+    made through tolerance draws use each record's draw's bank (:func:`record_banks`).
+    sources: keep only records whose source photo's file name (or full path) is listed (e.g. the
     held-out photos of a training run). max_crops: stop after this many crops.
     progress(done, total) counts crops. Rows: record, crop, source, input, sensor_top,
     sensor_left, method, psnr_db, ssim, mse and per zone <zone>_psnr_db, <zone>_ssim,
@@ -267,7 +314,7 @@ def evaluate_rows(
     pairs_dir = Path(pairs_dir)
     manifest = read_pairs_manifest(pairs_dir)
     sensor = sensor_from_dict(manifest["sensor"], str(pairs_dir / MANIFEST))
-    the_bank = _load_bank(manifest, pairs_dir, bank)
+    bank_of = record_banks(manifest, pairs_dir, bank)
     all_methods: dict[str, Method] = {"input": builtin_method("input")}
     all_methods.update(methods)
     crops = _select_crops(manifest["records"], sources)
@@ -279,7 +326,7 @@ def evaluate_rows(
     if progress:
         progress(0, len(crops))
     for done, (ri, ci, rec, cr) in enumerate(crops, 1):
-        rows += _crop_rows(pairs_dir, sensor, the_bank, all_methods, ri, ci, rec, cr)
+        rows += _crop_rows(pairs_dir, sensor, bank_of(ri, rec), all_methods, ri, ci, rec, cr)
         if progress:
             progress(done, len(crops))
     return rows
@@ -302,7 +349,7 @@ def _select_crops(records: list[dict], sources: Sequence[str] | None) -> list[tu
 def _crop_rows(
     pairs_dir: Path,
     sensor: SensorProfile,
-    bank: PSFBank | GridBank | None,
+    bank: PSFBank | None,
     methods: Mapping[str, Method],
     ri: int,
     ci: int,
@@ -316,11 +363,10 @@ def _crop_rows(
         raise InputError(str(pairs_dir / cr["input"]), "size", f"is {tuple(x.shape)}; its target is {tuple(y.shape)}")
     _, h, w = x.shape
     top, left = int(cr["sensor_top"]), int(cr["sensor_left"])
-    rec_bank = _record_bank(bank, rec, f"{pairs_dir / MANIFEST}: records[{ri}]")
     ctx = CropContext(
         native_mapping(h, w, sensor, top, left),
         sensor,
-        rec_bank,
+        bank,
         crop_capture(rec, cr),
         top,
         left,

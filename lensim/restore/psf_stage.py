@@ -233,54 +233,38 @@ def stage_bank_entry(manifest: Mapping[str, Any]) -> Any:
     it: the manifest's "bank" (for a grid, each record's setting's bank), or for pairs made
     through tolerance draws ("stage_bank": "tolerance_draw"; older manifests have their
     "tolerances" only) {"tolerance_draw": [each draw's bank folder]}: each record's stage
-    uses the bank of the draw its photo went through (its "tolerance_draw")."""
+    uses the bank of the draw its photo went through (its "tolerance_draw";
+    lensim.evaluate.harness.record_banks)."""
     from lensim.data.pairs import STAGE_PER_DRAW
+    from lensim.evaluate.harness import tolerance_draw_banks
 
-    if manifest.get("stage_bank") == STAGE_PER_DRAW or "tolerances" in manifest:
-        tol = manifest.get("tolerances")
-        draws = tol.get("draws") if isinstance(tol, Mapping) else None
-        return {STAGE_PER_DRAW: [d.get("bank") if isinstance(d, Mapping) else None for d in draws or []]}
-    return manifest.get("bank")
+    draws = tolerance_draw_banks(manifest)
+    return manifest.get("bank") if draws is None else {STAGE_PER_DRAW: draws}
 
 
-def _stage_banks(entry: Any, root: Path, bank: Any, where: str) -> Callable[[int, Mapping[str, Any]], Any]:
-    """(record index, record) -> the PSF bank of that record's stage, for a stage bank entry
-    (:func:`stage_bank_entry`); ``bank`` (given, else the entry's folder) for one bank or a
-    grid. One-line InputErrors naming ``where`` (the manifest) for a bank not found or a
-    record without a valid draw."""
-    from functools import lru_cache
+def _stage_banks(manifest: Mapping[str, Any], root: Path, bank: Any) -> Callable[[int, Mapping[str, Any]], Any]:
+    """(record index, record) -> the PSF bank of that record's stage
+    (lensim.evaluate.harness.record_banks); a bank not found is a one-line InputError naming
+    the manifest."""
+    from lensim.data.manifest import MANIFEST
+    from lensim.evaluate.harness import record_banks
 
-    from lensim.data.pairs import STAGE_PER_DRAW
-    from lensim.evaluate.harness import _load_bank, _record_bank
+    resolve = record_banks(manifest, root, bank)
 
-    def found(folder: Any, given: Any = None) -> Any:
-        b = _load_bank({"bank": folder}, root, given)
-        if b is None:
+    def get(i: int, rec: Mapping[str, Any]) -> Any:
+        found = resolve(i, rec)
+        if found is None:
+            entry = stage_bank_entry(manifest)
+            named = entry if not isinstance(entry, dict) else next(iter(entry.values()))[rec["tolerance_draw"]]
             raise InputError(
-                where,
+                str(root / MANIFEST),
                 "bank",
-                f"names the bank {folder!r}, which was not found; the PSF-informed "
+                f"names the bank {named!r}, which was not found; the PSF-informed "
                 "network needs the bank the pairs were made with",
             )
-        return b
+        return found
 
-    if not isinstance(entry, dict):
-        the_bank = found(entry, bank)
-        return lambda i, rec: _record_bank(the_bank, rec, f"{where}: records[{i}]")
-    folders = entry[STAGE_PER_DRAW]
-    draw_bank = lru_cache(maxsize=2)(lambda k: found(folders[k]))  # records come grouped by draw
-
-    def pick(i: int, rec: Mapping[str, Any]) -> Any:
-        k = rec.get("tolerance_draw")
-        if isinstance(k, bool) or not isinstance(k, int) or not 0 <= k < len(folders):
-            raise InputError(
-                f"{where}: records[{i}]",
-                "tolerance_draw",
-                f"expected one of the {len(folders)} draws' index, got {k!r}",
-            )
-        return draw_bank(k)
-
-    return pick
+    return get
 
 
 def cache_key(stage: WienerStage, bank_entry: Any) -> str:
@@ -339,9 +323,11 @@ def ensure_wiener_cache(
     crops = [(i, rec, cr) for i, rec in enumerate(manifest["records"]) for cr in rec.get("crops", [])]
     todo = [(i, rec, cr) for i, rec, cr in crops if not cached_path(folder, root / cr["input"]).exists()]
     if todo or not (folder / STAGE_JSON).is_file():
-        bank_of = _stage_banks(entry, root, bank, str(root / MANIFEST))
-        folder.mkdir(parents=True, exist_ok=True)
+        bank_of = _stage_banks(manifest, root, bank)
         todo.sort(key=lambda t: str(t[1].get("tolerance_draw", "")))  # one draw's bank after the other
+        for i, rec, _ in todo[:1]:
+            bank_of(i, rec)  # a bank not found: nothing written
+        folder.mkdir(parents=True, exist_ok=True)
         for done, (i, rec, cr) in enumerate(todo, 1):
             x, _ = read_image(root / cr["input"])
             _, h, w = x.shape
