@@ -265,7 +265,7 @@ def record_banks(
         return lambda i, rec: _record_bank(the_bank, rec, f"{where}: records[{i}]")
     folders = draws
 
-    @lru_cache(maxsize=2)  # records are read grouped by draw, or two draws alternate
+    @lru_cache(maxsize=8)  # evaluate reads records in order, draws mixed (dataset make draws 8 by default)
     def load(k: int) -> PSFBank | None:
         found = _load_bank({"bank": folders[k]}, pairs_dir, None)
         return found if isinstance(found, PSFBank) else None
