@@ -35,15 +35,17 @@ def unseen_folder(out: Path, size: int) -> Path:
     return folder
 
 
-def held_out_banks(library: Path) -> list:
+def held_out_banks(library: Path, setting: int = 0) -> list:
     """(planned bank, bank folder, sensor file) of one complete bank of every held-out entry
-    in the library folder: its first in the plan (wide open, infinity, 24 MP) when done."""
+    in the library folder: its complete bank number `setting` in plan order (0: wide open,
+    infinity, 24 MP; 1: the same on the 10 MP sensor; 2, 3: two stops down; 4-7: the same
+    focused near), or its last complete one when it has fewer."""
     from lensim.data import library_banks as lb
 
-    chosen: dict = {}
+    banks: dict = {}
     for b, d, s in lb.library_banks(library, holdout=True):
-        chosen.setdefault(b.lens, (b, d, s))
-    return list(chosen.values())
+        banks.setdefault(b.lens, []).append((b, d, s))
+    return [mine[min(setting, len(mine) - 1)] for mine in banks.values()]
 
 
 def score_lens(out: Path, photos: Path, bank_dir: Path, sensor_file: Path, model: str, size: int) -> dict:
@@ -81,6 +83,9 @@ def main() -> None:
     ap.add_argument("--model", default="universal", help="universal (the shipped model) or a model file / run")
     ap.add_argument("--photo-size", type=int, default=384)
     ap.add_argument("--size", type=int, default=128, help="crop size (pixels)")
+    ap.add_argument(
+        "--setting", type=int, default=0, help="which bank of each lens, in plan order (0: wide open, infinity, 24 MP)"
+    )
     ap.add_argument("-o", "--output", type=Path, required=True)
     args = ap.parse_args()
 
@@ -91,11 +96,12 @@ def main() -> None:
     photos = unseen_folder(out, args.photo_size)
     results = {}
     t0 = time.perf_counter()
-    for planned, bank_dir, sensor_file in held_out_banks(args.library):
+    for planned, bank_dir, sensor_file in held_out_banks(args.library, args.setting):
         t = time.perf_counter()
         methods = score_lens(out / planned.lens, photos, bank_dir, sensor_file, args.model, args.size)
         results[planned.lens] = {
             "family": planned.family,
+            "focus_m": planned.focus_m,
             "bank": planned.id,
             "pitch_um": planned.pitch_um,
             "fno": planned.fno,

@@ -20,7 +20,8 @@ WORK=${1:?usage: universal_pretrain_gpu.sh WORK_DIR OUT_DIR [SECONDS]}
 OUT=${2:?usage: universal_pretrain_gpu.sh WORK_DIR OUT_DIR [SECONDS]}
 TOTAL=${3:-560}
 DEV=${UNIVERSAL_DEVICE:-cuda}
-WORKERS=${UNIVERSAL_WORKERS:-$(nproc)}
+CORES=$(nproc)  # (before OMP_NUM_THREADS is set: nproc honours it)
+WORKERS=${UNIVERSAL_WORKERS:-$CORES}
 BANK_SECONDS=${UNIVERSAL_BANK_SECONDS:-240}
 PAIRS_SECONDS=${UNIVERSAL_PAIRS_SECONDS:-90}
 PY=${PYTHON:-python3}
@@ -31,7 +32,7 @@ elapsed() { echo $(($(date +%s) - START)); }
 say() { echo "[$(elapsed) s] $*" | tee -a "$OUT/log.txt"; }
 AMP=$([ "$DEV" = cpu ] || echo --no-amp)
 
-say "device: $(nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader 2>&1 | head -n 1); $(nproc) cores; workers $WORKERS"
+say "device: $(nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader 2>&1 | head -n 1); $CORES cores; workers $WORKERS"
 say "banks"
 timeout "$BANK_SECONDS" $PY -W ignore -m lensim library banks -o "$WORK/lib" --split train --workers "$WORKERS" --json \
   > "$OUT/banks.json" 2> "$WORK/banks.err"
