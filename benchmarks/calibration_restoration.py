@@ -158,7 +158,7 @@ def bank_of(pairs: Path) -> str:
     return json.loads((pairs / "manifest.json").read_text())["bank"]
 
 
-def train(out: Path, name: str, pairs: Path, budget: float, crop: int) -> dict:
+def train(out: Path, name: str, pairs: Path, budget: float, crop: int, seed: int = 0) -> dict:
     """`lensim train --init universal` on the time budget (as the demo fine-tunes), once."""
     run = out / "runs" / name
     marker = run / "summary.json"
@@ -167,7 +167,7 @@ def train(out: Path, name: str, pairs: Path, budget: float, crop: int) -> dict:
     log(f"train {name} ({budget:.0f} s)")
     args = ["train", str(pairs), "-o", str(run), "--init", "universal", "--time-budget-s", str(budget)]
     args += ["--epochs", "100000", "--batch-size", "4", "--lr", "2e-4", "--lr-schedule", "cosine", "--crop", str(crop)]
-    args += ["--val-fraction", "0.25", "--seed", "0", "--threads", "1", "--json"]
+    args += ["--val-fraction", "0.25", "--seed", str(seed), "--threads", "1", "--json"]
     if (run / "last.pt").exists():
         args.append("--resume")
     t = time.perf_counter()
