@@ -138,6 +138,30 @@ def run_jobs(
     _run_on_dask(fn, jobs, min(workers, len(jobs)), scheduler, on_result)
 
 
+def run_whole_jobs(
+    fn: Callable[..., R],
+    jobs: Sequence[J],
+    workers: int = 1,
+    scheduler: str | None = None,
+    on_result: Callable[[J, R], None] | None = None,
+) -> None:
+    """Run ``fn(job, workers, scheduler)`` for every job whose own work can be spread over
+    workers (a whole bank: its fields), calling ``on_result(job, result)`` as each finishes.
+
+    With no scheduler and ``workers`` > 1: whole jobs side by side on a local Dask cluster,
+    ``fn(job)`` in one worker each (``fn``'s defaults must be one worker and no scheduler;
+    the workers share this machine's folders). Otherwise one job after another here, each
+    ``fn(job, workers, scheduler)`` spreading its own parts over the cluster at
+    ``scheduler`` (whose workers need not see this machine's folders)."""
+    if scheduler is None and workers > 1:
+        run_jobs(fn, jobs, workers, None, on_result)
+        return
+    for job in jobs:
+        result = fn(job, workers, scheduler)
+        if on_result is not None:
+            on_result(job, result)
+
+
 def _client(client_type: Any, address: Any) -> Any:
     """A Dask client of the cluster (or at the address); a scheduler that does not answer
     is a one-line InputError naming its address."""
@@ -272,4 +296,4 @@ def _result(fut: Any, job_of: dict[Any, tuple[int, Any]], n: int) -> Any:
         raise _lost(job_of[fut.key][1], job_of[fut.key][0], n) from None
 
 
-__all__ = ["available_cores", "exit_with_parent", "run_jobs"]
+__all__ = ["available_cores", "exit_with_parent", "run_jobs", "run_whole_jobs"]

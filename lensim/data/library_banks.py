@@ -320,20 +320,16 @@ def compute_library_banks(
         if progress:
             progress(settled, len(plan))
 
-    if scheduler is None and workers > 1:
-        from lensim.workers import run_jobs
+    from lensim.workers import run_whole_jobs
 
-        run_jobs(_bank_job, [(out, planned, LIBRARY_BANK_SETTINGS) for planned in todo], workers, None, settle)
-    else:
-        for planned in todo:
-            settle(planned, _one(out, planned, workers, scheduler, LIBRARY_BANK_SETTINGS))
+    run_whole_jobs(_bank_job, [(out, planned, LIBRARY_BANK_SETTINGS) for planned in todo], workers, scheduler, settle)
     return result
 
 
-def _bank_job(job: tuple[Path, PlannedBank, BankSettings]) -> bool:
-    """One whole bank in this process (a Dask worker's job): _one with one worker."""
+def _bank_job(job: tuple[Path, PlannedBank, BankSettings], workers: int = 1, scheduler: str | None = None) -> bool:
+    """One whole bank (a Dask worker's job with the defaults): _one."""
     out, planned, settings = job
-    return _one(out, planned, 1, None, settings)
+    return _one(out, planned, workers, scheduler, settings)
 
 
 def library_banks(out_dir: str | Path, holdout: bool | None = None) -> list[tuple[PlannedBank, Path, Path]]:

@@ -146,13 +146,9 @@ def make_library_pairs(
         if progress:
             progress(settled, len(banks))
 
-    if scheduler is None and workers > 1:
-        from lensim.workers import run_jobs
+    from lensim.workers import run_whole_jobs
 
-        run_jobs(_bank_pairs, jobs, workers, None, made)
-    else:
-        for job in jobs:
-            made(job, _bank_pairs(job, workers, scheduler))
+    run_whole_jobs(_bank_pairs, jobs, workers, scheduler, made)
     if progress:
         progress(len(banks), len(banks))
     return result
