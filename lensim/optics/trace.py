@@ -231,6 +231,9 @@ def trace_reference(
 # (lensim.optics.trace_chunk: rays that fail leave the vectors). Chunks are smaller than
 # torch's intra-op grain size, so each operation runs on one core, and the chunks run in
 # parallel threads (torch releases the GIL inside its kernels), one per torch thread.
+# Where it covers the steps (CPU tensors, the five kinds of surface, no recorded
+# positions), a chunk runs lensim.optics.trace_fused's compiled kernel instead, one chunk
+# per torch thread (the kernel releases the GIL), with the same results to rounding.
 
 CHUNK_RAYS = 32767  # just below torch's GRAIN_SIZE (32768): each operation stays on one core
 _EXECUTORS: dict[int, ThreadPoolExecutor] = {}
@@ -285,6 +288,44 @@ class _ChunkSource:
         return self.e[tuple(int(i) for i in np.unravel_index(r, self.lead))][off : off + (b - a)]
 
 
+#: whether trace() runs the fused kernel where it covers the steps (tests compare it with
+#: the torch chunk loop by turning it off)
+USE_FUSED_KERNEL = True
+#: the fused kernel's smallest task (rays): below it, handing a task to the thread pool
+#: costs more than tracing it
+FUSED_MIN_RAYS = 16384
+
+
+def _fused_kernel(chunk_steps: list):
+    """The fused kernel (lensim.optics.trace_fused) as fn(p, d, o, v, z0, n, *outputs) on
+    torch tensors, or None where it does not cover the steps (or there are none). numba is
+    imported here, on the first trace, not with lensim."""
+    if not chunk_steps or not USE_FUSED_KERNEL:
+        return None
+    from lensim.optics import trace_fused
+
+    plan = trace_fused.plan_for(chunk_steps)
+    if plan is None:
+        return None
+    arrays = (plan.ints, plan.floats, plan.coef, plan.high)
+
+    def fn(p, d, o, v, z0, n, *outs) -> None:
+        t = [x.numpy() for x in (p, d, o, v)]
+        work = np.empty((11, trace_fused.BLOCK))
+        uniform = n.strides[1] == 0
+        trace_fused.trace_rays(*t, n, uniform, z0, *arrays, *(x.numpy() for x in outs), work)
+
+    return fn
+
+
+def _chunk_media(nv: list | torch.Tensor, a: int, b: int) -> np.ndarray:
+    """The media indices of rows [a, b) as an (S+1, b - a) array for the fused kernel (a
+    column broadcast over the rows where each medium has one index)."""
+    if isinstance(nv, list):
+        return np.broadcast_to(np.asarray(nv, dtype=np.float64)[:, None], (len(nv), b - a))
+    return nv[:, a:b].numpy()
+
+
 def _executor(workers: int):
     if workers not in _EXECUTORS:
         _EXECUTORS[workers] = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="lensim-trace")
@@ -308,10 +349,11 @@ def trace(
     wavelength_um must broadcast against the rays' batch shape. Rays that fail stay finite
     and stop: one that misses a surface keeps its state from before that surface, one that
     is vignetted or totally internally reflected stops on the surface (direction unchanged).
-    Runs the chunked fast path below; trace_reference() is the plain one (same results for
-    valid rays to rounding) and is used when the rays or the lens's parameters (curvature,
-    thickness, conic, aspheric terms, image defocus, surface poses given as tensors) require
-    gradients, or a surface or the image plane is decentred or tilted (lensim.optics.pose).
+    Runs the chunked fast path below (its fused kernel where it can); trace_reference() is
+    the plain one (same results for valid rays to rounding) and is used when the rays or the
+    lens's parameters (curvature, thickness, conic, aspheric terms, image defocus, surface
+    poses given as tensors) require gradients, or a surface or the image plane is decentred
+    or tilted (lensim.optics.pose).
     """
     end = lens.num_surfaces if end is None else end
     reference = lens.has_poses or lens.requires_grad
@@ -337,10 +379,14 @@ def trace(
     failed_at = torch.empty(B, dtype=torch.int16, device=device)
     rec = torch.empty(len(chunk_steps), B, 3, dtype=DTYPE, device=device) if record and chunk_steps else None
     z0 = float(zv[start]) if start < len(zv) else 0.0
+    fused = _fused_kernel(chunk_steps) if device.type == "cpu" and rec is None else None
 
     def run(task) -> None:
         a, b, nv = task
         p, d, o, v = (src.get(a, b) for src in sources)
+        if fused is not None:
+            outs = (out_pos, out_dir, out_opl, out_valid, status, failed_at)
+            return fused(p, d, o, v, z0, _chunk_media(nv, a, b), *(t[a:b] for t in outs))
         rows = [rec[j, a:b] for j in range(len(chunk_steps))] if rec is not None else None
         sink = Sink(out_pos[a:b], out_dir[a:b], out_opl[a:b], out_valid[a:b], status[a:b], failed_at[a:b], rows)
         if not chunk_steps:
@@ -350,6 +396,9 @@ def trace(
         trace_chunk(chunk_steps, Live.start(p, d, o, v, z0, chunk_indices(nv, a, b), sink), sink)
 
     chunk = CHUNK_RAYS if device.type == "cpu" else max(B, 1)
+    workers = torch.get_num_threads() if device.type == "cpu" else 1
+    if fused is not None:  # one task per thread (each a compiled loop; no cache to fit)
+        chunk = max(FUSED_MIN_RAYS, -(-B // workers))
     tasks = []
     for g0, g1, nv in _index_groups(n, wavelength_um, batch):
         a = g0
@@ -357,8 +406,8 @@ def trace(
             b = min(a + chunk, g1, (a // P + 1) * P if by_rows else g1)
             tasks.append((a, b, nv))  # a tensor nv spans the whole batch (g0 = 0)
             a = b
-    workers = torch.get_num_threads() if device.type == "cpu" else 1
-    if workers > 1 and len(tasks) >= 4 * workers:  # fewer chunks: the pool costs more than it gains
+    pooled = len(tasks) >= 2 if fused is not None else len(tasks) >= 4 * workers
+    if workers > 1 and pooled:  # fewer chunks: the pool costs more than it gains
         for f in [_executor(workers).submit(run, t) for t in tasks]:
             f.result()
     else:

@@ -79,10 +79,11 @@ def generate_rays(
     return rays, wl
 
 
-#: pupil points x fields x wavelengths per piece of a paraxial launch: below torch's grain
-#: size (32768), so each operation runs on one core (no OpenMP region whose threads spin
-#: while another process holds a core)
-LAUNCH_PIECE = 8192
+#: pupil points x fields x wavelengths per piece of a paraxial launch with more than one
+#: torch thread: its largest tensor (the positions, 3 values a point) stays below torch's
+#: grain size (32768), so each operation runs on one core (no OpenMP region whose threads
+#: spin while another process holds a core); with one thread the launch runs whole
+LAUNCH_PIECE = 10922
 
 
 def _paraxial_rays(
@@ -90,11 +91,12 @@ def _paraxial_rays(
 ) -> Rays:
     """Paraxially aimed rays (W, F, P) of fields fld (F,) through pupil points (P, 2),
     launched and given their starting OPL (media index n0, (W, 1, 1)) in pieces of the
-    pupil of LAUNCH_PIECE elements (whole, where gradients flow or off the CPU)."""
+    pupil of LAUNCH_PIECE elements (whole, where gradients flow, off the CPU, or with one
+    torch thread, which opens no parallel region)."""
     F, P = fld.shape[0], pupil.shape[0]
     r_ep = para.epd_mm / 2.0
     step = max(1, LAUNCH_PIECE // (W * F))
-    whole = P <= step or pupil.device.type != "cpu" or pupil.requires_grad
+    whole = P <= step or pupil.device.type != "cpu" or pupil.requires_grad or torch.get_num_threads() == 1
     if whole or isinstance(para.entrance_pupil_z_mm, torch.Tensor):
         p_all, d_all = launch(lens, fld, pupil.to(DTYPE) * r_ep, para)
         return object_rays(lens, p_all.unsqueeze(0).expand(W, F, P, 3), d_all.unsqueeze(0).expand(W, F, P, 3), n0)

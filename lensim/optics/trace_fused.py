@@ -1,0 +1,479 @@
+"""The fast tracer's fused kernel: one chunk of rays through every step, ray by ray, in
+one compiled loop (numba), without a vector temporary.
+
+lensim.optics.trace.trace runs it for each chunk where it can (CPU tensors, no gradients,
+every surface a Plane, Sphere, Conic, EvenAsphere or OddAsphere, no recorded surface
+positions); elsewhere it runs the torch chunk loop (lensim.optics.trace_chunk), whose
+semantics this kernel keeps ray for ray: the same steps (``trace_chunk.steps``), the same
+status codes (MISSED, TIR, VIGNETTED) written on the same surfaces, failed rays left as
+they stand (a ray that misses keeps its state from before the surface; a vignetted or
+totally internally reflected one stops on it with its incoming direction), the same
+backwards test and virtual steps. The per-ray formulas mirror the chunk forms of
+lensim.optics.geometry (named in each function's docstring); tests/test_trace_fused.py
+checks the two against each other on every kind of surface, failing rays included. The
+results agree to rounding (~1e-13 mm): the kernel's square roots are ``sqrt``, not
+``u * rsqrt(u)``, multiply-adds may be fused, a conic's normal is scaled to unit length
+with a sphere's formula (1/sqrt), and each ray runs Newton's method until it converges
+itself rather than until its whole chunk has.
+
+Layout: rays go through in blocks of BLOCK, a block through one step at a time, its state
+(x, y, z, L, M, N, OPL, status, failure surface) in the rows of a work array; planes,
+spheres and conics run a loop without branches (selects), which the compiler vectorizes
+(SIMD across rays); aspheres run Newton's method ray by ray.
+
+The kernel releases the GIL (trace() runs chunks on its thread pool) and is compiled on
+first use and cached on disk (numba's ``cache=True``, next to this file or in
+NUMBA_CACHE_DIR). Lengths in mm.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+from numba import njit
+
+from lensim.optics.geometry import (
+    _FLAT_DZ,
+    _MIN_RADIUS_MM,
+    NEWTON_MAX_ITER,
+    NEWTON_TOL_MM,
+    Conic,
+    EvenAsphere,
+    OddAsphere,
+    Plane,
+    Sphere,
+)
+from lensim.optics.trace_chunk import _BACKWARDS_MM, MISSED, OK, TIR, VIGNETTED, Step
+
+# kinds of surface (a step's KIND)
+PLANE, SPHERE, CONIC, ASPHERE = 0, 1, 2, 3
+_KIND_OF = {Plane: PLANE, Sphere: SPHERE, Conic: CONIC, EvenAsphere: ASPHERE, OddAsphere: ASPHERE}
+# a step's integers (plan.ints[s, ...])
+KIND, INDEX, INTERACT, MIRROR, BACKWARDS_OK, CHECK_DOMAIN = range(6)
+# a step's floats (plan.floats[s, ...])
+CURV, CONIC_K, SHIFT, Z_VERTEX, R2_MAX, R2_MIN, B1 = range(7)
+# aspheric series (plan.coef[s, series, m]: the coefficient of r2^m; plan.high[s, series]:
+# the highest m, -1 for none): the sag's even and odd parts, the slope over r's even and odd
+SAG_EVEN, SAG_ODD, SLOPE_EVEN, SLOPE_ODD = range(4)
+_MAX_M = 11  # r2^0 .. r2^10 (powers up to 20)
+Arr = np.ndarray
+#: numba's options for every function of the kernel: compiled once and cached on disk;
+#: the GIL released; division as in C (no ZeroDivisionError checks); multiply-adds fused
+#: (rounding only); no reference counts (the kernel allocates nothing, and counting the
+#: arrays passed between its functions cost more than the arithmetic)
+_JIT: dict = dict(cache=True, nogil=True, error_model="numpy", _nrt=False, fastmath={"contract"})
+
+
+class Plan:
+    """A trace's steps as the kernel's arrays: ints (S, 6), floats (S, 7), the aspheric
+    series coef (S, 4, 11) and their highest power high (S, 4)."""
+
+    def __init__(self, chunk_steps: list[Step]) -> None:
+        S = len(chunk_steps)
+        self.ints = np.zeros((S, 6), dtype=np.int64)
+        self.floats = np.zeros((S, 7), dtype=np.float64)
+        self.coef = np.zeros((S, 4, _MAX_M), dtype=np.float64)
+        self.high = np.full((S, 4), -1, dtype=np.int64)
+        for s, st in enumerate(chunk_steps):
+            self._fill(s, st)
+
+    def _fill(self, s: int, st: Step) -> None:
+        g = st.geometry
+        kind = _KIND_OF[type(g)]
+        domain = isinstance(g, Conic) and g._leaves_domain()  # every kind the kernel knows is a Conic
+        self.ints[s] = (kind, st.index, st.interact, st.surface.is_mirror, st.backwards_ok, domain)
+        r2_max = math.inf if st.r2_max is None else st.r2_max
+        r2_min = -math.inf if st.r2_min is None else st.r2_min
+        b1 = float(g._b1) if isinstance(g, EvenAsphere) else 0.0
+        self.floats[s] = (float(g.curvature), float(g.conic), st.shift, st.z_vertex, r2_max, r2_min, b1)
+        if isinstance(g, EvenAsphere):
+            for j, terms in enumerate((g._sag_even, g._sag_odd, g._slope_even, g._slope_odd)):
+                for m, a in terms.items():
+                    self.coef[s, j, m] = float(a)
+                self.high[s, j] = max(terms) if terms else -1
+
+
+def plan_for(chunk_steps: list[Step]) -> Plan | None:
+    """The kernel's plan for these steps, or None where a surface is of a kind the kernel
+    does not know (a Geometry subclass of its own) or has a parameter that is a tensor."""
+    for st in chunk_steps:
+        g = st.geometry
+        if type(g) not in _KIND_OF:
+            return None
+        values = [g.curvature, g.conic] + (list(g.terms.values()) if isinstance(g, EvenAsphere) else [])
+        if any(isinstance(v, torch.Tensor) and v.requires_grad for v in values):
+            return None
+    return Plan(chunk_steps)
+
+
+# ---- per-ray formulas (each mirrors a chunk method of lensim.optics.geometry) -----------
+@njit(**_JIT)
+def _series(coef: np.ndarray, high: np.ndarray, s: int, j: int, r2: float) -> float:
+    """sum coef[s, j, m] r2^m for m = 0..high[s, j] by Horner's rule (geometry._power_series)."""
+    h = high[s, j]
+    acc = coef[s, j, h]
+    for m in range(h - 1, -1, -1):
+        acc = acc * r2 + coef[s, j, m]
+    return acc
+
+
+@njit(**_JIT)
+def _sag(f: np.ndarray, coef: np.ndarray, high: np.ndarray, s: int, r2: float) -> float:
+    """An asphere's sag (mm) at squared radius r2 (EvenAsphere.sag, OddAsphere.sag)."""
+    c, k = f[s, CURV], f[s, CONIC_K]
+    u = 1.0 - (1.0 + k) * c * c * r2
+    z = c * r2 / (1.0 + math.sqrt(max(u, 0.0)))
+    if high[s, SAG_EVEN] >= 0:
+        z += _series(coef, high, s, SAG_EVEN, r2)
+    if high[s, SAG_ODD] >= 0:
+        z += math.sqrt(max(r2, 0.0)) * _series(coef, high, s, SAG_ODD, r2)
+    return z
+
+
+@njit(**_JIT)
+def _slope_over_r(f: np.ndarray, coef: np.ndarray, high: np.ndarray, s: int, r2: float) -> float:
+    """An asphere's (dz/dr) / r (1/mm) at r2 (EvenAsphere / OddAsphere.sag_slope_over_r)."""
+    c, k = f[s, CURV], f[s, CONIC_K]
+    g = c / math.sqrt(max(1.0 - (1.0 + k) * c * c * r2, 1e-30))
+    if high[s, SLOPE_EVEN] >= 0:
+        g += _series(coef, high, s, SLOPE_EVEN, r2)
+    if high[s, SLOPE_ODD] >= 0 or f[s, B1] != 0.0:
+        r = max(math.sqrt(max(r2, 0.0)), _MIN_RADIUS_MM)
+        if high[s, SLOPE_ODD] >= 0:
+            g += r * _series(coef, high, s, SLOPE_ODD, r2)
+        g += f[s, B1] / r
+    return g
+
+
+@njit(**_JIT)
+def _newton(
+    f: np.ndarray,
+    coef: np.ndarray,
+    high: np.ndarray,
+    s: int,
+    x1: float,
+    y1: float,
+    L: float,
+    M: float,
+    N: float,
+    t1: float,
+) -> tuple[float, bool]:
+    """EvenAsphere.refine_chunk for one ray: (t1, converged) from the conic root t1 of the
+    vertex-plane point (x1, y1, 0); a ray that does not converge, or ends where the sag
+    has no slope along it, misses."""
+    if not math.isfinite(t1):
+        t1 = 0.0
+    for _ in range(NEWTON_MAX_ITER):
+        xx = x1 + t1 * L
+        yy = y1 + t1 * M
+        rr = xx * xx + yy * yy
+        fv = t1 * N - _sag(f, coef, high, s, rr)
+        fp = N - (xx * L + yy * M) * _slope_over_r(f, coef, high, s, rr)
+        ok = abs(fp) > 1e-12
+        step = fv / fp if ok else fv
+        t1 = t1 - step
+        if abs(step) < NEWTON_TOL_MM:
+            return t1, ok
+    return t1, False
+
+
+@njit(**_JIT)
+def _conic_root(
+    c: float, k: float, x: float, y: float, z: float, L: float, M: float, N: float
+) -> tuple[float, float, float, float, bool]:
+    """Conic.hit_chunk's closed form for one ray (a plane is c = 0): (t1, back, x1, y1,
+    ok), the root t1 from the vertex-plane point (x1, y1, 0), back = z / N (minus the
+    path to that plane), ok: the ray is not parallel to the plane and meets the quadric."""
+    back = z / N
+    x1 = x - back * L
+    y1 = y - back * M
+    r2 = x1 * x1 + y1 * y1
+    b = (x1 * L + y1 * M) * c - N
+    disc = b * b - c * (N * N * (c * k) + c) * r2
+    t1 = r2 * -c / (b + math.copysign(math.sqrt(max(disc, 0.0)), b))
+    return t1, back, x1, y1, (abs(N) > _FLAT_DZ) & (disc >= 0.0)
+
+
+@njit(**_JIT)
+def _advance(
+    s: int, i: int, ints: np.ndarray, f: np.ndarray, coef: np.ndarray, high: np.ndarray, w: np.ndarray
+) -> None:
+    """Step s for ray i of the block w on an asphere (Newton's method, ray by ray): the
+    same as _closed_loop, with EvenAsphere's intersection and normal."""
+    live = w[CODE, i] == OK
+    x, y, z = w[X, i], w[Y, i], w[Z, i] - (f[s, SHIFT] if live else 0.0)
+    L, M, N = w[L_, i], w[M_, i], w[N_, i]
+    t1, back, x1, y1, hit = _conic_root(f[s, CURV], f[s, CONIC_K], x, y, z, L, M, N)
+    if live and hit:
+        t1, hit = _newton(f, coef, high, s, x1, y1, L, M, N, t1)
+    t = t1 - back
+    hit = hit and math.isfinite(t) and (ints[s, BACKWARDS_OK] != 0 or t > _BACKWARDS_MM)
+    if live and hit:
+        xn, yn, zn = x + t * L, y + t * M, z + t * N
+        rr = xn * xn + yn * yn
+        hit = 1.0 - (1.0 + f[s, CONIC_K]) * f[s, CURV] ** 2 * rr >= 0.0  # Conic.in_domain
+    code = OK if not live else (MISSED if not hit else OK)
+    if live and hit:
+        x, y, z = xn, yn, zn
+        w[OPL, i] += t * w[N1, i]
+        if rr > f[s, R2_MAX] or rr < f[s, R2_MIN]:
+            code = VIGNETTED
+        elif ints[s, MIRROR] != 0 or w[MU, i] != 1.0:
+            g = _slope_over_r(f, coef, high, s, rr)
+            inv = 1.0 / math.sqrt(x * x * g * g + y * y * g * g + 1.0)
+            L, M, N, tir = _bend(ints[s, MIRROR] != 0, w[MU, i], -(x * g) * inv, -(y * g) * inv, inv, L, M, N)
+            code = TIR if tir else OK
+            if not tir:
+                w[L_, i], w[M_, i], w[N_, i] = L, M, N
+    w[X, i], w[Y, i], w[Z, i] = x, y, z + (f[s, Z_VERTEX] if code != OK else 0.0)
+    if code != OK:
+        w[CODE, i], w[WHERE, i] = code, ints[s, INDEX]
+
+
+@njit(**_JIT)
+def _bend(
+    mirror: bool, mu: float, nx: float, ny: float, nz: float, L: float, M: float, N: float
+) -> tuple[float, float, float, bool]:
+    """trace_chunk._reflect / _refract for one ray at a surface of unit normal (nx, ny, nz),
+    mu = n1 / n2: (L, M, N, tir), the direction after it (tir: totally internally reflected)."""
+    cos_i = L * nx + M * ny + N * nz
+    if mirror:
+        dn = cos_i * -2.0
+        return L + dn * nx, M + dn * ny, N + dn * nz, False
+    ct = cos_i * cos_i * (mu * mu) + (1.0 - mu * mu)
+    kk = math.copysign(math.sqrt(max(ct, 0.0)), cos_i) - cos_i * mu
+    return L * mu + kk * nx, M * mu + kk * ny, N * mu + kk * nz, ct < 0.0
+
+
+@njit(**_JIT)
+def _step_asphere(
+    s: int, ints: np.ndarray, f: np.ndarray, coef: np.ndarray, high: np.ndarray, w: np.ndarray, m: int
+) -> None:
+    """Step s (an even or odd asphere) for the first m rays of the block w."""
+    for i in range(m):
+        _advance(s, i, ints, f, coef, high, w)
+
+
+@njit(**_JIT, inline="always")
+def _closed_loop(
+    s: int,
+    ints: Arr,
+    f: Arr,
+    m: int,
+    X: Arr,
+    Y: Arr,
+    Z: Arr,
+    L: Arr,
+    M: Arr,
+    N: Arr,
+    O: Arr,
+    C: Arr,
+    W: Arr,
+    n1: Arr,
+    mu: Arr,
+    bend: bool,
+    unit: bool,
+) -> None:
+    """trace_chunk's _move_to_surface, _reflect and _refract at step s (a plane, sphere or
+    conic: Conic.hit_chunk's closed form) for the first m rays of the block (its rows X,
+    Y, Z (z local to the previous vertex), L, M, N, O (OPL), C (status code), W (failure
+    surface), n1 (the medium's index before the surface), mu (n1 / n2)): a ray still
+    traced (C OK) moves to the surface and is bent there; one that fails gets its code and
+    the step's surface, its z made global, and stops. Every branch is a select, so the
+    compiler vectorizes the loop. bend: the step refracts or reflects; unit: its normal
+    needs scaling (a conic; a plane's and a sphere's are unit already); both constants."""
+    plane, mirror, c, k = ints[s, KIND] == PLANE, ints[s, MIRROR] != 0, f[s, CURV], f[s, CONIC_K]
+    shift, z_vertex, r2_max, r2_min = f[s, SHIFT], f[s, Z_VERTEX], f[s, R2_MAX], f[s, R2_MIN]
+    back_ok, domain = ints[s, BACKWARDS_OK] != 0, ints[s, CHECK_DOMAIN] != 0
+    idx = float(ints[s, INDEX])
+    for i in range(m):
+        live = C[i] == OK
+        x, y, z, dx, dy, dz = X[i], Y[i], Z[i] - (shift if live else 0.0), L[i], M[i], N[i]
+        t1, back, x1, y1, hit = _conic_root(c, k, x, y, z, dx, dy, dz)
+        t = -(z / dz) if plane else t1 - back
+        hit = hit & (plane | (abs(t) < math.inf)) & (back_ok | (t > _BACKWARDS_MM))
+        xn, yn, zn = x + t * dx, y + t * dy, z + t * dz
+        rr = xn * xn + yn * yn
+        hit = hit & (~domain | (1.0 - (1.0 + k) * c * c * rr >= 0.0))  # Conic.in_domain
+        go = live & hit
+        vig = go & ((rr > r2_max) | (rr < r2_min))
+        tir, bent = False, False
+        if bend:
+            nx, ny, nz = xn * -c, yn * -c, zn * (-c * (1.0 + k)) + 1.0
+            if unit:
+                inv = 1.0 / math.sqrt(nx * nx + ny * ny + nz * nz)
+                nx, ny, nz = nx * inv, ny * inv, nz * inv
+            cos_i = dx * nx + dy * ny + dz * nz
+            ct = cos_i * cos_i * (mu[i] * mu[i]) + (1.0 - mu[i] * mu[i])
+            kk = math.copysign(math.sqrt(max(ct, 0.0)), cos_i) - cos_i * mu[i]
+            dn = cos_i * -2.0
+            bent = go & ~vig & (mirror | (mu[i] != 1.0))
+            tir = bent & ~mirror & (ct < 0.0)
+            bent = bent & ~tir
+            L[i] = (dx + dn * nx if mirror else dx * mu[i] + kk * nx) if bent else dx
+            M[i] = (dy + dn * ny if mirror else dy * mu[i] + kk * ny) if bent else dy
+            N[i] = (dz + dn * nz if mirror else dz * mu[i] + kk * nz) if bent else dz
+        code = MISSED if not hit else (VIGNETTED if vig else (TIR if tir else OK))
+        fails = live & (code != OK)
+        X[i] = xn if go else x
+        Y[i] = yn if go else y
+        Z[i] = (zn if go else z) + (z_vertex if fails else 0.0)
+        O[i] = O[i] + t * n1[i] if go else O[i]
+        C[i] = code if fails else C[i]
+        W[i] = idx if fails else W[i]
+
+
+@njit(**_JIT)
+def _move(
+    s: int,
+    ints: Arr,
+    f: Arr,
+    m: int,
+    X: Arr,
+    Y: Arr,
+    Z: Arr,
+    L: Arr,
+    M: Arr,
+    N: Arr,
+    O: Arr,
+    C: Arr,
+    W: Arr,
+    n1: Arr,
+    mu: Arr,
+) -> None:
+    """_closed_loop for a step that does not bend the rays (the image plane, a surface
+    between equal media)."""
+    _closed_loop(s, ints, f, m, X, Y, Z, L, M, N, O, C, W, n1, mu, False, False)
+
+
+@njit(**_JIT)
+def _move_bend(
+    s: int,
+    ints: Arr,
+    f: Arr,
+    m: int,
+    X: Arr,
+    Y: Arr,
+    Z: Arr,
+    L: Arr,
+    M: Arr,
+    N: Arr,
+    O: Arr,
+    C: Arr,
+    W: Arr,
+    n1: Arr,
+    mu: Arr,
+) -> None:
+    """_closed_loop for a plane or sphere that bends the rays."""
+    _closed_loop(s, ints, f, m, X, Y, Z, L, M, N, O, C, W, n1, mu, True, False)
+
+
+@njit(**_JIT)
+def _move_bend_unit(
+    s: int,
+    ints: Arr,
+    f: Arr,
+    m: int,
+    X: Arr,
+    Y: Arr,
+    Z: Arr,
+    L: Arr,
+    M: Arr,
+    N: Arr,
+    O: Arr,
+    C: Arr,
+    W: Arr,
+    n1: Arr,
+    mu: Arr,
+) -> None:
+    """_closed_loop for a conic that bends the rays."""
+    _closed_loop(s, ints, f, m, X, Y, Z, L, M, N, O, C, W, n1, mu, True, True)
+
+
+# rows of a block's work array w
+X, Y, Z, L_, M_, N_, OPL, CODE, WHERE, N1, MU = range(11)
+#: rays per block: the kernel carries a block through one step at a time, its state in
+#: cache, in loops the compiler vectorizes (SIMD across rays; aspheres excepted)
+BLOCK = 2048
+
+
+@njit(**_JIT)
+def _media(n: np.ndarray, uniform: bool, s: int, a: int, m: int, w: np.ndarray) -> bool:
+    """Rows N1 (index before step s's surface) and MU (n1 / n2) of the block w for rays
+    a..a+m; uniform: every ray has the same indices (n: (S+1, B), a column broadcast).
+    Returns whether the surface has the same medium on both sides for every ray."""
+    s2 = min(s + 1, n.shape[0] - 1)
+    if uniform:
+        v1, mu = n[s, a], n[s, a] / n[s2, a]
+        for i in range(m):
+            w[N1, i], w[MU, i] = v1, mu
+        return mu == 1.0
+    for i in range(m):
+        w[N1, i], w[MU, i] = n[s, a + i], n[s, a + i] / n[s2, a + i]
+    return False
+
+
+@njit(**_JIT)
+def _run_step(
+    s: int, ints: np.ndarray, floats: np.ndarray, coef: np.ndarray, high: np.ndarray, w: np.ndarray, m: int, same: bool
+) -> None:
+    """Step s on the first m rays of the block w, by the loop its surface needs (same: the
+    media on both sides are equal for every ray)."""
+    kind = ints[s, KIND]
+    if kind == ASPHERE:
+        _step_asphere(s, ints, floats, coef, high, w, m)
+        return
+    rows = (w[X], w[Y], w[Z], w[L_], w[M_], w[N_], w[OPL], w[CODE], w[WHERE], w[N1], w[MU])
+    if ints[s, INTERACT] == 0 or (same and ints[s, MIRROR] == 0):
+        _move(s, ints, floats, m, *rows)
+    elif kind == CONIC:
+        _move_bend_unit(s, ints, floats, m, *rows)
+    else:
+        _move_bend(s, ints, floats, m, *rows)
+
+
+@njit(**_JIT)
+def trace_rays(
+    p: Arr,
+    d: Arr,
+    o: Arr,
+    v: Arr,
+    n: Arr,
+    uniform: bool,
+    z0: float,
+    ints: Arr,
+    floats: Arr,
+    coef: Arr,
+    high: Arr,
+    out_p: Arr,
+    out_d: Arr,
+    out_o: Arr,
+    out_v: Arr,
+    status: Arr,
+    failed: Arr,
+    w: Arr,
+) -> None:
+    """Trace rays p (B, 3) mm, d (B, 3), OPL o (B,) mm, validity v (B,) through the plan's
+    steps (ints, floats, coef, high), media indices n (S+1, B) (uniform: a column
+    broadcast), z0 the first step's vertex z (mm); write positions, directions, paths,
+    validity, status codes and failure surfaces (-1: none) to the outputs; w: a work
+    array (11, BLOCK). Rays invalid on input are written as given."""
+    S, B = ints.shape[0], p.shape[0]
+    z_last = floats[S - 1, Z_VERTEX]
+    for a in range(0, B, BLOCK):
+        m = min(BLOCK, B - a)
+        for i in range(m):
+            w[X, i], w[Y, i], w[Z, i] = p[a + i, 0], p[a + i, 1], p[a + i, 2] - (z0 if v[a + i] else 0.0)
+            w[L_, i], w[M_, i], w[N_, i], w[OPL, i] = d[a + i, 0], d[a + i, 1], d[a + i, 2], o[a + i]
+            w[CODE, i], w[WHERE, i] = (OK, -1.0) if v[a + i] else (-1.0, -1.0)  # -1: not traced
+        for s in range(S):
+            same = _media(n, uniform, ints[s, INDEX], a, m, w)
+            _run_step(s, ints, floats, coef, high, w, m, same)
+        for i in range(m):
+            live = w[CODE, i] == OK
+            out_p[a + i, 0], out_p[a + i, 1], out_p[a + i, 2] = w[X, i], w[Y, i], w[Z, i] + (z_last if live else 0.0)
+            out_d[a + i, 0], out_d[a + i, 1], out_d[a + i, 2] = w[L_, i], w[M_, i], w[N_, i]
+            out_o[a + i], out_v[a + i] = w[OPL, i], live
+            status[a + i], failed[a + i] = max(w[CODE, i], 0.0), w[WHERE, i]
