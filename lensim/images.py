@@ -124,6 +124,12 @@ def _read_png16(path: Path) -> np.ndarray:
     return arr[..., 0] if info["planes"] == 1 else arr
 
 
+#: zlib level of the PNGs lensim writes. Level 3 instead of zlib's default 6: a 24 MP 8-bit
+#: restored photo took 3.1-3.3 s of CPU instead of 9.5-9.8 s, and its file grew from 19.1 to
+#: 21.0 MB (level 1: 2.3 s, 22.4 MB).
+PNG_COMPRESS_LEVEL = 3
+
+
 def write_image(path: str | Path, image: torch.Tensor, bits: int = 8, srgb_tag: bool = False) -> None:
     """Write a (3, H, W) float image in [0, 1] as 8- or 16-bit PNG or TIFF, atomically.
     ``srgb_tag`` marks the file as sRGB: an embedded sRGB ICC profile in a TIFF, the
@@ -144,12 +150,14 @@ def write_image(path: str | Path, image: torch.Tensor, bits: int = 8, srgb_tag: 
     if bits == 8:
         from PIL import Image
 
-        Image.fromarray(q, "RGB").save(buf, format="PNG")
+        Image.fromarray(q, "RGB").save(buf, format="PNG", compress_level=PNG_COMPRESS_LEVEL)
     else:
         import png  # pypng: 16-bit RGB PNG (Pillow cannot write it)
 
         h, w, _ = q.shape
-        png.Writer(w, h, greyscale=False, bitdepth=16).write(buf, iter(q.reshape(h, w * 3)))  # rows, no list copy
+        png.Writer(w, h, greyscale=False, bitdepth=16, compression=PNG_COMPRESS_LEVEL).write(
+            buf, iter(q.reshape(h, w * 3))
+        )  # rows, no list copy
     data = buf.getvalue()
     if srgb_tag:
         data = _with_png_srgb_chunk(data)

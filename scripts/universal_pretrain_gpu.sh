@@ -8,9 +8,8 @@
 #    lens first), a rerun resumes;
 # 2. their pairs (`lensim library pairs --workers N`: 2 training photos x 3 sensor positions per
 #    bank), for at most PAIRS_SECONDS;
-# 3. each pairs folder's Wiener stage cache, N folders at a time (what `library pretrain` would
-#    otherwise compute one folder after another);
-# 4. `lensim library pretrain --device cuda --no-amp` for the time left (float32: mixed
+# 3. `lensim library pretrain --workers N --device cuda --no-amp`: each pairs folder's Wiener
+#    stage cache, N folders at a time, then training for the time left (float32: mixed
 #    precision is slower for this small network, benchmarks/results/gpu/README.md), shipped into
 #    OUT_DIR/universal (model.pt, training_log.csv).
 # OUT_DIR also gets log.txt (each step's time), banks.json and pairs.json (the commands' summaries).
@@ -45,33 +44,8 @@ timeout "$PAIRS_SECONDS" $PY -W ignore -m lensim library pairs "$WORK/lib" -o "$
 say "pairs exit $?; complete folders: $(ls "$WORK"/pairs/pairs/*/manifest.json 2>/dev/null | wc -l)"
 tail -n 3 "$WORK/pairs.err" | cut -c1-300 | tee -a "$OUT/log.txt"
 
-say "Wiener stage caches"
-$PY -W ignore - "$WORK/pairs" "$WORKERS" <<'EOF' 2>&1 | tail -n 3 | tee -a "$OUT/log.txt"
-import sys
-from concurrent.futures import ProcessPoolExecutor
-
-from lensim.data.library_pairs import library_pair_folders
-
-
-def cache(folder):
-    import torch
-
-    from lensim.restore.psf_stage import training_cache
-    from lensim.restore.universal import PretrainConfig
-
-    torch.set_num_threads(1)
-    training_cache(folder, PretrainConfig().network())
-    return folder
-
-
-folders = library_pair_folders(sys.argv[1])
-with ProcessPoolExecutor(int(sys.argv[2])) as pool:
-    done = list(pool.map(cache, folders))
-print(f"caches of {len(done)} folders")
-EOF
-
-MINUTES=$(awk -v s=$((TOTAL - $(elapsed) - 40)) 'BEGIN { printf "%.2f", (s > 30 ? s : 30) / 60 }')
-say "pretraining for $MINUTES minutes on $DEV"
+MINUTES=$(awk -v s=$((TOTAL - $(elapsed) - 60)) 'BEGIN { printf "%.2f", (s > 30 ? s : 30) / 60 }')
+say "Wiener stage caches ($WORKERS folders at a time), then pretraining for $MINUTES minutes on $DEV"
 $PY -W ignore -m lensim library pretrain "$WORK/pairs" -o "$WORK/run" --arch psfnet --device "$DEV" $AMP \
-  --minutes "$MINUTES" --ship "$OUT/universal" --quiet 2>&1 | tail -n 3 | cut -c1-400 | tee -a "$OUT/log.txt"
+  --minutes "$MINUTES" --workers "$WORKERS" --ship "$OUT/universal" --quiet 2>&1 | tail -n 3 | cut -c1-400 | tee -a "$OUT/log.txt"
 say "pretraining done; last log rows: $(tail -n 2 "$WORK/run/log.csv" 2>&1 | tr '\n' ' ')"

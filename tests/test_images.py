@@ -54,3 +54,24 @@ def test_bad_files_give_one_line_errors(tmp_path):
     tifffile.imwrite(tmp_path / "c.tif", np.zeros((20, 20, 5), np.uint8))
     with pytest.raises(InputError, match="channels"):
         read_image(tmp_path / "c.tif")
+
+
+@pytest.mark.parametrize("bits", [8, 16])
+def test_png_is_lossless_and_written_at_lensims_zlib_level(tmp_path, bits):
+    """8- and 16-bit PNGs read back exactly, and their zlib stream says 'fast' (FLEVEL 1:
+    levels 2-5), i.e. PNG_COMPRESS_LEVEL 3 and not zlib's default 6 (FLEVEL 2)."""
+    import struct
+
+    from lensim.images import PNG_COMPRESS_LEVEL, read_image, write_image
+
+    img = torch.rand(3, 40, 56, generator=torch.Generator().manual_seed(4))
+    path = tmp_path / f"x{bits}.png"
+    write_image(path, img, bits=bits)
+    top = 2**bits - 1
+    back, depth = read_image(path)
+    assert depth == bits and (back - img).abs().max().item() <= 0.5 / top + 1e-6  # the quantisation only
+    data = path.read_bytes()
+    at = data.index(b"IDAT")
+    (length,) = struct.unpack(">I", data[at - 4 : at])
+    flevel = data[at + 5] >> 6  # the zlib header's second byte
+    assert length > 0 and PNG_COMPRESS_LEVEL == 3 and flevel == 1

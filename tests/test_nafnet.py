@@ -390,3 +390,20 @@ def test_train_and_evaluate_with_arch(tmp_path: Path) -> None:
     # without --methods: the built-in methods plus the plain network, named after its option
     assert _method_names(None, {"model": None, "plain": run}) == ["input", "wiener", "rl", "unsharp", "plain"]
     assert _method_names(None, {"model": run, "plain": run}, "plain-unet")[-2:] == ["model", "plain-unet"]
+
+
+def test_layer_norm_in_channels_last_equals_the_per_pixel_formula() -> None:
+    """CPU inference runs in channels_last, where LayerNorm2d takes torch's fused layer norm
+    over the NHWC view; it must equal the NCHW per-pixel formula."""
+    torch.manual_seed(3)
+    norm = LayerNorm2d(6)
+    with torch.no_grad():
+        norm.weight.normal_()
+        norm.bias.normal_()
+    x = torch.randn(2, 6, 9, 7) * 3 + 1
+    slow = norm(x)
+    fast = norm(x.contiguous(memory_format=torch.channels_last))
+    by_hand = (x - x.mean(1, keepdim=True)) / torch.sqrt(x.var(1, unbiased=False, keepdim=True) + norm.eps)
+    by_hand = by_hand * norm.weight.view(1, -1, 1, 1) + norm.bias.view(1, -1, 1, 1)
+    assert torch.allclose(slow, by_hand, atol=1e-5) and torch.allclose(fast, by_hand, atol=1e-5)
+    assert fast.shape == x.shape and not torch.equal(norm.bias.view(1, -1, 1, 1).expand_as(x), fast)

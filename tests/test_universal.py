@@ -92,6 +92,31 @@ def test_shipped_model_loads_with_its_ranges(shipped, camera):
         assert len(list((folder / "wiener").glob("*/*.png"))) == 2
 
 
+@pytest.mark.slow  # a 2-worker local Dask cluster (about 15 s)
+def test_stage_caches_on_two_workers_equal_one_process(camera, tmp_path):
+    """stage_caches with 2 workers writes each folder's Wiener stage cache byte for byte as
+    one process does, and reports every folder."""
+    import shutil
+
+    network = uni.replace(TINY, arch="psfnet").network()
+    copies = {}
+    for workers in (1, 2):
+        folders = []
+        for folder in camera["folders"]:
+            copy = tmp_path / f"w{workers}" / folder.name
+            shutil.copytree(folder, copy, ignore=shutil.ignore_patterns("wiener"))
+            folders.append(copy)
+        seen: list[tuple[int, int]] = []
+        uni.stage_caches(folders, network, workers, lambda done, total, seen=seen: seen.append((done, total)))
+        assert seen[-1] == (2, 2)
+        copies[workers] = {
+            p.relative_to(tmp_path / f"w{workers}"): p.read_bytes()
+            for p in (tmp_path / f"w{workers}").glob("*/wiener/*/*.png")
+        }
+    assert len(copies[1]) == 4 and copies[1] == copies[2]
+    assert uni.stage_caches(camera["folders"], uni.replace(TINY, arch="nafnet").network(), 2) is None  # no stage
+
+
 def test_unknown_architecture_is_one_line_naming_it(tmp_path, capsys, monkeypatch):
     code, _, err = run_cli(
         ["library", "pretrain", str(tmp_path), "-o", str(tmp_path / "run"), "--arch", "unet"], capsys, monkeypatch

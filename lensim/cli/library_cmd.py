@@ -193,6 +193,9 @@ def pretrain_command(
     device: str = typer.Option("cpu", "--device", help="cpu, cuda or cuda:N (mixed precision on CUDA)."),
     no_amp: bool = typer.Option(False, "--no-amp", help="Full float32 on CUDA."),
     ship_to: Path = typer.Option(None, "--ship", help="Write the model for inference into this folder at the end."),
+    workers: int = typer.Option(
+        1, "--workers", help="Pairs folders whose Wiener stage caches are computed at a time before training."
+    ),
     quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
 ) -> None:
     """Pretrain the universal model on the library's pairs (lensim.restore.universal).
@@ -211,6 +214,7 @@ def pretrain_command(
         at_least(value, 1, option, what="a count")
     positive(lr, "--lr")
     at_least(max_steps, 0, "--max-steps", what="a count")
+    at_least(workers, 1, "--workers", what="a number of processes")
     cfg = PretrainConfig(
         width=width,
         crop=crop,
@@ -226,7 +230,8 @@ def pretrain_command(
     cfg.network()  # an unknown --arch is one line before any work
     folders = _pair_folders(pairs)
     with progress_bar("universal pretraining", "s", quiet) as report:
-        result = pretrain(folders, output, cfg, report, None if call_minutes is None else call_minutes * 60.0)
+        call_s = None if call_minutes is None else call_minutes * 60.0
+        result = pretrain(folders, output, cfg, report, call_s, cache_workers=workers)
     if ship_to is not None:
         ship(output, ship_to)
     loss = "n/a" if result.loss is None else f"{result.loss:.5g}"

@@ -86,7 +86,12 @@ def restore_command(
         help="TOP,LEFT sensor pixel of the image's top-left "
         "pixel at native scale (default: the image is a full frame).",
     ),
-    tile: int = typer.Option(512, "--tile", help="Largest tile side in pixels."),
+    tile: int = typer.Option(
+        None,
+        "--tile",
+        help="Largest tile side in pixels (default: the network's: 1024 for NAFNet and the PSF-informed "
+        "network, 512 for the UNet).",
+    ),
     overlap: int = typer.Option(
         None,
         "--overlap",
@@ -201,11 +206,13 @@ def restore_command(
     model, info, sensor_data, (sensor_w, sensor_h) = _load_model(
         checkpoint, None if zero_shot else lens_file, sensor_file, device, engine, threads
     )
-    if overlap is None:
-        from lensim.restore.infer import default_overlap
+    if overlap is None or tile is None:
+        from lensim.restore.infer import default_overlap, default_tile
 
-        overlap = default_overlap(model)
-        _check_tiling(tile, overlap, default=True)
+        defaults = overlap is None
+        tile = default_tile(model) if tile is None else tile
+        overlap = default_overlap(model) if overlap is None else overlap
+        _check_tiling(tile, overlap, default=defaults)
     lens_obj = check_zero_shot(info, sensor_data, lens_file, fno) if zero_shot else None
     _check_photos(photos, offset, (sensor_w, sensor_h), getattr(model, "uses_wiener", False))
     bank_dir: Path | None = bank
@@ -268,11 +275,10 @@ def _tile_memory(workers: int) -> Iterator[None]:
         ) from None
 
 
-def _check_tiling(tile: int, overlap: int | None, default: bool = False) -> None:
-    """--tile and --overlap (default: the network's overlap, checked once it is loaded)."""
-    if overlap is None:
-        overlap = 0
-    if tile < 16 or not 0 <= overlap < tile:
+def _check_tiling(tile: int | None, overlap: int | None, default: bool = False) -> None:
+    """--tile and --overlap; None: the network's, known (and checked) once it is loaded."""
+    too_large = tile is not None and overlap is not None and overlap >= tile
+    if (tile is not None and tile < 16) or (overlap is not None and overlap < 0) or too_large:
         given = f"the network's default overlap {overlap}" if default else f"overlap {overlap}"
         raise InputError(
             "--tile/--overlap",
@@ -283,7 +289,7 @@ def _check_tiling(tile: int, overlap: int | None, default: bool = False) -> None
 
 def _check_options(
     bits: int,
-    tile: int,
+    tile: int | None,
     overlap: int | None,
     workers: int,
     threads: int,

@@ -76,7 +76,7 @@ class RestoreSettings:
 
     checkpoint: str
     sensor: dict[str, Any]
-    tile: int = 512
+    tile: int | None = None  # None: the network's (lensim.restore.infer.default_tile)
     overlap: int | None = None  # None: the network's (lensim.restore.infer.default_overlap)
     device: str = "cpu"
     allow_other_camera: bool = False

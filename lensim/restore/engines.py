@@ -60,8 +60,8 @@ class OnnxEngine:
         source: the name used in error messages (default: the file name).
 
     Attributes: ``metadata`` (lensim.restore.export.onnx_metadata), size_multiple,
-    use_fov, settings_dim, uses_wiener, tile_overlap (the overlap the metadata records, the
-    default of lensim.restore.infer.default_overlap) and stage (the PSF-informed network's
+    use_fov, settings_dim, uses_wiener, tile_overlap and tile_size (the overlap and tile the
+    metadata records: the defaults of lensim.restore.infer.default_overlap and default_tile) and stage (the PSF-informed network's
     WienerStage, else None); device/dtype are CPU float32 (the tiles' host arrays).
     """
 
@@ -97,6 +97,7 @@ class OnnxEngine:
         self.settings_dim = int(self.metadata["settings_dim"])
         self.uses_wiener = bool(self.metadata["uses_wiener"])
         self.tile_overlap = (self.metadata.get("tiling") or {}).get("overlap")
+        self.tile_size = (self.metadata.get("tiling") or {}).get("tile")
         self.stage = None
         if self.uses_wiener:
             from lensim.restore.psf_stage import WienerStage

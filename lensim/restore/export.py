@@ -160,7 +160,7 @@ def _fov_metadata(sensor: Any) -> dict[str, Any]:
 def onnx_metadata(model: nn.Module, info: dict[str, Any], opset: int) -> dict[str, Any]:
     """The JSON metadata of an export: ``model`` the network, ``info`` what
     lensim.restore.checkpoint.load_checkpoint returned with it."""
-    from lensim.restore.infer import DEFAULT_TILE, default_margin, default_overlap
+    from lensim.restore.infer import default_margin, default_overlap, default_tile
 
     config = dict(getattr(model, "config", {}))
     graph = OnnxGraph(model)
@@ -213,7 +213,7 @@ def onnx_metadata(model: nn.Module, info: dict[str, Any], opset: int) -> dict[st
         "train_config": info.get("train_config"),
         "conditioning": info.get("conditioning"),
         "tiling": {
-            "tile": DEFAULT_TILE,
+            "tile": default_tile(model),
             "overlap": overlap,
             "margin": default_margin(overlap),
             "tile_origin_multiple": graph.multiple,

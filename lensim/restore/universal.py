@@ -93,6 +93,40 @@ class PretrainResult:
     folders: int
 
 
+def _stage_cache(job: tuple[str, dict[str, Any]]) -> str:
+    """One folder's Wiener stage cache (a picklable job of :func:`stage_caches`)."""
+    from lensim.restore.psf_stage import training_cache
+
+    folder, network = job
+    training_cache(folder, network)
+    return folder
+
+
+def stage_caches(
+    folders: Sequence[str | Path],
+    network: dict[str, Any],
+    workers: int = 1,
+    progress: Callable[[int, int], None] | None = None,
+) -> None:
+    """Compute each pairs folder's Wiener stage cache for a network of config ``network``
+    where it is missing (none for a network without the stage), ``workers`` folders at a
+    time on a local Dask cluster (lensim.workers.run_jobs; one thread each), else one after
+    another here. progress(folders done, folders) as each finishes. :func:`pool` then finds
+    the caches made."""
+    from lensim.workers import run_jobs
+
+    if network.get("arch") != "psfnet":
+        return
+    done = [0]
+
+    def finished(_job: tuple[str, dict[str, Any]], _result: str) -> None:
+        done[0] += 1
+        if progress is not None:
+            progress(done[0], len(folders))
+
+    run_jobs(_stage_cache, [(str(f), dict(network)) for f in folders], workers, None, finished)
+
+
 def pool(
     folders: Sequence[str | Path],
     crop: int,
@@ -242,16 +276,20 @@ def pretrain(
     config: PretrainConfig | None = None,
     progress: Callable[[float, float], None] | None = None,
     call_budget_s: float | None = None,
+    cache_workers: int = 1,
 ) -> PretrainResult:
     """Pretrain (or continue pretraining) the universal network on the pairs folders
     (module docstring) into run_dir. progress(seconds, budget) after every step;
-    call_budget_s: this call stops (checkpointed) after that many seconds of training."""
+    call_budget_s: this call stops (checkpointed) after that many seconds of training;
+    cache_workers: folders whose Wiener stage caches are computed at a time before
+    training (:func:`stage_caches`)."""
     from lensim.restore.batches import collate, epoch_batches
 
     cfg = config or PretrainConfig()
     run = Path(run_dir)
     with folder_lock(run):
         atomic_write_json(run / "config.json", {**asdict(cfg), "folders": [str(f) for f in folders]})
+        stage_caches(folders, cfg.network(), cache_workers)
         data = pool(folders, cfg.crop, cfg.seed, cfg.network())
         universal = _ranges(folders)
         state = _resume(run, cfg)
