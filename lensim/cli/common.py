@@ -359,7 +359,7 @@ class StageBars:
     def __init__(self, show: bool) -> None:
         self.start = time.perf_counter()
         self.bars = None
-        self.task = None
+        self.task: Any = None  # rich's TaskID of the current stage's bar
         if show:
             from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 

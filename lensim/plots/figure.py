@@ -4,6 +4,7 @@ pyplot: nothing global is touched, nothing is shown), saved atomically."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Literal
 
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
@@ -12,7 +13,9 @@ from lensim.errors import InputError
 from lensim.io import atomic_writer
 
 
-def new_figure(size: tuple[float, float], layout: str | None = None) -> Figure:
+def new_figure(
+    size: tuple[float, float], layout: Literal["constrained", "compressed", "tight"] | None = None
+) -> Figure:
     """A Figure of `size` (width, height) inches on its own Agg canvas; layout: None or a
     matplotlib layout engine name ("constrained", "tight")."""
     fig = Figure(figsize=size, layout=layout)

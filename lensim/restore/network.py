@@ -134,6 +134,7 @@ class FieldModulation(nn.Module):
         self.hidden = nn.Conv2d(FIELD_FEATURES + extra, self.HIDDEN, 1)
         self.out = nn.Conv2d(self.HIDDEN, 2 * ch, 1)
         nn.init.zeros_(self.out.weight)
+        assert self.out.bias is not None
         nn.init.zeros_(self.out.bias)
 
     def forward(self, feat: torch.Tensor, feats: torch.Tensor) -> torch.Tensor:
@@ -178,6 +179,7 @@ class DeformResBlock(nn.Module):
         n_mask = deformable_groups * KERNEL_TAPS
         self.offset_conv = _conv3(ch + (n_off if coarse_offsets else 0), n_off + n_mask)
         nn.init.zeros_(self.offset_conv.weight)
+        assert self.offset_conv.bias is not None
         nn.init.zeros_(self.offset_conv.bias)
         self.dcn = ModulatedDeformConv2d(ch, ch, 3, deformable_groups, backend=backend)
         self.conv2 = _conv3(ch, ch)
@@ -337,6 +339,7 @@ class FieldAwareUNet(nn.Module):
         self.tail = _conv3(ws[0], 3)
         if zero_init_tail:
             nn.init.zeros_(self.tail.weight)
+            assert self.tail.bias is not None
             nn.init.zeros_(self.tail.bias)
 
     @property
