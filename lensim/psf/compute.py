@@ -7,10 +7,11 @@ Fields are given normalized, 0..1 of the lens's maximum field along +y.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -54,7 +55,7 @@ class PSF:
     chief_xy_mm: tuple[float, float]
     paraxial_xy_mm: tuple[float, float]
     transmission: float
-    figures: dict = field(default_factory=dict)
+    figures: dict = dataclasses.field(default_factory=dict)
 
 
 def check_sampling(

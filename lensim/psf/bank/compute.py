@@ -16,6 +16,7 @@ import numpy as np
 import torch
 
 from lensim.errors import InputError, PupilSamplingError
+from lensim.optics.aiming.modes import Aiming
 from lensim.optics.field_analysis import axis_solid_angles
 from lensim.optics.lens import Lens
 from lensim.optics.lens_file import lens_to_dict
@@ -55,7 +56,7 @@ class _Job:
     method: PsfMethod
     pupil_samples: int
     ri_samples: int
-    aiming: str
+    aiming: Aiming
     ri_axis: np.ndarray | None = None  # (W,) the on-axis beam's solid angles (sr), traced once per bank
 
     @property

@@ -26,6 +26,7 @@ from typing import TypeVar
 import numpy as np
 
 from lensim.errors import InputError, ParameterError, PupilSamplingError
+from lensim.optics.aiming.modes import Aiming
 from lensim.optics.lens import Lens
 from lensim.psf.defaults import BANK_FIELDS, BANK_PUPIL_SAMPLES, DEFAULT_WAVELENGTHS_TEXT, PsfMethod, psf_method
 
@@ -161,7 +162,7 @@ class BankSettings:
     field_spacing: str = "sqrt"
     wavelengths_nm: tuple[float, ...] = DEFAULT_WAVELENGTHS_NM
     pupil_samples: int = BANK_PUPIL_SAMPLES
-    aiming: str = "real"
+    aiming: Aiming = "real"
     kernel_pixels: int | None = None
     kernel_limit: int = 99
     method: PsfMethod = "huygens"

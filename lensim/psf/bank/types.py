@@ -3,12 +3,13 @@ with the kernel lookup at any image point."""
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 import math
 import zipfile
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -55,7 +56,7 @@ class BankField:
     strehl: float
     working_fno: float
     primary_fine: np.ndarray
-    warnings: list[str] = field(default_factory=list)
+    warnings: list[str] = dataclasses.field(default_factory=list)
     settings_key: str = ""
     rgb_azimuths: np.ndarray | None = None
 
