@@ -53,6 +53,7 @@ def _systems():
 @pytest.mark.parametrize("aiming", ["paraxial", "real"])
 def test_chunked_tracer_matches_reference(name, aiming, monkeypatch):
     monkeypatch.setattr(T, "CHUNK_RAYS", 200)  # several chunks, a ragged last one, the thread pool
+    monkeypatch.setattr(T, "FUSED_MIN_BATCH", 0)  # the fused kernel (test_trace_fused: against the torch loop)
     lens = _systems()[name]
     fields = [object_field(lens, f * lens.max_field, "paraxial") for f in (0.0, 0.7, 1.0)]
     pupil = torch.cat([square_grid(15) * 1.3, random_uniform(100)])

@@ -42,6 +42,11 @@ def _lens(name: str) -> Lens:
     return load_lens(DATA / files[name] if name in files else name, warn=False)
 
 
+@pytest.fixture(autouse=True)
+def _kernel_for_every_size(monkeypatch):
+    monkeypatch.setattr(T, "FUSED_MIN_BATCH", 0)  # small test batches run the kernel too
+
+
 LENSES = ["double_gauss", "cooke_triplet", "phone_wide", "hubble", "odd_asphere", "vignetting", "tir", "conics"]
 
 

@@ -294,6 +294,10 @@ USE_FUSED_KERNEL = True
 #: the fused kernel's smallest task (rays): below it, handing a task to the thread pool
 #: costs more than tracing it
 FUSED_MIN_RAYS = 16384
+#: the smallest trace (rays) that runs the fused kernel: the first in a process costs about
+#: 1.5 s (numba's import and start, the kernel loaded from its cache), which a chief ray or
+#: a ray fan (lens info, fans, the chief-ray checks) need not pay
+FUSED_MIN_BATCH = 4096
 
 
 def _fused_kernel(chunk_steps: list):
@@ -379,7 +383,7 @@ def trace(
     failed_at = torch.empty(B, dtype=torch.int16, device=device)
     rec = torch.empty(len(chunk_steps), B, 3, dtype=DTYPE, device=device) if record and chunk_steps else None
     z0 = float(zv[start]) if start < len(zv) else 0.0
-    fused = _fused_kernel(chunk_steps) if device.type == "cpu" and rec is None else None
+    fused = _fused_kernel(chunk_steps) if device.type == "cpu" and rec is None and B >= FUSED_MIN_BATCH else None
 
     def run(task) -> None:
         a, b, nv = task
