@@ -6,6 +6,7 @@ import pytest
 import torch
 
 import lensim.optics.trace as T
+from lensim.optics import trace_fused
 from lensim.optics.aiming.rays import generate_rays, object_field
 from lensim.optics.aiming.sampling import random_uniform, square_grid
 from lensim.optics.lens import Lens
@@ -45,6 +46,7 @@ def _lens(name: str) -> Lens:
 @pytest.fixture(autouse=True)
 def _kernel_for_every_size(monkeypatch):
     monkeypatch.setattr(T, "FUSED_MIN_BATCH", 0)  # small test batches run the kernel too
+    monkeypatch.setattr(trace_fused, "ASPHERES", True)  # and so do aspheres (off by default: slower)
 
 
 LENSES = ["double_gauss", "cooke_triplet", "phone_wide", "hubble", "odd_asphere", "vignetting", "tir", "conics"]
@@ -99,9 +101,8 @@ def test_fused_kernel_from_a_middle_surface():
     _compare(lens, mid.rays, wl, start=3)
 
 
-def test_fused_kernel_declines_what_it_does_not_know():
-    """A geometry of a kind of its own, and recorded surface positions, take the torch loop."""
-    from lensim.optics import trace_fused
+def test_fused_kernel_declines_what_it_does_not_know(monkeypatch):
+    """A geometry of a kind of its own, and aspheres unless ASPHERES, take the torch loop."""
     from lensim.optics.geometry import Conic
 
     class Other(Conic):
@@ -112,3 +113,8 @@ def test_fused_kernel_declines_what_it_does_not_know():
     assert trace_fused.plan_for(st) is not None
     st[1] = st[1].__class__(**{**st[1].__dict__, "geometry": Other(0.01)})
     assert trace_fused.plan_for(st) is None
+    phone = _lens("phone_wide")
+    phone_steps = steps(phone, 0, phone.num_surfaces, True, True)
+    assert trace_fused.plan_for(phone_steps) is not None
+    monkeypatch.setattr(trace_fused, "ASPHERES", False)
+    assert trace_fused.plan_for(phone_steps) is None

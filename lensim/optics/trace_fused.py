@@ -95,12 +95,21 @@ class Plan:
                 self.high[s, j] = max(terms) if terms else -1
 
 
+#: whether the kernel traces aspheres. Its Newton's method runs ray by ray, a chain of
+#: dependent square roots and divisions that the CPU cannot overlap, and is slower than the
+#: torch loop's, which is vectorized across the chunk (measured: 0.69x in CPU time on the
+#: phone wide-angle lens, 100k rays): aspheric lenses take the torch loop until the
+#: kernel's Newton iterations run across a block. Tests turn it on to check the code.
+ASPHERES = False
+
+
 def plan_for(chunk_steps: list[Step]) -> Plan | None:
     """The kernel's plan for these steps, or None where a surface is of a kind the kernel
-    does not know (a Geometry subclass of its own) or has a parameter that is a tensor."""
+    does not know (a Geometry subclass of its own, an asphere unless ASPHERES) or has a
+    parameter that is a tensor."""
     for st in chunk_steps:
         g = st.geometry
-        if type(g) not in _KIND_OF:
+        if type(g) not in _KIND_OF or (_KIND_OF[type(g)] == ASPHERE and not ASPHERES):
             return None
         values = [g.curvature, g.conic] + (list(g.terms.values()) if isinstance(g, EvenAsphere) else [])
         if any(isinstance(v, torch.Tensor) and v.requires_grad for v in values):
