@@ -65,6 +65,9 @@ WAVELENGTHS_NM = (450.0, 550.0, 650.0)
 CAMERAS = {
     "focus_decentre": {"image.focus": 0.006, "e3.decentre_x": 0.004},
     "focus_tilt_decentre": {"image.focus": -0.005, "image.tilt_x": 0.12, "e2.decentre_y": -0.004},
+    # a larger element error (3x focus_decentre's decentre) and a small sensor tilt: restoration's
+    # second camera (calibration_tolerance_draws.py --larger)
+    "larger_decentre": {"image.focus": 0.006, "e3.decentre_x": 0.012, "image.tilt_y": 0.05},
 }
 #: elements whose decentres are fitted (lensim calibrate --elements)
 ELEMENTS_FITTED = 1
