@@ -60,10 +60,14 @@ SAG_EVEN, SAG_ODD, SLOPE_EVEN, SLOPE_ODD = range(4)
 _MAX_M = 11  # r2^0 .. r2^10 (powers up to 20)
 Arr = np.ndarray
 #: numba's options for every function of the kernel: compiled once and cached on disk;
-#: the GIL released; division as in C (no ZeroDivisionError checks); multiply-adds fused
-#: (rounding only); no reference counts (the kernel allocates nothing, and counting the
-#: arrays passed between its functions cost more than the arithmetic)
-_JIT: dict = dict(cache=True, nogil=True, error_model="numpy", _nrt=False, fastmath={"contract"})
+#: the GIL released; division as in C (no ZeroDivisionError checks); no reference counts
+#: (the kernel allocates nothing, and counting the arrays passed between its functions cost
+#: more than the arithmetic). Multiply-adds are NOT fused (no fastmath "contract"): fused,
+#: a ray's rounding differed between the vectorized loop body and its scalar remainder, so
+#: a ray's result depended on where the thread-count-dependent chunks split the batch, and
+#: a killed-and-resumed bank differed from an uninterrupted one by 1 ulp
+#: (tests/test_kill_resume.py)
+_JIT: dict = dict(cache=True, nogil=True, error_model="numpy", _nrt=False)
 
 
 class Plan:
