@@ -11,32 +11,15 @@ from lensim.optics.aiming.rays import generate_rays, object_field
 from lensim.optics.aiming.sampling import random_uniform, square_grid
 from lensim.optics.lens import Lens
 from lensim.optics.lens_file import load_lens
-from lensim.optics.materials import ConstantIndex
-from lensim.optics.surfaces import Surface
 from lensim.optics.trace_chunk import MISSED, TIR, VIGNETTED, steps
 from reference_lenses import REFERENCE_LENSES
+from test_trace_fast import _systems
 
 DATA = REFERENCE_LENSES
 
 
 def _lens(name: str) -> Lens:
-    made = {
-        "tir": Lens(
-            [Surface(0.0, 5.0, ConstantIndex(1.9), is_stop=True), Surface(-1 / 6.0, 20.0)],
-            aperture_value=10.0,
-            fields=[0.0, 40.0],
-            wavelengths_um=[0.55],
-        ),
-        "conics": Lens(
-            [
-                Surface(1 / 15.0, 4.0, ConstantIndex(1.6), conic=-0.7, is_stop=True, clear_radius=5.5),
-                Surface(-1 / 30.0, 30.0, conic=2.0),
-            ],
-            aperture_value=12.0,
-            fields=[0.0, 10.0],
-            wavelengths_um=[0.55],
-        ),
-    }
+    made = _systems()  # the torch loop's test lenses (tir, conics, ...)
     if name in made:
         return made[name]
     files = {"hubble": "hubble_rc.yaml", "odd_asphere": "odd_asphere_singlet.zmx", "vignetting": "US08427765-1.zmx"}
