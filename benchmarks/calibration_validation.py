@@ -190,7 +190,8 @@ def run_camera(world: World, name: str, truth, out: Path) -> dict:
         r = rounds[-1]
         rms = f"rms {r['rms_at_start']:.4f} -> {r['rms_after']:.4f}, moved {r['moved_sigma']:.1f} sigma"
         cost = f"{r['simulate_s']:.0f}+{r['fit_s']:.0f} s"
-        log(f"{name}: round {r['round']} ({r['start_from']}): {_short(r['values'])} {rms}; {cost}")
+        bound = f"; at bound: {r.get('at_bound')}" if r.get("at_bound") else ""
+        log(f"{name}: round {r['round']} ({r['start_from']}): {_short(r['values'])} {rms}; {cost}{bound}")
 
     obs = observations([data], world.spectrum)
     refined = refine(
@@ -220,6 +221,7 @@ def run_camera(world: World, name: str, truth, out: Path) -> dict:
         "candidates": world.candidates,
         "before": ratios(world, photo, world.lens, det),
         "after": ratios(world, photo, refined.lens, det),
+        **{k: refined.lens.as_built.get(k) for k in ("bounds", "priors", "at_bound", "held_at_nominal")},
         "psf_ncc": psf_nccs(world, truth, {"nominal": world.lens, "first fit": first.lens, "calibrated": refined.lens}),
     }
     path.write_text(json.dumps(result, indent=1))
@@ -287,12 +289,21 @@ def table(results: list[dict]) -> str:
             lr = " | ".join(f"{row.get(k, math.nan):.4f}" for k in kinds)
             worst = " | ".join(f"{row.get(f'{k} worst', math.nan):.4f}" for k in kinds)
             lines.append(f"| {r['camera']} | {row['field']} | {lr} | {worst} |")
-    lines += ["", "| camera | parameter | truth | fitted +- 1 sigma |", "| --- | --- | --- | --- |"]
+    lines += [
+        "",
+        "| camera | parameter | truth | fitted +- 1 sigma | bound (+-) | prior sigma |",
+        "| --- | --- | --- | --- | --- | --- |",
+    ]
     for r in results:
         names = sorted(set(r["truth"]) | set(r["fitted"]))
+        bounds, priors, at = r.get("bounds") or {}, r.get("priors") or {}, set(r.get("at_bound") or [])
         for n in names:
             fit = f"{r['fitted'][n]:+.5f} +- {r['sigma'][n]:.5f}" if n in r["fitted"] else "(not fitted)"
-            lines.append(f"| {r['camera']} | {n} | {r['truth'].get(n, 0.0):+.5f} | {fit} |")
+            fit += " (at its bound)" if n in at else ""
+            extra = f"{bounds[n]:.5f} | {priors[n] or 0.0:.5f}" if n in bounds else " | "
+            lines.append(f"| {r['camera']} | {n} | {r['truth'].get(n, 0.0):+.5f} | {fit} | {extra} |")
+        for h in r.get("held_at_nominal") or []:
+            lines.append(f"| {r['camera']} | {h['parameter']} | | held at nominal: {h['reason']} | | |")
     lines += [
         "",
         "| camera | edges | RMS residual before -> after | evaluations | traces | calibration s |",

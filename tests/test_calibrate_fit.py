@@ -122,3 +122,75 @@ def test_fitting_each_candidate_element_finds_the_one_the_linear_choice_misses()
     for name, value in truth.items():
         assert result.values[name] == pytest.approx(value, abs=max(4 * result.sigma[name], 0.004)), name
     assert result.rms_after == pytest.approx(tried[2]["rms"])
+
+
+def _observed(lens, truth, edges, seed, noise=0.003):
+    wl, w = list(lens.wavelengths_um), list(lens.wavelength_weights)
+    rng = np.random.default_rng(seed)
+    measured = [m + rng.normal(0.0, noise, m.shape) for m in model_mtfs(perturbed_lens(lens, truth), edges, wl, w, 16)]
+    return Observations(edges, measured, None, wl, w, samples=16)
+
+
+def test_a_fit_that_would_run_away_stays_within_its_bounds(monkeypatch):
+    # a sensor tilted 1 deg (four times the manufacturing bound): without the bound the
+    # fit follows it; with it, the tilt ends at the bound and is reported there
+    from lensim.calibrate import bounds
+
+    lens = load_lens("cooke_triplet", warn=False)
+    obs = _observed(lens, {"image.focus": 0.01, "image.tilt_x": 1.0}, _edges(), 3)
+    names = ["image.focus", "image.tilt_x", "image.tilt_y"]
+    bounded = fit(lens, obs, names=names)
+    assert bounded.values["image.tilt_x"] == pytest.approx(bounds.SENSOR_TILT_BOUND_DEG, rel=1e-3)
+    # every value inside its bound (the other tilt may go to its bound too, to make up)
+    record = bounded.lens.as_built
+    assert all(abs(v) <= record["bounds"][n] * (1 + 1e-9) for n, v in bounded.values.items())
+    assert "image.tilt_x" in record["at_bound"] and "image.focus" not in record["at_bound"]
+    assert record["bounds"]["image.tilt_x"] == bounds.SENSOR_TILT_BOUND_DEG
+    assert record["priors"]["image.tilt_x"] == pytest.approx(0.5 * bounds.SENSOR_TILT_BOUND_DEG)
+    assert record["priors"]["image.focus"] is None and record["bounds"]["image.focus"] > 0.1
+    monkeypatch.setattr(bounds, "SENSOR_TILT_BOUND_DEG", 5.0)
+    free = fit(lens, obs, names=names)
+    assert free.values["image.tilt_x"] == pytest.approx(1.0, abs=0.1) and free.lens.as_built["at_bound"] == []
+
+
+def test_bounds_and_priors_scale_with_the_lens():
+    from lensim.calibrate.bounds import bound_of, prior_sigma
+    from lensim.calibrate.fit import parameter_scales
+
+    edges = _edges()
+    cooke = load_lens("cooke_triplet", warn=False)
+    phone = load_lens("phone_wide", warn=False)
+    obs = Observations(edges, [], None, [0.55], [1.0])
+    k_cooke, k_phone = parameter_scales(cooke, obs), parameter_scales(phone, obs)
+    # decentres: tens of micrometres, in proportion to the depth of focus of each lens
+    assert 0.01 < bound_of("e1.decentre_x", k_phone) < 0.05 < bound_of("e1.decentre_x", k_cooke) < 0.3
+    assert bound_of("e1.decentre_x", k_cooke) / bound_of("e1.decentre_x", k_phone) == pytest.approx(
+        k_cooke["focus"] / k_phone["focus"]
+    )
+    # tilts: a manufacturing range in degrees, with a prior of half of it
+    assert bound_of("image.tilt_y", k_phone) == bound_of("image.tilt_y", k_cooke) <= 0.5
+    assert prior_sigma("e2.tilt_x", k_phone) == pytest.approx(0.5 * bound_of("e2.tilt_x", k_phone))
+
+
+def test_what_the_chart_cannot_constrain_is_held_at_nominal_when_chosen():
+    # edges on the y axis only: chosen automatically, image.tilt_y is held at nominal
+    # (given by name it is refused: test_calibration_refuses_what_the_chart_cannot_see)
+    lens = load_lens("cooke_triplet", warn=False)
+    edges = _edges(radii=(0.0, 10.0), azimuths=(90.0, 270.0))
+    result = fit(lens, _observed(lens, {"image.focus": 0.02}, edges, 4))
+    held = [h["parameter"] for h in result.lens.as_built["held_at_nominal"]]
+    assert "image.tilt_y" in held and "image.tilt_y" not in result.values
+    assert all(
+        h["reason"].startswith("the chart's edges cannot constrain it") for h in result.lens.as_built["held_at_nominal"]
+    )
+    assert result.values["image.focus"] == pytest.approx(0.02, abs=0.003)
+
+
+def test_an_element_tilt_is_a_candidate_of_the_sensitivity_analysis():
+    lens = load_lens("cooke_triplet", warn=False)
+    truth = {"image.focus": 0.02, "e2.tilt_x": 0.15}
+    result = fit(lens, _observed(lens, truth, _edges(radii=(0.0, 6.0, 12.0)), 5))
+    assert {"e2.tilt_x", "e2.tilt_y"} <= set(result.values)
+    assert result.values["e2.tilt_x"] == pytest.approx(0.15, abs=max(4 * result.sigma["e2.tilt_x"], 0.02))
+    assert abs(result.values["e2.tilt_y"]) < 0.03
+    assert result.values["image.focus"] == pytest.approx(0.02, abs=0.004)

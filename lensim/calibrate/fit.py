@@ -31,6 +31,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from lensim.calibrate.bounds import at_bounds, limits, prior_weights
+from lensim.calibrate.bounds import record as bounds_record
 from lensim.calibrate.model import Edge, mtfs_from, trace_points
 from lensim.calibrate.tolerances import elements, perturbed_lens
 from lensim.errors import InputError
@@ -40,6 +42,11 @@ from lensim.optics.lens import Lens
 ELEMENT_TILT_DEG = 0.05
 KINDS = ("focus", "tilt_x", "tilt_y", "decentre_x", "decentre_y")
 IMAGE_PARAMETERS = ("image.focus", "image.tilt_x", "image.tilt_y")
+#: how an element may move in the fit (each with its _x and _y parameter)
+ELEMENT_MOVES = ("decentre", "tilt")
+#: an element's tilt is fitted instead of its decentre when it leaves less than this
+#: fraction of the decentre's residual in the linear model (element_ranking)
+TILT_PREFERENCE = 0.9
 #: |correlation| above which two fitted parameters are reported as a degenerate pair
 DEGENERATE = 0.9
 #: the image focus (in its scale) the fit also starts from, with both signs
@@ -177,19 +184,38 @@ def sensitivity_table(
     return sorted(rows, key=lambda r: -r["rms_change"]), columns
 
 
+def _move_cost(gap: np.ndarray, columns: dict[str, np.ndarray], chosen: Sequence[str], move: str) -> float:
+    """The squared residual of gap that a move ("e2.decentre": its x and y) leaves when
+    fitted with `chosen` in the linear model (the columns)."""
+    a = np.stack([columns[n] for n in [*chosen, f"{move}_x", f"{move}_y"]], axis=1)
+    coef, *_ = np.linalg.lstsq(a, gap, rcond=None)
+    return float(np.sum((a @ coef - gap) ** 2))
+
+
 def element_ranking(gap: np.ndarray, columns: dict[str, np.ndarray], chosen: Sequence[str]) -> list[str]:
-    """The elements not yet in `chosen`, ordered by the residual of gap (measured - nominal
-    model) that their decentres (x, y) leave when fitted with `chosen` in the linear model
-    (the columns), smallest first; ties keep the elements' order."""
+    """The element moves ("e2.decentre" or "e2.tilt": that element's x and y parameters)
+    of the elements not yet in `chosen`, one per element (the one of ELEMENT_MOVES whose
+    columns are known and leave the smaller residual of gap = measured - nominal model
+    when fitted with `chosen` in the linear model), the elements ordered by that
+    residual, smallest first; ties keep the elements' order. A tilt is chosen over the
+    decentre only when its residual is below TILT_PREFERENCE times the decentre's: at the
+    nominal lens the two moves of a thin element change the edges nearly alike."""
     targets = sorted({n.partition(".")[0] for n in columns if n.startswith("e")}, key=lambda t: int(t[1:]))
     costs = []
     for t in targets:
-        if f"{t}.decentre_x" in chosen:
+        if any(n.partition(".")[0] == t for n in chosen):
             continue
-        a = np.stack([columns[n] for n in [*chosen, f"{t}.decentre_x", f"{t}.decentre_y"]], axis=1)
-        coef, *_ = np.linalg.lstsq(a, gap, rcond=None)
-        costs.append((float(np.sum((a @ coef - gap) ** 2)), t))
-    return [t for _, t in sorted(costs, key=lambda c: c[0])]
+        cost = {
+            m: _move_cost(gap, columns, chosen, f"{t}.{m}")
+            for m in ELEMENT_MOVES
+            if f"{t}.{m}_x" in columns and f"{t}.{m}_y" in columns
+        }
+        if not cost:
+            continue
+        tilt = "decentre" not in cost or cost.get("tilt", np.inf) < TILT_PREFERENCE * cost["decentre"]
+        move = "tilt" if tilt else "decentre"
+        costs.append((cost[move], f"{t}.{move}"))
+    return [m for _, m in sorted(costs, key=lambda c: c[0])]
 
 
 def choose_parameters(
@@ -199,16 +225,17 @@ def choose_parameters(
     first: str | None = None,
     image: Sequence[str] = IMAGE_PARAMETERS,
 ) -> list[str]:
-    """The image parameters (default: focus and tilts), and the decentres (x, y) of the
-    `elements_fitted` elements that, fitted with them in the linear model (the columns),
-    leave the smallest residual of gap (measured - nominal model), chosen one after the
-    other (element_ranking); first: the first element, when it is given."""
+    """The image parameters (default: focus and tilts), and the decentres or tilts (x, y)
+    of the `elements_fitted` elements that, fitted with them in the linear model (the
+    columns), leave the smallest residual of gap (measured - nominal model), chosen one
+    after the other (element_ranking); first: the first element's move ("e2.decentre"),
+    when it is given."""
     chosen = list(image)
     for i in range(elements_fitted):
         ranking = [first] if i == 0 and first is not None else element_ranking(gap, columns, chosen)
         if not ranking:
             break
-        chosen += [f"{ranking[0]}.decentre_x", f"{ranking[0]}.decentre_y"]
+        chosen += [f"{ranking[0]}_x", f"{ranking[0]}_y"]
     return chosen
 
 
@@ -288,33 +315,55 @@ def check_coverage(names: Sequence[str], jac: np.ndarray, where: str, scales: di
     return degenerate_pairs(names, cov)
 
 
-def _solve(model: Model, names: list[str], scales: np.ndarray, measured: np.ndarray, start: np.ndarray):
-    """scipy least_squares (trust region reflective) in units of the scales from start,
-    the Jacobian by forward differences of STEP (image columns need no trace)."""
+@dataclass
+class _Run:
+    """One start's outcome: the fitted u (in units of the scales), the data residuals
+    ((N,), MTF), the objective (half the sum of squares of data and prior rows), the
+    Jacobian of every row ((N + P, P)) and the parameters ended at a bound."""
+
+    x: np.ndarray
+    data: np.ndarray
+    cost: float
+    jac: np.ndarray
+    at_bound: list[str]
+
+
+def _solve(model: Model, names: list[str], units: np.ndarray, context: dict, start: np.ndarray) -> _Run:
+    """scipy least_squares (trust region reflective) in units of the scales from start
+    (clipped into the bounds), within lensim.calibrate.bounds' limits and with its prior
+    rows, the Jacobian by forward differences of STEP (image columns need no trace);
+    context: measured ((N,)) and kinds (parameter_scales)."""
     from scipy.optimize import least_squares
 
+    measured, kinds = context["measured"], context["kinds"]
+    lower, upper = limits(names, units, kinds)
+    weights = prior_weights(names, units, kinds, NOISE_MTF)
     memo: dict[bytes, np.ndarray] = {}
 
-    def f(u: np.ndarray) -> np.ndarray:
+    def data(u: np.ndarray) -> np.ndarray:
         key = u.tobytes()
         if key not in memo:
             memo.clear()
-            memo[key] = model.predict(dict(zip(names, (u * scales).tolist(), strict=True))) - measured
+            memo[key] = model.predict(dict(zip(names, (u * units).tolist(), strict=True))) - measured
         return memo[key]
 
     def jac(u: np.ndarray) -> np.ndarray:
-        f0 = f(u)
+        f0 = data(u)
         cols = []
         for i, name in enumerate(names):
-            v = dict(zip(names, (u * scales).tolist(), strict=True))
-            v[name] += STEP * scales[i]
+            v = dict(zip(names, (u * units).tolist(), strict=True))
+            v[name] += STEP * units[i]
             cols.append((model.predict(v) - measured - f0) / STEP)
-        return np.stack(cols, axis=1)
+        return np.concatenate([np.stack(cols, axis=1), np.diag(weights)])
 
-    return least_squares(f, start, jac=jac, bounds=(-20.0, 20.0), x_scale=1.0, max_nfev=60)
+    u0 = np.clip(start, lower, upper)
+    res = least_squares(
+        lambda u: np.concatenate([data(u), weights * u]), u0, jac=jac, bounds=(lower, upper), x_scale=1.0, max_nfev=60
+    )
+    return _Run(res.x, data(res.x), float(res.cost), res.jac, at_bounds(names, res.x, lower, upper))
 
 
-def _starts(model: Model, names: list[str], scales: np.ndarray, measured: np.ndarray) -> list[np.ndarray]:
+def _starts(model: Model, names: list[str], units: np.ndarray, context: dict) -> list[np.ndarray]:
     """Where the full fit starts: the MTF alone hardly tells a focus shift's sign, so the
     image parameters are fitted first (no trace: cheap) from image focus +-FOCUS_START and
     0 scales, and the best start of each focus sign is kept (one when both agree)."""
@@ -327,69 +376,119 @@ def _starts(model: Model, names: list[str], scales: np.ndarray, measured: np.nda
     for f0 in (-FOCUS_START, 0.0, FOCUS_START):
         u0 = np.zeros(len(sub))
         u0[sub.index("image.focus")] = f0
-        res = _solve(model, sub, scales[image], measured, u0)
+        res = _solve(model, sub, units[image], context, u0)
         u = np.zeros(len(names))
         u[image] = res.x
         sign = 1 if u[k] >= 0 else -1
         if sign not in best or res.cost < best[sign][0]:
-            best[sign] = (float(res.cost), u)
+            best[sign] = (res.cost, u)
     starts = [u for _, u in sorted(best.values(), key=lambda t: t[0])]
     if len(starts) == 2 and np.allclose(starts[0], starts[1], atol=0.05):
         starts = starts[:1]
     return starts
 
 
-def _run_summary(res, names: list[str], scales: np.ndarray) -> dict:
-    """One start's outcome: the image focus it ended at (mm, 0 when not fitted) and its RMS residual."""
-    if "image.focus" not in names:
-        return {"focus": 0.0, "rms": float(np.sqrt(np.mean(res.fun**2)))}
-    k = names.index("image.focus")
-    focus = float(res.x[k] * scales[k])
-    return {"focus": focus, "rms": float(np.sqrt(np.mean(res.fun**2)))}
+def _rms(run: _Run) -> float:
+    return float(np.sqrt(np.mean(run.data**2)))
+
+
+def _run_summary(run: _Run, names: list[str], units: np.ndarray) -> dict:
+    """One start's outcome: the image focus it ended at (mm, 0 when not fitted), its RMS
+    SFR residual and the parameters it left at a bound."""
+    k = names.index("image.focus") if "image.focus" in names else None
+    focus = 0.0 if k is None else float(run.x[k] * units[k])
+    return {"focus": focus, "rms": _rms(run), "at_bound": run.at_bound}
 
 
 @dataclass
 class _Outcome:
-    """One parameter set fitted: its names, scales, degenerate pairs and the runs (one per start)."""
+    """One parameter set fitted: its names, units (scales), degenerate pairs, the runs (one
+    per start) and the parameters held at nominal (the chart cannot constrain them)."""
 
     names: list[str]
     scales: np.ndarray
     degenerate: list[dict]
-    runs: list
+    runs: list[_Run]
+    held: list[dict] = field(default_factory=list)
 
     @property
-    def best(self):
+    def best(self) -> _Run:
         return min(self.runs, key=lambda r: r.cost)
 
 
-def _fit_set(model: Model, names: list[str], context: dict, start: dict[str, float] | None) -> _Outcome:
-    """Check the coverage of one parameter set and fit it from each start (_starts, or
-    `start`); context: kinds (scales by kind), columns (known Jacobian columns), base
-    (nominal model), measured, where."""
-    kinds, base, measured = context["kinds"], context["base"], context["measured"]
-    scales = np.array([scale_of(n, kinds) for n in names])
-    cols = [context["columns"].get(n) for n in names]
+def _columns(model: Model, names: Sequence[str], context: dict) -> np.ndarray:
+    """The Jacobian columns ((N, P), per scale) of the names: known ones, the others computed."""
+    kinds, base, known = context["kinds"], context["base"], context["columns"]
+    cols = [known.get(n) for n in names]
     cols = [
         c if c is not None else model.predict({n: scale_of(n, kinds)}) - base for n, c in zip(names, cols, strict=True)
     ]
-    degenerate = check_coverage(names, np.stack(cols, axis=1), context["where"], kinds)
+    return np.stack(cols, axis=1)
+
+
+def _constrained(model: Model, names: list[str], context: dict, hold: bool) -> tuple[list[str], list[dict], list[dict]]:
+    """check_coverage of a parameter set: (names kept, degenerate pairs, held); with hold,
+    a parameter the chart cannot constrain is held at nominal (dropped, recorded with the
+    reason) and the rest checked again; without, it is refused (CoverageError)."""
+    held: list[dict] = []
+    while True:
+        try:
+            jac = _columns(model, names, context)
+            return names, check_coverage(names, jac, context["where"], context["kinds"]), held
+        except CoverageError as e:
+            if not hold or e.field not in names or len(names) == 1:
+                raise
+            held.append({"parameter": e.field, "reason": e.message})
+            names = [n for n in names if n != e.field]
+
+
+def _fit_set(model: Model, names: list[str], context: dict, start: dict[str, float] | None, hold: bool) -> _Outcome:
+    """Check the coverage of one parameter set (_constrained) and fit it from each start
+    (_starts, or `start`); context: kinds (scales by kind), columns (known Jacobian
+    columns), base (nominal model), measured, where."""
+    names, degenerate, held = _constrained(model, names, context, hold)
+    units = np.array([scale_of(n, context["kinds"]) for n in names])
     if start is None:
-        starts = _starts(model, names, scales, measured)
+        starts = _starts(model, names, units, context)
     else:
-        starts = [np.array([start.get(n, 0.0) for n in names]) / scales]
-    return _Outcome(names, scales, degenerate, [_solve(model, names, scales, measured, u0) for u0 in starts])
+        starts = [np.array([start.get(n, 0.0) for n in names]) / units]
+    return _Outcome(names, units, degenerate, [_solve(model, names, units, context, u0) for u0 in starts], held)
 
 
-def _fit_sets(model: Model, sets: list[list[str]], context: dict, start: dict[str, float] | None) -> list[_Outcome]:
+def _fit_sets(
+    model: Model, sets: list[list[str]], context: dict, start: dict[str, float] | None, hold: bool
+) -> list[_Outcome]:
     """_fit_set of each set; a set after the first that the chart cannot constrain is skipped."""
     out = []
     for i, names in enumerate(sets):
         try:
-            out.append(_fit_set(model, names, context, start))
+            out.append(_fit_set(model, names, context, start, hold))
         except CoverageError:
             if i == 0:
                 raise
     return out
+
+
+def _record(chosen: _Outcome, outcomes: list[_Outcome], context: dict, sigma: dict[str, float]) -> dict:
+    """The as_built record of a fit (lensim.calibrate.fit.fit's docstring)."""
+    names, units, run = chosen.names, chosen.scales, chosen.best
+    record = {
+        "kind": "calibration",
+        "uncertainties": sigma,
+        "rms_residual_before": float(np.sqrt(np.mean((context["base"] - context["measured"]) ** 2))),
+        "rms_residual_after": _rms(run),
+        "edges": context["edges"],
+        "scales": {n: float(v) for n, v in zip(names, units, strict=True)},
+        "degenerate": chosen.degenerate,
+        "starts": [_run_summary(r, names, units) for r in chosen.runs],
+        **bounds_record(names, context["kinds"]),
+        "prior_noise_mtf": NOISE_MTF,
+        "at_bound": run.at_bound,
+        "held_at_nominal": chosen.held,
+    }
+    if len(outcomes) > 1:
+        record["candidates"] = [{"parameters": o.names, "rms": _rms(o.best), "held": o.held} for o in outcomes]
+    return record
 
 
 def fit(
@@ -404,48 +503,37 @@ def fit(
 ) -> Fit:
     """Fit the parameters `names` (default: choose_parameters from the sensitivity table,
     which is then reported; given names skip it) to the observations, from each start of
-    _starts, keeping the smallest residual; returns the Fit with the as-built lens (its
-    as_built record holds the values, uncertainties, residuals and degenerate pairs).
-    where: the source named in a CoverageError. start: values (mm or deg) to start from
-    instead of _starts (a refit near a known solution; missing ones start at 0).
-    candidates: the number of first elements fitted in full (candidate_sets: the linear
-    model at the nominal lens can rank the wrong element first), the smallest residual
-    kept (each candidate's RMS in as_built.candidates); with names, their image parameters
-    and number of elements are kept and the elements chosen again."""
+    _starts, keeping the smallest objective; every parameter stays within its physical
+    bound and has a prior towards nominal (lensim.calibrate.bounds). Returns the Fit with
+    the as-built lens (its as_built record holds the values, uncertainties, residuals,
+    degenerate pairs, bounds, priors, the parameters at a bound and those held at
+    nominal). where: the source named in a CoverageError: a given name the chart cannot
+    constrain is refused, a chosen one held at nominal. start: values (mm or deg) to
+    start from instead of _starts (a refit near a known solution; missing ones start at
+    0). candidates: the number of first elements fitted in full (candidate_sets: the
+    linear model at the nominal lens can rank the wrong element first), the smallest
+    objective kept (each candidate's RMS in as_built.candidates); with names, their image
+    parameters and number of elements are kept and the elements chosen again."""
     t0 = time.perf_counter()
     model = Model(lens, obs)
     measured = np.concatenate(obs.measured)
     base = model.predict({})
     kinds = parameter_scales(lens, obs)
     context = {"kinds": kinds, "columns": {}, "base": base, "measured": measured, "where": where, "progress": progress}
+    context["edges"] = len(obs.edges)
     table, sets = _parameter_sets(model, names, elements_fitted, candidates, context)
-    outcomes = _fit_sets(model, sets, context, start)
+    outcomes = _fit_sets(model, sets, context, start, hold=names is None or candidates > 1)
     chosen = min(outcomes, key=lambda o: o.best.cost)
-    names, scales, res = chosen.names, chosen.scales, chosen.best
+    names, units, run = chosen.names, chosen.scales, chosen.best
     dof = max(measured.size - len(names), 1)
-    cov = np.linalg.pinv(res.jac.T @ res.jac) * (2.0 * res.cost / dof)
+    cov = np.linalg.pinv(run.jac.T @ run.jac) * max(float(np.sum(run.data**2)) / dof, 1e-300)
     sigma_u = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    values = {n: float(v) for n, v in zip(names, res.x * scales, strict=True)}
-    sigma = {n: float(s) for n, s in zip(names, sigma_u * scales, strict=True)}
+    values = {n: float(v) for n, v in zip(names, run.x * units, strict=True)}
+    sigma = {n: float(s) for n, s in zip(names, sigma_u * units, strict=True)}
     d = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
-    rms_before = float(np.sqrt(np.mean((base - measured) ** 2)))
-    rms_after = float(np.sqrt(np.mean(res.fun**2)))
-    record = {
-        "kind": "calibration",
-        "uncertainties": sigma,
-        "rms_residual_before": rms_before,
-        "rms_residual_after": rms_after,
-        "edges": len(obs.edges),
-        "scales": {n: float(v) for n, v in zip(names, scales, strict=True)},
-        "degenerate": chosen.degenerate,
-        "starts": [_run_summary(r, names, scales) for r in chosen.runs],
-    }
-    if len(outcomes) > 1:
-        record["candidates"] = [
-            {"parameters": o.names, "rms": float(np.sqrt(np.mean(o.best.fun**2)))} for o in outcomes
-        ]
-    as_built = perturbed_lens(lens, values, record)
+    as_built = perturbed_lens(lens, values, _record(chosen, outcomes, context, sigma))
     return Fit(
-        values, sigma, table, rms_before, rms_after, as_built, model.evaluations,
-        time.perf_counter() - t0, (cov / np.outer(d, d)).round(3).tolist(), chosen.degenerate, model.traces,
+        values, sigma, table, float(np.sqrt(np.mean((base - measured) ** 2))),
+        _rms(run), as_built, model.evaluations, time.perf_counter() - t0,
+        (cov / np.outer(d, d)).round(3).tolist(), chosen.degenerate, model.traces,
     )  # fmt: skip

@@ -232,8 +232,9 @@ def _round(
         "evaluations": result.evaluations,
         "traces": result.traces,
     }
-    if "candidates" in result.lens.as_built:
-        record["candidates"] = result.lens.as_built["candidates"]
+    for key in ("candidates", "at_bound", "held_at_nominal", "bounds", "priors"):
+        if key in result.lens.as_built:
+            record[key] = result.lens.as_built[key]
     return record
 
 
@@ -275,6 +276,7 @@ def refine(
         "uncertainties": end["sigma"],
         "rms_residual_after": end["rms_after"],
         "refresh": {"rounds": history, "converged": converged},
+        **{k: end[k] for k in ("at_bound", "held_at_nominal", "bounds", "priors") if k in end},
     }
     as_built = perturbed_lens(lens, end["values"], record)
     return Refined(end["values"], end["sigma"], end["rms_after"], as_built, history, converged)
