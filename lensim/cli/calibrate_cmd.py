@@ -102,14 +102,15 @@ def calibrate_command(
     json_out: bool = typer.Option(False, "--json", help="Print the fit as JSON."),
 ) -> None:
     """Fit the lens as built to photographed charts: the image-plane offset, the sensor's
-    tilt and the decentre of the element(s) that explain the photos best (a sensitivity
-    analysis ranks them), from each chart edge's SFR against lensim's simulation of the
+    tilt and the decentre or tilt of the element(s) that explain the photos best (a
+    sensitivity analysis ranks them), each within a physical bound and with a prior
+    towards the nominal design, from each chart edge's SFR against lensim's simulation of the
     nominal lens at the photo's pose. Writes a lens file every command takes, its
     as_built record holding the fitted values, their 1-sigma uncertainties and the
     residuals. The system transfer (pixel, mosaic, develop) is then taken again from the
     chart simulated through the fitted lens and the fit repeated, until no parameter
     moves by its 1-sigma uncertainty (the rounds are recorded). A parameter the chart's
-    edges cannot constrain is refused (exit status 2).
+    edges cannot constrain is held at nominal (recorded in the lens file).
 
     Example: lensim calibrate IMG_1.dng IMG_2.dng --lens my.yaml --sensor cam.yaml --chart chart.json -o as_built.yaml
     """
@@ -150,6 +151,7 @@ def calibrate_command(
         "output": str(output),
         "values": refined.values,
         "sigma": refined.sigma,
+        **{k: refined.lens.as_built.get(k) for k in ("bounds", "priors", "at_bound", "held_at_nominal")},
         "rms_residual_before": result.rms_before,
         "rms_residual_after": refined.rms_after,
         "sensitivity": result.sensitivity,
@@ -162,8 +164,12 @@ def calibrate_command(
     if json_out:
         print_json(report)
     elif not quiet:
+        at_bound = set(refined.lens.as_built.get("at_bound", []))
         for n, v in refined.values.items():
-            console.print(f"{n:>20s} = {v:+.5f} +- {refined.sigma[n]:.5f}", highlight=False)
+            note = " (at its bound)" if n in at_bound else ""
+            console.print(f"{n:>20s} = {v:+.5f} +- {refined.sigma[n]:.5f}{note}", highlight=False)
+        for h in refined.lens.as_built.get("held_at_nominal", []):
+            console.print(f"held at nominal: {h['parameter']} ({h['reason']})", highlight=False)
         for p in result.degenerate:
             a, b = p["pair"]
             console.print(f"degenerate: {a} and {b} (correlation {p['correlation']:+.2f})", highlight=False)
