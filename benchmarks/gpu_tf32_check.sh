@@ -1,8 +1,8 @@
 #!/bin/bash
 # Is CUDA training of the universal model sound? (issue 23: the H200's whole-library model
 # scored 0.7-1.2 dB below the CPU-trained one, erratic even on banks it trained on.)
-#   bash benchmarks/gpu_tf32_check.sh OUT_DIR PAIRS_DIR [SECONDS]
-# PAIRS_DIR holds library pairs folders WITH their Wiener stage caches (made on the CPU
+#   bash benchmarks/gpu_tf32_check.sh OUT_DIR PAIRS_DIR[+PAIRS_DIR...] [SECONDS]
+# Each PAIRS_DIR holds library pairs folders WITH their Wiener stage caches (made on the CPU
 # machine: the shipped model's 27 banks). Side by side, all from seed 0, float32:
 #   tf32on   width 46 on CUDA, PyTorch's default (cuDNN convolutions in TF32)
 #   tf32off  width 46 on CUDA, TF32 off (benchmarks/cuda_precision_run.py)
@@ -11,6 +11,8 @@
 # The GPU runs ship a model at 1000 and 3000 steps and at the end of the time, the CPU run at
 # 1000 steps or its time; OUT_DIR/RUN.tar holds RUN-STEPS/{model.pt,training_log.csv}.
 # Scored afterwards on the held-out lenses (benchmarks/universal_zero_shot.py --model).
+# GPU_CHECK_RUNS="NAME,TF32,DEVICE,WIDTH,THREADS ..." replaces these four runs (the CPU run is
+# the one whose DEVICE is cpu: it stops at the first snapshot).
 set -u
 OUT=${1:?usage: gpu_tf32_check.sh OUT_DIR PAIRS_DIR [SECONDS]}
 DATA=${2:?usage: gpu_tf32_check.sh OUT_DIR PAIRS_DIR [SECONDS]}
@@ -30,7 +32,7 @@ pretrain() {  # NAME TF32 DEVICE WIDTH THREADS STEPS (0: until the time is spent
   [ "$dev" = cpu ] || amp=--no-amp
   limit=$(awk -v s=$(($(left) - 45)) 'BEGIN { printf "%.2f", (s > 6 ? s : 6) / 60 }')
   OMP_NUM_THREADS=$threads timeout $(($(left) - 5)) $PY -W ignore benchmarks/cuda_precision_run.py --tf32 "$tf32" \
-    library pretrain "$DATA"/* -o "$WORK/$name" --arch psfnet --width "$width" --device "$dev" $amp \
+    library pretrain $(for d in ${DATA//+/ }; do echo "$d"/*; done) -o "$WORK/$name" --arch psfnet --width "$width" --device "$dev" $amp \
     --max-steps "$steps" --minutes 100 --call-minutes "$limit" --seed 0 --ship "$WORK/ship/$name-$steps" --quiet \
     >> "$WORK/$name.log" 2>&1
   say "$name to $steps steps: exit $?; $(tail -n 1 "$WORK/$name/log.csv" 2>&1)"
@@ -46,9 +48,14 @@ series() {  # NAME TF32 DEVICE WIDTH THREADS STEPS...
 }
 
 say "device: $(nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader 2>&1 | head -n 1); torch $($PY -c 'import torch; print(torch.__version__)')"
-series tf32on on "$DEV" 46 2 $STEPS 0 &
-series tf32off off "$DEV" 46 2 $STEPS 0 &
-series w24off off "$DEV" 24 2 $STEPS 0 &
-series cpu off cpu 46 6 ${STEPS%% *} &
+RUNS=${GPU_CHECK_RUNS:-tf32on,on,$DEV,46,2 tf32off,off,$DEV,46,2 w24off,off,$DEV,24,2 cpu,off,cpu,46,6}
+for run in $RUNS; do
+  IFS=, read -r name tf32 dev width threads <<< "$run"
+  if [ "$dev" = cpu ]; then
+    series "$name" "$tf32" "$dev" "$width" "$threads" ${STEPS%% *} &
+  else
+    series "$name" "$tf32" "$dev" "$width" "$threads" $STEPS 0 &
+  fi
+done
 wait
 say "done"
