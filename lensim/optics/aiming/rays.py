@@ -33,6 +33,7 @@ from lensim.optics.trace import (
     STATUS_TEXT,
     Rays,
     TraceResult,
+    host_empty,
     media_indices,
     trace,
 )
@@ -90,11 +91,15 @@ def _paraxial_rays(
     lens: Lens, fld: torch.Tensor, pupil: torch.Tensor, para: ParaxialData, n0: torch.Tensor, W: int
 ) -> Rays:
     """Paraxially aimed rays (W, F, P) of fields fld (F,) through pupil points (P, 2),
-    launched and given their starting OPL (media index n0, (W, 1, 1)) in pieces of the
-    pupil of LAUNCH_PIECE elements (whole, where gradients flow, off the CPU, or with one
-    torch thread, which opens no parallel region)."""
+    launched and given their starting OPL (media index n0, (W, 1, 1)): by the compiled
+    loop for an object at infinity (at least FUSED_LAUNCH_MIN rays on the CPU, no
+    gradients), else by torch in pieces of the pupil of LAUNCH_PIECE elements (whole,
+    where gradients flow, off the CPU, or with one torch thread, which opens no parallel
+    region)."""
     F, P = fld.shape[0], pupil.shape[0]
     r_ep = para.epd_mm / 2.0
+    if _fused_launch_applies(lens, fld, pupil, para, n0, W):
+        return _fused_paraxial_rays(lens, fld, pupil, para, n0, W)
     step = max(1, LAUNCH_PIECE // (W * F))
     whole = P <= step or pupil.device.type != "cpu" or pupil.requires_grad or torch.get_num_threads() == 1
     if whole or isinstance(para.entrance_pupil_z_mm, torch.Tensor):
@@ -116,6 +121,59 @@ def _paraxial_rays(
         opl[..., a:b].copy_(piece.opl)
         valid[..., a:b].fill_(True)
     assert dirs is not None
+    return Rays(pos.unsqueeze(0).expand(W, F, P, 3), dirs.unsqueeze(0).expand(W, F, P, 3), opl, valid)
+
+
+#: the smallest paraxial launch (wavelengths x fields x pupil points) that runs the compiled
+#: loop (lensim.optics.aiming.launch_fused): smaller ones (chief rays, fans) need not import
+#: numba; the same threshold as the tracer's (lensim.optics.trace.FUSED_MIN_BATCH)
+FUSED_LAUNCH_MIN = 4096
+
+
+def _fused_launch_applies(
+    lens: Lens, fld: torch.Tensor, pupil: torch.Tensor, para: ParaxialData, n0: torch.Tensor, W: int
+) -> bool:
+    """Whether the compiled launch covers these rays: an object at infinity, CPU tensors,
+    no gradients, at least FUSED_LAUNCH_MIN rays, the kernel not turned off."""
+    from lensim.optics import trace as trace_mod
+
+    values: tuple[object, ...] = (fld, pupil, n0, para.epd_mm, para.entrance_pupil_z_mm)
+    return (
+        lens.infinite_object
+        and trace_mod.USE_FUSED_KERNEL
+        and W * fld.shape[0] * pupil.shape[0] >= FUSED_LAUNCH_MIN
+        and all(not isinstance(v, torch.Tensor) or (v.device.type == "cpu" and not v.requires_grad) for v in values)
+    )
+
+
+def _fused_paraxial_rays(
+    lens: Lens, fld: torch.Tensor, pupil: torch.Tensor, para: ParaxialData, n0: torch.Tensor, W: int
+) -> Rays:
+    """_paraxial_rays of an object at infinity by the compiled loop: the same rays, bit for
+    bit; the one direction of each field comes from launch() and is expanded over the
+    points, as there."""
+    from lensim.optics.aiming.launch_fused import launch_infinite
+
+    F, P = fld.shape[0], pupil.shape[0]
+    r_ep = float(para.epd_mm) / 2.0
+    _, d_one = launch(lens, fld, pupil[:1].to(DTYPE) * r_ep, para)  # (F, 1, 3)
+    cpu = torch.device("cpu")
+    pos, opl, valid = (
+        host_empty((F, P, 3), DTYPE, cpu),
+        host_empty((W, F, P), DTYPE, cpu),
+        host_empty((W, F, P), torch.bool, cpu),
+    )
+    launch_infinite(
+        pupil.to(DTYPE).contiguous().numpy(),
+        r_ep,
+        float(para.entrance_pupil_z_mm),
+        d_one[:, 0].contiguous().numpy(),
+        n0.expand(W, 1, 1).reshape(W).to(DTYPE).contiguous().numpy(),
+        pos.numpy(),
+        opl.numpy(),
+        valid.numpy(),
+    )
+    dirs = d_one.expand(F, P, 3)
     return Rays(pos.unsqueeze(0).expand(W, F, P, 3), dirs.unsqueeze(0).expand(W, F, P, 3), opl, valid)
 
 
