@@ -162,6 +162,32 @@ def test_zero_shot_restore_and_out_of_range_sensor(shipped, camera, tmp_path, ca
     assert len(lines) == 1 and "--sensor" in lines[0] and "1.12 um pixel pitch" in lines[0], err
 
 
+def test_zero_shot_with_a_universal_model_of_ones_own(shipped, camera, tmp_path, capsys, monkeypatch):
+    """A model from `lensim library pretrain --ship DIR` restores zero-shot as CHECKPOINT with
+    --lens, the shipped one not used (MODEL_DIR points nowhere); a training run is not one."""
+    monkeypatch.setattr(uni, "MODEL_DIR", tmp_path / "nowhere")
+    monkeypatch.setenv("LENSIM_CACHE", str(tmp_path / "cache"))
+    photo = _photo(tmp_path)
+    sensor = str(camera["sensor_file"])
+    for i, model in enumerate((shipped, shipped / "model.pt")):
+        args = [
+            "restore",
+            str(model),
+            str(photo),
+            "--lens",
+            "cooke_triplet",
+            "--sensor",
+            sensor,
+            "-o",
+            str(tmp_path / f"o{i}"),
+        ]
+        code, _, err = run_cli([*args, "--quiet"], capsys, monkeypatch)
+        assert code == 0, err
+        assert (tmp_path / f"o{i}" / "photo.png").exists()
+    assert uni.is_universal_model(shipped) and not uni.is_universal_model(camera["base"] / "run")
+    assert not uni.is_universal_model(photo)
+
+
 def test_zero_shot_needs_lens_and_sensor(shipped, tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(uni, "MODEL_DIR", shipped)
     code, _, err = run_cli(

@@ -68,7 +68,8 @@ def restore_command(
         ...,
         help="Run folder (best.pt, else last.pt) or checkpoint file; with --engine "
         "onnxruntime also an .onnx file from `lensim export`; 'universal' (or left out, with --lens and "
-        "--sensor): the shipped universal model, zero-shot.",
+        "--sensor): the shipped universal model, zero-shot; with --lens and --sensor, a universal model "
+        "of your own (`lensim library pretrain --ship` folder) restores zero-shot too.",
     ),
     images: list[Path] = typer.Argument(
         None,

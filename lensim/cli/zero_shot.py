@@ -20,18 +20,25 @@ def universal_inputs(
 ) -> tuple[Path, list[Path], bool]:
     """(checkpoint path, images, zero-shot?): CHECKPOINT "universal" is the shipped model;
     with --lens given, a CHECKPOINT that is a photo or raw file is the first image and the
-    shipped model restores them all. Zero-shot needs --lens and --sensor (one line naming them)."""
+    shipped model restores them all, and a CHECKPOINT that is a universal model of the user's
+    own (`lensim library pretrain --ship`: a folder holding model.pt, or that file) restores
+    them zero-shot as the shipped one would. Zero-shot needs --lens and --sensor (one line
+    naming them)."""
     from lensim.images import READ_SUFFIXES
     from lensim.raw import RAW_SUFFIXES
-    from lensim.restore.universal import NAME, model_path
+    from lensim.restore.universal import NAME, is_universal_model, model_path
 
     photo = checkpoint.suffix.lower() in (*READ_SUFFIXES, *RAW_SUFFIXES)
-    if str(checkpoint) != NAME and not (lens is not None and photo):
+    shipped = str(checkpoint) == NAME or (lens is not None and photo)
+    own = not shipped and lens is not None and is_universal_model(checkpoint)
+    if not (shipped or own):
         return checkpoint, images, False
     if lens is None or sensor is None:
         raise InputError(
             "--lens/--sensor", None, "the universal model restores a lens it is told: expected --lens and --sensor"
         )
+    if own:
+        return model_path(checkpoint), images, True
     return model_path(NAME), (images if str(checkpoint) == NAME else [checkpoint, *images]), True
 
 

@@ -357,6 +357,22 @@ def model_path(name_or_path: str | Path) -> Path:
     return p
 
 
+def is_universal_model(path: str | Path) -> bool:
+    """Whether path is a universal model as `ship` writes it (a folder holding model.pt, or
+    that file) with its ``universal`` record; False for anything else, a training run included
+    (its folder holds last.pt/best.pt, not model.pt)."""
+    from lensim.restore.checkpoint import read_checkpoint
+
+    p = Path(path)
+    p = p / MODEL_FILE if p.is_dir() else p
+    if not p.is_file() or p.suffix != ".pt":
+        return False
+    try:
+        return "universal" in read_checkpoint(p)
+    except InputError:
+        return False
+
+
 def load_universal(name_or_path: str | Path = NAME) -> tuple[torch.nn.Module, dict[str, Any]]:
     """The universal network (eval mode, float32) and its ``universal`` record (ranges)."""
     from lensim.restore.checkpoint import load_checkpoint
