@@ -223,6 +223,23 @@ def test_init_starts_from_the_weights(init_reference):
     assert float(tuned[0][1]) < float(scratch[0][1])  # the first step already has the trained weights
 
 
+def test_a_fine_tuning_that_loses_ground_keeps_its_starting_weights(init_reference, tmp_path):
+    """best.pt starts as the --init weights (validated before the first step): a run whose
+    steps only make things worse (an absurd learning rate) ends with them in best.pt."""
+    _, pairs, init = init_reference
+    run = tmp_path / "run"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        code = cli(["train", str(pairs), "-o", str(run), "--init", str(init), *TRAIN, "--lr", "1"])
+    assert code == 0
+    start = torch.load(init, weights_only=True)["model_state"]
+    best = torch.load(run / "best.pt", weights_only=True)
+    last = torch.load(run / "last.pt", weights_only=True)
+    assert best["step"] == 0 and last["step"] > 0
+    assert all(torch.equal(best["model_state"][k], v) for k, v in start.items())
+    assert not all(torch.equal(last["model_state"][k], v) for k, v in start.items())
+
+
 def test_init_resumes_after_a_kill(init_reference, tmp_path):
     base, pairs, init = init_reference
     run = tmp_path / "run"

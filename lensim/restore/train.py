@@ -429,6 +429,19 @@ def _validate(loop: _Loop, mean_loss: float, epoch_lr: float) -> tuple[dict[str,
     return row, metrics
 
 
+def _validate_start(loop: _Loop) -> None:
+    """A run started from other weights (TrainConfig.init): validate them before the first
+    step and write them as best.pt, so that best.pt is never worse on the validation photos
+    than where the run started (a short fine-tuning whose first steps lose ground keeps the
+    starting weights)."""
+    state = loop.state
+    loop.val_metrics = evaluate_pairs(state.model, loop.val_loader, loop.device)
+    vp = loop.val_metrics.get("psnr", math.nan)
+    if math.isfinite(vp):
+        state.best_val_psnr = vp
+    _save_checkpoint(loop, best=True)
+
+
 def _epoch(loop: _Loop, batches: list[list[int]]) -> tuple[bool, dict[str, Any] | None, dict[str, float]]:
     """Train the epoch's remaining batches (_train_epoch), then on rank 0 validate and
     checkpoint (_validate) and report progress; (whether the time budget stopped it, the
@@ -553,6 +566,8 @@ def _train(
     history: list[dict[str, Any]] = []
     metrics: dict[str, float] = {}
     stopped = False
+    if ckpt is None and cfg.init and ranks.main and len(data.val):
+        _validate_start(loop)
     state.model.train()
     while state.epoch < cfg.epochs and not stopped:
         batches = epoch_batches(
