@@ -96,7 +96,7 @@ def _captured_config(args: list[str], pairs: Path, tmp_path: Path, capsys, monke
     seen: list[TrainConfig] = []
 
     def fake_train(dataset, run, config=None, resume=False, progress=None, **overrides):
-        seen.append(train_module._resolve_config(config, overrides, None, str(run)))
+        seen.append(train_module.resolve_config(config, overrides, None, str(run)))
         return train_module.TrainResult(str(run), 0, 0, False, 0.0, math.nan, None, None, None, None)
 
     monkeypatch.setattr(train_module, "train", fake_train)
@@ -228,7 +228,7 @@ def _demo_configs(tmp_path: Path, monkeypatch, settings: list) -> list[TrainConf
     seen: list[TrainConfig] = []
 
     def fake_train(dataset, run, config=None, resume=False, progress=None, **overrides):
-        seen.append(train_module._resolve_config(config, overrides, None, str(run)))
+        seen.append(train_module.resolve_config(config, overrides, None, str(run)))
         Path(run).mkdir(parents=True)
         return train_module.TrainResult(str(run), 0, 0, False, 0.0, math.nan, None, None, None, None)
 

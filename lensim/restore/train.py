@@ -38,11 +38,10 @@ Devices: "cpu", "cuda" (bfloat16 autocast where supported, else float16 with a g
 
 from __future__ import annotations
 
-import contextlib
 import math
 import os
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -74,39 +73,14 @@ from lensim.restore.distributed import (
     shutdown,
     wrap_model,
 )
-from lensim.restore.divergence import ON_NAN, NonFinite, Rollbacks, check_loss, roll_back
-from lensim.restore.losses import LOSSES, restoration_loss
-from lensim.restore.models import ARCHS, build_model
+from lensim.restore.divergence import NonFinite, Rollbacks, check_loss, roll_back
+from lensim.restore.losses import restoration_loss
+from lensim.restore.models import build_model
 from lensim.restore.psf_stage import training_cache
+from lensim.restore.run_config import FROZEN_ON_RESUME, resolve_config, saved_config
 from lensim.restore.run_log import RunLog
-from lensim.restore.schedule import LR_SCHEDULES, BudgetClock, LearningRate
+from lensim.restore.schedule import BudgetClock, LearningRate
 from lensim.restore.universal import load_init
-
-# Settings that must not change when resuming (they would change the loss curve's meaning).
-FROZEN_ON_RESUME = (
-    "loss",
-    "batch_size",
-    "lr",
-    "lr_halve_every",
-    "lr_schedule",
-    "crop",
-    "arch",
-    "width",
-    "depth",
-    "use_fov",
-    "use_deformable",
-    "use_context",
-    "deformable_groups",
-    "deformable_scales",
-    "field_modulation",
-    "stem",
-    "seed",
-    "augment",
-    "val_fraction",
-    "max_steps_per_epoch",
-    "use_settings",
-    "conditioning",
-)
 
 
 @dataclass
@@ -156,70 +130,6 @@ def budget_progress(
 
 
 # ----------------------------------------------------------------------------- set-up
-
-
-def _resolve_config(
-    config: TrainConfig | None, overrides: dict[str, Any], ckpt: dict[str, Any] | None, source: str
-) -> TrainConfig:
-    """The run's settings: ``config`` with ``overrides``, resolved (TrainConfig.resolved:
-    the architecture's defaults filled in, as RUN/config.json and checkpoints record them).
-    When resuming, every setting comes from the checkpoint (``config`` is not used) and
-    ``overrides`` change only those outside FROZEN_ON_RESUME (a value of a frozen one that
-    resolves differently is an InputError naming ``source``), so a resumed run keeps its
-    epochs and time budget unless told otherwise. Checked before any work starts."""
-    if ckpt is None:
-        cfg = TrainConfig(**{**asdict(config or TrainConfig()), **overrides})
-    else:
-        saved = saved_config(ckpt["train_config"])
-        diff = _frozen_differences(saved, overrides)
-        if diff:
-            raise InputError(
-                source,
-                ", ".join(diff),
-                f"differs from the run being resumed "
-                f"({', '.join(f'{k}={getattr(saved, k)!r}' for k in diff)}); expected the same value "
-                "or none",
-            )
-        cfg = replace(saved, **{k: v for k, v in overrides.items() if k not in FROZEN_ON_RESUME})
-    if cfg.epochs < 1 or cfg.batch_size < 1 or cfg.lr <= 0 or cfg.lr_halve_every < 1:
-        raise InputError(
-            None,
-            "config",
-            f"expected epochs, batch_size, lr_halve_every >= 1 and lr > 0, got "
-            f"epochs={cfg.epochs}, batch_size={cfg.batch_size}, lr={cfg.lr}, "
-            f"lr_halve_every={cfg.lr_halve_every}",
-        )
-    if cfg.lr_schedule not in LR_SCHEDULES:
-        raise InputError(None, "lr_schedule", f"expected one of {', '.join(LR_SCHEDULES)}, got {cfg.lr_schedule!r}")
-    if cfg.loss not in LOSSES:
-        raise InputError(None, "loss", f"expected one of {', '.join(LOSSES)}, got {cfg.loss!r}")
-    if cfg.arch not in ARCHS:
-        raise InputError(None, "arch", f"expected one of {', '.join(ARCHS)}, got {cfg.arch!r}")
-    if cfg.on_nan not in ON_NAN:
-        raise InputError(None, "on_nan", f"expected one of {', '.join(ON_NAN)}, got {cfg.on_nan!r}")
-    return cfg.resolved()
-
-
-def saved_config(train_config: dict[str, Any]) -> TrainConfig:
-    """A checkpoint's TrainConfig, resolved. A setting the checkpoint predates had its
-    default value there; a checkpoint without "arch" holds the paper's UNet (written before
-    there was a choice: lensim.restore.models.arch_of), whose missing switches resolve to
-    the UNet's defaults (stem 1)."""
-    known = set(asdict(TrainConfig()))
-    return TrainConfig(
-        **{**asdict(TrainConfig()), "arch": "unet", **{k: v for k, v in train_config.items() if k in known}}
-    ).resolved()
-
-
-def _frozen_differences(saved: TrainConfig, overrides: dict[str, Any]) -> list[str]:
-    """The FROZEN_ON_RESUME settings among ``overrides`` that differ from the resolved
-    ``saved`` run's once resolved themselves (``stem=0`` or ``use_context=None`` ask for
-    the architecture's default, which is no change when it is the run's value)."""
-    given = {k: overrides[k] for k in FROZEN_ON_RESUME if k in overrides}
-    want = replace(saved, **given)
-    with contextlib.suppress(InputError):  # a combination the network refuses: compare as given
-        want = want.resolved()
-    return [k for k in given if getattr(want, k) != getattr(saved, k)]
 
 
 def _device(cfg: TrainConfig) -> tuple[Ranks, torch.device]:
@@ -524,7 +434,7 @@ def _train(
     ckpt = read_resume_checkpoint(run) if resume else None
     if ckpt is None:
         refuse_existing_run(run)
-    cfg = _resolve_config(config, overrides, ckpt, str(run / LAST))
+    cfg = resolve_config(config, overrides, ckpt, str(run / LAST))
     ranks, device = _device(cfg)
     data = _load_data(dataset_dir, cfg, ckpt)  # sets cfg.conditioning for a new run
     state, lr, autocast = _build_state(cfg, device, ckpt, str(run / LAST))
