@@ -12,6 +12,7 @@ lensim/assets/models/universal/README.md.
 from __future__ import annotations
 
 import json
+import shutil
 import warnings
 from pathlib import Path
 
@@ -93,6 +94,26 @@ def test_shipped_model_loads_with_its_ranges(shipped, camera):
 
 
 @pytest.mark.slow  # a 2-worker local Dask cluster (about 15 s)
+def test_pairs_copied_without_their_banks_warn_that_no_fno_range_is_recorded(camera, tmp_path):
+    """Pairs carried to another machine without their banks (the Wiener stage caches made
+    already): pretraining works, says in one warning that it records no F-number range, and
+    records the pitch range; with the banks there the F-number range is recorded."""
+    uni.stage_caches(camera["folders"], uni.replace(TINY, arch="psfnet").network())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert uni._ranges(camera["folders"])["fno"] is not None
+    copies = []
+    for folder in camera["folders"]:
+        shutil.copytree(folder, tmp_path / folder.name)
+        manifest = json.loads((tmp_path / folder.name / "manifest.json").read_text())
+        manifest["bank"] = str(tmp_path / "elsewhere" / folder.name)
+        (tmp_path / folder.name / "manifest.json").write_text(json.dumps(manifest))
+        copies.append(tmp_path / folder.name)
+    with pytest.warns(UserWarning, match="2 of 2 pairs folders.*no F-number range"):
+        ranges = uni._ranges(copies)
+    assert ranges["fno"] is None and ranges["pixel_pitch_um"][0] > 0
+
+
 def test_stage_caches_on_two_workers_equal_one_process(camera, tmp_path):
     """stage_caches with 2 workers writes each folder's Wiener stage cache byte for byte as
     one process does, and reports every folder."""

@@ -32,6 +32,7 @@ from __future__ import annotations
 import csv
 import math
 import time
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -159,7 +160,7 @@ def _set_epoch(data: torch.utils.data.ConcatDataset, epoch: int) -> None:
 def _ranges(folders: Sequence[str | Path]) -> dict[str, Any]:
     """The pixel pitch (um, of each folder's sensor) and F-number (of its bank's shooting
     settings, where recorded) ranges of the pairs folders, and their banks' folder names."""
-    pitches, fnos, banks = [], [], []
+    pitches, fnos, banks, missing = [], [], [], []
     for f in folders:
         manifest = read_json(Path(f) / "manifest.json", "pairs manifest")
         pitches.append(float(manifest["sensor"]["pixel_pitch_um"]))
@@ -170,6 +171,15 @@ def _ranges(folders: Sequence[str | Path]) -> dict[str, Any]:
             if resolved.get("fno") is not None:
                 fnos.append(float(resolved["fno"]))
             banks.append(bank_dir.name)
+        elif bank_dir is not None:
+            missing.append(bank_dir)
+    if missing:  # pairs copied without their banks (to a GPU machine, say)
+        warnings.warn(
+            f"{missing[0]}: the bank of {len(missing)} of {len(folders)} pairs folders is not here, so the model "
+            "records no F-number range for them (lensim restore checks F-numbers against the banks found only)",
+            UserWarning,
+            stacklevel=2,
+        )
     return {
         "pixel_pitch_um": [min(pitches), max(pitches)],
         "fno": [min(fnos), max(fnos)] if fnos else None,
