@@ -16,7 +16,9 @@ def demo_command(
     output: Path = typer.Option(
         Path("lensim-demo"), "-o", "--output", help="Output folder (reused: stages are cached)."
     ),
-    quick: bool = typer.Option(False, "--quick", help="A ~3-minute run (CI); the default takes about 15 minutes."),
+    quick: bool = typer.Option(
+        False, "--quick", help="A ~3-minute run (CI); the default takes about 9-11 minutes on 2 quiet cores."
+    ),
     seed: int = typer.Option(0, "--seed", help="Seed of every random draw."),
     workers: int = typer.Option(
         0,
