@@ -101,3 +101,31 @@ def test_fused_kernel_declines_what_it_does_not_know(monkeypatch):
     assert trace_fused.plan_for(phone_steps) is not None
     monkeypatch.setattr(trace_fused, "ASPHERES", False)
     assert trace_fused.plan_for(phone_steps) is None
+
+
+@pytest.mark.parametrize("name", ["double_gauss", "tir", "phone_wide"])
+def test_fused_kernel_rays_do_not_depend_on_the_split(name, monkeypatch):
+    """A ray's result does not depend on where the batch is cut into tasks or where its
+    block ends (the closed loops run over whole blocks, the rays past the end untraced):
+    traced whole, in tasks of odd sizes and with two threads, bit for bit the same."""
+    lens = _lens(name)
+    pupil = torch.cat([square_grid(61) * 1.2, random_uniform(777)])  # 3665 rays: a ragged last block
+    rays, wl = generate_rays(lens, [0.0, 0.8 * lens.max_field], pupil, [lens.primary_wavelength_um], "paraxial")
+    runs = []
+    for tasks, threads, block_rays in ((1, 1, 16384), (8, 2, 1000), (3, 2, 333)):
+        monkeypatch.setattr(T, "FUSED_TASKS_PER_THREAD", tasks)
+        monkeypatch.setattr(T, "FUSED_MIN_RAYS", block_rays)
+        old = torch.get_num_threads()
+        torch.set_num_threads(threads)
+        try:
+            runs.append(T.trace(lens, rays, wl))
+        finally:
+            torch.set_num_threads(old)
+    for other in runs[1:]:
+        for a, b in zip(
+            (runs[0].rays.position, runs[0].rays.direction, runs[0].rays.opl, runs[0].status, runs[0].failed_at),
+            (other.rays.position, other.rays.direction, other.rays.opl, other.status, other.failed_at),
+            strict=True,
+        ):
+            assert torch.equal(a, b)
+    assert bool(runs[0].rays.valid.any()) and not bool(runs[0].rays.valid.all())

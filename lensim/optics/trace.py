@@ -333,7 +333,7 @@ def _fused_kernel(chunk_steps: list):
 
     def fn(p, d, o, v, z0, n, *outs) -> None:
         t = [x.numpy() for x in (p, d, o, v)]
-        work = np.empty((11, trace_fused.BLOCK))
+        work = np.zeros(trace_fused.WORK_SHAPE)  # zeros: finite media rows past a ragged block's end
         uniform = n.strides[1] == 0
         trace_fused.trace_rays(*t, n, uniform, z0, *arrays, *(x.numpy() for x in outs), work)
 
@@ -416,8 +416,9 @@ def trace(
 
     chunk = CHUNK_RAYS if device.type == "cpu" else max(B, 1)
     workers = torch.get_num_threads() if device.type == "cpu" else 1
-    if fused is not None:  # a few tasks per thread (each a compiled loop; no cache to fit)
-        chunk = max(FUSED_MIN_RAYS, -(-B // (workers * FUSED_TASKS_PER_THREAD)))
+    if fused is not None:  # as many tasks for each thread, a few each where the batch allows
+        per = min(FUSED_TASKS_PER_THREAD, B // (workers * FUSED_MIN_RAYS)) if workers > 1 else 0
+        chunk = -(-B // (workers * per)) if per >= 1 else max(FUSED_MIN_RAYS, -(-B // workers))
     tasks = []
     for g0, g1, nv in _index_groups(n, wavelength_um, batch):
         a = g0

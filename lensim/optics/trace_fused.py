@@ -12,14 +12,18 @@ backwards test and virtual steps. The per-ray formulas mirror the chunk forms of
 lensim.optics.geometry (named in each function's docstring); tests/test_trace_fused.py
 checks the two against each other on every kind of surface, failing rays included. The
 results agree to rounding (~1e-13 mm): the kernel's square roots are ``sqrt``, not
-``u * rsqrt(u)``, multiply-adds may be fused, a conic's normal is scaled to unit length
+``u * rsqrt(u)``, a conic's normal is scaled to unit length
 with a sphere's formula (1/sqrt), and each ray runs Newton's method until it converges
 itself rather than until its whole chunk has.
 
 Layout: rays go through in blocks of BLOCK, a block through one step at a time, its state
-(x, y, z, L, M, N, OPL, status, failure surface) in the rows of a work array; planes,
-spheres and conics run a loop without branches (selects), which the compiler vectorizes
-(SIMD across rays); aspheres run Newton's method ray by ray.
+(x, y, z, L, M, N, OPL, status, failure surface) in the flat rows of one of two work
+blocks (WORK_SHAPE); planes, spheres and conics run a loop without branches (selects)
+over all BLOCK rays (those past the batch's end are not traced), reading one work block
+and writing the other, which the compiler vectorizes (SIMD across rays) without runtime
+overlap checks or masked stores (an in-place store of "new if cond else old" compiles to
+a masked store, microcoded on AMD CPUs: the kernel ran about 20 % slower that way);
+aspheres run Newton's method ray by ray, in place.
 
 The kernel releases the GIL (trace() runs chunks on its thread pool) and is compiled on
 first use and cached on disk (numba's ``cache=True``, next to this file or in
@@ -215,9 +219,9 @@ def _advance(
 ) -> None:
     """Step s for ray i of the block w on an asphere (Newton's method, ray by ray): the
     same as _closed_loop, with EvenAsphere's intersection and normal."""
-    live = w[CODE, i] == OK
-    x, y, z = w[X, i], w[Y, i], w[Z, i] - (f[s, SHIFT] if live else 0.0)
-    L, M, N = w[L_, i], w[M_, i], w[N_, i]
+    live = w[CODE * BLOCK + i] == OK
+    x, y, z = w[X * BLOCK + i], w[Y * BLOCK + i], w[Z * BLOCK + i] - (f[s, SHIFT] if live else 0.0)
+    L, M, N = w[L_ * BLOCK + i], w[M_ * BLOCK + i], w[N_ * BLOCK + i]
     t1, back, x1, y1, hit = _conic_root(f[s, CURV], f[s, CONIC_K], x, y, z, L, M, N)
     if live and hit:
         t1, hit = _newton(f, coef, high, s, x1, y1, L, M, N, t1)
@@ -230,19 +234,19 @@ def _advance(
     code = OK if not live else (MISSED if not hit else OK)
     if live and hit:
         x, y, z = xn, yn, zn
-        w[OPL, i] += t * w[N1, i]
+        w[OPL * BLOCK + i] += t * w[N1 * BLOCK + i]
         if rr > f[s, R2_MAX] or rr < f[s, R2_MIN]:
             code = VIGNETTED
-        elif ints[s, MIRROR] != 0 or w[MU, i] != 1.0:
+        elif ints[s, MIRROR] != 0 or w[MU * BLOCK + i] != 1.0:
             g = _slope_over_r(f, coef, high, s, rr)
             inv = 1.0 / math.sqrt(x * x * g * g + y * y * g * g + 1.0)
-            L, M, N, tir = _bend(ints[s, MIRROR] != 0, w[MU, i], -(x * g) * inv, -(y * g) * inv, inv, L, M, N)
+            L, M, N, tir = _bend(ints[s, MIRROR] != 0, w[MU * BLOCK + i], -(x * g) * inv, -(y * g) * inv, inv, L, M, N)
             code = TIR if tir else OK
             if not tir:
-                w[L_, i], w[M_, i], w[N_, i] = L, M, N
-    w[X, i], w[Y, i], w[Z, i] = x, y, z + (f[s, Z_VERTEX] if code != OK else 0.0)
+                w[L_ * BLOCK + i], w[M_ * BLOCK + i], w[N_ * BLOCK + i] = L, M, N
+    w[X * BLOCK + i], w[Y * BLOCK + i], w[Z * BLOCK + i] = x, y, z + (f[s, Z_VERTEX] if code != OK else 0.0)
     if code != OK:
-        w[CODE, i], w[WHERE, i] = code, ints[s, INDEX]
+        w[CODE * BLOCK + i], w[WHERE * BLOCK + i] = code, ints[s, INDEX]
 
 
 @njit(**_JIT)
@@ -270,40 +274,28 @@ def _step_asphere(
 
 
 @njit(**_JIT, inline="always")
-def _closed_loop(
-    s: int,
-    ints: Arr,
-    f: Arr,
-    m: int,
-    X: Arr,
-    Y: Arr,
-    Z: Arr,
-    L: Arr,
-    M: Arr,
-    N: Arr,
-    O: Arr,
-    C: Arr,
-    W: Arr,
-    n1: Arr,
-    mu: Arr,
-    bend: bool,
-    unit: bool,
-) -> None:
+def _closed_loop(s: int, ints: Arr, f: Arr, a: Arr, b: Arr, bend: bool, unit: bool) -> None:
     """trace_chunk's _move_to_surface, _reflect and _refract at step s (a plane, sphere or
-    conic: Conic.hit_chunk's closed form) for the first m rays of the block (its rows X,
-    Y, Z (z local to the previous vertex), L, M, N, O (OPL), C (status code), W (failure
-    surface), n1 (the medium's index before the surface), mu (n1 / n2)): a ray still
-    traced (C OK) moves to the surface and is bent there; one that fails gets its code and
-    the step's surface, its z made global, and stops. Every branch is a select, so the
-    compiler vectorizes the loop. bend: the step refracts or reflects; unit: its normal
-    needs scaling (a conic; a plane's and a sphere's are unit already); both constants."""
+    conic: Conic.hit_chunk's closed form) for the BLOCK rays of the block a (flat rows of
+    BLOCK: X, Y, Z (z local to the previous vertex), L, M, N, OPL, CODE (status), WHERE
+    (failure surface), N1 (the medium's index before the surface), MU (n1 / n2)), written
+    to the rows X..WHERE of b: a ray still traced (CODE OK) moves to the surface and is
+    bent there; one that fails gets its code and the step's surface, its z made global,
+    and stops. Every branch is a select and every store unconditional (into the other
+    block: an in-place store of a select with the old value compiles to a masked store,
+    microcoded and slow on AMD CPUs), over a constant trip count, so the compiler
+    vectorizes the loop without runtime checks. bend: the step refracts or reflects;
+    unit: its normal needs scaling (a conic; a plane's and a sphere's are unit already);
+    both constants."""
     plane, mirror, c, k = ints[s, KIND] == PLANE, ints[s, MIRROR] != 0, f[s, CURV], f[s, CONIC_K]
     shift, z_vertex, r2_max, r2_min = f[s, SHIFT], f[s, Z_VERTEX], f[s, R2_MAX], f[s, R2_MIN]
     back_ok, domain = ints[s, BACKWARDS_OK] != 0, ints[s, CHECK_DOMAIN] != 0
     idx = float(ints[s, INDEX])
-    for i in range(m):
-        live = C[i] == OK
-        x, y, z, dx, dy, dz = X[i], Y[i], Z[i] - (shift if live else 0.0), L[i], M[i], N[i]
+    for i in range(BLOCK):
+        cw, wh, n1, mu = a[CODE * BLOCK + i], a[WHERE * BLOCK + i], a[N1 * BLOCK + i], a[MU * BLOCK + i]
+        live = cw == OK
+        x, y, z = a[X * BLOCK + i], a[Y * BLOCK + i], a[Z * BLOCK + i] - (shift if live else 0.0)
+        dx, dy, dz, o = a[L_ * BLOCK + i], a[M_ * BLOCK + i], a[N_ * BLOCK + i], a[OPL * BLOCK + i]
         t1, back, x1, y1, hit = _conic_root(c, k, x, y, z, dx, dy, dz)
         t = -(z / dz) if plane else t1 - back
         hit = hit & (plane | (abs(t) < math.inf)) & (back_ok | (t > _BACKWARDS_MM))
@@ -313,96 +305,50 @@ def _closed_loop(
         go = live & hit
         vig = go & ((rr > r2_max) | (rr < r2_min))
         tir, bent = False, False
+        Lo, Mo, No = dx, dy, dz
         if bend:
             nx, ny, nz = xn * -c, yn * -c, zn * (-c * (1.0 + k)) + 1.0
             if unit:
                 inv = 1.0 / math.sqrt(nx * nx + ny * ny + nz * nz)
                 nx, ny, nz = nx * inv, ny * inv, nz * inv
             cos_i = dx * nx + dy * ny + dz * nz
-            ct = cos_i * cos_i * (mu[i] * mu[i]) + (1.0 - mu[i] * mu[i])
-            kk = math.copysign(math.sqrt(max(ct, 0.0)), cos_i) - cos_i * mu[i]
+            ct = cos_i * cos_i * (mu * mu) + (1.0 - mu * mu)
+            kk = math.copysign(math.sqrt(max(ct, 0.0)), cos_i) - cos_i * mu
             dn = cos_i * -2.0
-            bent = go & ~vig & (mirror | (mu[i] != 1.0))
+            bent = go & ~vig & (mirror | (mu != 1.0))
             tir = bent & ~mirror & (ct < 0.0)
             bent = bent & ~tir
-            L[i] = (dx + dn * nx if mirror else dx * mu[i] + kk * nx) if bent else dx
-            M[i] = (dy + dn * ny if mirror else dy * mu[i] + kk * ny) if bent else dy
-            N[i] = (dz + dn * nz if mirror else dz * mu[i] + kk * nz) if bent else dz
+            Lo = (dx + dn * nx if mirror else dx * mu + kk * nx) if bent else dx
+            Mo = (dy + dn * ny if mirror else dy * mu + kk * ny) if bent else dy
+            No = (dz + dn * nz if mirror else dz * mu + kk * nz) if bent else dz
         code = MISSED if not hit else (VIGNETTED if vig else (TIR if tir else OK))
         fails = live & (code != OK)
-        X[i] = xn if go else x
-        Y[i] = yn if go else y
-        Z[i] = (zn if go else z) + (z_vertex if fails else 0.0)
-        O[i] = O[i] + t * n1[i] if go else O[i]
-        C[i] = code if fails else C[i]
-        W[i] = idx if fails else W[i]
+        b[L_ * BLOCK + i], b[M_ * BLOCK + i], b[N_ * BLOCK + i] = Lo, Mo, No
+        b[X * BLOCK + i] = xn if go else x
+        b[Y * BLOCK + i] = yn if go else y
+        b[Z * BLOCK + i] = (zn if go else z) + (z_vertex if fails else 0.0)
+        b[OPL * BLOCK + i] = o + t * n1 if go else o
+        b[CODE * BLOCK + i] = code if fails else cw
+        b[WHERE * BLOCK + i] = idx if fails else wh
 
 
 @njit(**_JIT)
-def _move(
-    s: int,
-    ints: Arr,
-    f: Arr,
-    m: int,
-    X: Arr,
-    Y: Arr,
-    Z: Arr,
-    L: Arr,
-    M: Arr,
-    N: Arr,
-    O: Arr,
-    C: Arr,
-    W: Arr,
-    n1: Arr,
-    mu: Arr,
-) -> None:
+def _move(s: int, ints: Arr, f: Arr, a: Arr, b: Arr) -> None:
     """_closed_loop for a step that does not bend the rays (the image plane, a surface
     between equal media)."""
-    _closed_loop(s, ints, f, m, X, Y, Z, L, M, N, O, C, W, n1, mu, False, False)
+    _closed_loop(s, ints, f, a, b, False, False)
 
 
 @njit(**_JIT)
-def _move_bend(
-    s: int,
-    ints: Arr,
-    f: Arr,
-    m: int,
-    X: Arr,
-    Y: Arr,
-    Z: Arr,
-    L: Arr,
-    M: Arr,
-    N: Arr,
-    O: Arr,
-    C: Arr,
-    W: Arr,
-    n1: Arr,
-    mu: Arr,
-) -> None:
+def _move_bend(s: int, ints: Arr, f: Arr, a: Arr, b: Arr) -> None:
     """_closed_loop for a plane or sphere that bends the rays."""
-    _closed_loop(s, ints, f, m, X, Y, Z, L, M, N, O, C, W, n1, mu, True, False)
+    _closed_loop(s, ints, f, a, b, True, False)
 
 
 @njit(**_JIT)
-def _move_bend_unit(
-    s: int,
-    ints: Arr,
-    f: Arr,
-    m: int,
-    X: Arr,
-    Y: Arr,
-    Z: Arr,
-    L: Arr,
-    M: Arr,
-    N: Arr,
-    O: Arr,
-    C: Arr,
-    W: Arr,
-    n1: Arr,
-    mu: Arr,
-) -> None:
+def _move_bend_unit(s: int, ints: Arr, f: Arr, a: Arr, b: Arr) -> None:
     """_closed_loop for a conic that bends the rays."""
-    _closed_loop(s, ints, f, m, X, Y, Z, L, M, N, O, C, W, n1, mu, True, True)
+    _closed_loop(s, ints, f, a, b, True, True)
 
 
 # rows of a block's work array w
@@ -410,6 +356,11 @@ X, Y, Z, L_, M_, N_, OPL, CODE, WHERE, N1, MU = range(11)
 #: rays per block: the kernel carries a block through one step at a time, its state in
 #: cache, in loops the compiler vectorizes (SIMD across rays; aspheres excepted)
 BLOCK = 2048
+#: the rows of a block's work array
+ROWS = 11
+#: the shape of the work array trace_rays takes: two blocks of flat rows (the closed loops
+#: read one and write the other)
+WORK_SHAPE = (2, ROWS * BLOCK)
 
 
 @njit(**_JIT)
@@ -421,30 +372,31 @@ def _media(n: np.ndarray, uniform: bool, s: int, a: int, m: int, w: np.ndarray) 
     if uniform:
         v1, mu = n[s, a], n[s, a] / n[s2, a]
         for i in range(m):
-            w[N1, i], w[MU, i] = v1, mu
+            w[N1 * BLOCK + i], w[MU * BLOCK + i] = v1, mu
         return mu == 1.0
     for i in range(m):
-        w[N1, i], w[MU, i] = n[s, a + i], n[s, a + i] / n[s2, a + i]
+        w[N1 * BLOCK + i], w[MU * BLOCK + i] = n[s, a + i], n[s, a + i] / n[s2, a + i]
     return False
 
 
 @njit(**_JIT)
 def _run_step(
-    s: int, ints: np.ndarray, floats: np.ndarray, coef: np.ndarray, high: np.ndarray, w: np.ndarray, m: int, same: bool
-) -> None:
+    s: int, ints: np.ndarray, floats: np.ndarray, coef: np.ndarray, high: np.ndarray, w: Arr, v: Arr, m: int, same: bool
+) -> bool:
     """Step s on the first m rays of the block w, by the loop its surface needs (same: the
-    media on both sides are equal for every ray)."""
+    media on both sides are equal for every ray): an asphere in place, else into the block
+    v. Returns whether the rays are now in v."""
     kind = ints[s, KIND]
     if kind == ASPHERE:
         _step_asphere(s, ints, floats, coef, high, w, m)
-        return
-    rows = (w[X], w[Y], w[Z], w[L_], w[M_], w[N_], w[OPL], w[CODE], w[WHERE], w[N1], w[MU])
+        return False
     if ints[s, INTERACT] == 0 or (same and ints[s, MIRROR] == 0):
-        _move(s, ints, floats, m, *rows)
+        _move(s, ints, floats, w, v)
     elif kind == CONIC:
-        _move_bend_unit(s, ints, floats, m, *rows)
+        _move_bend_unit(s, ints, floats, w, v)
     else:
-        _move_bend(s, ints, floats, m, *rows)
+        _move_bend(s, ints, floats, w, v)
+    return True
 
 
 @njit(**_JIT)
@@ -466,7 +418,7 @@ def trace_rays(
     out_v: Arr,
     status: Arr,
     failed: Arr,
-    w: Arr,
+    work: Arr,
 ) -> None:
     """Trace rays p (B, 3) mm, d (B, 3), OPL o (B,) mm, validity v (B,) through the plan's
     steps (ints, floats, coef, high), media indices n (S+1, B) (uniform: a column
@@ -477,16 +429,25 @@ def trace_rays(
     z_last = floats[S - 1, Z_VERTEX]
     for a in range(0, B, BLOCK):
         m = min(BLOCK, B - a)
-        for i in range(m):
-            w[X, i], w[Y, i], w[Z, i] = p[a + i, 0], p[a + i, 1], p[a + i, 2] - (z0 if v[a + i] else 0.0)
-            w[L_, i], w[M_, i], w[N_, i], w[OPL, i] = d[a + i, 0], d[a + i, 1], d[a + i, 2], o[a + i]
-            w[CODE, i], w[WHERE, i] = (OK, -1.0) if v[a + i] else (-1.0, -1.0)  # -1: not traced
+        w = work[0]
+        for i in range(BLOCK):  # rays past m: copies of the first, not traced (CODE -1)
+            j = a + i if i < m else a
+            w[X * BLOCK + i], w[Y * BLOCK + i] = p[j, 0], p[j, 1]
+            w[Z * BLOCK + i] = p[j, 2] - (z0 if v[j] else 0.0)
+            w[L_ * BLOCK + i], w[M_ * BLOCK + i], w[N_ * BLOCK + i] = d[j, 0], d[j, 1], d[j, 2]
+            w[OPL * BLOCK + i] = o[j]
+            w[CODE * BLOCK + i] = OK if v[j] and i < m else -1.0  # -1: not traced
+            w[WHERE * BLOCK + i] = -1.0
+        cur = 0
         for s in range(S):
-            same = _media(n, uniform, ints[s, INDEX], a, m, w)
-            _run_step(s, ints, floats, coef, high, w, m, same)
+            same = _media(n, uniform, ints[s, INDEX], a, m, work[cur])
+            if _run_step(s, ints, floats, coef, high, work[cur], work[1 - cur], m, same):
+                cur = 1 - cur
+        w = work[cur]
         for i in range(m):
-            live = w[CODE, i] == OK
-            out_p[a + i, 0], out_p[a + i, 1], out_p[a + i, 2] = w[X, i], w[Y, i], w[Z, i] + (z_last if live else 0.0)
-            out_d[a + i, 0], out_d[a + i, 1], out_d[a + i, 2] = w[L_, i], w[M_, i], w[N_, i]
-            out_o[a + i], out_v[a + i] = w[OPL, i], live
-            status[a + i], failed[a + i] = max(w[CODE, i], 0.0), w[WHERE, i]
+            live = w[CODE * BLOCK + i] == OK
+            out_p[a + i, 0], out_p[a + i, 1] = w[X * BLOCK + i], w[Y * BLOCK + i]
+            out_p[a + i, 2] = w[Z * BLOCK + i] + (z_last if live else 0.0)
+            out_d[a + i, 0], out_d[a + i, 1], out_d[a + i, 2] = w[L_ * BLOCK + i], w[M_ * BLOCK + i], w[N_ * BLOCK + i]
+            out_o[a + i], out_v[a + i] = w[OPL * BLOCK + i], live
+            status[a + i], failed[a + i] = max(w[CODE * BLOCK + i], 0.0), w[WHERE * BLOCK + i]
