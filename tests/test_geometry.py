@@ -117,6 +117,24 @@ def test_odd_asphere_sag_against_the_formula():
     assert (geo.sag(r * r) - z).abs().max() < 1e-14
 
 
+def test_a_subclass_that_says_nothing_of_what_it_fits_changes_no_lens():
+    """A subclass that does not define `fits` (a test double, a user's variant of a kind) is
+    not a new kind: make_geometry keeps making the built-in kinds. Before, any subclass was
+    asked first with its parent's `fits`, so defining one anywhere in a process turned every
+    sphere loaded afterwards into it (a bank resumed in that process then differed by 1 ulp
+    from the one a fresh process had started)."""
+    from lensim.optics import geometry
+
+    kinds = list(geometry._KINDS)
+
+    class Other(Conic):
+        kind = "other"
+
+    assert geometry._KINDS == kinds
+    assert type(make_geometry(0.02)) is Sphere and type(make_geometry(0.02, -0.5)) is Conic
+    assert Surface(0.02).kind == "sphere"
+
+
 def test_a_new_kind_is_one_subclass():
     """Defining a subclass registers it: make_geometry (and so Surface.geometry, the tracers
     and the drawings) picks it for the parameters its `fits` accepts, before the older kinds."""

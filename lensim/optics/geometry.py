@@ -44,7 +44,7 @@ _FLAT_DZ = 1e-12  # |N| below this: the ray runs parallel to the vertex plane an
 
 T = torch.Tensor
 Normal = tuple[T, T, T]
-_KINDS: list[type[Geometry]] = []  # every subclass of Geometry, in the order defined
+_KINDS: list[type[Geometry]] = []  # the subclasses of Geometry that define fits(), in the order defined
 
 
 def sqrt_nonneg(u: torch.Tensor, positive: bool = False) -> torch.Tensor:
@@ -153,7 +153,8 @@ class Geometry:
 
     def __init_subclass__(cls, **kwargs: object) -> None:
         super().__init_subclass__(**kwargs)
-        _KINDS.append(cls)
+        if "fits" in cls.__dict__:  # a kind that says which surfaces it is: make_geometry asks it
+            _KINDS.append(cls)
 
     @classmethod
     def fits(cls, curvature: float, conic: float, terms: dict[int, float]) -> bool:
