@@ -274,7 +274,9 @@ def _step_asphere(
 
 
 @njit(**_JIT, inline="always")
-def _closed_loop(s: int, ints: Arr, f: Arr, a: Arr, b: Arr, bend: bool, unit: bool) -> None:
+def _closed_loop(
+    s: int, ints: Arr, f: Arr, a: Arr, b: Arr, n1s: float, mus: float, uni: bool, bend: bool, unit: bool
+) -> None:
     """trace_chunk's _move_to_surface, _reflect and _refract at step s (a plane, sphere or
     conic: Conic.hit_chunk's closed form) for the BLOCK rays of the block a (flat rows of
     BLOCK: X, Y, Z (z local to the previous vertex), L, M, N, OPL, CODE (status), WHERE
@@ -292,7 +294,8 @@ def _closed_loop(s: int, ints: Arr, f: Arr, a: Arr, b: Arr, bend: bool, unit: bo
     back_ok, domain = ints[s, BACKWARDS_OK] != 0, ints[s, CHECK_DOMAIN] != 0
     idx = float(ints[s, INDEX])
     for i in range(BLOCK):
-        cw, wh, n1, mu = a[CODE * BLOCK + i], a[WHERE * BLOCK + i], a[N1 * BLOCK + i], a[MU * BLOCK + i]
+        cw, wh = a[CODE * BLOCK + i], a[WHERE * BLOCK + i]
+        n1, mu = (n1s, mus) if uni else (a[N1 * BLOCK + i], a[MU * BLOCK + i])
         live = cw == OK
         x, y, z = a[X * BLOCK + i], a[Y * BLOCK + i], a[Z * BLOCK + i] - (shift if live else 0.0)
         dx, dy, dz, o = a[L_ * BLOCK + i], a[M_ * BLOCK + i], a[N_ * BLOCK + i], a[OPL * BLOCK + i]
@@ -333,22 +336,40 @@ def _closed_loop(s: int, ints: Arr, f: Arr, a: Arr, b: Arr, bend: bool, unit: bo
 
 
 @njit(**_JIT)
-def _move(s: int, ints: Arr, f: Arr, a: Arr, b: Arr) -> None:
+def _move(s: int, ints: Arr, f: Arr, a: Arr, b: Arr, n1: float, mu: float) -> None:
     """_closed_loop for a step that does not bend the rays (the image plane, a surface
-    between equal media)."""
-    _closed_loop(s, ints, f, a, b, False, False)
+    between equal media), per-ray media (rows N1, MU)."""
+    _closed_loop(s, ints, f, a, b, n1, mu, False, False, False)
 
 
 @njit(**_JIT)
-def _move_bend(s: int, ints: Arr, f: Arr, a: Arr, b: Arr) -> None:
-    """_closed_loop for a plane or sphere that bends the rays."""
-    _closed_loop(s, ints, f, a, b, True, False)
+def _move_bend(s: int, ints: Arr, f: Arr, a: Arr, b: Arr, n1: float, mu: float) -> None:
+    """_closed_loop for a plane or sphere that bends the rays, per-ray media."""
+    _closed_loop(s, ints, f, a, b, n1, mu, False, True, False)
 
 
 @njit(**_JIT)
-def _move_bend_unit(s: int, ints: Arr, f: Arr, a: Arr, b: Arr) -> None:
-    """_closed_loop for a conic that bends the rays."""
-    _closed_loop(s, ints, f, a, b, True, True)
+def _move_bend_unit(s: int, ints: Arr, f: Arr, a: Arr, b: Arr, n1: float, mu: float) -> None:
+    """_closed_loop for a conic that bends the rays, per-ray media."""
+    _closed_loop(s, ints, f, a, b, n1, mu, False, True, True)
+
+
+@njit(**_JIT)
+def _move_u(s: int, ints: Arr, f: Arr, a: Arr, b: Arr, n1: float, mu: float) -> None:
+    """_move with one index n1 and ratio mu for every ray."""
+    _closed_loop(s, ints, f, a, b, n1, mu, True, False, False)
+
+
+@njit(**_JIT)
+def _move_bend_u(s: int, ints: Arr, f: Arr, a: Arr, b: Arr, n1: float, mu: float) -> None:
+    """_move_bend with one index n1 and ratio mu for every ray."""
+    _closed_loop(s, ints, f, a, b, n1, mu, True, True, False)
+
+
+@njit(**_JIT)
+def _move_bend_unit_u(s: int, ints: Arr, f: Arr, a: Arr, b: Arr, n1: float, mu: float) -> None:
+    """_move_bend_unit with one index n1 and ratio mu for every ray."""
+    _closed_loop(s, ints, f, a, b, n1, mu, True, True, True)
 
 
 # rows of a block's work array w
@@ -365,9 +386,10 @@ WORK_SHAPE = (2, ROWS * BLOCK)
 
 @njit(**_JIT)
 def _media(n: np.ndarray, uniform: bool, s: int, a: int, m: int, w: np.ndarray) -> bool:
-    """Rows N1 (index before step s's surface) and MU (n1 / n2) of the block w for rays
-    a..a+m; uniform: every ray has the same indices (n: (S+1, B), a column broadcast).
-    Returns whether the surface has the same medium on both sides for every ray."""
+    """Rows N1 (index before surface s) and MU (n1 / n2) of the block w for rays a..a+m
+    (the asphere's loop and the closed loops with per-ray media read them); uniform: every
+    ray has the same indices (n: (S+1, B), a column broadcast). Returns whether the surface
+    has the same medium on both sides for every ray."""
     s2 = min(s + 1, n.shape[0] - 1)
     if uniform:
         v1, mu = n[s, a], n[s, a] / n[s2, a]
@@ -381,21 +403,37 @@ def _media(n: np.ndarray, uniform: bool, s: int, a: int, m: int, w: np.ndarray) 
 
 @njit(**_JIT)
 def _run_step(
-    s: int, ints: np.ndarray, floats: np.ndarray, coef: np.ndarray, high: np.ndarray, w: Arr, v: Arr, m: int, same: bool
+    s: int, ints: Arr, floats: Arr, coef: Arr, high: Arr, n: Arr, uniform: bool, a: int, m: int, w: Arr, v: Arr
 ) -> bool:
-    """Step s on the first m rays of the block w, by the loop its surface needs (same: the
-    media on both sides are equal for every ray): an asphere in place, else into the block
-    v. Returns whether the rays are now in v."""
-    kind = ints[s, KIND]
+    """Step s on the first m rays (from row a of the batch) of the block w, by the loop its
+    surface needs, with the media indices n (S+1, B) (uniform: a column broadcast, passed
+    to the loop as two numbers, else rows N1 and MU of w): an asphere in place, else into
+    the block v. Returns whether the rays are now in v."""
+    kind, j = ints[s, KIND], ints[s, INDEX]
     if kind == ASPHERE:
+        _media(n, uniform, j, a, m, w)
         _step_asphere(s, ints, floats, coef, high, w, m)
         return False
-    if ints[s, INTERACT] == 0 or (same and ints[s, MIRROR] == 0):
-        _move(s, ints, floats, w, v)
-    elif kind == CONIC:
-        _move_bend_unit(s, ints, floats, w, v)
+    uni = uniform
+    if uniform:
+        n1, mu = n[j, a], n[j, a] / n[min(j + 1, n.shape[0] - 1), a]
     else:
-        _move_bend(s, ints, floats, w, v)
+        n1, mu = 0.0, 0.0
+        _media(n, uniform, j, a, m, w)
+    if ints[s, INTERACT] == 0 or (uni and mu == 1.0 and ints[s, MIRROR] == 0):
+        if uni:
+            _move_u(s, ints, floats, w, v, n1, mu)
+        else:
+            _move(s, ints, floats, w, v, n1, mu)
+    elif kind == CONIC:
+        if uni:
+            _move_bend_unit_u(s, ints, floats, w, v, n1, mu)
+        else:
+            _move_bend_unit(s, ints, floats, w, v, n1, mu)
+    elif uni:
+        _move_bend_u(s, ints, floats, w, v, n1, mu)
+    else:
+        _move_bend(s, ints, floats, w, v, n1, mu)
     return True
 
 
@@ -423,8 +461,9 @@ def trace_rays(
     """Trace rays p (B, 3) mm, d (B, 3), OPL o (B,) mm, validity v (B,) through the plan's
     steps (ints, floats, coef, high), media indices n (S+1, B) (uniform: a column
     broadcast), z0 the first step's vertex z (mm); write positions, directions, paths,
-    validity, status codes and failure surfaces (-1: none) to the outputs; w: a work
-    array (11, BLOCK). Rays invalid on input are written as given."""
+    validity, status codes and failure surfaces (-1: none) to the outputs; work: a work
+    array of WORK_SHAPE (zeros: finite values past a ragged block's end). Rays invalid on
+    input are written as given."""
     S, B = ints.shape[0], p.shape[0]
     z_last = floats[S - 1, Z_VERTEX]
     for a in range(0, B, BLOCK):
@@ -440,8 +479,7 @@ def trace_rays(
             w[WHERE * BLOCK + i] = -1.0
         cur = 0
         for s in range(S):
-            same = _media(n, uniform, ints[s, INDEX], a, m, work[cur])
-            if _run_step(s, ints, floats, coef, high, work[cur], work[1 - cur], m, same):
+            if _run_step(s, ints, floats, coef, high, n, uniform, a, m, work[cur], work[1 - cur]):
                 cur = 1 - cur
         w = work[cur]
         for i in range(m):
