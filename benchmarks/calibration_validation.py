@@ -300,7 +300,8 @@ def table(results: list[dict]) -> str:
         for n in names:
             fit = f"{r['fitted'][n]:+.5f} +- {r['sigma'][n]:.5f}" if n in r["fitted"] else "(not fitted)"
             fit += " (at its bound)" if n in at else ""
-            extra = f"{bounds[n]:.5f} | {priors[n] or 0.0:.5f}" if n in bounds else " | "
+            prior = "none" if priors.get(n) is None else f"{priors[n]:.5f}"
+            extra = f"{bounds[n]:.5f} | {prior}" if n in bounds else " | "
             lines.append(f"| {r['camera']} | {n} | {r['truth'].get(n, 0.0):+.5f} | {fit} | {extra} |")
         for h in r.get("held_at_nominal") or []:
             lines.append(f"| {r['camera']} | {h['parameter']} | | held at nominal: {h['reason']} | | |")
