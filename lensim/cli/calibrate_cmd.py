@@ -107,7 +107,9 @@ def calibrate_command(
     towards the nominal design, from each chart edge's SFR against lensim's simulation of the
     nominal lens at the photo's pose. Writes a lens file every command takes, its
     as_built record holding the fitted values, their 1-sigma uncertainties and the
-    residuals. The system transfer (pixel, mosaic, develop) is then taken again from the
+    residuals.
+
+    The system transfer (pixel, mosaic, develop) is then taken again from the
     chart simulated through the fitted lens and the fit repeated, until no parameter
     moves by its 1-sigma uncertainty (the rounds are recorded). A parameter the chart's
     edges cannot constrain is held at nominal (recorded in the lens file).
