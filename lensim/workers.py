@@ -199,7 +199,9 @@ def _workers_ignore_sigint() -> Iterator[None]:
 
 def _local_cluster(workers: int) -> Any:
     """A local Dask cluster of ``workers`` processes, one thread each, on no fixed port,
-    logging errors only (no warnings of cancelled jobs). Its workers keep glibc's own
+    logging nothing below CRITICAL: no warnings of cancelled jobs, and no traceback when a
+    worker's heartbeat misses a scheduler that is busy (the demo printed one; a job that
+    fails still raises in the client, and a lost worker is WorkerLostError). Its workers keep glibc's own
     malloc trimming: Dask's nanny would start them with MALLOC_TRIM_THRESHOLD_=65536
     (distributed.nanny.pre-spawn-environ), which also turns off glibc's adaptive mmap
     threshold, so every large temporary array is mmapped and page-faulted afresh; that
@@ -222,7 +224,7 @@ def _local_cluster(workers: int) -> Any:
                 threads_per_worker=1,
                 processes=True,
                 dashboard_address=":0",
-                silence_logs=logging.ERROR,
+                silence_logs=logging.CRITICAL,
             )
     except (RuntimeError, OSError) as e:  # a worker process died while starting ("Nanny failed to start")
         raise WorkerLostError(
