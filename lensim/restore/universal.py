@@ -373,12 +373,9 @@ def is_universal_model(path: str | Path) -> bool:
     (its folder holds last.pt/best.pt, not model.pt)."""
     from lensim.restore.checkpoint import read_checkpoint
 
-    p = Path(path)
-    p = p / MODEL_FILE if p.is_dir() else p
-    if not p.is_file() or p.suffix != ".pt":
-        return False
     try:
-        return "universal" in read_checkpoint(p)
+        p = model_path(path)
+        return p.suffix == ".pt" and "universal" in read_checkpoint(p)
     except InputError:
         return False
 
