@@ -7,10 +7,11 @@ observation: its square's centre on the sensor (mm, from the mapping: x along co
 along rows, the bank's orientation; the four sides of a square share one trace), the
 direction across it (0 deg for a left/right side, 90 for a top/bottom one), the photo's
 SFR on FREQ_CY_PX (converted to lp/mm with the pitch), and the system transfer: the
-simulation's SFR over the nominal lens's optical MTF there
-(lensim.calibrate.model.edge_mtf), which carries the pixel, the mosaic and the develop
-chain. Frequencies where the nominal optical MTF is below MIN_OPTICAL_MTF are dropped (the
-ratio is noise there).
+simulation's SFR over the transfer of the nominal lens's pixel kernel there
+(lensim.calibrate.model.edge_mtf of an edge with the mapping's pitch: the optical MTF
+with the pixel and its aliases), which carries the mosaic and the develop chain.
+Frequencies where that transfer is below MIN_OPTICAL_MTF are dropped (the ratio is noise
+there).
 """
 
 from __future__ import annotations
@@ -97,14 +98,15 @@ def chart_data(
         col, row = np.mean(centres[p.region.square], axis=0)
         angle = 90.0 if p.region.side in ("top", "bottom") else 0.0
         x, y = mapping.x0_mm + col * p_mm, mapping.y0_mm + row * p_mm
-        full = Edge(float(x), float(y), angle, tuple((FREQ_CY_PX / p_mm).tolist()))
+        full = Edge(float(x), float(y), angle, tuple((FREQ_CY_PX / p_mm).tolist()), mapping.pitch_um)
         optical = edge_mtf(lens, full, *spectrum, samples=samples)
         keep = optical >= MIN_OPTICAL_MTF
         if keep.sum() < 2:
             continue
         photo_sfr = np.interp(FREQ_CY_PX, p.sfr.freq_cy_px, p.sfr.mtf)[keep]
         sim_sfr = np.interp(FREQ_CY_PX, s.sfr.freq_cy_px, s.sfr.mtf)[keep]
-        edges.append(Edge(full.x_mm, full.y_mm, angle, tuple(np.asarray(full.frequencies_lp_mm)[keep].tolist())))
+        kept = tuple(np.asarray(full.frequencies_lp_mm)[keep].tolist())
+        edges.append(Edge(full.x_mm, full.y_mm, angle, kept, mapping.pitch_um))
         measured.append(photo_sfr)
         system.append(sim_sfr / optical[keep])
         regions.append(p.region)

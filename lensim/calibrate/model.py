@@ -20,6 +20,16 @@ image plane (focus, sensor tilt) needs no new trace: each point's rays are carri
 where the moved and turned sensor is at that point (sensor_shift_mm); to first order in
 the tilt this is the tilted sensor (the PSF spans microns; measured within a tenth of the
 change it makes on the Cooke triplet, tests/test_calibrate_fit.py).
+
+An edge measured on lensim's rendering (an edge with pitch_um) does not see the optical
+MTF times the pixel's sinc: lensim blurs with kernels sampled at the pixel pitch, and an
+edge's SFR in such an image is the transfer of that sampled kernel, the sum of the
+pixel-integrated OTF over the aliases (n, m) / pitch (|n|, |m| <= ALIAS_ORDERS), the kernel's
+centre sample on the chief ray. At phone_wide's 3.8 um the optics pass much beyond
+Nyquist, and the aliases changed differently with a decentre than the optical MTF:
+modelled without them, an element decentred 12 um lowered the rendered edges' MTF by 0.07
+more than the model said (benchmarks/calibration_validation.py's camera), which the fit
+took as extra focus.
 """
 
 from __future__ import annotations
@@ -40,12 +50,15 @@ from lensim.psf.pupil_field import PupilField, focus_stacks
 @dataclass(frozen=True)
 class Edge:
     """One slanted edge: x_mm, y_mm on the sensor; angle_deg across the edge (from +x,
-    counter-clockwise); frequencies_lp_mm (F,) where its SFR is known."""
+    counter-clockwise); frequencies_lp_mm (F,) where its SFR is known; pitch_um: the pixel
+    pitch (um) of lensim's kernels when its SFR is that of lensim's rendering (the model is
+    then the sampled kernel's transfer, module docstring), None for an optical MTF."""
 
     x_mm: float
     y_mm: float
     angle_deg: float
     frequencies_lp_mm: tuple[float, ...]
+    pitch_um: float | None = None
 
     @property
     def radius_mm(self) -> float:
@@ -129,6 +142,10 @@ def sensor_shift_mm(x_mm: float, y_mm: float, image: Sequence[float]) -> float:
     return focus + y_mm * math.tan(math.radians(tilt_x)) - x_mm * math.tan(math.radians(tilt_y))
 
 
+#: alias orders (each axis) summed by a pixel-sampled model (mtfs_from's pitch_um)
+ALIAS_ORDERS = 2
+
+
 def mtfs_from(
     stacks: dict[tuple[float, float], Stacks],
     edges: Sequence[Edge],
@@ -136,7 +153,8 @@ def mtfs_from(
     image: Sequence[float] = (0.0, 0.0, 0.0),
 ) -> list[np.ndarray]:
     """The MTF (F,) of every edge from its point's stacks (trace_points), the sensor moved
-    and turned by image = (focus mm, tilt_x deg, tilt_y deg) on top of the traced lens's."""
+    and turned by image = (focus mm, tilt_x deg, tilt_y deg) on top of the traced lens's
+    (with an edge's pitch_um, its pixel kernel's transfer)."""
     spots: dict[tuple[float, float], _Spot] = {}
     out = []
     for e in edges:
@@ -149,22 +167,46 @@ def mtfs_from(
     return out
 
 
-def _edge_from_spot(spot: _Spot, edge: Edge, weights: Sequence[float]) -> np.ndarray:
+def _frequency_vectors(edge: Edge) -> tuple[np.ndarray, np.ndarray]:
+    """(F, A, 2) frequency vectors (lp/mm) in the sensor's frame: the edge's frequencies
+    across it, each with the A alias offsets (n, m) / pitch (|n|, |m| <= ALIAS_ORDERS; one,
+    (0, 0), without the edge's pitch); and the same turned into the frame of the lens turned to the
+    edge's azimuth (trace_points)."""
     f = np.asarray(edge.frequencies_lp_mm, dtype=np.float64)
-    angle = edge.angle_deg - edge.azimuth_deg
-    direction = np.array([math.cos(math.radians(angle)), math.sin(math.radians(angle))])
-    total = np.zeros(f.shape, dtype=np.complex128)
-    norm, ref = 0.0, spot.fields[0].chief[:2].numpy()
-    a = math.radians(angle)
-    for pf, otf, w in zip(spot.fields, spot.otfs, weights, strict=True):
+    a = math.radians(edge.angle_deg)
+    base = f[:, None] * np.array([math.cos(a), math.sin(a)])
+    pitch_um = edge.pitch_um
+    if pitch_um is None:
+        offsets = np.zeros((1, 2))
+    else:
+        n = np.arange(-ALIAS_ORDERS, ALIAS_ORDERS + 1, dtype=np.float64)
+        offsets = np.stack(np.meshgrid(n, n, indexing="ij"), axis=-1).reshape(-1, 2) / (pitch_um * 1e-3)
+    sensor = base[:, None, :] + offsets[None]
+    z = math.radians(edge.azimuth_deg)  # the turned frame: vectors turned by -azimuth
+    c, s = math.cos(z), math.sin(z)
+    turned = np.stack([c * sensor[..., 0] + s * sensor[..., 1], -s * sensor[..., 0] + c * sensor[..., 1]], axis=-1)
+    return sensor, turned
+
+
+def _edge_from_spot(spot: _Spot, edge: Edge, weights: Sequence[float]) -> np.ndarray:
+    """The polychromatic transfer (F,) across one edge, relative to the spot's weighted
+    mean chief-ray point (each wavelength's offset from it is the lateral colour); with
+    the edge's pitch_um, that of the pixel kernel (module docstring)."""
+    sensor, turned = _frequency_vectors(edge)
+    w = [wt * pf.transmission for wt, pf in zip(weights, spot.fields, strict=True)]
+    norm = max(sum(w), 1e-300)
+    chiefs = np.stack([pf.chief[:2].numpy() for pf in spot.fields])
+    ref = np.asarray(w) @ chiefs / norm
+    total = np.zeros(turned.shape[:2], dtype=np.complex128)
+    for pf, otf, weight, chief in zip(spot.fields, spot.otfs, w, chiefs, strict=True):
         scale = pf.n_image * (2.0 / pf.samples) / pf.wavelength_mm
         ax, ay = direction_scale(pf)
-        lags = _bilinear(otf, f * math.cos(a) / (ax * scale), f * math.sin(a) / (ay * scale))
-        shift = float((pf.chief[:2].numpy() - ref) @ direction)
-        weight = w * pf.transmission
-        total += weight * lags * np.exp(-2j * np.pi * f * shift)
-        norm += weight
-    return np.abs(total) / max(norm, 1e-300)
+        lags = _bilinear(otf, turned[..., 0] / (ax * scale), turned[..., 1] / (ay * scale))
+        total += weight * lags * np.exp(-2j * np.pi * (turned @ (chief - ref)))
+    if edge.pitch_um is not None:
+        p = edge.pitch_um * 1e-3
+        total *= np.sinc(sensor[..., 0] * p) * np.sinc(sensor[..., 1] * p)
+    return np.abs(total.sum(axis=1)) / norm
 
 
 def edge_mtf(
@@ -175,7 +217,8 @@ def edge_mtf(
     samples: int = 32,
     aiming: str = "paraxial",
 ) -> np.ndarray:
-    """The polychromatic optical MTF (F,) across one edge of a lens (perturbed or not)."""
+    """The polychromatic optical MTF (F,) across one edge of a lens (perturbed or not);
+    with the edge's pitch_um, the transfer of lensim's pixel kernel there."""
     return model_mtfs(lens, [edge], wavelengths_um, weights, samples, aiming)[0]
 
 

@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -87,30 +87,64 @@ def quadrant_azimuths(mapping: SensorMapping) -> dict[str, float]:
     return out
 
 
-def compose_quadrants(images: dict[str, np.ndarray]) -> np.ndarray:
+#: the key suffix of a quadrant's bank of the mirrored lens (posed_banks)
+MIRROR = "/mirror"
+
+
+def mirrored_pixels(mapping: SensorMapping) -> np.ndarray:
+    """(H, W) bool: the pixels where a bank along +y takes its kernel mirrored about +y
+    (lensim.psf.bank.azimuth.azimuth_turn: half of every quadrant, split by the 45-degree
+    lines)."""
+    from lensim.psf.bank.azimuth import azimuth_turn
+
+    rows, cols = np.mgrid[: mapping.height, : mapping.width]
+    p = mapping.pitch_um * 1e-3
+    x, y = mapping.x0_mm + (cols + 0.5) * p, mapping.y0_mm + (rows + 0.5) * p
+    offsets = np.degrees(np.arctan2(y, x)) - 90.0
+    return np.vectorize(lambda a: azimuth_turn(float(a))[2], otypes=[bool])(offsets)
+
+
+def compose_quadrants(images: dict[str, np.ndarray], mapping: SensorMapping | None = None) -> np.ndarray:
     """One (3, H, W) image from one per quadrant (QUADRANTS' keys), each quadrant from
-    its own; a single image under "all" is returned as it is."""
+    its own, and where a quadrant's key with MIRROR is given (posed_banks) that one's
+    image at mirrored_pixels (mapping: where the image lies; needed then); a single
+    image under "all" is returned as it is."""
     if "all" in images:
         return images["all"]
     out = np.array(images["lr"], copy=True)
     rows, cols = out.shape[-2:]
+    mirrored = None
+    if any(k.endswith(MIRROR) for k in images):
+        if mapping is None:
+            raise ValueError("composing mirrored quadrants needs the mapping")
+        mirrored = mirrored_pixels(mapping)
     for key, (row, col) in QUADRANTS.items():
         r = slice(rows // 2, None) if row else slice(None, rows // 2)
         c = slice(cols // 2, None) if col else slice(None, cols // 2)
         out[..., r, c] = images[key][..., r, c]
+        if mirrored is not None and key + MIRROR in images:
+            m = mirrored[r, c]
+            out[..., r, c][..., m] = images[key + MIRROR][..., r, c][..., m]
     return out
 
 
 def posed_banks(lens: Lens, mapping: SensorMapping, bank_of: Callable[[Lens], PSFBank]) -> dict[str, PSFBank]:
     """The banks that render a lens on the frame: one ("all") for a rotationally symmetric
-    lens; one per quadrant for a lens with poses (a bank turns its +y PSFs to every
-    azimuth), the lens turned to the quadrant's diagonal
-    (lensim.calibrate.tolerance_report.lens_at_azimuth)."""
-    from lensim.calibrate.tolerance_report import lens_at_azimuth
+    lens; for a lens with poses (a bank turns its +y PSFs to every azimuth) one per
+    quadrant, the lens turned to the quadrant's diagonal
+    (lensim.calibrate.tolerance_report.lens_at_azimuth), and one of that turned lens
+    mirrored (key + MIRROR; tolerance_report.mirrored_lens) for the pixels where the
+    bank's kernel is taken mirrored (mirrored_pixels), so that every pixel gets the
+    lens's own PSF (compose_quadrants)."""
+    from lensim.calibrate.tolerance_report import lens_at_azimuth, mirrored_lens
 
     if not lens.has_poses:
         return {"all": bank_of(lens)}
-    return {k: bank_of(lens_at_azimuth(lens, a)) for k, a in quadrant_azimuths(mapping).items()}
+    out = {}
+    for k, a in quadrant_azimuths(mapping).items():
+        turned = lens_at_azimuth(lens, a)
+        out[k], out[k + MIRROR] = bank_of(turned), bank_of(mirrored_lens(turned))
+    return out
 
 
 def chart_simulator(
@@ -135,7 +169,7 @@ def chart_simulator(
         images = {}
         for key, bank in posed_banks(lens, mapping, bank_of).items():
             images[key], _ = simulate_chart(photo, layout, detection, bank, sensor, mapping, noise=False, kelvin=kelvin)
-        image = compose_quadrants(images)
+        image = compose_quadrants(images, mapping)
         found = measure_chart(image, layout, detection.homography, data.pitch_um, regions=data.regions)
         p_mm = data.pitch_um * 1e-3
         out = []
@@ -154,7 +188,7 @@ def refreshed_system(
     SFRs (concatenated, (sum F_i,)) over the optical MTFs the fit models there
     (lensim.calibrate.fit.Model without a transfer); where that MTF is below
     MIN_OPTICAL_MTF or the simulation gave no SFR, the previous transfer (or 1) stays."""
-    bare = Observations(obs.edges, obs.measured, None, obs.wavelengths_um, obs.weights, obs.samples, obs.aiming)
+    bare = replace(obs, system=None)
     optical = Model(lens, bare).predict(values)
     sizes = [len(e.frequencies_lp_mm) for e in obs.edges]
     old = np.concatenate(obs.system) if obs.system is not None else np.ones(optical.shape)
@@ -214,7 +248,7 @@ def _round(
     simulated = np.concatenate([s for sim in simulators for s in sim(moved)])
     system = refreshed_system(obs, lens, start, simulated)
     t_sim = time.perf_counter() - t0
-    new = Observations(obs.edges, obs.measured, system, obs.wavelengths_um, obs.weights, obs.samples, obs.aiming)
+    new = replace(obs, system=system)
     measured = np.concatenate(obs.measured)
     rms_start = float(np.sqrt(np.mean((Model(lens, new).predict(start) - measured) ** 2)))
     k = options.get("candidates", 1)

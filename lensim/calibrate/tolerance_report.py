@@ -15,7 +15,7 @@ import numpy as np
 
 from lensim.calibrate.tolerances import Tolerances, drawn_lens, perturbed_lens
 from lensim.optics.lens import Lens
-from lensim.optics.pose import rotate_pose
+from lensim.optics.pose import mirror_pose, rotate_pose
 from lensim.optics.spot import rms_spot_radius
 from lensim.psf.mtf import field_otf
 
@@ -46,6 +46,21 @@ def lens_at_azimuth(lens: Lens, azimuth_deg: float) -> Lens:
 
     surfaces = [dataclasses.replace(s, pose=rotate_pose(s.pose, azimuth_deg)) for s in lens.surfaces]
     tilt = rotate_pose((0.0, 0.0, *lens.image_tilt), azimuth_deg)[2:]
+    return lens.with_changes(surfaces=surfaces, image_tilt=(tilt[0], tilt[1]))
+
+
+def mirrored_lens(lens: Lens) -> Lens:
+    """The lens mirrored in the y-z plane (x -> -x): every surface pose and the sensor tilt
+    mirrored (lensim.optics.pose.mirror_pose). Its PSF at a +y field is the original's
+    flipped left-right: a bank's kernel mirrored about its +y direction (what
+    lensim.psf.bank.azimuth does for half the azimuths, exact for a symmetric lens) is
+    the original's when the bank holds this lens."""
+    if not lens.has_poses:
+        return lens
+    import dataclasses
+
+    surfaces = [dataclasses.replace(s, pose=mirror_pose(s.pose)) for s in lens.surfaces]
+    tilt = mirror_pose((0.0, 0.0, *lens.image_tilt))[2:]
     return lens.with_changes(surfaces=surfaces, image_tilt=(tilt[0], tilt[1]))
 
 

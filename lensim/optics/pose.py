@@ -91,6 +91,13 @@ def compose(a: Pose, b: Pose) -> Pose:
     return (a[0] + b[0], a[1] + b[1], a[2] + b[2], a[3] + b[3])
 
 
+def mirror_pose(pose: Pose) -> Pose:
+    """The pose mirrored in the y-z plane (x -> -x): M Rx(a) Ry(b) M = Rx(a) Ry(-b) with
+    M = diag(-1, 1, 1), so the x decentre and the tilt about y change sign (exact)."""
+    dx, dy, tx, ty = pose
+    return (-dx, dy, tx, -ty)
+
+
 def rotate_pose(pose: Pose, angle_deg: float) -> Pose:
     """A pose seen from a frame rotated by angle_deg about the optical axis (counter-
     clockwise from +x to +y): the decentre vector and the tilt vector (tilts about x and y
