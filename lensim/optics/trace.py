@@ -332,7 +332,7 @@ def _fused_kernel(chunk_steps: list):
     arrays = (plan.ints, plan.floats, plan.coef, plan.high)
 
     def fn(p, d, o, v, z0, n, *outs) -> None:
-        t = [x.numpy() for x in (p, d, o, v)]
+        t = [np.ascontiguousarray(x.numpy()) for x in (p, d, o, v)]  # the kernel's one signature
         work = np.zeros(trace_fused.WORK_SHAPE)  # zeros: finite media rows past a ragged block's end
         uniform = n.strides[1] == 0
         trace_fused.trace_rays(*t, n, uniform, z0, *arrays, *(x.numpy() for x in outs), work)
@@ -343,8 +343,9 @@ def _fused_kernel(chunk_steps: list):
 def _chunk_media(nv: list | torch.Tensor, a: int, b: int) -> np.ndarray:
     """The media indices of rows [a, b) as an (S+1, b - a) array for the fused kernel (a
     column broadcast over the rows where each medium has one index)."""
-    if isinstance(nv, list):
-        return np.broadcast_to(np.asarray(nv, dtype=np.float64)[:, None], (len(nv), b - a))
+    if isinstance(nv, list):  # writable (not np.broadcast_to's read-only view): the kernel's one signature
+        column = np.asarray(nv, dtype=np.float64)[:, None]
+        return np.lib.stride_tricks.as_strided(column, (len(nv), b - a), (column.strides[0], 0), writeable=True)
     return nv[:, a:b].numpy()
 
 

@@ -25,14 +25,16 @@ overlap checks or masked stores (an in-place store of "new if cond else old" com
 a masked store, microcoded on AMD CPUs: the kernel ran about 20 % slower that way);
 aspheres run Newton's method ray by ray, in place.
 
-The kernel releases the GIL (trace() runs chunks on its thread pool) and is compiled on
-first use and cached on disk (numba's ``cache=True``, next to this file or in
+The kernel releases the GIL (trace() runs chunks on its thread pool) and is compiled for
+its one signature when this module is first imported (lensim.optics.trace imports it on
+the first trace), then cached on disk (numba's ``cache=True``, next to this file or in
 NUMBA_CACHE_DIR). Lengths in mm.
 """
 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import torch
@@ -437,7 +439,28 @@ def _run_step(
     return True
 
 
-@njit(**_JIT)
+def _array(dtype: Any, ndim: int, layout: Any) -> Any:
+    """numba's array type of dtype, ndim and layout ("C" or "A")."""
+    from numba import types
+
+    return types.Array(dtype, ndim, layout)
+
+
+def _trace_signature() -> Any:
+    """trace_rays' one signature: the media indices of any layout ("A": a broadcast column,
+    or rows of a larger array), every other array C-contiguous (lensim.optics.trace passes
+    them so). Without it numba compiled a specialisation per layout met (four in one demo
+    bank, each nearly as long to compile as the kernel's other functions together)."""
+    from numba import types
+
+    f64, i64, c2, c1 = types.float64, types.int64, _array(types.float64, 2, "C"), _array(types.float64, 1, "C")
+    flags = _array(types.boolean, 1, "C")
+    plan = (_array(i64, 2, "C"), c2, _array(f64, 3, "C"), _array(i64, 2, "C"))
+    outs = (c2, c2, c1, flags, _array(types.int8, 1, "C"), _array(types.int16, 1, "C"))
+    return types.void(c2, c2, c1, flags, _array(f64, 2, "A"), types.boolean, f64, *plan, *outs, c2)
+
+
+@njit(_trace_signature(), **_JIT)
 def trace_rays(
     p: Arr,
     d: Arr,
