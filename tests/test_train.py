@@ -171,6 +171,21 @@ def test_loss_decreases_and_logs_are_written(pairs: Path, tmp_path: Path):
     assert not [p for p in os.listdir(run) if p.endswith(".tmp")]
 
 
+def test_validation_computes_the_inputs_metrics_once(pairs: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    """The validation crops' own PSNR/SSIM do not change between epochs: the first
+    validation computes them, the later ones reuse them (the same figures)."""
+    from lensim.restore import batches
+
+    calls = []
+    real = batches.ssim_batch
+    monkeypatch.setattr(batches, "ssim_batch", lambda a, b: calls.append(1) or real(a, b))
+    res = train(pairs, tmp_path / "run", epochs=3, max_steps_per_epoch=1, arch="unet", **TINY)
+    val_batches = math.ceil(3 / TINY["val_batch_size"])  # one validation photo of 3 crops
+    assert len(calls) == (3 + 1) * val_batches  # the output's at 3 validations, the input's once
+    once = train(pairs, tmp_path / "one", epochs=1, max_steps_per_epoch=1, arch="unet", **TINY)  # computed afresh
+    assert math.isfinite(res.val_input_psnr) and res.val_input_psnr == once.val_input_psnr
+
+
 def test_a_run_folder_is_not_overwritten(pairs: Path, tmp_path: Path):
     from lensim.errors import InputError
 

@@ -60,10 +60,15 @@ def collate(items: list[dict[str, Any]]) -> dict[str, torch.Tensor]:
 
 @torch.no_grad()
 def evaluate_pairs(
-    model: torch.nn.Module, loader: Iterator[dict[str, torch.Tensor]] | DataLoader, device: torch.device
+    model: torch.nn.Module,
+    loader: Iterator[dict[str, torch.Tensor]] | DataLoader,
+    device: torch.device,
+    input_metrics: dict[str, float] | None = None,
 ) -> dict[str, float]:
-    """Mean PSNR (dB) and SSIM over crops of the restored output and of the input itself
-    (outputs clamped to [0, 1] as when written to a file)."""
+    """Mean PSNR (dB) and SSIM over crops of the restored output ("psnr", "ssim") and of
+    the input itself ("input_psnr", "input_ssim"; outputs clamped to [0, 1] as when written
+    to a file). input_metrics: those two of an earlier call on the same crops, returned
+    as given instead of computed again (a validation set's input does not change)."""
     was_training = model.training
     model.eval()
     tot = {"psnr": 0.0, "ssim": 0.0, "input_psnr": 0.0, "input_ssim": 0.0}
@@ -75,11 +80,15 @@ def evaluate_pairs(
         out = model(*args).float().clamp(0, 1)
         tot["psnr"] += float(psnr_batch(out, tgt).clamp(max=100.0).sum())
         tot["ssim"] += float(ssim_batch(out, tgt).sum())
-        tot["input_psnr"] += float(psnr_batch(inp, tgt).clamp(max=100.0).sum())
-        tot["input_ssim"] += float(ssim_batch(inp, tgt).sum())
+        if input_metrics is None:
+            tot["input_psnr"] += float(psnr_batch(inp, tgt).clamp(max=100.0).sum())
+            tot["input_ssim"] += float(ssim_batch(inp, tgt).sum())
         n += inp.shape[0]
     model.train(was_training)
-    return {k: v / n for k, v in tot.items()} if n else {k: math.nan for k in tot}
+    metrics = {k: v / n for k, v in tot.items()} if n else {k: math.nan for k in tot}
+    if input_metrics is not None:
+        metrics.update({k: input_metrics[k] for k in ("input_psnr", "input_ssim")})
+    return metrics
 
 
 __all__ = ["collate", "epoch_batches", "epoch_order", "evaluate_pairs", "model_inputs"]

@@ -228,6 +228,14 @@ class _Loop:
     checkpoint_s: float = 0.0  # clock.call_s() at the last checkpoint
     checkpoint_step: int = 0  # the optimizer step of the last checkpoint
     val_metrics: dict[str, float] = field(default_factory=dict)  # of the last validation
+    input_metrics: dict[str, float] | None = None  # the validation inputs' own, from the first validation
+
+    def evaluate(self) -> dict[str, float]:
+        """evaluate_pairs of the model on the validation crops (their input metrics computed
+        once per call of train())."""
+        metrics = evaluate_pairs(self.state.model, self.val_loader, self.device, self.input_metrics)
+        self.input_metrics = {k: metrics[k] for k in ("input_psnr", "input_ssim")}
+        return metrics
 
 
 def _checkpoint_due(loop: _Loop) -> bool:
@@ -318,7 +326,7 @@ def _validate(loop: _Loop, mean_loss: float, epoch_lr: float) -> tuple[dict[str,
     when validation PSNR improved (or there is none yet), best.pt. Returns (the log row,
     the metrics of evaluate_pairs; empty without validation photos)."""
     state = loop.state
-    metrics = evaluate_pairs(state.model, loop.val_loader, loop.device) if len(loop.data.val) else {}
+    metrics = loop.evaluate() if len(loop.data.val) else {}
     vp, vs = metrics.get("psnr", math.nan), metrics.get("ssim", math.nan)
     row = {
         "epoch": state.epoch,
@@ -345,7 +353,7 @@ def _validate_start(loop: _Loop) -> None:
     than where the run started (a short fine-tuning whose first steps lose ground keeps the
     starting weights)."""
     state = loop.state
-    loop.val_metrics = evaluate_pairs(state.model, loop.val_loader, loop.device)
+    loop.val_metrics = loop.evaluate()
     vp = loop.val_metrics.get("psnr", math.nan)
     if math.isfinite(vp):
         state.best_val_psnr = vp
