@@ -15,8 +15,9 @@ trace of every edge's point, lensim.calibrate.model.trace_points: about 2 s for 
 and 3 wavelengths), a change of the image plane only moves and turns the sensor on the
 last trace (no trace; lensim.calibrate.model.mtfs_from, about 0.4 s). The MTF alone
 hardly tells a focus shift's sign, so the image parameters are first fitted alone from
-both signs of focus and the full fit runs from the best start of each sign, the smaller
-residual kept. Uncertainties come from the Jacobian at the optimum: cov = s^2 (J^T J)^-1,
+both signs of focus (and with each element parameter at +-ELEMENT_START: a decentre changes
+the MTF at second order near nominal) and the full fit runs from the best start of each
+sign, the smaller residual kept. Uncertainties come from the Jacobian at the optimum: cov = s^2 (J^T J)^-1,
 s^2 the residual variance. Before fitting, a parameter the chart's edges cannot constrain
 (its predicted 1-sigma uncertainty at the assumed noise is above its scale) is refused
 with a CoverageError naming it (and the parameter it is tied to); pairs correlated beyond
@@ -51,6 +52,8 @@ TILT_PREFERENCE = 0.9
 DEGENERATE = 0.9
 #: the image focus (in its scale) the fit also starts from, with both signs
 FOCUS_START = 1.5
+#: the element decentre or tilt (in its scale) the image prefit also starts from (_starts)
+ELEMENT_START = 2.0
 #: forward-difference step of the Jacobian, in each parameter's scale
 STEP = 0.05
 #: the MTF noise a chart measurement is assumed to have when coverage is checked
@@ -328,30 +331,37 @@ class _Run:
     at_bound: list[str]
 
 
-def _solve(model: Model, names: list[str], units: np.ndarray, context: dict, start: np.ndarray) -> _Run:
+def _solve(
+    model: Model, names: list[str], units: np.ndarray, context: dict, start: np.ndarray, fixed: dict | None = None
+) -> _Run:
     """scipy least_squares (trust region reflective) in units of the scales from start
     (clipped into the bounds), within lensim.calibrate.bounds' limits and with its prior
     rows, the Jacobian by forward differences of STEP (image columns need no trace);
-    context: measured ((N,)) and kinds (parameter_scales)."""
+    context: measured ((N,)) and kinds (parameter_scales); fixed: other parameters' values
+    (mm or deg) held while these are fitted."""
     from scipy.optimize import least_squares
 
     measured, kinds = context["measured"], context["kinds"]
     lower, upper = limits(names, units, kinds)
     weights = prior_weights(names, units, kinds, NOISE_MTF)
     memo: dict[bytes, np.ndarray] = {}
+    held = dict(fixed or {})
+
+    def values(u: np.ndarray) -> dict[str, float]:
+        return held | dict(zip(names, (u * units).tolist(), strict=True))
 
     def data(u: np.ndarray) -> np.ndarray:
         key = u.tobytes()
         if key not in memo:
             memo.clear()
-            memo[key] = model.predict(dict(zip(names, (u * units).tolist(), strict=True))) - measured
+            memo[key] = model.predict(values(u)) - measured
         return memo[key]
 
     def jac(u: np.ndarray) -> np.ndarray:
         f0 = data(u)
         cols = []
         for i, name in enumerate(names):
-            v = dict(zip(names, (u * units).tolist(), strict=True))
+            v = values(u)
             v[name] += STEP * units[i]
             cols.append((model.predict(v) - measured - f0) / STEP)
         return np.concatenate([np.stack(cols, axis=1), np.diag(weights)])
@@ -363,25 +373,60 @@ def _solve(model: Model, names: list[str], units: np.ndarray, context: dict, sta
     return _Run(res.x, data(res.x), float(res.cost), res.jac, at_bounds(names, res.x, lower, upper))
 
 
-def _starts(model: Model, names: list[str], units: np.ndarray, context: dict) -> list[np.ndarray]:
-    """Where the full fit starts: the MTF alone hardly tells a focus shift's sign, so the
-    image parameters are fitted first (no trace: cheap) from image focus +-FOCUS_START and
-    0 scales, and the best start of each focus sign is kept (one when both agree)."""
+def _element_offsets(names: list[str]) -> list[np.ndarray]:
+    """The element starts (u, in scales; image parameters 0) the image prefit is also run
+    from: each element parameter at +-ELEMENT_START, one at a time."""
+    out = []
+    for i, name in enumerate(names):
+        if name in IMAGE_PARAMETERS:
+            continue
+        for sign in (-1.0, 1.0):
+            u = np.zeros(len(names))
+            u[i] = sign * ELEMENT_START
+            out.append(u)
+    return out
+
+
+def _prefit(
+    model: Model, names: list[str], units: np.ndarray, context: dict, u0: np.ndarray
+) -> tuple[float, np.ndarray]:
+    """The image parameters fitted alone from u0 (in scales), the element ones held at
+    u0's: (objective with every prior row, u with the fitted image values)."""
     image = [i for i, n in enumerate(names) if n in IMAGE_PARAMETERS]
+    rest = [i for i in range(len(names)) if i not in image]
+    fixed = {names[i]: float(u0[i] * units[i]) for i in rest if u0[i] != 0.0}
+    res = _solve(model, [names[i] for i in image], units[image], context, u0[image], fixed)
+    u = np.array(u0, dtype=np.float64)
+    u[image] = res.x
+    prior = prior_weights([names[i] for i in rest], units[rest], context["kinds"], NOISE_MTF) * u[rest]
+    return res.cost + 0.5 * float(np.sum(prior**2)), u
+
+
+def _starts(model: Model, names: list[str], units: np.ndarray, context: dict) -> list[np.ndarray]:
+    """Where the full fit starts. The MTF alone hardly tells a focus shift's sign, so the
+    image parameters are fitted first (no trace: cheap) from image focus +-FOCUS_START and
+    0 scales; and an element's decentre or tilt changes the MTF little near nominal (an
+    odd aberration changes the MTF at second order), where a fit started there stays and
+    takes a large error of the element as focus and sensor tilt: each sign's best image
+    start is also prefitted with each element parameter at +-ELEMENT_START (one trace
+    each). The best start of each focus sign is kept (one when both agree)."""
     if "image.focus" not in names:
         return [np.zeros(len(names))]
     k = names.index("image.focus")
-    sub = [names[i] for i in image]
     best: dict[int, tuple[float, np.ndarray]] = {}
-    for f0 in (-FOCUS_START, 0.0, FOCUS_START):
-        u0 = np.zeros(len(sub))
-        u0[sub.index("image.focus")] = f0
-        res = _solve(model, sub, units[image], context, u0)
-        u = np.zeros(len(names))
-        u[image] = res.x
+
+    def keep(cost: float, u: np.ndarray) -> None:
         sign = 1 if u[k] >= 0 else -1
-        if sign not in best or res.cost < best[sign][0]:
-            best[sign] = (res.cost, u)
+        if sign not in best or cost < best[sign][0]:
+            best[sign] = (cost, u)
+
+    for f0 in (-FOCUS_START, 0.0, FOCUS_START):
+        u0 = np.zeros(len(names))
+        u0[k] = f0
+        keep(*_prefit(model, names, units, context, u0))
+    for _, image_start in list(best.values()):
+        for offset in _element_offsets(names):
+            keep(*_prefit(model, names, units, context, image_start + offset))
     starts = [u for _, u in sorted(best.values(), key=lambda t: t[0])]
     if len(starts) == 2 and np.allclose(starts[0], starts[1], atol=0.05):
         starts = starts[:1]
