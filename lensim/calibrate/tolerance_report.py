@@ -15,7 +15,7 @@ import numpy as np
 
 from lensim.calibrate.tolerances import Tolerances, drawn_lens, perturbed_lens
 from lensim.optics.lens import Lens
-from lensim.optics.pose import mirror_pose, rotate_pose
+from lensim.optics.pose import Pose, mirror_pose, rotate_pose
 from lensim.optics.spot import rms_spot_radius
 from lensim.psf.mtf import field_otf
 
@@ -35,6 +35,16 @@ class Probe:
     aiming: str = "real"
 
 
+def _with_poses(lens: Lens, transform: Callable[[Pose], Pose]) -> Lens:
+    """The lens with transform applied to every surface pose and to the sensor tilt (as
+    the tilt part of a pose)."""
+    import dataclasses
+
+    surfaces = [dataclasses.replace(s, pose=transform(s.pose)) for s in lens.surfaces]
+    tilt = transform((0.0, 0.0, *lens.image_tilt))[2:]
+    return lens.with_changes(surfaces=surfaces, image_tilt=(tilt[0], tilt[1]))
+
+
 def lens_at_azimuth(lens: Lens, azimuth_deg: float) -> Lens:
     """The lens turned so that its field point at azimuth_deg (counter-clockwise from +y,
     seen looking along +z) lies along +y: every surface pose and the sensor tilt rotated
@@ -42,11 +52,7 @@ def lens_at_azimuth(lens: Lens, azimuth_deg: float) -> Lens:
     radial ones of the original at that azimuth, sagittal (x) the azimuthal ones."""
     if not lens.has_poses or azimuth_deg == 0.0:
         return lens
-    import dataclasses
-
-    surfaces = [dataclasses.replace(s, pose=rotate_pose(s.pose, azimuth_deg)) for s in lens.surfaces]
-    tilt = rotate_pose((0.0, 0.0, *lens.image_tilt), azimuth_deg)[2:]
-    return lens.with_changes(surfaces=surfaces, image_tilt=(tilt[0], tilt[1]))
+    return _with_poses(lens, lambda pose: rotate_pose(pose, azimuth_deg))
 
 
 def mirrored_lens(lens: Lens) -> Lens:
@@ -57,11 +63,7 @@ def mirrored_lens(lens: Lens) -> Lens:
     the original's when the bank holds this lens."""
     if not lens.has_poses:
         return lens
-    import dataclasses
-
-    surfaces = [dataclasses.replace(s, pose=mirror_pose(s.pose)) for s in lens.surfaces]
-    tilt = mirror_pose((0.0, 0.0, *lens.image_tilt))[2:]
-    return lens.with_changes(surfaces=surfaces, image_tilt=(tilt[0], tilt[1]))
+    return _with_poses(lens, mirror_pose)
 
 
 def measure(lens: Lens, probe: Probe) -> dict[str, list[float]]:
