@@ -58,6 +58,10 @@ def collate(items: list[dict[str, Any]]) -> dict[str, torch.Tensor]:
     }
 
 
+#: evaluate_pairs' figures of the input crops themselves (the same for any model)
+INPUT_METRICS = ("input_psnr", "input_ssim")
+
+
 @torch.no_grad()
 def evaluate_pairs(
     model: torch.nn.Module,
@@ -87,8 +91,8 @@ def evaluate_pairs(
     model.train(was_training)
     metrics = {k: v / n for k, v in tot.items()} if n else {k: math.nan for k in tot}
     if input_metrics is not None:
-        metrics.update({k: input_metrics[k] for k in ("input_psnr", "input_ssim")})
+        metrics.update({k: input_metrics[k] for k in INPUT_METRICS})
     return metrics
 
 
-__all__ = ["collate", "epoch_batches", "epoch_order", "evaluate_pairs", "model_inputs"]
+__all__ = ["INPUT_METRICS", "collate", "epoch_batches", "epoch_order", "evaluate_pairs", "model_inputs"]

@@ -50,7 +50,7 @@ from torch.utils.data import DataLoader
 
 from lensim.data.manifest import read_pairs_manifest
 from lensim.errors import InputError
-from lensim.restore.batches import collate, epoch_batches, epoch_order, evaluate_pairs, model_inputs
+from lensim.restore.batches import INPUT_METRICS, collate, epoch_batches, epoch_order, evaluate_pairs, model_inputs
 from lensim.restore.checkpoint import (
     BEST,
     LAST,
@@ -234,7 +234,7 @@ class _Loop:
         """evaluate_pairs of the model on the validation crops (their input metrics computed
         once per call of train())."""
         metrics = evaluate_pairs(self.state.model, self.val_loader, self.device, self.input_metrics)
-        self.input_metrics = {k: metrics[k] for k in ("input_psnr", "input_ssim")}
+        self.input_metrics = {k: metrics[k] for k in INPUT_METRICS}
         return metrics
 
 
