@@ -178,3 +178,14 @@ def test_wiener_tiles_cross_fade_to_a_partition_of_unity():
         for t, row in enumerate(w):
             total[t * tile : t * tile + tile + ramp] += row
         assert (total[ramp // 2 : ramp // 2 + size] - 1).abs().max() < 1e-6, (size, tile, ramp)
+
+
+def test_mirrored_index_is_numpys_symmetric_padding_however_far_it_reaches():
+    import numpy as np
+
+    from lensim.evaluate.wiener_tiles import mirrored_index
+
+    for size, before, after in ((7, 3, 4), (5, 12, 17), (1, 2, 3), (64, 40, 40)):
+        line = np.arange(size)
+        expected = np.pad(line, (before, after), mode="symmetric")
+        assert mirrored_index(-before, size + after, size).tolist() == expected.tolist()

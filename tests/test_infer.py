@@ -272,6 +272,8 @@ def test_train_and_restore_commands(tmp_path: Path):
             "--overlap",
             "16",
             "--json",
+            "--precision",
+            "float32",
         ],
     )
     assert res.exit_code == 0, res.output
@@ -298,3 +300,55 @@ def test_train_and_restore_commands(tmp_path: Path):
     )
     assert res.exit_code == 0, res.output
     assert read_image(tmp_path / "o8" / "a.png")[1] == 8
+
+
+def test_bfloat16_tiles_stay_close_to_float32_and_float32_is_the_library_default():
+    """precision bfloat16 runs the tiles under autocast (the output differs from float32's,
+    so it did run, and is float32) within 35 dB PSNR of float32 even for this random
+    network; the default is float32 (bit for bit)."""
+    model = random_model()
+    img = torch.rand(3, 48, 64, generator=torch.Generator().manual_seed(3))
+    geometry = ((100.0, 200.0), (480.0, 640.0))
+    ref = restore_image(model, img, *geometry, tile=32, overlap=16)
+    assert torch.equal(restore_image(model, img, *geometry, tile=32, overlap=16, precision="float32"), ref)
+    low = restore_image(model, img, *geometry, tile=32, overlap=16, precision="bfloat16")
+    assert low.dtype == torch.float32 and not torch.equal(low, ref)
+    mse = float((low - ref).square().mean())
+    assert 10 * math.log10(float(ref.square().mean()) / mse) > 35.0
+
+
+def test_auto_precision_is_bfloat16_only_for_a_torch_network_on_a_cpu_that_has_it(monkeypatch):
+    import lensim.restore.infer as infer
+
+    model = random_model()
+    engine = infer.as_engine(model)
+    monkeypatch.setattr(infer, "native_bfloat16", lambda device="cpu": True)
+    assert infer.tile_dtype("auto", engine) == torch.bfloat16
+    assert infer.tile_dtype("float32", engine) is None
+
+    class Exported:  # an engine that is not a PyTorch network (an ONNX session)
+        device, dtype = torch.device("cpu"), torch.float32
+
+    assert infer.tile_dtype("auto", Exported()) is None
+    with pytest.raises(ValueError, match="bfloat16 applies to a PyTorch network"):
+        infer.tile_dtype("bfloat16", Exported())
+    with pytest.raises(ValueError, match="precision must be one of"):
+        infer.tile_dtype("half", engine)
+    monkeypatch.setattr(infer, "native_bfloat16", lambda device="cpu": False)
+    assert infer.tile_dtype("auto", engine) is None
+    assert infer.tile_dtype("bfloat16", engine) == torch.bfloat16  # asked for: emulated, slower
+
+
+def test_restore_precision_option_is_checked_in_one_line(tmp_path: Path, capsys, monkeypatch):
+    from cli_runner import run_cli
+
+    photo = tmp_path / "a.png"
+    write_image(photo, torch.rand(3, 16, 16), 8)
+    for extra, expected in (
+        (["--precision", "half"], "--precision: expected one of auto, float32, bfloat16, got 'half'"),
+        (["--precision", "bfloat16", "--engine", "onnxruntime"], "--precision: bfloat16 applies to --engine torch"),
+    ):
+        args = ["restore", str(tmp_path), str(photo), "-o", str(tmp_path / "o"), *extra]
+        code, _, err = run_cli(args, capsys, monkeypatch)
+        assert code == 2 and len(err.strip().splitlines()) == 1 and expected in err, err
+        assert not (tmp_path / "o").exists()

@@ -6,7 +6,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.signal import fftconvolve
 
 from lensim.errors import InputError
 from lensim.evaluate.slanted_edge import Orientation
@@ -90,6 +89,8 @@ def make_slanted_edge(
     cover = _box_sum_cdf(dist, h * abs(math.cos(t)), h * abs(math.sin(t)))
     fine = low + (high - low) * cover
     if kern is not None:
+        from scipy.signal import fftconvolve  # here: scipy.signal takes ~1 s to import
+
         fine = fftconvolve(fine, kern, mode="valid")
     img = fine.reshape(n_y, k, n_x, k).mean(axis=(1, 3))
     return img if orientation == "vertical" else np.ascontiguousarray(img.T)

@@ -133,6 +133,7 @@ def checkpoint_method(
     tile: int = 512,
     overlap: int | None = None,
     arch: str | None = None,
+    precision: str = "float32",
 ) -> Method:
     """A trained network (`lensim train` run folder or checkpoint) as a method: each crop is
     restored by lensim.restore.infer.restore_image with its absolute sensor offset (native
@@ -143,7 +144,8 @@ def checkpoint_method(
     checkpoint's trained ranges is warned about (UserWarning) or, far outside, refused for
     a conditioned network (lensim.restore.conditioning.Conditioning.check). arch: when
     given, the checkpoint must hold that architecture ("unet" or "nafnet"; InputError
-    naming the file otherwise)."""
+    naming the file otherwise). precision: the tiles' arithmetic
+    (lensim.restore.infer.PRECISIONS)."""
     from lensim.restore.checkpoint import load_checkpoint
     from lensim.restore.conditioning import Conditioning
     from lensim.restore.infer import restore_image
@@ -184,6 +186,7 @@ def checkpoint_method(
             overlap=overlap,
             settings=vec,
             wiener=_stage_image(model, image, ctx),
+            precision=precision,
         )
 
     return restore

@@ -72,7 +72,8 @@ class RestoreSettings:
     each file's EXIF), the checkpoint's conditioning (Conditioning.to_dict(); None: no
     settings) and the engine: "torch", or "onnxruntime" with ``onnx`` the serialized model
     (worker processes build their sessions from it); ``bank``: the PSF bank's folder, for a
-    PSF-informed network (lensim.restore.psf_stage.network_bank)."""
+    PSF-informed network (lensim.restore.psf_stage.network_bank); ``precision``: the tiles'
+    arithmetic (lensim.restore.infer.PRECISIONS)."""
 
     checkpoint: str
     sensor: dict[str, Any]
@@ -85,6 +86,7 @@ class RestoreSettings:
     engine: str = "torch"
     onnx: bytes | None = None
     bank: str | None = None
+    precision: str = "float32"
 
 
 def plan_jobs(files: list[Path], out_dir: Path, dng: bool) -> list[RawJob]:
@@ -266,6 +268,7 @@ def restore_raw(
             progress=progress,
             settings=vec,
             wiener=wiener,
+            precision=settings.precision,
         )
     except OutOfMemory as e:
         raise OutOfMemory(str(job.source), e.field, e.message) from None
