@@ -226,7 +226,9 @@ def test_restore_command_onnxruntime_equals_torch(narrow, tmp_path: Path, capsys
     outs = {}
     for name, source, engine in [("torch", run, "torch"), ("file", path, "onnxruntime"), ("fly", run, "onnxruntime")]:
         code, _, err = run_cli(
-            ["restore", str(source), *common, "-o", str(tmp_path / name), "--engine", engine], capsys, monkeypatch
+            ["restore", str(source), *common, "-o", str(tmp_path / name), "--engine", engine, "--precision", "float32"],
+            capsys,
+            monkeypatch,
         )
         assert code == 0, err
         outs[name] = read_tif16(tmp_path / name / "a.tif")
@@ -265,6 +267,8 @@ def test_conditioned_restore_reads_the_conditioning_from_the_file(tmp_path: Path
                 "--quiet",
                 "--engine",
                 engine,
+                "--precision",
+                "float32",
                 "--fno",
                 "4",
                 "--focus-m",
@@ -376,6 +380,8 @@ def test_raw_restore_onnxruntime_equals_torch(tmp_path: Path, capsys, monkeypatc
                 "8",
                 "--engine",
                 engine,
+                "--precision",
+                "float32",
             ],
             capsys,
             monkeypatch,
@@ -401,6 +407,8 @@ def test_raw_worker_processes_run_onnxruntime(tmp_path: Path, capsys, monkeypatc
                 "--quiet",
                 "--engine",
                 engine,
+                "--precision",
+                "float32",
                 "--workers",
                 workers,
             ],

@@ -82,6 +82,8 @@ def test_raw_restore_equals_the_in_memory_chain(run, tmp_path: Path, capsys, mon
             "32",
             "--overlap",
             "8",
+            "--precision",
+            "float32",
         ],
         capsys,
         monkeypatch,
@@ -314,7 +316,16 @@ def test_simulated_dng_restores_as_in_memory(tmp_path: Path, capsys, monkeypatch
     place, frame = (float(top), float(left)), (4000.0, 6000.0)
     in_memory = restore_image(model, isp.quantize(camera, 8), place, frame).clamp(0, 1)  # simulate's 8-bit photo
     code, _, err = run_cli(
-        ["restore", str(tmp_path / "run"), str(tmp_path / "shot.dng"), "-o", str(tmp_path / "out"), "--quiet"],
+        [
+            "restore",
+            str(tmp_path / "run"),
+            str(tmp_path / "shot.dng"),
+            "-o",
+            str(tmp_path / "out"),
+            "--quiet",
+            "--precision",
+            "float32",
+        ],
         capsys,
         monkeypatch,
     )

@@ -232,6 +232,8 @@ def test_restore_takes_the_settings_from_the_options(runs: dict[str, Path], tmp_
         "32",
         "--overlap",
         "8",
+        "--precision",
+        "float32",
     ]
     code, _, err = run_cli(base + ["-o", str(tmp_path / "none")], capsys, monkeypatch)
     assert code == 2 and len(err.strip().splitlines()) == 1

@@ -105,7 +105,7 @@ def restore_command(
         "torch",
         "--engine",
         help="torch (the PyTorch network) or onnxruntime (an .onnx file, "
-        "or the run exported on the fly); same tiling, same results within 1e-3.",
+        "or the run exported on the fly); same tiling, same results within 1e-3 (torch with --precision float32).",
     ),
     threads: int = typer.Option(0, "--threads", help="CPU threads for PyTorch / onnxruntime (0: their default)."),
     precision: str = typer.Option(
