@@ -30,6 +30,12 @@ from typing import IO, Any
 from lensim.errors import InputError, OutputError
 
 
+def default_cache_dir() -> Path:
+    """Where lensim caches what it computed (PSF banks, glass catalogues' names):
+    $LENSIM_CACHE or ~/.cache/lensim."""
+    return Path(os.environ.get("LENSIM_CACHE", Path.home() / ".cache" / "lensim"))
+
+
 def _umask_mode() -> int:
     """The mode an ordinary new file gets: 0666 minus the process umask."""
     mask = os.umask(0)

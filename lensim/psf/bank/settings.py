@@ -16,7 +16,6 @@ import dataclasses
 import hashlib
 import json
 import math
-import os
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -26,6 +25,7 @@ from typing import TypeVar
 import numpy as np
 
 from lensim.errors import InputError, ParameterError, PupilSamplingError
+from lensim.io import default_cache_dir
 from lensim.optics.aiming.modes import Aiming
 from lensim.optics.lens import Lens
 from lensim.psf.defaults import BANK_FIELDS, BANK_PUPIL_SAMPLES, DEFAULT_WAVELENGTHS_TEXT, PsfMethod, psf_method
@@ -87,11 +87,6 @@ def parse_wavelengths_nm(text: str) -> tuple[float, ...]:
             f"expected positive, strictly increasing wavelengths in nm, got {text!r}",
         )
     return values
-
-
-def default_cache_dir() -> Path:
-    """Where computed PSF banks are cached: $LENSIM_CACHE or ~/.cache/lensim."""
-    return Path(os.environ.get("LENSIM_CACHE", Path.home() / ".cache" / "lensim"))
 
 
 def suggest_kernel_pixels(lens: Lens, pitch_um: float, limit: int = 99) -> int:
