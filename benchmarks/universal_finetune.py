@@ -70,9 +70,21 @@ def budget(pairs: Path, minutes: float, steps: int | None) -> dict:
     return {"epochs": -(-steps // per_epoch), "time_budget_s": None}
 
 
-def train_run(pairs: Path, run: Path, limits: dict, init: str | None, device: str = "cpu", amp: bool = True) -> dict:
+#: run name -> (folder suffix, init, learning rate): fine-tuned from the universal model at
+#: 2e-4, from scratch at 5e-4, and fine-tuned at half the rate (does a gentler start keep more
+#: of what pretraining learned?)
+RUNS = {
+    "fine-tuned": ("tuned", "universal", 2e-4),
+    "scratch": ("scratch", None, 5e-4),
+    "fine-tuned-lr1e-4": ("tuned-lr1e-4", "universal", 1e-4),
+}
+
+
+def train_run(
+    pairs: Path, run: Path, limits: dict, init: str | None, device: str = "cpu", amp: bool = True, lr: float = 2e-4
+) -> dict:
     """One run on the universal model's network (made once: RUN/done.json); limits:
-    :func:`budget`'s."""
+    :func:`budget`'s; lr: the initial learning rate (cosine)."""
     import time
 
     from lensim.restore.train import train
@@ -89,7 +101,7 @@ def train_run(pairs: Path, run: Path, limits: dict, init: str | None, device: st
         **init_network(NAME),  # psfnet, its width and stem, FOV on, no deformable or context block
         **limits,
         batch_size=BATCH,
-        lr=5e-4 if init is None else 2e-4,
+        lr=lr,
         lr_schedule="cosine",
         crop=96,
         val_fraction=0.0,
@@ -116,8 +128,8 @@ def main() -> None:
     ap.add_argument(
         "--runs",
         default="fine-tuned,scratch",
-        help="the runs this call trains (two calls may train one each, side by side, once the pairs exist); "
-        "every finished run in OUT is scored",
+        help=f"the runs this call trains, of {', '.join(RUNS)} (calls may train one each, side by side, once "
+        "the pairs exist); every finished run in OUT is scored",
     )
     ap.add_argument("-o", "--output", type=Path, required=True)
     args = ap.parse_args()
@@ -131,18 +143,17 @@ def main() -> None:
     out = args.output
     planned, bank_dir, sensor_file = lens_bank(args.library, args.lens)
     pairs = training_pairs(out, bank_dir, sensor_file)
-    runs = {"fine-tuned": ("tuned", NAME), "scratch": ("scratch", None)}
     limits = budget(pairs, args.minutes, args.steps)
     for name in args.runs.split(","):
-        d, init = runs[name]
-        train_run(pairs, out / f"run-{d}", limits, init, args.device, not args.no_amp)
-    runs = {name: r for name, r in runs.items() if (out / f"run-{r[0]}" / "done.json").exists()}
-    info = {name: json.loads((out / f"run-{d}" / "done.json").read_text()) for name, (d, _) in runs.items()}
+        d, init, lr = RUNS[name]
+        train_run(pairs, out / f"run-{d}", limits, init, args.device, not args.no_amp, lr)
+    runs = {name: r for name, r in RUNS.items() if (out / f"run-{r[0]}" / "done.json").exists()}
+    info = {name: json.loads((out / f"run-{r[0]}" / "done.json").read_text()) for name, r in runs.items()}
     methods = {
         "wiener": harness.builtin_method("wiener"),
         "universal": harness.checkpoint_method(model_path(NAME), tile=128, overlap=0),
     }
-    for name, (d, _) in runs.items():
+    for name, (d, _, _) in runs.items():
         methods[name] = harness.checkpoint_method(out / f"run-{d}" / "last.pt", tile=128, overlap=0)
     scores = harness.evaluate(args.eval_pairs, methods)["methods"]
     result = {
