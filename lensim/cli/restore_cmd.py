@@ -112,8 +112,8 @@ def restore_command(
         "auto",
         "--precision",
         help="The network's arithmetic with --engine torch: float32, bfloat16, or auto (bfloat16 on a CPU "
-        "with native bfloat16, AVX512-BF16 or AMX: about 2x faster, within 57-63 dB PSNR of float32; "
-        "else float32).",
+        "with native bfloat16, AVX512-BF16 or AMX: a 24 MP photo about 1.35x faster, its tiles within 65 dB "
+        "PSNR of float32's; else float32).",
     ),
     dng: bool = typer.Option(
         False,
