@@ -277,6 +277,7 @@ def test_train_and_restore_commands(tmp_path: Path):
         ],
     )
     assert res.exit_code == 0, res.output
+    assert json.loads(res.output)["precision"] == "float32"
     out, bits = read_image(tmp_path / "out" / "a.png")
     assert bits == 16 and out.shape == (3, 40, 56)
     model, _ = load_checkpoint(tmp_path / "run")

@@ -267,7 +267,10 @@ def restore_command(
                 )
             )
     if json_out:
-        print_json({"checkpoint": info["path"], "engine": engine, "images": written})
+        from lensim.restore.infer import as_engine, tile_dtype
+
+        ran = "bfloat16" if tile_dtype(precision, as_engine(model)) is not None else "float32"
+        print_json({"checkpoint": info["path"], "engine": engine, "precision": ran, "images": written})
 
 
 @contextlib.contextmanager
