@@ -16,12 +16,14 @@ the first fit and each round are checkpointed in OUT/<camera>.first.json and
 OUT/<camera>.rounds.json, so a killed run resumes after the last round).
 
 Reported per camera: the MTF-area ratio simulation/photo per zone before (nominal lens)
-and after (as-built lens) calibration, the NCC of the as-built (and nominal) Huygens PSFs
-against the true ones at the centre, 0.7 and the corner (550 nm; on the lower-right
-diagonal, and the worst of the four diagonals), the fitted parameters against the truth,
-the degenerate pairs, the fit's run time, model evaluations and traces. The NCC is taken
-on a 16 um window (the rows before 2026-11-28 07:00; it holds 92 % of a field's spot) and on
-a 40 um one (the whole spot; fields "<field> 40um").
+and after (as-built lens) calibration, and through the true lens ("at_truth": the ratio's
+own noise floor, the photo's and the simulation's SFR noise; --truth-again adds it to a
+recorded result), the NCC of the as-built (and nominal) Huygens PSFs against the true ones
+at the centre, 0.7 and the corner (550 nm; on the lower-right diagonal, and the worst of
+the four diagonals), the fitted parameters against the truth, the degenerate pairs, the
+fit's run time, model evaluations and traces. The NCC is taken on a 16 um window (the rows
+before 2026-11-28 07:00; it holds 92 % of a field's spot) and on a 40 um one (the whole
+spot; fields "<field> 40um").
 
 Camera "held_out" is draw 0 of seed 2024 of HELD_OUT_TOLERANCES (element tilts and
 spacings the fit does not model included); it was not run while the method was developed.
@@ -233,6 +235,7 @@ def run_camera(world: World, name: str, truth, out: Path) -> dict:
         "candidates": world.candidates,
         "before": ratios(world, photo, world.lens, det),
         "after": ratios(world, photo, refined.lens, det),
+        "at_truth": ratios(world, photo, truth, det),
         **{k: refined.lens.as_built.get(k) for k in ("bounds", "priors", "at_bound", "held_at_nominal")},
         "psf_ncc": psf_nccs(world, truth, {"nominal": world.lens, "first fit": first.lens, "calibrated": refined.lens}),
     }
@@ -247,6 +250,16 @@ def ncc_again(world: World, truth, path: Path) -> dict:
     lenses = {"nominal": world.lens, "first fit": perturbed_lens(world.lens, result["first_fit"])}
     lenses["calibrated"] = perturbed_lens(world.lens, result["fitted"])
     result["psf_ncc"] = psf_nccs(world, truth, lenses)
+    path.write_text(json.dumps(result, indent=1))
+    return result
+
+
+def truth_again(world: World, truth, path: Path) -> dict:
+    """A camera's result with the zone ratios of the true lens on its photo ("at_truth":
+    what the ratio reads with no calibration error, its noise floor) added."""
+    result = json.loads(path.read_text())
+    photo = photograph(world, truth, seed=11)
+    result["at_truth"] = ratios(world, photo, truth, detect_chart(photo, world.layout, result["camera"]))
     path.write_text(json.dumps(result, indent=1))
     return result
 
@@ -296,11 +309,16 @@ def _rounds_table(results: list[dict]) -> list[str]:
 
 
 def table(results: list[dict]) -> str:
-    lines = ["| camera | zone | ratio before | ratio after |", "| --- | --- | --- | --- |"]
+    lines = [
+        "| camera | zone | ratio before | ratio after | true lens (the ratio's floor) |",
+        "| --- | --- | --- | --- | --- |",
+    ]
     for r in results:
         after = {z["zone"]: z["ratio"] for z in r["after"]}
+        truth = {z["zone"]: z["ratio"] for z in r.get("at_truth", [])}
         for z in r["before"]:
-            lines.append(f"| {r['camera']} | {z['zone']:g} | {z['ratio']:.3f} | {after.get(z['zone'], math.nan):.3f} |")
+            row = f"{z['ratio']:.3f} | {after.get(z['zone'], math.nan):.3f} | {truth.get(z['zone'], math.nan):.3f}"
+            lines.append(f"| {r['camera']} | {z['zone']:g} | {row} |")
     lines += [
         "",
         "| camera | field | PSF NCC nominal | first fit | calibrated | worst diagonal: nominal | first | calibrated |",
@@ -361,6 +379,7 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=REFRESH_ROUNDS, help="most transfer refreshes (--refresh-rounds)")
     ap.add_argument("--candidates", type=int, default=1, help="elements fitted in full for the choice (--candidates)")
     ap.add_argument("--table-only", action="store_true", help="only gather OUT/*.json into OUT/table.md")
+    ap.add_argument("--truth-again", action="store_true", help="add the true lens's zone ratios to OUT/<camera>.json")
     ap.add_argument(
         "--ncc-again", action="store_true", help="recompute the PSF NCCs of OUT/<camera>.json (all windows)"
     )
@@ -380,8 +399,9 @@ def main() -> None:
             truth = drawn_lens(world.lens, tol, 2024, 0)
         else:
             truth = perturbed_lens(world.lens, CAMERAS[name])
-        if args.ncc_again:
-            results.append(ncc_again(world, truth, args.out / f"{name}.json"))
+        if args.ncc_again or args.truth_again:
+            again = ncc_again if args.ncc_again else truth_again
+            results.append(again(world, truth, args.out / f"{name}.json"))
             continue
         results.append(run_camera(world, name, truth, args.out))
         (args.out / "table.md").write_text(table(results))
