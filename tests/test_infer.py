@@ -325,6 +325,7 @@ def test_auto_precision_is_bfloat16_only_for_a_torch_network_on_a_cpu_that_has_i
     engine = infer.as_engine(model)
     monkeypatch.setattr(infer, "native_bfloat16", lambda device="cpu": True)
     assert infer.tile_dtype("auto", engine) == torch.bfloat16
+    assert infer.tile_dtype("auto", model) == torch.bfloat16  # a bare network: its parameters' device
     assert infer.tile_dtype("float32", engine) is None
 
     class Exported:  # an engine that is not a PyTorch network (an ONNX session)

@@ -360,7 +360,7 @@ def simulate_chart(
     radius = int(bank.psf_at(0.0, 0.0).shape[-1]) // 2
     lin = linear_rgb(photo)
     warp = PixelDistortion.from_bank(bank, mapping) if distortion else None
-    grid = tile * 2 // math.gcd(tile, 2)  # the Bayer phase and the blur's kernel grid of the whole frame
+    grid = math.lcm(tile, 2)  # the Bayer phase and the blur's kernel grid of the whole frame
     scenes = _scenes(lin, layout, detection, radius + CONTEXT_PX, warp, radius, grid)
     if noise is True:
         noise = matched_noise(*_photo_noise(lin, scenes), sensor, generator, kelvin)

@@ -102,7 +102,9 @@ def tile_dtype(precision: str, engine: object) -> torch.dtype | None:
     networks only; ValueError for another engine or an unknown precision."""
     if precision not in PRECISIONS:
         raise ValueError(f"precision must be one of {', '.join(PRECISIONS)}, got {precision!r}")
-    torch_network = isinstance(engine, TorchEngine) or isinstance(engine, torch.nn.Module)
+    if isinstance(engine, torch.nn.Module):
+        engine = TorchEngine(engine)  # its parameters' device, which a bare module does not name
+    torch_network = isinstance(engine, TorchEngine)
     device = torch.device(getattr(engine, "device", "cpu"))
     if precision == "float32" or (precision == "auto" and not (torch_network and device.type == "cpu")):
         return None
