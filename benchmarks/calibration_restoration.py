@@ -1,17 +1,29 @@
 """Restoration of photos from a perturbed camera, three models compared (issue 24, item 5).
 
-The camera is calibration_validation.py's `focus_decentre`: phone_wide at 1 m on the phone
-sensor with focus +6 um and element 3 decentred 4 um in x. Three PSF-informed networks,
-each fine-tuned from the universal model (`lensim train --init universal`) on the same time
-budget and seed, are compared on the perturbed camera's photos:
+The camera (--camera, CAMERAS) is one of calibration_validation.py's: phone_wide at 1 m on
+the phone sensor, `larger_decentre` (focus +6 um, element 3 decentred 12 um in x, sensor
+tilted 0.05 deg about y; the default) or `focus_decentre` (focus +6 um, e3 decentred 4 um).
+Three PSF-informed networks, each fine-tuned from the universal model (`lensim train --init
+universal`) on the same budget (--epochs: the same steps; else the time budget) and seed,
+are compared on the perturbed camera's photos:
 
   (a) nominal     trained on pairs through the nominal lens;
-  (b) calibrated  trained on pairs through the as-built lens `lensim calibrate --candidates 3`
-                  recovered (benchmarks/results/calibration/candidates3/focus_decentre.json,
-                  made a lens by lensim.calibrate.tolerances.perturbed_lens as the validation
-                  does);
+  (b) calibrated  trained on pairs through the as-built lens the camera's calibration
+                  recovered (CAMERAS: its json's "fitted", made a lens by
+                  lensim.calibrate.tolerances.perturbed_lens as the validation does);
   (c) tolerances  trained on pairs through TOLERANCE_DRAWS draws of TOLERANCES
-                  (`lensim dataset make --tolerances`).
+                  (`lensim dataset make --tolerances`'s draws).
+
+Rendering (--render): "posed" (the default) simulates every lens with poses (the truth, the
+calibrated lens, each tolerance draw) as the chart validation photographs its cameras:
+through lensim.render.posed.posed_banks (one bank per sensor quadrant, the lens turned to
+its diagonal, and that turned lens mirrored), each pixel through its own
+(lensim.data.pairs.PosedBanks; lensim.data.pairs.make_dataset in this process); the
+nominal lens is symmetric and has one bank. "turned" is the earlier rendering (the
+committed focus_decentre results): `lensim dataset make` with the lens file, one bank
+along +y turned to every azimuth, which for a lens with poses mirrors its kernels in half
+of every quadrant (exact only for a symmetric lens), so the test photos are not the
+validation camera's.
 
 The test pairs are simulated through the true perturbed lens from photos no training set
 contains (every TEST_EVERY-th built-in sample photo; the others are the training photos).
@@ -22,11 +34,16 @@ pair went through (lensim's rule for tolerance pairs; before, every pair's was d
 and this script computed them all with the nominal lens's). Scored by `lensim evaluate`
 per field zone (centre, middle, edge) and per photo.
 
-A lens with decentres is not rotationally symmetric; its PSF bank is computed along +y
-and rotated to every azimuth like any bank (the test camera "is" that bank; the chart
-validation renders one bank per quadrant instead).
+The Wiener stages and the "wiener (true lens's bank)" oracle use a lens's bank along +y
+turned to every azimuth (the pairs' "bank": PosedBanks.stage), what `lensim restore` has
+for a lens file; with --render posed the test photos went through the posed banks instead.
 
     nice -n 15 env OMP_NUM_THREADS=1 python benchmarks/calibration_restoration.py \\
+        --camera larger_decentre --epochs 18 --out /tmp/crv3 \\
+        --results benchmarks/results/calibration/restoration_v3
+    # the committed focus_decentre results (turned rendering, 300 s budgets):
+    nice -n 15 env OMP_NUM_THREADS=1 python benchmarks/calibration_restoration.py \\
+        --camera focus_decentre --render turned \\
         --out /tmp/calibration-restoration --results benchmarks/results/calibration/restoration
 
 Resumable: every stage's output is kept under --out (lenses, photos, pairs, runs, evals)
@@ -46,8 +63,16 @@ import time
 from pathlib import Path
 
 LENS, SENSOR, DISTANCE_M = "phone_wide", "phone", 1.0
-TRUTH = {"image.focus": 0.006, "e3.decentre_x": 0.004}
-FIT = Path(__file__).parent / "results/calibration/candidates3/focus_decentre.json"
+RESULTS = Path(__file__).parent / "results/calibration"
+#: camera -> (its true perturbation: calibration_validation.CAMERAS', its calibration's json)
+CAMERAS = {
+    "focus_decentre": ({"image.focus": 0.006, "e3.decentre_x": 0.004}, RESULTS / "candidates3/focus_decentre.json"),
+    "larger_decentre": (
+        {"image.focus": 0.006, "e3.decentre_x": 0.012, "image.tilt_y": 0.05},
+        RESULTS / "v3/fixed_simulation/larger_decentre.json",
+    ),
+}
+TRUTH, FIT = CAMERAS["focus_decentre"]  # the turned rendering's camera (calibration_tolerance_draws.py's)
 #: the unit-to-unit spread model (c) trains with: a maker's tolerance file, not fitted to this unit
 TOLERANCES = """\
 distribution: uniform
@@ -99,26 +124,40 @@ def lensim(*args: str) -> str:
     return res.stdout
 
 
-def make_lenses(out: Path) -> dict[str, Path]:
-    """The nominal, calibrated and true lenses at the chart's 1 m (JSON lens files) and the tolerance file."""
+def lenses_of(camera: str) -> dict:
+    """The nominal, calibrated and true lenses of a camera at the chart's 1 m."""
     from lensim.calibrate.tolerances import perturbed_lens
-    from lensim.optics.lens_file import load_lens, save_lens
+    from lensim.optics.lens_file import load_lens
     from lensim.optics.shooting import ShootingSettings, lens_at
+
+    truth, fit = CAMERAS[camera]
+    lens = lens_at(load_lens(LENS, warn=False), ShootingSettings(object_m=DISTANCE_M, focus_m=DISTANCE_M))
+    fitted = json.loads(fit.read_text())["fitted"]
+    return {"nominal": lens, "calibrated": perturbed_lens(lens, fitted), "truth": perturbed_lens(lens, truth)}
+
+
+def make_lenses(out: Path, camera: str = "focus_decentre") -> dict[str, Path]:
+    """The nominal, calibrated and true lenses at the chart's 1 m (JSON lens files) and the tolerance file."""
+    from lensim.optics.lens_file import save_lens
 
     d = out / "lenses"
     d.mkdir(parents=True, exist_ok=True)
-    lens = lens_at(load_lens(LENS, warn=False), ShootingSettings(object_m=DISTANCE_M, focus_m=DISTANCE_M))
-    fitted = json.loads(FIT.read_text())["fitted"]
-    lenses = {"nominal": lens, "calibrated": perturbed_lens(lens, fitted), "truth": perturbed_lens(lens, TRUTH)}
+    lenses = lenses_of(camera)
     paths = {k: d / f"{k}.json" for k in lenses}
     for k, m in lenses.items():
         if not paths[k].exists():
             save_lens(m, paths[k])  # JSON: save_lens to YAML fails on a lens_at lens's numpy floats
-    tol = d / "tolerances.yaml"
+    paths["tolerances"] = tolerance_file(out)
+    return paths
+
+
+def tolerance_file(out: Path) -> Path:
+    """OUT/lenses/tolerances.yaml: TOLERANCES (written once)."""
+    tol = out / "lenses" / "tolerances.yaml"
+    tol.parent.mkdir(parents=True, exist_ok=True)
     if not tol.exists():
         tol.write_text(TOLERANCES)
-    paths["tolerances"] = tol
-    return paths
+    return tol
 
 
 def split_photos(out: Path, size: int, tiny: bool) -> tuple[Path, Path]:
@@ -154,19 +193,112 @@ def make_pairs(out: Path, name: str, photos: Path, lens: Path, s: dict, toleranc
     return pairs
 
 
+class Posed:
+    """Pairs of lenses with poses through their posed banks (--render posed), in this
+    process: lensim.data.pairs.make_dataset with PosedBanks, or ToleranceBanks whose draws
+    have theirs; banks cached under OUT/cache with the settings s."""
+
+    def __init__(self, out: Path, s: dict) -> None:
+        from lensim.psf.bank.settings import BankSettings, parse_wavelengths_nm
+        from lensim.render.mapping import native_mapping
+        from lensim.sensor.profile import load_sensor
+
+        self.out, self.s = out, s
+        self.sensor = load_sensor(SENSOR)
+        self.full = native_mapping(self.sensor.height, self.sensor.width, self.sensor, 0, 0)
+        self.settings = BankSettings(fields=s["fields"], wavelengths_nm=parse_wavelengths_nm(s["wl"]),
+                                     pupil_samples=s["pupil"], cache_dir=out / "cache")  # fmt: skip
+
+    def bank(self, lens):
+        from lensim.psf.bank import get_bank
+
+        return get_bank(lens, self.sensor.pixel_pitch_um, self.settings, response=self.sensor.spectral_response)
+
+    def banks(self, lens):
+        """A symmetric lens's bank, or a lens with poses' PosedBanks (stage: its bank along +y)."""
+        from lensim.data.pairs import PosedBanks
+        from lensim.render.posed import posed_banks
+
+        banks = posed_banks(lens, self.full, self.bank)
+        return banks["all"] if "all" in banks else PosedBanks(banks, self.bank(lens))
+
+    def draws(self, lens, tolerances: Path):
+        """ToleranceBanks of draws 0..s["draws"]-1 of seed 0 (as `lensim dataset make
+        --tolerances` draws them), each draw's photos through its posed banks."""
+        from lensim.calibrate.tolerances import drawn_lens, load_tolerances
+        from lensim.data.pairs import ToleranceBanks
+        from lensim.optics.lens_file import lens_to_dict
+
+        tol = load_tolerances(tolerances, lens)
+        drawn = [drawn_lens(lens, tol, 0, k) for k in range(self.s["draws"])]
+        posed = [self.banks(m) for m in drawn]
+        records = [{k: m.as_built[k] for k in ("seed", "draw", "parameters")} for m in drawn]
+        stages = [p.stage if hasattr(p, "stage") else p for p in posed]
+        with_poses = [p if hasattr(p, "stage") else None for p in posed]
+        if any(p is None for p in with_poses):
+            raise SystemExit("a tolerance draw without poses: expected decentres or tilts in every draw")
+        return ToleranceBanks(stages, lens_to_dict(lens), str(tolerances), records, self.bank(lens), with_poses)
+
+    def pairs(self, name: str, photos: Path, banks, crops: int) -> Path:
+        """lensim.data.pairs.make_dataset (resumes), as make_pairs' `lensim dataset make` would."""
+        from lensim.data.pairs import make_dataset
+        from lensim.psf.bank import PSFBank
+
+        pairs = self.out / "pairs" / name
+        if (pairs / "done").exists():
+            return pairs
+        log(f"pairs {name}" + ("" if isinstance(banks, PSFBank) else " (posed banks)"))
+        t = time.perf_counter()
+        s = self.s
+        make_dataset(photos, pairs, banks, SENSOR, self.sensor, crops=crops, size=s["size"], seed=0,
+                     placements=s["placements"])  # fmt: skip
+        (pairs / "done").write_text(json.dumps({"seconds": time.perf_counter() - t}))
+        return pairs
+
+
+def pairs_maker(out: Path, camera: str, s: dict, photos: tuple[Path, Path], render: str):
+    """name -> its pairs folder (made once, on first use): "test" through the true lens,
+    "nominal", "calibrated", "tolerances" (the training pairs of (a), (b), (c)), rendered
+    posed (Posed) or turned (make_pairs: `lensim dataset make` with lens files)."""
+    train, test = photos
+    photo_of = {"test": test}
+    crops = {"test": s["test_crops"]}
+    lens_of = {"test": "truth", "tolerances": "nominal"}
+    if render == "posed":
+        p = Posed(out, s)
+        lenses = lenses_of(camera)
+
+        def make(name: str) -> Path:
+            lens = lenses[lens_of.get(name, name)]
+            banks = p.draws(lens, tolerance_file(out)) if name == "tolerances" else p.banks(lens)
+            return p.pairs(name, photo_of.get(name, train), banks, crops.get(name, s["crops"]))
+
+        return make
+    files = make_lenses(out, camera)
+
+    def make_turned(name: str) -> Path:
+        tol = files["tolerances"] if name == "tolerances" else None
+        settings = {**s, "crops": crops.get(name, s["crops"])}
+        return make_pairs(out, name, photo_of.get(name, train), files[lens_of.get(name, name)], settings, tol)
+
+    return make_turned
+
+
 def bank_of(pairs: Path) -> str:
     return json.loads((pairs / "manifest.json").read_text())["bank"]
 
 
-def train(out: Path, name: str, pairs: Path, budget: float, crop: int, seed: int = 0) -> dict:
-    """`lensim train --init universal` on the time budget (as the demo fine-tunes), once."""
+def train(out: Path, name: str, pairs: Path, budget: float, crop: int, seed: int = 0, epochs: int = 0) -> dict:
+    """`lensim train --init universal` on the time budget (as the demo fine-tunes), or for
+    `epochs` epochs (the same steps whatever the machine's load), once."""
     run = out / "runs" / name
     marker = run / "summary.json"
     if marker.exists():
         return json.loads(marker.read_text())
-    log(f"train {name} ({budget:.0f} s)")
-    args = ["train", str(pairs), "-o", str(run), "--init", "universal", "--time-budget-s", str(budget)]
-    args += ["--epochs", "100000", "--batch-size", "4", "--lr", "2e-4", "--lr-schedule", "cosine", "--crop", str(crop)]
+    log(f"train {name} ({f'{epochs} epochs' if epochs else f'{budget:.0f} s'})")
+    args = ["train", str(pairs), "-o", str(run), "--init", "universal"]
+    args += ["--epochs", str(epochs)] if epochs else ["--time-budget-s", str(budget), "--epochs", "100000"]
+    args += ["--batch-size", "4", "--lr", "2e-4", "--lr-schedule", "cosine", "--crop", str(crop)]
     args += ["--val-fraction", "0.25", "--seed", str(seed), "--threads", "1", "--json"]
     if (run / "last.pt").exists():
         args.append("--resume")
@@ -206,12 +338,17 @@ def per_photo(evals: Path, method: str) -> dict[str, dict[str, float]]:
     return {p: {k: sum(v) / len(v) for k, v in d.items()} for p, d in sorted(acc.items())}
 
 
-def gather(out: Path, runs: dict[str, dict], seconds: float) -> dict:
-    """Per method: overall and per-zone PSNR/SSIM, per-photo PSNR; each model's steps."""
+def gather(
+    out: Path, runs: dict[str, dict], seconds: float, camera: str = "focus_decentre", posed: bool = False
+) -> dict:
+    """Per method: overall and per-zone PSNR/SSIM, per-photo PSNR; each model's steps.
+    The Wiener oracle is the true lens's bank: its PSFs exactly with the turned rendering,
+    along +y turned to every azimuth with the posed one."""
     ev = out / "evals"
     oracle = json.loads((ev / "oracle" / "metrics.json").read_text())["methods"]
-    rows = {"input": oracle["input"], "wiener (true PSFs)": oracle["wiener"]}
-    photos = {"input": per_photo(ev / "oracle", "input"), "wiener (true PSFs)": per_photo(ev / "oracle", "wiener")}
+    wiener = "wiener (true lens's bank)" if posed else "wiener (true PSFs)"
+    rows = {"input": oracle["input"], wiener: oracle["wiener"]}
+    photos = {"input": per_photo(ev / "oracle", "input"), wiener: per_photo(ev / "oracle", "wiener")}
     for m in runs:
         rows[m] = json.loads((ev / m / "metrics.json").read_text())["methods"]["model"]
         photos[m] = per_photo(ev / m, "model")
@@ -220,8 +357,9 @@ def gather(out: Path, runs: dict[str, dict], seconds: float) -> dict:
     rows["universal (zero-shot)"] = json.loads((ev / "universal" / "metrics.json").read_text())["methods"]["universal"]
     photos["universal (zero-shot)"] = per_photo(ev / "universal", "universal")
     stages = {p.parent.name: json.loads(p.read_text())["seconds"] for p in sorted((out / "pairs").glob("*/done"))}
-    return {"camera": "focus_decentre", "truth": TRUTH, "metrics": rows, "per_photo": photos, "training": train_info,
-            "pairs_seconds": stages, "run_seconds_all_invocations": seconds}  # fmt: skip
+    fit = str(CAMERAS[camera][1].relative_to(RESULTS.parent.parent))
+    return {"camera": camera, "truth": CAMERAS[camera][0], "fit": fit, "metrics": rows, "per_photo": photos,
+            "training": train_info, "pairs_seconds": stages, "run_seconds_all_invocations": seconds}  # fmt: skip
 
 
 def table(res: dict) -> str:
@@ -269,9 +407,9 @@ def stage_swap(out: Path) -> dict[str, dict[str, dict]]:
     return swap
 
 
-def report(out: Path, results: Path | None, runs: dict[str, dict], s: dict, seconds: float) -> None:
+def report(out: Path, results: Path | None, runs: dict[str, dict], s: dict, seconds: float, camera: str) -> None:
     """OUT/restoration.json and OUT/table.md from the stages done so far (copied to results)."""
-    res = gather(out, runs, seconds)
+    res = gather(out, runs, seconds, camera, s.get("render") == "posed")
     res["settings"] = s
     res["stage_swap"] = stage_swap(out)
     (out / "restoration.json").write_text(json.dumps(res, indent=1))
@@ -286,34 +424,38 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path("/tmp/calibration-restoration"), help="work folder (resumable)")
     ap.add_argument("--results", type=Path, default=None, help="folder for table.md and restoration.json")
+    ap.add_argument("--camera", default="larger_decentre", choices=sorted(CAMERAS), help="the perturbed camera")
+    ap.add_argument("--render", default="posed", choices=("posed", "turned"), help="how lenses with poses render")
+    ap.add_argument("--epochs", type=int, default=0, help="train this many epochs (0: the time budget)")
     ap.add_argument("--tiny", action="store_true", help="a dry run at tiny sizes")
     args = ap.parse_args()
-    s = TINY if args.tiny else FULL
+    s = {**(TINY if args.tiny else FULL), "render": args.render, "epochs": args.epochs}
     t0 = time.perf_counter()
     elapsed = args.out / "elapsed.json"  # seconds of earlier invocations (a killed run's are lost)
     before = json.loads(elapsed.read_text())["seconds"] if elapsed.exists() else 0.0
     args.out.mkdir(parents=True, exist_ok=True)
-    lenses = make_lenses(args.out)
-    train_photos, test_photos = split_photos(args.out, s["photo"], args.tiny)
-    test = make_pairs(args.out, "test", test_photos, lenses["truth"], {**s, "crops": s["test_crops"]})
+    make = pairs_maker(args.out, args.camera, s, split_photos(args.out, s["photo"], args.tiny), args.render)
+    pairs = {"test": make("test")}
+    test = pairs["test"]
     evaluate(args.out, "oracle", test, "input,wiener", None, None)
-    pairs = {"nominal": make_pairs(args.out, "nominal", train_photos, lenses["nominal"], s)}
+    pairs["nominal"] = make("nominal")
     evaluate(args.out, "universal", test, "input,universal", bank_of(pairs["nominal"]), None)
     runs: dict[str, dict] = {}
+
+    def done() -> None:
+        report(args.out, args.results, runs, s, before + time.perf_counter() - t0, args.camera)
+
     for m, stage_lens in MODELS.items():  # one model after the other: a partial run reports what it has
-        if m == "tolerances":
-            pairs[m] = make_pairs(args.out, m, train_photos, lenses["nominal"], s, lenses["tolerances"])
-        elif m not in pairs:
-            pairs[m] = make_pairs(args.out, m, train_photos, lenses[m], s)
-        runs[m] = train(args.out, m, pairs[m], s["budget"], s["train_crop"])
+        pairs[m] = pairs.get(m) or make(m)
+        runs[m] = train(args.out, m, pairs[m], s["budget"], s["train_crop"], epochs=args.epochs)
         evaluate(args.out, m, test, "input,model", bank_of(pairs[stage_lens]), args.out / "runs" / m)
-        report(args.out, args.results, runs, s, before + time.perf_counter() - t0)
+        done()
     banks = {"nominal": bank_of(pairs["nominal"]), "calibrated": bank_of(pairs["calibrated"]), "truth": bank_of(test)}
     for m in MODELS:  # every network with every stage bank: what the training pairs do, what the stage does
         for stage, bank in banks.items():
             if stage != MODELS[m]:
                 evaluate(args.out, f"{m}@{stage}", test, "input,model", bank, args.out / "runs" / m)
-    report(args.out, args.results, runs, s, before + time.perf_counter() - t0)
+    done()
     elapsed.write_text(json.dumps({"seconds": before + time.perf_counter() - t0}))
     log("done")
 

@@ -51,7 +51,7 @@ from lensim.calibrate.chart_detect import detect_chart
 from lensim.calibrate.chart_draw import render_view
 from lensim.calibrate.compare import compare_images, simulate_chart
 from lensim.calibrate.fit import Fit
-from lensim.calibrate.refresh import chart_simulator, compose_quadrants, posed_banks, quadrant_azimuths, refine
+from lensim.calibrate.refresh import chart_simulator, refine
 from lensim.calibrate.tolerance_report import lens_at_azimuth
 from lensim.calibrate.tolerances import drawn_lens, perturbed_lens, tolerances_from_dict
 from lensim.optics.lens_file import load_lens
@@ -61,6 +61,7 @@ from lensim.psf.bank import BankSettings, get_bank
 from lensim.psf.compute import compute_psf
 from lensim.render.mapping import map_to_sensor
 from lensim.render.pipeline import simulate
+from lensim.render.posed import compose_quadrants, posed_banks, quadrant_azimuths
 from lensim.sensor.profile import load_sensor
 
 LENS, SENSOR, DISTANCE_M = "phone_wide", "phone", 1.0

@@ -8,10 +8,11 @@ import pytest
 
 from lensim.calibrate.fit import Observations, fit
 from lensim.calibrate.model import Edge, model_mtfs
-from lensim.calibrate.refresh import MIRROR, compose_quadrants, mirrored_pixels, next_start, quadrant_azimuths, refine
+from lensim.calibrate.refresh import next_start, refine
 from lensim.calibrate.tolerances import perturbed_lens
 from lensim.optics.lens_file import load_lens
 from lensim.render.mapping import SensorMapping
+from lensim.render.posed import MIRROR, compose_quadrants, mirrored_pixels, quadrant_azimuths
 
 FREQ = (10.0, 25.0, 40.0, 55.0, 70.0)
 SAMPLES = 16

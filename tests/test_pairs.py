@@ -189,3 +189,23 @@ def test_exposure_draws_darken_scene_and_target_together(setup):
             assert (base / "a" / ca["input"]).read_bytes() == (base / "ev0" / co["input"]).read_bytes()
     with pytest.raises(InputError, match="exposure_ev"):
         make_dataset(sharp, base / "bad", bank, SENSOR, sensor, crops=1, size=64, exposure_ev=(0.0, -1.0))
+
+
+def test_posed_banks_render_every_pixel_through_its_quadrants_bank(setup):
+    # a lens with poses renders through one bank per sensor quadrant and its mirrored lens's
+    # (lensim.render.posed); the same bank under every key is the plain bank's rendering, byte
+    # for byte, and the manifest's "bank" is the stage's (what a restoration uses)
+    from lensim.data.pairs import PosedBanks
+    from lensim.render.posed import MIRROR, QUADRANTS
+
+    bank = setup[3]
+    posed = PosedBanks(dict.fromkeys((k + m for k in QUADRANTS for m in ("", MIRROR)), bank), bank)
+    a, _ = _run(setup, "a")
+    base, sharp, sensor, _ = setup
+    p = make_dataset(sharp, base / "posed", posed, SENSOR, sensor, crops=2, size=64, seed=3)
+    assert p["bank"] == str(bank.directory) and set(p["posed_banks"]) == {
+        k + m for k in QUADRANTS for m in ("", MIRROR)
+    }
+    for ra, rp in zip(a["records"], p["records"], strict=True):
+        for ca, cp in zip(ra["crops"], rp["crops"], strict=True):
+            assert (base / "a" / ca["input"]).read_bytes() == (base / "posed" / cp["input"]).read_bytes()

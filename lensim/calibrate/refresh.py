@@ -39,6 +39,7 @@ import numpy as np
 from lensim.calibrate.fit import Fit, Model, Observations, fit
 from lensim.calibrate.tolerances import perturbed_lens
 from lensim.optics.lens import Lens
+from lensim.render.posed import compose_quadrants, posed_banks
 
 if TYPE_CHECKING:
     from lensim.calibrate.calibrate import ChartData
@@ -51,8 +52,6 @@ if TYPE_CHECKING:
 #: a chart simulated through a lens: the SFR of every observed edge ((F_i,) each, on the
 #: edge's frequencies; NaN where the simulation could not measure it)
 Simulator = Callable[[Lens], list[np.ndarray]]
-#: the frame's quadrants: (bottom half?, right half?) of the photo, named by their corner
-QUADRANTS = {"ur": (0, 1), "lr": (1, 1), "ul": (0, 0), "ll": (1, 0)}
 #: the largest accelerated step beyond the plain one, in plain steps (and the largest -theta)
 EXTRAPOLATION = 4.0
 #: below this optical MTF (the fitted lens's) an edge frequency keeps its previous transfer
@@ -73,78 +72,6 @@ class Refined:
     lens: Lens
     rounds: list[dict] = field(default_factory=list)
     converged: bool = False
-
-
-def quadrant_azimuths(mapping: SensorMapping) -> dict[str, float]:
-    """The azimuth (deg, counter-clockwise from +y) of each quadrant's outer corner of the
-    frame the mapping places on the sensor."""
-    p = mapping.pitch_um * 1e-3
-    out = {}
-    for key, (row, col) in QUADRANTS.items():
-        x = mapping.x0_mm + col * (mapping.width - 1) * p
-        y = mapping.y0_mm + row * (mapping.height - 1) * p
-        out[key] = math.degrees(math.atan2(-x, y))
-    return out
-
-
-#: the key suffix of a quadrant's bank of the mirrored lens (posed_banks)
-MIRROR = "/mirror"
-
-
-def mirrored_pixels(mapping: SensorMapping) -> np.ndarray:
-    """(H, W) bool: the pixels where a bank along +y takes its kernel mirrored about +y
-    (lensim.psf.bank.azimuth.azimuth_turn: half of every quadrant, split by the 45-degree
-    lines)."""
-    from lensim.psf.bank.azimuth import azimuth_turn
-
-    rows, cols = np.mgrid[: mapping.height, : mapping.width]
-    p = mapping.pitch_um * 1e-3
-    x, y = mapping.x0_mm + (cols + 0.5) * p, mapping.y0_mm + (rows + 0.5) * p
-    offsets = np.degrees(np.arctan2(y, x)) - 90.0
-    return np.vectorize(lambda a: azimuth_turn(float(a))[2], otypes=[bool])(offsets)
-
-
-def compose_quadrants(images: dict[str, np.ndarray], mapping: SensorMapping | None = None) -> np.ndarray:
-    """One (3, H, W) image from one per quadrant (QUADRANTS' keys), each quadrant from
-    its own, and where a quadrant's key with MIRROR is given (posed_banks) that one's
-    image at mirrored_pixels (mapping: where the image lies; needed then); a single
-    image under "all" is returned as it is."""
-    if "all" in images:
-        return images["all"]
-    out = np.array(images["lr"], copy=True)
-    rows, cols = out.shape[-2:]
-    mirrored = None
-    if any(k.endswith(MIRROR) for k in images):
-        if mapping is None:
-            raise ValueError("composing mirrored quadrants needs the mapping")
-        mirrored = mirrored_pixels(mapping)
-    for key, (row, col) in QUADRANTS.items():
-        r = slice(rows // 2, None) if row else slice(None, rows // 2)
-        c = slice(cols // 2, None) if col else slice(None, cols // 2)
-        out[..., r, c] = images[key][..., r, c]
-        if mirrored is not None and key + MIRROR in images:
-            m = mirrored[r, c]
-            out[..., r, c][..., m] = images[key + MIRROR][..., r, c][..., m]
-    return out
-
-
-def posed_banks(lens: Lens, mapping: SensorMapping, bank_of: Callable[[Lens], PSFBank]) -> dict[str, PSFBank]:
-    """The banks that render a lens on the frame: one ("all") for a rotationally symmetric
-    lens; for a lens with poses (a bank turns its +y PSFs to every azimuth) one per
-    quadrant, the lens turned to the quadrant's diagonal
-    (lensim.calibrate.tolerance_report.lens_at_azimuth), and one of that turned lens
-    mirrored (key + MIRROR; tolerance_report.mirrored_lens) for the pixels where the
-    bank's kernel is taken mirrored (mirrored_pixels), so that every pixel gets the
-    lens's own PSF (compose_quadrants)."""
-    from lensim.calibrate.tolerance_report import lens_at_azimuth, mirrored_lens
-
-    if not lens.has_poses:
-        return {"all": bank_of(lens)}
-    out = {}
-    for k, a in quadrant_azimuths(mapping).items():
-        turned = lens_at_azimuth(lens, a)
-        out[k], out[k + MIRROR] = bank_of(turned), bank_of(mirrored_lens(turned))
-    return out
 
 
 def chart_simulator(

@@ -68,7 +68,7 @@ class PairJob:
     index: int
     path: str
     out_dir: str
-    bank_dir: str
+    bank_dir: str | dict[str, str]  # a bank's folder, or a lens with poses' banks' (PosedBanks)
     sensor: str
     seed: int
     crops: int
@@ -96,13 +96,34 @@ class ToleranceBanks:
     nominal: the nominal lens's bank, the pairs' "bank": what a restoration has at inference,
     where the unit's draw is unknown. The PSF-informed network's Wiener stage of each pair
     uses the bank of its own draw (the manifest's "stage_bank": STAGE_PER_DRAW;
-    lensim.restore.psf_stage.stage_bank_entry)."""
+    lensim.restore.psf_stage.stage_bank_entry). posed: per draw, the banks its photos are
+    simulated through instead of banks[k] (a draw with decentres or tilts has poses:
+    PosedBanks); the stage stays banks[k]."""
 
     banks: list[PSFBank]
     lens: dict
     tolerances: str
     draws: list[dict]
     nominal: PSFBank
+    posed: list[PosedBanks] | None = None
+
+
+@dataclass
+class PosedBanks:
+    """The banks that render a lens with poses (lensim.render.posed.posed_banks: one per
+    sensor quadrant and its mirrored lens's), each pixel of a photo simulated through its
+    own (lensim.render.pipeline.simulate). stage: the lens's bank along +y (turned to
+    every azimuth), the pairs' "bank": what a restoration of the lens uses. In
+    ToleranceBanks.posed, draw k's photos are simulated through posed[k] (and its Wiener
+    stage is banks[k] as without)."""
+
+    banks: dict[str, PSFBank]
+    stage: PSFBank
+
+    def dirs(self) -> dict[str, str]:
+        if any(b.directory is None for b in self.banks.values()):
+            raise InputError(None, "bank", "expected banks stored on disk (workers load them)")
+        return {k: str(b.directory) for k, b in self.banks.items()}
 
 
 def image_seed(seed: int, index: int, name: str) -> int:
@@ -165,7 +186,11 @@ def make_pairs_for_image(job: PairJob) -> dict:
     torch.set_num_threads(1)
     out = Path(job.out_dir)
     sensor = load_sensor(job.sensor)
-    bank = load_bank_cached(job.bank_dir)  # once per process, not per photo
+    bank: PSFBank | dict[str, PSFBank]  # once per process, not per photo
+    if isinstance(job.bank_dir, dict):
+        bank = {k: load_bank_cached(d) for k, d in job.bank_dir.items()}
+    else:
+        bank = load_bank_cached(job.bank_dir)
     img, bits = read_image(job.path)
     gen = torch.Generator().manual_seed(job.seed)
     _, h, w = img.shape
@@ -241,7 +266,7 @@ def grid_settings_of_photos(seed: int, photos: int, settings: int) -> list[int]:
 class _BankUse:
     """Which bank each photo is simulated with, and what the dataset records of it."""
 
-    dirs: list[str]  # bank folder per photo
+    dirs: list[str | dict[str, str]]  # bank folder per photo (a lens with poses: PosedBanks.dirs)
     settings: list[dict | None]  # shooting settings per photo (describe()'s), None when unknown
     grid_settings: list[int | None]  # the setting's index per photo in a grid
     recorded: dict  # what settings.json records of the bank(s)
@@ -258,26 +283,37 @@ def _tolerance_use(banks: ToleranceBanks, photos: int, seed: int) -> _BankUse:
         raise InputError(None, "bank", "expected banks stored on disk (workers load them)")
     picks = grid_settings_of_photos(seed, photos, len(banks.banks))
     dirs = [str(b.directory) for b in banks.banks]
+    posed = [p.dirs() for p in banks.posed] if banks.posed is not None else None
     recorded = {
         "lens": banks.lens,
         "bank": str(banks.nominal.directory),
         "stage_bank": STAGE_PER_DRAW,
         "tolerances": {
             "file": banks.tolerances,
-            "draws": [{**d, "bank": b} for d, b in zip(banks.draws, dirs, strict=True)],
+            "draws": [
+                {**d, "bank": b, **({"posed_banks": posed[k]} if posed else {})}
+                for k, (d, b) in enumerate(zip(banks.draws, dirs, strict=True))
+            ],
         },
     }
+    render = posed if posed else dirs
     return _BankUse(
-        [dirs[k] for k in picks], [None] * photos, list(picks), recorded, banks.banks[0].pixel_pitch_um, dirs[0]
+        [render[k] for k in picks], [None] * photos, list(picks), recorded, banks.banks[0].pixel_pitch_um, dirs[0]
     )
 
 
-def _bank_use(bank: PSFBank | GridBank | ToleranceBanks, photos: int, seed: int) -> _BankUse:
+def _bank_use(bank: PSFBank | GridBank | ToleranceBanks | PosedBanks, photos: int, seed: int) -> _BankUse:
     """A single bank for every photo, or a grid's banks drawn per photo
     (grid_settings_of_photos); records carry the bank's resolved settings when its
-    manifest describes them (a grid's, or a bank of one setting)."""
+    manifest describes them (a grid's, or a bank of one setting). A lens with poses'
+    banks (PosedBanks) for every photo, the recorded "bank" their stage's."""
     if isinstance(bank, ToleranceBanks):
         return _tolerance_use(bank, photos, seed)
+    if isinstance(bank, PosedBanks):
+        use = _bank_use(bank.stage, photos, seed)
+        use.dirs = [bank.dirs()] * photos
+        use.recorded["posed_banks"] = bank.dirs()
+        return use
     if isinstance(bank, GridBank):
         picks = grid_settings_of_photos(seed, photos, len(bank))
         entries = bank.manifest["settings"]
@@ -311,7 +347,7 @@ def _bank_use(bank: PSFBank | GridBank | ToleranceBanks, photos: int, seed: int)
 def make_dataset(
     sharp_dir: str | Path,
     out_dir: str | Path,
-    bank: PSFBank | GridBank | ToleranceBanks,
+    bank: PSFBank | GridBank | ToleranceBanks | PosedBanks,
     sensor_name: str,
     sensor: SensorProfile,
     crops: int = 8,
@@ -333,7 +369,10 @@ def make_dataset(
     "grid_setting" (the index), the manifest a "grid" summary. ToleranceBanks (perturbed
     lenses) likewise: records carry "tolerance_draw", the manifest "tolerances" (each
     draw's parameters, bank and photo count), its "bank" is the nominal lens's and its
-    "stage_bank" STAGE_PER_DRAW (ToleranceBanks). exposure_ev: the range of
+    "stage_bank" STAGE_PER_DRAW (ToleranceBanks); with ToleranceBanks.posed each draw's
+    photos go through its PosedBanks (the draw's "posed_banks"). A lens with poses
+    (PosedBanks): every photo through its quadrants' banks, the manifest's "bank" the
+    stage's and "posed_banks" the folders. exposure_ev: the range of
     exposure changes in stops drawn per placement (module docstring)."""
     if size < 16 or size % 2:
         raise InputError(None, "size", f"expected an even crop size of at least 16 pixels, got {size}")
@@ -480,7 +519,7 @@ def _claim_folder(out: Path, settings: dict) -> bool:
         )
     # the bank folders may move; an older tolerance folder (draw 0's bank as "bank", no
     # "stage_bank") resumes, its photos being the same, and gets today's manifest
-    diff = sorted(k for k in settings if k not in ("bank", "stage_bank") and prev.get(k) != settings[k])
+    diff = sorted(k for k in settings if k not in ("bank", "stage_bank", "posed_banks") and prev.get(k) != settings[k])
     if diff:
         raise InputError(
             str(out),

@@ -16,7 +16,7 @@ lensim.render.kernels; the bank itself (cached): lensim.psf.bank.get_bank.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -27,6 +27,7 @@ from lensim.render.blur import spatially_variant_blur
 from lensim.render.distortion import apply_distortion
 from lensim.render.kernels import check_bank_fits, kernel_function
 from lensim.render.mapping import SensorMapping, map_to_sensor
+from lensim.render.posed import compose_rendered
 from lensim.sensor.isp import CaptureParams, add_noise, mosaic, quantize_raw, raw_to_srgb, unprocess
 from lensim.sensor.profile import SensorProfile
 
@@ -93,7 +94,7 @@ def blur_energy_image(
 
 def simulate(
     image: torch.Tensor,
-    bank: PSFBank,
+    bank: PSFBank | Mapping[str, PSFBank],
     sensor: SensorProfile,
     generator: torch.Generator | None = None,
     blur: bool = True,
@@ -110,6 +111,8 @@ def simulate(
 ) -> tuple[torch.Tensor, CaptureParams]:
     """What the camera would deliver for a sharp sRGB image (3, H, W) in [0, 1].
 
+    bank: a PSF bank, or the banks of a lens with poses (lensim.render.posed.posed_banks:
+    each pixel blurred through its quadrant's, mirrored or not; no distortion then).
     mapping: where the image lies on the sensor (default: fitted to the whole sensor).
     raw_path: also write the noisy, quantized Bayer mosaic there (a CFA DNG, :func:`dng_writer`);
     on_raw: any other raw hook (not both).
@@ -123,7 +126,10 @@ def simulate(
     if blur or distortion:
         if bank is None:
             raise InputError("<simulate>", "bank", "blur and distortion need a PSF bank")
-        check_bank_fits(bank, mapping, str(bank.directory or "<bank>"))
+        for one in bank.values() if isinstance(bank, Mapping) else [bank]:
+            check_bank_fits(one, mapping, str(one.directory or "<bank>"))
+        if distortion and isinstance(bank, Mapping):
+            raise ValueError("distortion through posed banks is not modelled")
     if raw_path is not None:
         if on_raw is not None:
             raise ValueError("give raw_path or on_raw, not both")
@@ -131,8 +137,17 @@ def simulate(
 
     def lens(cam: torch.Tensor) -> torch.Tensor:
         if distortion:
-            cam = apply_distortion(cam, bank, mapping)
-        return blur_energy_image(cam, bank, mapping, relative_illumination, tile) if blur else cam
+            cam = apply_distortion(cam, bank, mapping)  # type: ignore[arg-type]
+        if not blur:
+            return cam
+        if isinstance(bank, Mapping):
+            return compose_rendered(
+                lambda k: blur_energy_image(cam, bank[k], mapping, relative_illumination, tile),
+                bank,
+                mapping,
+                tuple(cam.shape[-2:]),
+            )
+        return blur_energy_image(cam, bank, mapping, relative_illumination, tile)
 
     out, params = simulate_capture(
         image,
