@@ -255,6 +255,33 @@ def test_dataset_make_draws_pairs_through_perturbed_lenses(tmp_path, capsys, mon
     code, _, err = run_cli(bad, capsys, monkeypatch)
     assert code == 2 and "--tolerances" in err and err.count("\n") == 1
     _stage_is_each_draws_own(tmp_path / "data", args, capsys, monkeypatch)
+    _posed_draws(tmp_path, args, manifest, capsys, monkeypatch)
+
+
+def _posed_draws(tmp_path, args, turned, capsys, monkeypatch):
+    """--posed-draws: each draw's photos through its posed banks (8: a quadrant's lens and its
+    mirrored lens's, lensim.render.posed), the stage still its one bank; same crops and
+    targets, other inputs."""
+    import json
+
+    from cli_runner import run_cli
+    from lensim.images import read_image
+
+    posed_args = [a if a != str(tmp_path / "data") else str(tmp_path / "posed") for a in args] + ["--posed-draws"]
+    code, _, err = run_cli(posed_args, capsys, monkeypatch)
+    assert code == 0, err
+    manifest = json.loads((tmp_path / "posed" / "manifest.json").read_text())
+    draws = manifest["tolerances"]["draws"]
+    assert [d["bank"] for d in draws] == [d["bank"] for d in turned["tolerances"]["draws"]]
+    assert all(len(set(d["posed_banks"].values())) == 8 and d["bank"] not in d["posed_banks"].values() for d in draws)
+    diff = 0.0
+    for rt, rp in zip(turned["records"], manifest["records"], strict=True):
+        assert rt["crops"][0]["sensor_top"] == rp["crops"][0]["sensor_top"]
+        inputs, targets = ([read_image(tmp_path / d / r["crops"][0][k])[0] for d, r in (("data", rt), ("posed", rp))]
+                           for k in ("input", "target"))  # fmt: skip
+        assert torch.equal(*targets)
+        diff = max(diff, float((inputs[0] - inputs[1]).abs().max()))
+    assert diff > 0
 
 
 def _stage_is_each_draws_own(data, args, capsys, monkeypatch):

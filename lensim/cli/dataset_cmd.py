@@ -26,6 +26,7 @@ from lensim.errors import InputError
 
 if TYPE_CHECKING:
     from lensim.data.pairs import ToleranceBanks
+    from lensim.optics.lens import Lens
     from lensim.psf.bank import BankSettings, GridAxes, GridBank, PSFBank
     from lensim.sensor.profile import SensorProfile
 
@@ -125,6 +126,14 @@ def make(
         "--tolerance-draws perturbed copies of the lens (seeded by --seed, banks cached).",
     ),
     tolerance_draws: int = typer.Option(8, "--tolerance-draws", help="Perturbed lenses (banks) with --tolerances."),
+    posed_draws: bool = typer.Option(
+        False,
+        "--posed-draws/--turned-draws",
+        help="With --tolerances: simulate each draw with decentres or tilts through its posed banks "
+        "(one per sensor quadrant and its mirrored lens's, 8 more banks per draw: every pixel gets "
+        "the draw's own PSF, as calibration photographs a perturbed camera) instead of its one bank "
+        "turned to every azimuth (exact for a symmetric lens only).",
+    ),
     quiet: bool = typer.Option(False, "--quiet", help="No progress output."),
     json_out: bool = typer.Option(False, "--json", help="Print a summary as JSON."),
 ) -> None:
@@ -144,7 +153,9 @@ def make(
     cached bank each; each photo goes through one of them, every draw equally often; records
     carry "tolerance_draw", the manifest every draw's parameters. The pairs' bank (what a
     restoration uses by default) is the nominal lens's; the PSF-informed network's Wiener
-    stage of each pair uses its own draw's bank.
+    stage of each pair uses its own draw's bank. With --posed-draws each draw's photos go
+    through its posed banks (lensim.render.posed; the manifest's draws list them as
+    "posed_banks"); its stage stays the draw's bank.
 
     Example: lensim dataset make photos/ --lens double_gauss --sensor full_frame --fno 2,2.8,4 --focus-m inf,3 -o data/
 
@@ -172,7 +183,13 @@ def make(
     if tolerances is not None:
         _check_tolerances(tolerances, tolerance_draws, bank_dir, axes)
         bank = _tolerance_banks(
-            lens_file, tolerances, tolerance_draws, seed, (sharp_dir, size, sensor, settings), workers, quiet, scheduler
+            lens_file,
+            tolerances,
+            (tolerance_draws, seed, posed_draws),
+            (sharp_dir, size, sensor, settings),
+            workers,
+            quiet,
+            scheduler,
         )
     elif bank_dir is not None:
         bank, _ = bank_or_grid_for_lens(bank_dir, lens_file)
@@ -262,30 +279,49 @@ def _check_tolerances(tolerances: Path, draws: int, bank_dir: Path | None, axes:
 def _tolerance_banks(
     lens_file: str | None,
     tolerances: Path,
-    draws: int,
-    seed: int,
+    how: tuple[int, int, bool],
     job: tuple[Path, int, SensorProfile, BankSettings],
     workers: int,
     quiet: bool,
     scheduler: str | None,
 ) -> ToleranceBanks:
-    """The nominal lens's bank and the banks of draws 0..draws-1 of `seed` (cached: a rerun
-    or a killed run reuses every field computed), computed together once the photos are
-    known to work. job: (folder of sharp photos, crop size, sensor, bank settings)."""
+    """The nominal lens's bank and the banks of draws 0..draws-1 of `seed` (how: draws,
+    seed, posed: also each draw's posed banks, lensim.render.posed.posed_banks over the
+    whole sensor), cached (a rerun or a killed run reuses every field computed), computed
+    together once the photos are known to work. job: (folder of sharp photos, crop size,
+    sensor, bank settings)."""
     from lensim.calibrate.tolerances import drawn_lens, load_tolerances
-    from lensim.data.pairs import ToleranceBanks, check_photos, list_images
+    from lensim.data.pairs import PosedBanks, ToleranceBanks, check_photos, list_images
     from lensim.optics.lens_file import lens_to_dict, load_lens
     from lensim.psf.bank import BankRequest, PSFBank, get_banks
+    from lensim.render.mapping import native_mapping
+    from lensim.render.posed import posed_banks
 
+    draws, seed, posed = how
     sharp_dir, size, sensor, settings = job
     lens = load_lens(lens_file or assets.DEFAULT_LENS)
     tol = load_tolerances(tolerances, lens)
     check_response(settings, sensor.spectral_response, sensor=sensor)
     check_photos(list_images(sharp_dir), size)
-    lenses = [lens] + [drawn_lens(lens, tol, seed, k) for k in range(draws)]
+    drawn = [drawn_lens(lens, tol, seed, k) for k in range(draws)]
+    records = [{k: m.as_built[k] for k in ("seed", "draw", "parameters")} for m in drawn]
+    lenses = [lens, *drawn]
+    keyed: list[dict[str, int]] = []  # each draw's posed banks as indices into lenses (appended)
+    if posed:
+        full = native_mapping(sensor.height, sensor.width, sensor, 0, 0)
+
+        def index_of(one: Lens) -> int:
+            lenses.append(one)
+            return len(lenses) - 1
+
+        keyed = [posed_banks(m, full, index_of) for m in drawn]  # type: ignore[arg-type, misc]
     requests = [BankRequest(m, sensor.pixel_pitch_um, settings, response=sensor.spectral_response) for m in lenses]
     with progress_bar("PSF banks (nominal lens, tolerance draws)", "fields", quiet) as report:
-        banks = get_banks(requests, workers=workers, scheduler=scheduler, progress=report)
-    records = [{k: m.as_built[k] for k in ("seed", "draw", "parameters")} for m in lenses[1:]]
-    single = [b for b in banks if isinstance(b, PSFBank)]
-    return ToleranceBanks(single[1:], lens_to_dict(lens), str(tolerances), records, single[0])
+        computed = get_banks(requests, workers=workers, scheduler=scheduler, progress=report)
+    banks = [b for b in computed if isinstance(b, PSFBank)]
+    out = ToleranceBanks(banks[1 : draws + 1], lens_to_dict(lens), str(tolerances), records, banks[0])
+    if posed:
+        out.posed = [
+            PosedBanks({k: banks[i] for k, i in ks.items()}, b) for ks, b in zip(keyed, out.banks, strict=True)
+        ]
+    return out

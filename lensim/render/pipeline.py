@@ -145,7 +145,7 @@ def simulate(
                 lambda k: blur_energy_image(cam, bank[k], mapping, relative_illumination, tile),
                 bank,
                 mapping,
-                tuple(cam.shape[-2:]),
+                (cam.shape[-2], cam.shape[-1]),
             )
         return blur_energy_image(cam, bank, mapping, relative_illumination, tile)
 
