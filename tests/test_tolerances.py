@@ -254,6 +254,8 @@ def test_dataset_make_draws_pairs_through_perturbed_lenses(tmp_path, capsys, mon
     bad = [*args[:-6], "--tolerances", str(tol), "--fno", "4,5.6"]
     code, _, err = run_cli(bad, capsys, monkeypatch)
     assert code == 2 and "--tolerances" in err and err.count("\n") == 1
+    code, _, err = run_cli([*args[:-6], "--posed-draws"], capsys, monkeypatch)
+    assert code == 2 and "--posed-draws" in err and "--tolerances" in err and err.count("\n") == 1
     _stage_is_each_draws_own(tmp_path / "data", args, capsys, monkeypatch)
     _posed_draws(tmp_path, args, manifest, capsys, monkeypatch)
 

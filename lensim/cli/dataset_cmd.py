@@ -177,6 +177,8 @@ def make(
             "the bank (or grid of banks) fixes the shooting settings; expected --bank or "
             "--fno/--focus-m/--object-m/--config, not both",
         )
+    if posed_draws and tolerances is None:
+        raise InputError("--posed-draws", None, "renders tolerance draws; expected --tolerances with it")
     sensor = load_sensor(sensor_file)
     quiet = quiet or json_out
     bank: PSFBank | GridBank | ToleranceBanks
