@@ -129,3 +129,26 @@ def test_fused_kernel_rays_do_not_depend_on_the_split(name, monkeypatch):
         ):
             assert torch.equal(a, b)
     assert bool(runs[0].rays.valid.any()) and not bool(runs[0].rays.valid.all())
+
+
+def test_a_banks_kernel_size_is_looked_up_without_numba_and_equals_the_fused_one(monkeypatch):
+    """suggest_kernel_pixels traces a few thousand rays before every bank's cache lookup;
+    it runs the torch loop (without_fused_kernel), so a command whose bank is cached never
+    starts numba, and it finds the size the fused kernel finds."""
+    import contextlib
+    import subprocess
+    import sys
+
+    from lensim.psf.bank.settings import suggest_kernel_pixels
+
+    code = (
+        "import sys; from lensim.optics.lens_file import load_lens; "
+        "from lensim.psf.bank.settings import suggest_kernel_pixels; "
+        "print(suggest_kernel_pixels(load_lens('cooke_triplet', warn=False), 3.9), 'numba' in sys.modules)"
+    )
+    size, numba_loaded = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout.split()
+    monkeypatch.setattr(T, "without_fused_kernel", contextlib.nullcontext)
+    assert numba_loaded == "False"
+    assert int(size) == suggest_kernel_pixels(load_lens("cooke_triplet", warn=False), 3.9)

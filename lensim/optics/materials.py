@@ -12,11 +12,11 @@ import functools
 import math
 import re
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-from lensim.errors import InputError, OutputError, ParameterError, UnknownGlassError
+from lensim.errors import InputError, ParameterError, UnknownGlassError
+from lensim.optics import glass_cache
 
 CATALOGS: tuple[str, ...] = ("Schott", "Ohara", "CDGM", "Hikari", "Hoya", "Sumita")
 
@@ -180,16 +180,26 @@ class ModelGlass(Material):
 
 
 class CatalogGlass(Material):
-    """A vendor glass with the vendor's dispersion formula (via `opticalglass`)."""
+    """A vendor glass with the vendor's dispersion formula (via `opticalglass`). The
+    opticalglass medium is created on the first index not yet in lensim's index cache
+    (lensim.optics.glass_cache), so a lens whose indices are cached never imports it."""
 
-    def __init__(self, name: str, catalog: str, medium):
+    def __init__(self, name: str, catalog: str, medium=None):
         self.name = name
         self.catalog = catalog
         self._medium = medium
+        self._cache = glass_cache.IndexCache(name, catalog)
+
+    def _rindex(self, lam_nm: np.ndarray) -> np.ndarray:
+        if self._medium is None:
+            from opticalglass import glassfactory
+
+            self._medium = glassfactory.create_glass(self.name, self.catalog)
+        return np.asarray(self._medium.calc_rindex(lam_nm), dtype=np.float64)
 
     def index(self, wavelength_um):
         lam_nm = np.asarray(wavelength_um, dtype=np.float64) * 1000.0
-        return np.asarray(self._medium.calc_rindex(lam_nm), dtype=np.float64)
+        return self._cache.indices(lam_nm, self._rindex)
 
     def spec(self):
         return f"{self.name}@{self.catalog}"
@@ -210,29 +220,13 @@ def _normalize(name: str) -> str:
 
 @functools.cache
 def _catalog_names(catalog: str) -> dict[str, str]:
-    """Normalized name -> vendor name for one catalogue: its names as cached on disk for the
-    installed opticalglass (:func:`_name_cache`), else loaded from the catalogue (~0.1-0.8 s
-    each, plus ~0.9 s to import opticalglass) and cached. A glass that is not an exact
-    vendor name (SK16 for N-SK16) searches every catalogue's names first: resolving the
-    Cooke triplet's SK16 in a fresh process took 3.1 s without the cache and 1.4 s with it
-    (most of that opticalglass's import, to create the glass itself)."""
-    import json
-
-    cached = _name_cache(catalog)
-    try:
-        names = json.loads(cached.read_text()) if cached is not None else None
-    except (OSError, ValueError):
-        names = None
-    if not (isinstance(names, list) and all(isinstance(n, str) for n in names)):
-        names = _load_catalog_names(catalog)
-        if cached is not None:
-            from lensim.io import atomic_write_json
-
-            try:
-                atomic_write_json(cached, names)
-            except (OSError, OutputError):  # a read-only or full cache: the names are loaded again next time
-                pass
-    return {_normalize(n): n for n in names}
+    """Normalized name -> vendor name for one catalogue, its names cached on disk
+    (lensim.optics.glass_cache; loading a catalogue takes ~0.1-0.8 s plus ~0.9 s to import
+    opticalglass). A glass that is not an exact vendor name (SK16 for N-SK16) searches
+    every catalogue's names first: resolving the Cooke triplet's SK16 in a fresh process
+    took 3.1 s without the names cache and 1.4 s with it (most of that opticalglass's
+    import, to create the glass itself, which the index cache now also avoids)."""
+    return {_normalize(n): n for n in glass_cache.catalog_names(catalog, _load_catalog_names)}
 
 
 def _load_catalog_names(catalog: str) -> list[str]:
@@ -246,20 +240,6 @@ def _load_catalog_names(catalog: str) -> list[str]:
         warnings.simplefilter("ignore")
         cat = glassfactory.get_glass_catalog(catalog)
     return [str(n) for n in cat.get_glass_names()]
-
-
-def _name_cache(catalog: str) -> Path | None:
-    """CACHE/glass_names/opticalglass-VERSION/<catalog>.json (CACHE: the bank cache folder,
-    $LENSIM_CACHE or ~/.cache/lensim), or None when opticalglass's version is unknown."""
-    from importlib import metadata
-
-    from lensim.io import default_cache_dir
-
-    try:
-        version = metadata.version("opticalglass")
-    except metadata.PackageNotFoundError:
-        return None
-    return default_cache_dir() / "glass_names" / f"opticalglass-{version}" / f"{catalog}.json"
 
 
 def _catalog_key(catalog: str) -> str:
@@ -290,13 +270,11 @@ def glass_makers(makers: str | list[str] | tuple[str, ...]) -> list[str]:
 @functools.cache
 def catalog_glass(name: str, catalog: str) -> CatalogGlass:
     """Look a glass up in one catalogue by name (case, dashes and spaces ignored)."""
-    from opticalglass import glassfactory
-
     catalog = _catalog_key(catalog)
     vendor_name = _catalog_names(catalog).get(_normalize(name))
     if vendor_name is None:
         raise UnknownGlassError(None, "material", f"glass {name!r} is not in the {catalog} catalogue")
-    return CatalogGlass(vendor_name, catalog, glassfactory.create_glass(vendor_name, catalog))
+    return CatalogGlass(vendor_name, catalog)
 
 
 def _family(name: str) -> str:

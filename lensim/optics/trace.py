@@ -13,6 +13,9 @@ with a status code and the surface where they happened; no NaN reaches the calle
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
+from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -318,6 +321,23 @@ FUSED_TASKS_PER_THREAD = 8
 FUSED_MIN_BATCH = 4096
 
 
+#: set by without_fused_kernel (per thread and task: a context variable)
+_FUSED_OFF: contextvars.ContextVar[bool] = contextvars.ContextVar("lensim_fused_off", default=False)
+
+
+@contextlib.contextmanager
+def without_fused_kernel() -> Iterator[None]:
+    """Within this context (in this thread), trace() runs the torch chunk loop only: for a
+    one-off trace of a few thousand rays in a process that may trace nothing else (a bank's
+    kernel size, looked up before its cache: the Cooke triplet's 0.06 s instead of 0.8 s,
+    most of that numba's import and start). Same results to rounding."""
+    token = _FUSED_OFF.set(True)
+    try:
+        yield
+    finally:
+        _FUSED_OFF.reset(token)
+
+
 def _fused_kernel(chunk_steps: list):
     """The fused kernel (lensim.optics.trace_fused) as fn(p, d, o, v, z0, n, *outputs) on
     torch tensors, or None where it does not cover the steps (or there are none). numba is
@@ -369,6 +389,8 @@ def trace(
     """Trace rays (in the medium before surface `start`) through surfaces start..end-1 and,
     if to_image and end is the last surface, on to the image plane.
 
+    Within :func:`without_fused_kernel` it never runs the compiled kernel.
+
     wavelength_um must broadcast against the rays' batch shape. Rays that fail stay finite
     and stop: one that misses a surface keeps its state from before that surface, one that
     is vignetted or totally internally reflected stops on the surface (direction unchanged).
@@ -399,14 +421,15 @@ def trace(
     status, failed_at = host_empty((B,), torch.int8, device), host_empty((B,), torch.int16, device)
     rec = host_empty((len(chunk_steps), B, 3), DTYPE, device) if record and chunk_steps else None
     z0 = float(zv[start]) if start < len(zv) else 0.0
-    fused = _fused_kernel(chunk_steps) if device.type == "cpu" and rec is None and B >= FUSED_MIN_BATCH else None
+    use_fused = not _FUSED_OFF.get() and device.type == "cpu" and rec is None and B >= FUSED_MIN_BATCH
+    fused_fn = _fused_kernel(chunk_steps) if use_fused else None
 
     def run(task) -> None:
         a, b, nv = task
         p, d, o, v = (src.get(a, b) for src in sources)
-        if fused is not None:
+        if fused_fn is not None:
             outs = (out_pos, out_dir, out_opl, out_valid, status, failed_at)
-            return fused(p, d, o, v, z0, _chunk_media(nv, a, b), *(t[a:b] for t in outs))
+            return fused_fn(p, d, o, v, z0, _chunk_media(nv, a, b), *(t[a:b] for t in outs))
         rows = [rec[j, a:b] for j in range(len(chunk_steps))] if rec is not None else None
         sink = Sink(out_pos[a:b], out_dir[a:b], out_opl[a:b], out_valid[a:b], status[a:b], failed_at[a:b], rows)
         if not chunk_steps:
@@ -417,7 +440,7 @@ def trace(
 
     chunk = CHUNK_RAYS if device.type == "cpu" else max(B, 1)
     workers = torch.get_num_threads() if device.type == "cpu" else 1
-    if fused is not None:  # as many tasks for each thread, a few each where the batch allows
+    if fused_fn is not None:  # as many tasks for each thread, a few each where the batch allows
         per = min(FUSED_TASKS_PER_THREAD, B // (workers * FUSED_MIN_RAYS)) if workers > 1 else 0
         chunk = -(-B // (workers * per)) if per >= 1 else max(FUSED_MIN_RAYS, -(-B // workers))
     tasks = []
@@ -427,7 +450,7 @@ def trace(
             b = min(a + chunk, g1, (a // P + 1) * P if by_rows else g1)
             tasks.append((a, b, nv))  # a tensor nv spans the whole batch (g0 = 0)
             a = b
-    pooled = len(tasks) >= 2 if fused is not None else len(tasks) >= 4 * workers
+    pooled = len(tasks) >= 2 if fused_fn is not None else len(tasks) >= 4 * workers
     if workers > 1 and pooled:  # fewer chunks: the pool costs more than it gains
         for f in [_executor(workers).submit(run, t) for t in tasks]:
             f.result()

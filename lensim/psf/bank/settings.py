@@ -99,14 +99,15 @@ def suggest_kernel_pixels(lens: Lens, pitch_um: float, limit: int = 99) -> int:
     from lensim.optics.aiming.rays import generate_rays, object_field, trace_chief_rays
     from lensim.optics.aiming.sampling import hexapolar
     from lensim.optics.paraxial import paraxial_data
-    from lensim.optics.trace import trace
+    from lensim.optics.trace import trace, without_fused_kernel
 
     para = paraxial_data(lens)
-    fields = [object_field(lens, f * lens.max_field, "real", para) for f in (0.0, 0.5, 0.7, 0.85, 1.0)]
-    pupil = torch.cat([torch.zeros(1, 2, dtype=torch.float64), hexapolar(8)])
-    rays, wl = generate_rays(lens, fields, pupil, [lens.primary_wavelength_um, 0.40, 0.70], "real", para)
-    chief = trace_chief_rays(lens, rays.select(0), wl, fields, "real", para).rays.position[0, :, 0, :2]  # primary
-    res = trace(lens, rays.select(slice(1, None)), wl)
+    with without_fused_kernel():  # a few thousand rays, before a cached bank is found: no numba start-up
+        fields = [object_field(lens, f * lens.max_field, "real", para) for f in (0.0, 0.5, 0.7, 0.85, 1.0)]
+        pupil = torch.cat([torch.zeros(1, 2, dtype=torch.float64), hexapolar(8)])
+        rays, wl = generate_rays(lens, fields, pupil, [lens.primary_wavelength_um, 0.40, 0.70], "real", para)
+        chief = trace_chief_rays(lens, rays.select(0), wl, fields, "real", para).rays.position[0, :, 0, :2]
+        res = trace(lens, rays.select(slice(1, None)), wl)
     d = torch.linalg.norm(res.rays.position[..., :2] - chief.unsqueeze(0).unsqueeze(2), dim=-1)
     reach_um = 0.0
     for fi in range(len(fields)):
