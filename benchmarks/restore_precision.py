@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/restore_precision.py [--pairs PAIRS] [--photo FRAME.jpg]
         [--lens cooke_triplet --sensor apsc_mirrorless] [--threads 2] [--rounds 3]
+        [--baseline-tree DIR]
 
 Three measurements, each with the float32 and bfloat16 variants interleaved so both see the
 same machine load:
@@ -98,11 +99,15 @@ def accuracy(pairs: Path, held_out: Path | None) -> dict:
     return summary
 
 
-def command_speed(photo: Path, lens: str, sensor: str, threads: int, rounds: int, batch: int) -> dict:
+def command_speed(
+    photo: Path, lens: str, sensor: str, threads: int, rounds: int, batch: int, baseline: Path | None = None
+) -> dict:
     """Wall seconds of the whole `lensim restore` at each precision (fresh processes), on
     the photo alone and on ``batch`` copies of it in one command: the first gives the
     rate of a one-photo command (start-up included), the difference the rate of every
-    further photo of a batch (the model, the lens and its bank loaded once)."""
+    further photo of a batch (the model, the lens and its bank loaded once). baseline: a
+    checkout of an earlier lensim (`git worktree add DIR COMMIT`), whose one-photo
+    bfloat16 command runs in each round too (first on its PYTHONPATH)."""
     from PIL import Image
 
     with Image.open(photo) as im:
@@ -117,15 +122,23 @@ def command_speed(photo: Path, lens: str, sensor: str, threads: int, rounds: int
     base = [sys.executable, "-m", "lensim", "restore", "--lens", lens, "--sensor", sensor]
     base += ["--threads", str(threads), "--quiet", "-o", str(out), "--precision"]
 
-    def run(p: str, n: int) -> float:
+    def run(p: str, n: int, tree: Path | None = None) -> float:
         subprocess.run(["rm", "-rf", str(out)], check=True)
+        env = dict(os.environ)
+        if tree is not None:
+            env["PYTHONPATH"] = os.pathsep.join([str(tree), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
         t = time.perf_counter()
-        subprocess.run([*base, p, *map(str, names[:n])], check=True)
+        subprocess.run([*base, p, *map(str, names[:n])], check=True, env=env)
         return time.perf_counter() - t
 
     run("float32", 1)  # the lens's bank computed and cached, the modules' bytecode written
+    if baseline is not None:
+        run("bfloat16", 1, baseline)  # its bytecode and caches too
     times: dict[str, dict[int, list[float]]] = {p: {1: [], batch: []} for p in PRECISIONS}
+    before: list[float] = []
     for _ in range(rounds):
+        if baseline is not None:
+            before.append(run("bfloat16", 1, baseline))
         for p in PRECISIONS:
             for n in sorted({1, batch}):
                 times[p][n].append(run(p, n))
@@ -140,6 +153,14 @@ def command_speed(photo: Path, lens: str, sensor: str, threads: int, rounds: int
         "one_photo_mp_per_s": {p: megapixels / v for p, v in one.items()},
         "further_photo_mp_per_s": {p: megapixels / v for p, v in more.items()} if batch > 1 else None,
         "speedup_one_photo": one["float32"] / one["bfloat16"],
+        "baseline": None
+        if baseline is None
+        else {
+            "tree": str(baseline),
+            "one_photo_bfloat16_seconds": statistics.median(before),
+            "all_seconds": before,
+            "speedup_one_photo_bfloat16": statistics.median(before) / one["bfloat16"],
+        },
     }
 
 
@@ -168,6 +189,9 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--batch", type=int, default=2, help="photos in the batch run of the command part")
     ap.add_argument("--skip-network", action="store_true")
+    ap.add_argument(
+        "--baseline-tree", type=Path, default=None, help="an earlier checkout whose one-photo command runs each round"
+    )
     args = ap.parse_args()
     result: dict = {}
     if not args.skip_network:
@@ -179,7 +203,9 @@ def main() -> None:
     if args.photo is not None:
         if not args.photo.exists():
             make_frame(args.photo)
-        result["command"] = command_speed(args.photo, args.lens, args.sensor, args.threads, args.rounds, args.batch)
+        result["command"] = command_speed(
+            args.photo, args.lens, args.sensor, args.threads, args.rounds, args.batch, args.baseline_tree
+        )
     print(json.dumps(result, indent=1))
 
 
