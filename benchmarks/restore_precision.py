@@ -125,10 +125,10 @@ def command_speed(
     def run(p: str, n: int, tree: Path | None = None) -> float:
         subprocess.run(["rm", "-rf", str(out)], check=True)
         env = dict(os.environ)
-        if tree is not None:
+        if tree is not None:  # its lensim first on the path (`python -m` puts the working folder first)
             env["PYTHONPATH"] = os.pathsep.join([str(tree), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
         t = time.perf_counter()
-        subprocess.run([*base, p, *map(str, names[:n])], check=True, env=env)
+        subprocess.run([*base, p, *map(str, names[:n])], check=True, env=env, cwd=tree)
         return time.perf_counter() - t
 
     run("float32", 1)  # the lens's bank computed and cached, the modules' bytecode written
@@ -157,6 +157,9 @@ def command_speed(
         if baseline is None
         else {
             "tree": str(baseline),
+            "commit": subprocess.run(
+                ["git", "-C", str(baseline), "rev-parse", "HEAD"], capture_output=True, text=True
+            ).stdout.strip(),
             "one_photo_bfloat16_seconds": statistics.median(before),
             "all_seconds": before,
             "speedup_one_photo_bfloat16": statistics.median(before) / one["bfloat16"],
