@@ -476,3 +476,26 @@ def test_coarse_pitch_uses_the_alias_free_window():
     k0 = bank.fields[0].rgb
     assert abs(float(k0.sum(axis=(-2, -1)).max()) - 1.0) < 1e-5
     assert float(np.abs(k0[:, 0, :]).max()) == 0.0  # outer ring untouched
+
+
+def test_a_spot_wider_than_the_alias_free_window_asks_for_more_pupil_samples():
+    # Smith's Tessar at F/3.5, full field, 5.82 um pixels: a 62 um RMS spot that the 31 px
+    # kernel (180 um) holds, but 16 pupil samples resolve only 5 px (29 um) without
+    # wrap-around. That is the pupil sampling's shortfall, not the kernel's: a
+    # PupilSamplingError naming the samples, which with_enough_pupil_samples raises to
+    # (was an InputError asking for a larger kernel, so nothing raised them)
+    from lensim.assets.library import load_library_lens
+    from lensim.errors import PupilSamplingError
+    from lensim.psf.bank.settings import with_enough_pupil_samples
+
+    lens = load_library_lens("smith_tessar_f3.5")
+    one = BankSettings(fields=(1.0,), wavelengths_nm=(550.0,), pupil_samples=16, kernel_pixels=31, ri_samples=2)
+    with pytest.raises(PupilSamplingError, match=r"16 pupil samples resolve 5 of the kernel's 31 px") as caught:
+        get_bank(lens, 5.82, one, memory_only=True)
+    assert caught.value.needed > 16
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        bank = with_enough_pupil_samples(lambda s: get_bank(lens, 5.82, s, memory_only=True), one)
+    assert bank.manifest["method"] == "huygens" and bank.manifest["pupil_samples"] >= caught.value.needed
+    # the whole kernel is alias-free now: what the spot's tail needs is a larger kernel, not samples
+    assert bank.fields[0].warnings and not any("pupil samples" in w for w in bank.fields[0].warnings)

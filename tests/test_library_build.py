@@ -116,10 +116,27 @@ def test_pairs_use_trainable_banks_only(tmp_path, monkeypatch):
     assert r.made == 1 and (out / "pairs" / held.id / "manifest.json").exists()
 
 
-def test_a_spot_too_large_for_the_huygens_window_gets_geometric_psfs(tmp_path, monkeypatch):
+def test_a_spot_too_large_for_the_huygens_window_gets_more_pupil_samples(tmp_path, monkeypatch):
     sized = dataclasses.replace(TINY, kernel_pixels=None, kernel_limit=31)  # kernels hold the spot
     monkeypatch.setattr(lb, "LIBRARY_BANK_SETTINGS", sized)  # 16 pupil samples: a Huygens window of ~30 um
     planned = lb.bank_plan([library_entry("smith_tessar_f3.5")])[0]  # F/3.5: a 62 um RMS spot at the edge
+    r = lb.compute_library_banks(tmp_path, [planned])
+    assert (r.computed, r.failed) == (1, 0)
+    manifest = PSFBank.load(lb.bank_dir(tmp_path, planned.id)).manifest
+    assert manifest["method"] == "huygens" and manifest["pupil_samples"] > 16  # was geometric
+    # resumed: a field lost, the bank's raised samples kept (not 16 over its other fields)
+    (lb.bank_dir(tmp_path, planned.id) / "field_0001.npz").unlink()
+    lb.sensor_file(tmp_path, planned.id).unlink()
+    r = lb.compute_library_banks(tmp_path, [planned])
+    assert (r.computed, r.failed) == (1, 0)
+    assert PSFBank.load(lb.bank_dir(tmp_path, planned.id)).manifest["pupil_samples"] == manifest["pupil_samples"]
+
+
+def test_a_spot_beyond_the_most_pupil_samples_gets_geometric_psfs(tmp_path, monkeypatch):
+    sized = dataclasses.replace(TINY, kernel_pixels=None, kernel_limit=31)
+    monkeypatch.setattr(lb, "LIBRARY_BANK_SETTINGS", sized)
+    monkeypatch.setattr(lb, "MAX_PUPIL_SAMPLES", 32)  # the Tessar's edge asks for more
+    planned = lb.bank_plan([library_entry("smith_tessar_f3.5")])[0]
     r = lb.compute_library_banks(tmp_path, [planned])
     assert (r.computed, r.failed) == (1, 0)
     assert PSFBank.load(lb.bank_dir(tmp_path, planned.id)).manifest["method"] == "geometric"

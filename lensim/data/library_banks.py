@@ -16,7 +16,9 @@ The plan (:func:`bank_plan`): each library entry (lensim.assets.library) at
 44 entries x 2 x 2 x 2 = 352 banks. The settings of every library bank are
 :data:`LIBRARY_BANK_SETTINGS`: coarser than the demo's (6 fields, 5 wavelengths, 64 pupil
 samples, kernels of at most 31 pixels; benchmarks/library_banks.py measures what that
-costs against the demo's settings).
+costs against the demo's settings). A bank whose spot outgrows the window 64 pupil samples
+resolve without wrap-around is computed with the samples its kernel needs (at most
+:data:`MAX_PUPIL_SAMPLES`), and only beyond them with geometric PSFs.
 
 On disk (``out_dir``)::
 
@@ -44,9 +46,10 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from lensim.assets.library import LibraryLens, list_lenses, load_library_lens
-from lensim.errors import InputError, OutputError
+from lensim.errors import InputError, OutputError, PupilSamplingError
 from lensim.io import atomic_write_json, atomic_write_text, read_json
 from lensim.psf.bank import BankRequest, BankSettings, PSFBank, get_banks
+from lensim.psf.bank.settings import PUPIL_TRIES, pupil_samples_for
 from lensim.psf.bank.store import MANIFEST
 
 #: the bank settings of every library bank (see the module docstring)
@@ -57,6 +60,9 @@ LIBRARY_BANK_SETTINGS = BankSettings(
     kernel_limit=31,
     ri_samples=8,
 )
+#: the most pupil samples a library bank is raised to where a spot exceeds the window that
+#: LIBRARY_BANK_SETTINGS' samples resolve without wrap-around (beyond: geometric PSFs)
+MAX_PUPIL_SAMPLES = 512
 #: sensor widths (pixels) the library puts each lens on: two pixel pitches per lens
 SENSOR_WIDTHS_PX = (6000, 4000)
 #: the largest sensor half diagonal (mm) a library lens is put on: full frame
@@ -240,16 +246,20 @@ def _get(out_dir: Path, planned: PlannedBank, settings: BankSettings, workers: i
 
 
 def _one(out_dir: Path, planned: PlannedBank, workers: int, scheduler: str | None, settings: BankSettings) -> bool:
-    """Compute one bank: Huygens PSFs (settings: LIBRARY_BANK_SETTINGS), or geometric ones
-    where the spot is too large for the Huygens window of 64 pupil samples (the Huygens PSF
-    of such a blur is its geometric envelope); False (and its failed/ record) when the lens
-    cannot give the bank at all."""
+    """Compute one bank: Huygens PSFs (settings: LIBRARY_BANK_SETTINGS), with more pupil
+    samples (at most MAX_PUPIL_SAMPLES) where the spot is too large for the window that 64
+    resolve without wrap-around, or geometric ones where no Huygens window of the kernel
+    holds it (the Huygens PSF of such a blur is its geometric envelope); False (and its
+    failed/ record) when the lens cannot give the bank at all."""
     folder = bank_dir(out_dir, planned.id)
-    if (folder / MANIFEST).exists() and read_json(folder / MANIFEST, "bank manifest").get("method") == "geometric":
+    manifest = read_json(folder / MANIFEST, "bank manifest") if (folder / MANIFEST).exists() else {}
+    if manifest.get("method") == "geometric":
         settings = dataclasses.replace(settings, method="geometric")  # resuming a fallback bank
+    elif int(manifest.get("pupil_samples", 0)) > settings.pupil_samples:  # resuming a bank of raised samples
+        settings = dataclasses.replace(settings, pupil_samples=int(manifest["pupil_samples"]))
     try:
         try:
-            bank = _get(out_dir, planned, settings, workers, scheduler)
+            bank = _huygens(out_dir, planned, settings, workers, scheduler)
         except InputError as e:
             if isinstance(e, OutputError) or settings.method == "geometric" or "window" not in e.message:
                 raise
@@ -264,6 +274,26 @@ def _one(out_dir: Path, planned: PlannedBank, workers: int, scheduler: str | Non
         return False
     _finish(out_dir, planned, bank)
     return True
+
+
+def _huygens(
+    out_dir: Path, planned: PlannedBank, settings: BankSettings, workers: int, scheduler: str | None
+) -> PSFBank:
+    """The bank at `settings`, again with the pupil samples a field asks for (a
+    PupilSamplingError: its spot exceeds the window they resolve without wrap-around) while
+    at most MAX_PUPIL_SAMPLES; the folder's fields of fewer samples are dropped first.
+    Beyond MAX_PUPIL_SAMPLES the error stands (its message names the window)."""
+    folder = bank_dir(out_dir, planned.id)
+    for _ in range(PUPIL_TRIES):
+        try:
+            return _get(out_dir, planned, settings, workers, scheduler)
+        except PupilSamplingError as e:
+            need = pupil_samples_for(e.needed)
+            if settings.method == "geometric" or need <= settings.pupil_samples or need > MAX_PUPIL_SAMPLES:
+                raise
+            shutil.rmtree(folder, ignore_errors=True)  # fields of the coarser sampling
+            settings = dataclasses.replace(settings, pupil_samples=need)
+    return _get(out_dir, planned, settings, workers, scheduler)
 
 
 @dataclass

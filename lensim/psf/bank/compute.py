@@ -72,14 +72,30 @@ def alias_free_pixels(pf: PupilField, kernel_pixels: int, pixel_pitch_um: float,
     window the kernel is left at zero; check_sampling then makes sure the spot fits in it."""
     if method == "geometric":
         return kernel_pixels
+    m = int(ALIAS_FREE_FRACTION * _alias_period_um(pf) / pixel_pitch_um)
+    m = m if m % 2 else m - 1
+    return max(1, min(kernel_pixels, m))
+
+
+#: the fraction of the pupil grid's repeat period that alias_free_pixels computes
+ALIAS_FREE_FRACTION = 0.95
+
+
+def _alias_period_um(pf: PupilField) -> float:
+    """How often (um) the pupil grid of pf repeats a diffraction PSF: lambda / (n' du), du
+    the direction-cosine step between neighbouring samples."""
     from lensim.psf.fourier import direction_scale
 
     ax, ay = direction_scale(pf)
     du = max(abs(ax), abs(ay)) * 2.0 / pf.samples
-    period_um = pf.wavelength_um / pf.n_image / du
-    m = int(0.95 * period_um / pixel_pitch_um)
-    m = m if m % 2 else m - 1
-    return max(1, min(kernel_pixels, m))
+    return pf.wavelength_um / pf.n_image / du
+
+
+def pupil_samples_for_kernel(pf: PupilField, kernel_pixels: int, pixel_pitch_um: float) -> int:
+    """The pupil samples across whose alias-free window (alias_free_pixels) is the whole
+    kernel of kernel_pixels pixels: the repeat period grows in proportion to the samples."""
+    window_um = kernel_pixels * pixel_pitch_um
+    return math.ceil(pf.samples * window_um / (ALIAS_FREE_FRACTION * _alias_period_um(pf))) + 1
 
 
 def embed_centred(small: np.ndarray, size: int) -> np.ndarray:
@@ -114,7 +130,9 @@ class _FieldWork:
                 self.lens.source, f"field {self.fld:g} ({self.value:g}) at {wl_um * 1e3:g} nm", e.message
             ) from None
 
-    def _check(self, pf: PupilField, wl_um: float, sub_grid: int, offset: tuple[float, float]) -> None:
+    def _check(
+        self, pf: PupilField, wl_um: float, sub_grid: int, offset: tuple[float, float], cut: bool = False
+    ) -> None:
         job = self.job
         with warnings.catch_warnings(record=True) as rec:
             warnings.simplefilter("always")
@@ -137,7 +155,10 @@ class _FieldWork:
         for w in rec:
             if issubclass(w.category, PSFSamplingWarning):
                 msg = str(w.message)
-                msg = msg.removeprefix(prefix).replace("enlarge the grid or the spacing", "use a larger kernel")
+                msg = msg.removeprefix(prefix).replace(
+                    "enlarge the grid or the spacing",
+                    "use more pupil samples (the window is cut to what they resolve)" if cut else "use a larger kernel",
+                )
                 self.caught.append(f"{wl_um * 1e3:g} nm: {msg}")
 
     def fine_psf(self, pf: PupilField, wl_um: float, offset: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
@@ -145,9 +166,35 @@ class _FieldWork:
         window and zero outside it, its centre `offset` (mm) from the pupil's chief ray."""
         job = self.job
         m = alias_free_pixels(pf, job.kernel_pixels, job.pixel_pitch_um, job.method)
-        self._check(pf, wl_um, m * job.k, offset)
+        try:
+            self._check(pf, wl_um, m * job.k, offset, cut=m < job.kernel_pixels)
+        except PupilSamplingError:
+            raise
+        except InputError as e:
+            if m < job.kernel_pixels and self._kernel_holds_spot(pf, offset):
+                need = pupil_samples_for_kernel(pf, job.kernel_pixels, job.pixel_pitch_um)
+                raise PupilSamplingError(
+                    e.source,
+                    e.field,
+                    f"{e.message.split('; expected')[0]}: {pf.samples} pupil samples resolve {m} of the kernel's "
+                    f"{job.kernel_pixels} px without wrap-around; expected at least {need} pupil samples",
+                    need,
+                ) from None
+            raise
         fine = PSF_FUNCTIONS[job.method](pf, m * job.k, job.spacing_um, offset)
         return embed_centred(fine.numpy(), job.k * job.kernel_pixels)
+
+    def _kernel_holds_spot(self, pf: PupilField, offset: tuple[float, float]) -> bool:
+        """Whether the whole kernel window holds the geometric spot as check_sampling asks
+        (at least half of it): the spot is too large for the pupil sampling, not the kernel."""
+        job = self.job
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            try:
+                check_sampling(self.lens, pf, job.kernel_pixels * job.k, job.spacing_um, "geometric", offset)
+            except InputError:
+                return False
+        return True
 
     def relative_illumination(self) -> np.ndarray:
         """Relative illumination at this field (1 on axis) at each bank wavelength, (W,),
