@@ -75,11 +75,16 @@ def test_cached_indices_equal_opticalglass_bit_for_bit(fresh_cache):
     assert again.index(0.5875618) == truth[0, 1]  # a scalar wavelength
 
 
-def test_a_long_wavelength_array_is_computed_not_cached(fresh_cache):
+def test_a_long_wavelength_array_is_computed_not_cached(fresh_cache, monkeypatch):
     lam_um = np.linspace(0.4, 0.7, glass_cache.MAX_CACHED_WAVELENGTHS + 1)
-    n = materials.CatalogGlass("N-BK7", "Schott").index(lam_um)
+    glass = materials.CatalogGlass("N-BK7", "Schott")
+    n = glass.index(lam_um)
     assert n.shape == lam_um.shape and np.all(np.diff(n) < 0)  # normal dispersion
-    assert not (fresh_cache / "index" / "Schott" / "N-BK7.json").exists()
+    path = fresh_cache / "index" / "Schott" / "N-BK7.json"
+    assert not path.exists()
+    monkeypatch.setattr(glass_cache, "MAX_ENTRIES", 3)  # a full cache computes new wavelengths, adds none
+    assert np.array_equal(glass.index(lam_um[:3]), n[:3]) and len(json.loads(path.read_text())) == 3
+    assert np.array_equal(glass.index(lam_um[2:5]), n[2:5]) and len(json.loads(path.read_text())) == 3
 
 
 def test_a_lens_with_cached_indices_never_imports_opticalglass(fresh_cache):

@@ -24,6 +24,9 @@ import numpy as np
 #: at most this many distinct wavelengths are looked up in (and added to) the index cache
 #: per call; a longer array (a dispersion plot's curve, per-ray wavelengths) is computed
 MAX_CACHED_WAVELENGTHS = 64
+#: at most this many wavelengths are kept per glass: beyond, new ones are computed and not
+#: added (each addition rewrites the glass's file; random spectral samples would grow it)
+MAX_ENTRIES = 1024
 
 
 @functools.cache
@@ -102,6 +105,8 @@ class IndexCache:
         table = self._table()
         keys = [repr(float(v)) for v in uniq]
         missing = [i for i, k in enumerate(keys) if k not in table]
+        if missing and len(table) + len(missing) > MAX_ENTRIES:
+            return np.asarray(compute(lam_nm), dtype=np.float64)
         if missing:
             new = np.asarray(compute(uniq[missing]), dtype=np.float64).reshape(-1)
             table.update({keys[i]: float(n) for i, n in zip(missing, new, strict=True)})
