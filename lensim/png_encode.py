@@ -75,5 +75,6 @@ def encode_png(samples: np.ndarray, level: int = 3, threads: int = 1, srgb: bool
     bits = 8 if samples.dtype == np.uint8 else 16
     header = _chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, bits, 2, 0, 0, 0))  # colour type 2: RGB
     srgb_chunk = _chunk(b"sRGB", b"\x00") if srgb else b""
-    idat = _chunk(b"IDAT", _deflate_blocks(memoryview(up_filtered(samples)).cast("B"), level, threads))
+    scanlines = up_filtered(samples).reshape(-1)  # contiguous: a view
+    idat = _chunk(b"IDAT", _deflate_blocks(memoryview(scanlines.data), level, threads))
     return PNG_SIGNATURE + header + srgb_chunk + idat + _chunk(b"IEND", b"")

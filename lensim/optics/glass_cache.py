@@ -93,7 +93,7 @@ class IndexCache:
         if self._known is None:
             data = _read_json(self.path)
             ok = isinstance(data, dict) and all(isinstance(v, float) for v in data.values())
-            self._known = dict(data) if ok else {}  # type: ignore[arg-type]
+            self._known = {str(k): float(v) for k, v in data.items()} if isinstance(data, dict) and ok else {}
         return self._known
 
     def indices(self, lam_nm: np.ndarray, compute: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
