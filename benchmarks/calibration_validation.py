@@ -232,6 +232,7 @@ def run_camera(world: World, name: str, truth, out: Path) -> dict:
         "traces": first.traces + sum(r["traces"] for r in refined.rounds),
         "degenerate": first.degenerate,
         "starts": first.lens.as_built.get("starts", []),
+        "ranking": first.lens.as_built.get("ranking"),
         "elements_fitted": ELEMENTS_FITTED,
         "candidates": world.candidates,
         "before": ratios(world, photo, world.lens, det),
@@ -290,6 +291,10 @@ def _first_fit(world: World, name: str, data, out: Path) -> Fit:
                                       "seconds", "correlation", "degenerate", "traces")}  # fmt: skip
     path.write_text(json.dumps(keep | {"as_built": record}, indent=1))
     log(f"{name}: first fit {_short(f.values)}, rms {f.rms_after:.4f}, {f.seconds:.0f} s")
+    rank = record.get("ranking") or {}
+    for key in ("linear", "prefits"):
+        moves = ", ".join(f"{r['move']} {r['rms']:.4f}" for r in rank.get(key, []))
+        log(f"{name}: ranking ({rank.get('by')}), {key} residual RMS: {moves}")
     return f
 
 

@@ -17,11 +17,14 @@ last trace (no trace; lensim.calibrate.model.mtfs_from, about 0.4 s). The MTF al
 hardly tells a focus shift's sign, so the image parameters are first fitted alone from
 both signs of focus (and with each element parameter at +-ELEMENT_START: a decentre changes
 the MTF at second order near nominal) and the full fit runs from the best start of each
-sign, the smaller residual kept. Uncertainties come from the Jacobian at the optimum: cov = s^2 (J^T J)^-1,
-s^2 the residual variance. Before fitting, a parameter the chart's edges cannot constrain
-(its predicted 1-sigma uncertainty at the assumed noise is above its scale) is refused
-with a CoverageError naming it (and the parameter it is tied to); pairs correlated beyond
-DEGENERATE are reported.
+sign, the smaller residual kept (lensim.calibrate.search). The element fitted is the one
+whose prefits leave the smallest objective (search.prefit_ranking; the linear model at
+the nominal lens, element_ranking, is recorded beside it). Uncertainties come from the
+Jacobian at the optimum: cov = s^2 (J^T J)^-1, s^2 the residual variance. Before
+fitting, a parameter the chart's edges cannot constrain (its predicted 1-sigma
+uncertainty at the assumed noise is above its scale) is refused with a CoverageError
+naming it (and the parameter it is tied to); pairs correlated beyond DEGENERATE are
+reported.
 """
 
 from __future__ import annotations
@@ -32,9 +35,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from lensim.calibrate.bounds import at_bounds, limits, prior_weights
 from lensim.calibrate.bounds import record as bounds_record
 from lensim.calibrate.model import Edge, mtfs_from, trace_points
+from lensim.calibrate.search import IMAGE_PARAMETERS, NOISE_MTF, Run, prefit_ranking, solve, starts
 from lensim.calibrate.tolerances import elements, perturbed_lens
 from lensim.errors import InputError
 from lensim.optics.lens import Lens
@@ -42,7 +45,6 @@ from lensim.optics.lens import Lens
 #: element tilt scale (deg); the other scales follow the lens (parameter_scales)
 ELEMENT_TILT_DEG = 0.05
 KINDS = ("focus", "tilt_x", "tilt_y", "decentre_x", "decentre_y")
-IMAGE_PARAMETERS = ("image.focus", "image.tilt_x", "image.tilt_y")
 #: how an element may move in the fit (each with its _x and _y parameter)
 ELEMENT_MOVES = ("decentre", "tilt")
 #: an element's tilt is fitted instead of its decentre when it leaves less than this
@@ -50,14 +52,6 @@ ELEMENT_MOVES = ("decentre", "tilt")
 TILT_PREFERENCE = 0.9
 #: |correlation| above which two fitted parameters are reported as a degenerate pair
 DEGENERATE = 0.9
-#: the image focus (in its scale) the fit also starts from, with both signs
-FOCUS_START = 1.5
-#: the element decentre or tilt (in its scale) the image prefit also starts from (_starts)
-ELEMENT_START = 2.0
-#: forward-difference step of the Jacobian, in each parameter's scale
-STEP = 0.05
-#: the MTF noise a chart measurement is assumed to have when coverage is checked
-NOISE_MTF = 0.01
 
 Progress = Callable[[int, int], None]
 
@@ -195,14 +189,14 @@ def _move_cost(gap: np.ndarray, columns: dict[str, np.ndarray], chosen: Sequence
     return float(np.sum((a @ coef - gap) ** 2))
 
 
-def element_ranking(gap: np.ndarray, columns: dict[str, np.ndarray], chosen: Sequence[str]) -> list[str]:
-    """The element moves ("e2.decentre" or "e2.tilt": that element's x and y parameters)
-    of the elements not yet in `chosen`, one per element (the one of ELEMENT_MOVES whose
-    columns are known and leave the smaller residual of gap = measured - nominal model
-    when fitted with `chosen` in the linear model), the elements ordered by that
-    residual, smallest first; ties keep the elements' order. A tilt is chosen over the
-    decentre only when its residual is below TILT_PREFERENCE times the decentre's: at the
-    nominal lens the two moves of a thin element change the edges nearly alike."""
+def element_costs(gap: np.ndarray, columns: dict[str, np.ndarray], chosen: Sequence[str]) -> list[tuple[float, str]]:
+    """(squared residual, move) of each element not yet in `chosen`, smallest first: the
+    move ("e2.decentre" or "e2.tilt": that element's x and y parameters) is the one of
+    ELEMENT_MOVES whose columns are known and leave the smaller residual of gap =
+    measured - nominal model when fitted with `chosen` in the linear model; ties keep the
+    elements' order. A tilt is chosen over the decentre only when its residual is below
+    TILT_PREFERENCE times the decentre's: at the nominal lens the two moves of a thin
+    element change the edges nearly alike."""
     targets = sorted({n.partition(".")[0] for n in columns if n.startswith("e")}, key=lambda t: int(t[1:]))
     costs = []
     for t in targets:
@@ -218,7 +212,13 @@ def element_ranking(gap: np.ndarray, columns: dict[str, np.ndarray], chosen: Seq
         tilt = "decentre" not in cost or cost.get("tilt", np.inf) < TILT_PREFERENCE * cost["decentre"]
         move = "tilt" if tilt else "decentre"
         costs.append((cost[move], f"{t}.{move}"))
-    return [m for _, m in sorted(costs, key=lambda c: c[0])]
+    return sorted(costs, key=lambda c: c[0])
+
+
+def element_ranking(gap: np.ndarray, columns: dict[str, np.ndarray], chosen: Sequence[str]) -> list[str]:
+    """The element moves of element_costs (one per element not in `chosen`), ordered by
+    the residual they leave in the linear model at the nominal lens, smallest first."""
+    return [m for _, m in element_costs(gap, columns, chosen)]
 
 
 def choose_parameters(
@@ -248,28 +248,53 @@ def candidate_sets(
     elements_fitted: int,
     candidates: int,
     image: Sequence[str] = IMAGE_PARAMETERS,
+    firsts: Sequence[str] | None = None,
 ) -> list[list[str]]:
     """The parameter sets fitted in full: choose_parameters with each of the `candidates`
-    best-ranked first elements (element_ranking), the linear choice first."""
-    if elements_fitted < 1 or candidates <= 1:
+    best-ranked first elements' moves (firsts, best first; default element_ranking: the
+    linear model), the further elements chosen by the linear model."""
+    if elements_fitted < 1:
         return [choose_parameters(gap, columns, elements_fitted, image=image)]
-    firsts = element_ranking(gap, columns, image)[:candidates]
-    return [choose_parameters(gap, columns, elements_fitted, t, image) for t in firsts]
+    ranked = list(element_ranking(gap, columns, image) if firsts is None else firsts)
+    if not ranked:
+        return [choose_parameters(gap, columns, elements_fitted, image=image)]
+    return [choose_parameters(gap, columns, elements_fitted, t, image) for t in ranked[: max(candidates, 1)]]
+
+
+def _ranked_firsts(model: Model, gap: np.ndarray, image: Sequence[str], context: dict) -> list[str]:
+    """The first element's moves, best first: by the linear model at the nominal lens
+    (element_costs) when context["ranking"] is "linear" or the image focus is not fitted;
+    else by their image prefits (lensim.calibrate.search.prefit_ranking; every element
+    prefitted). Records both rankings in context["ranking_record"]: per move the linear
+    model's residual RMS (MTF) and, by prefits, each one's objective and RMS (MTF), and
+    the prefits' seconds, traces and model evaluations."""
+    linear = element_costs(gap, context["columns"], image)
+    record: dict = {"by": "linear", "linear": [{"move": m, "rms": float(np.sqrt(c / gap.size))} for c, m in linear]}
+    context["ranking_record"] = record
+    if context["ranking"] == "linear" or "image.focus" not in image or not linear:
+        return [m for _, m in linear]
+    t0, traces, evaluations = time.perf_counter(), model.traces, model.evaluations
+    rows = prefit_ranking(model, [m for _, m in linear], image, context, lambda n: scale_of(n, context["kinds"]))
+    record.update(by="prefit", prefits=rows, seconds=time.perf_counter() - t0, traces=model.traces - traces)
+    record["evaluations"] = model.evaluations - evaluations
+    return [r["move"] for r in rows]
 
 
 def _parameter_sets(
     model: Model, names: Sequence[str] | None, elements_fitted: int, candidates: int, context: dict
 ) -> tuple[list[dict], list[list[str]]]:
     """The sensitivity table (empty when names are given and candidates is 1) and the
-    parameter sets to fit: names as given; or candidate_sets, with the image parameters
-    and the number of elements of names when they are given (the elements chosen again)."""
+    parameter sets to fit: names as given; or candidate_sets of the first elements ranked
+    by _ranked_firsts, with the image parameters and the number of elements of names when
+    they are given (the elements chosen again)."""
     if names is not None and candidates <= 1:
         return [], [list(names)]
     table, context["columns"] = sensitivity_table(model, context["base"], context["kinds"], context.get("progress"))
     image = IMAGE_PARAMETERS if names is None else [n for n in names if n.startswith("image.")]
     count = elements_fitted if names is None else len({n.partition(".")[0] for n in names if n not in image})
     gap = context["measured"] - context["base"]
-    return table, candidate_sets(gap, context["columns"], count, candidates, image)
+    firsts = _ranked_firsts(model, gap, image, context) if count >= 1 else None
+    return table, candidate_sets(gap, context["columns"], count, candidates, image, firsts)
 
 
 def _covariance(jac: np.ndarray, noise: float) -> np.ndarray:
@@ -318,126 +343,11 @@ def check_coverage(names: Sequence[str], jac: np.ndarray, where: str, scales: di
     return degenerate_pairs(names, cov)
 
 
-@dataclass
-class _Run:
-    """One start's outcome: the fitted u (in units of the scales), the data residuals
-    ((N,), MTF), the objective (half the sum of squares of data and prior rows), the
-    Jacobian of every row ((N + P, P)) and the parameters ended at a bound."""
-
-    x: np.ndarray
-    data: np.ndarray
-    cost: float
-    jac: np.ndarray
-    at_bound: list[str]
-
-
-def _solve(
-    model: Model, names: list[str], units: np.ndarray, context: dict, start: np.ndarray, fixed: dict | None = None
-) -> _Run:
-    """scipy least_squares (trust region reflective) in units of the scales from start
-    (clipped into the bounds), within lensim.calibrate.bounds' limits and with its prior
-    rows, the Jacobian by forward differences of STEP (image columns need no trace);
-    context: measured ((N,)) and kinds (parameter_scales); fixed: other parameters' values
-    (mm or deg) held while these are fitted."""
-    from scipy.optimize import least_squares
-
-    measured, kinds = context["measured"], context["kinds"]
-    lower, upper = limits(names, units, kinds)
-    weights = prior_weights(names, units, kinds, NOISE_MTF)
-    memo: dict[bytes, np.ndarray] = {}
-    held = dict(fixed or {})
-
-    def values(u: np.ndarray) -> dict[str, float]:
-        return held | dict(zip(names, (u * units).tolist(), strict=True))
-
-    def data(u: np.ndarray) -> np.ndarray:
-        key = u.tobytes()
-        if key not in memo:
-            memo.clear()
-            memo[key] = model.predict(values(u)) - measured
-        return memo[key]
-
-    def jac(u: np.ndarray) -> np.ndarray:
-        f0 = data(u)
-        cols = []
-        for i, name in enumerate(names):
-            v = values(u)
-            v[name] += STEP * units[i]
-            cols.append((model.predict(v) - measured - f0) / STEP)
-        return np.concatenate([np.stack(cols, axis=1), np.diag(weights)])
-
-    u0 = np.clip(start, lower, upper)
-    res = least_squares(
-        lambda u: np.concatenate([data(u), weights * u]), u0, jac=jac, bounds=(lower, upper), x_scale=1.0, max_nfev=60
-    )
-    return _Run(res.x, data(res.x), float(res.cost), res.jac, at_bounds(names, res.x, lower, upper))
-
-
-def _element_offsets(names: list[str]) -> list[np.ndarray]:
-    """The element starts (u, in scales; image parameters 0) the image prefit is also run
-    from: each element parameter at +-ELEMENT_START, one at a time."""
-    out = []
-    for i, name in enumerate(names):
-        if name in IMAGE_PARAMETERS:
-            continue
-        for sign in (-1.0, 1.0):
-            u = np.zeros(len(names))
-            u[i] = sign * ELEMENT_START
-            out.append(u)
-    return out
-
-
-def _prefit(
-    model: Model, names: list[str], units: np.ndarray, context: dict, u0: np.ndarray
-) -> tuple[float, np.ndarray]:
-    """The image parameters fitted alone from u0 (in scales), the element ones held at
-    u0's: (objective with every prior row, u with the fitted image values)."""
-    image = [i for i, n in enumerate(names) if n in IMAGE_PARAMETERS]
-    rest = [i for i in range(len(names)) if i not in image]
-    fixed = {names[i]: float(u0[i] * units[i]) for i in rest if u0[i] != 0.0}
-    res = _solve(model, [names[i] for i in image], units[image], context, u0[image], fixed)
-    u = np.array(u0, dtype=np.float64)
-    u[image] = res.x
-    prior = prior_weights([names[i] for i in rest], units[rest], context["kinds"], NOISE_MTF) * u[rest]
-    return res.cost + 0.5 * float(np.sum(prior**2)), u
-
-
-def _starts(model: Model, names: list[str], units: np.ndarray, context: dict) -> list[np.ndarray]:
-    """Where the full fit starts. The MTF alone hardly tells a focus shift's sign, so the
-    image parameters are fitted first (no trace: cheap) from image focus +-FOCUS_START and
-    0 scales; and an element's decentre or tilt changes the MTF little near nominal (an
-    odd aberration changes the MTF at second order), where a fit started there stays and
-    takes a large error of the element as focus and sensor tilt: each sign's best image
-    start is also prefitted with each element parameter at +-ELEMENT_START (one trace
-    each). The best start of each focus sign is kept (one when both agree)."""
-    if "image.focus" not in names:
-        return [np.zeros(len(names))]
-    k = names.index("image.focus")
-    best: dict[int, tuple[float, np.ndarray]] = {}
-
-    def keep(cost: float, u: np.ndarray) -> None:
-        sign = 1 if u[k] >= 0 else -1
-        if sign not in best or cost < best[sign][0]:
-            best[sign] = (cost, u)
-
-    for f0 in (-FOCUS_START, 0.0, FOCUS_START):
-        u0 = np.zeros(len(names))
-        u0[k] = f0
-        keep(*_prefit(model, names, units, context, u0))
-    for _, image_start in list(best.values()):
-        for offset in _element_offsets(names):
-            keep(*_prefit(model, names, units, context, image_start + offset))
-    starts = [u for _, u in sorted(best.values(), key=lambda t: t[0])]
-    if len(starts) == 2 and np.allclose(starts[0], starts[1], atol=0.05):
-        starts = starts[:1]
-    return starts
-
-
-def _rms(run: _Run) -> float:
+def _rms(run: Run) -> float:
     return float(np.sqrt(np.mean(run.data**2)))
 
 
-def _run_summary(run: _Run, names: list[str], units: np.ndarray) -> dict:
+def _run_summary(run: Run, names: list[str], units: np.ndarray) -> dict:
     """One start's outcome: the image focus it ended at (mm, 0 when not fitted), its RMS
     SFR residual and the parameters it left at a bound."""
     k = names.index("image.focus") if "image.focus" in names else None
@@ -453,11 +363,11 @@ class _Outcome:
     names: list[str]
     scales: np.ndarray
     degenerate: list[dict]
-    runs: list[_Run]
+    runs: list[Run]
     held: list[dict] = field(default_factory=list)
 
     @property
-    def best(self) -> _Run:
+    def best(self) -> Run:
         return min(self.runs, key=lambda r: r.cost)
 
 
@@ -489,15 +399,15 @@ def _constrained(model: Model, names: list[str], context: dict, hold: bool) -> t
 
 def _fit_set(model: Model, names: list[str], context: dict, start: dict[str, float] | None, hold: bool) -> _Outcome:
     """Check the coverage of one parameter set (_constrained) and fit it from each start
-    (_starts, or `start`); context: kinds (scales by kind), columns (known Jacobian
-    columns), base (nominal model), measured, where."""
+    (lensim.calibrate.search.starts, or `start`); context: kinds (scales by kind),
+    columns (known Jacobian columns), base (nominal model), measured, where."""
     names, degenerate, held = _constrained(model, names, context, hold)
     units = np.array([scale_of(n, context["kinds"]) for n in names])
     if start is None:
-        starts = _starts(model, names, units, context)
+        origins = starts(model, names, units, context)
     else:
-        starts = [np.array([start.get(n, 0.0) for n in names]) / units]
-    return _Outcome(names, units, degenerate, [_solve(model, names, units, context, u0) for u0 in starts], held)
+        origins = [np.array([start.get(n, 0.0) for n in names]) / units]
+    return _Outcome(names, units, degenerate, [solve(model, names, units, context, u0) for u0 in origins], held)
 
 
 def _fit_sets(
@@ -531,6 +441,8 @@ def _record(chosen: _Outcome, outcomes: list[_Outcome], context: dict, sigma: di
         "at_bound": run.at_bound,
         "held_at_nominal": chosen.held,
     }
+    if "ranking_record" in context:
+        record["ranking"] = context["ranking_record"]
     if len(outcomes) > 1:
         record["candidates"] = [{"parameters": o.names, "rms": _rms(o.best), "held": o.held} for o in outcomes]
     return record
@@ -545,26 +457,34 @@ def fit(
     progress: Progress | None = None,
     start: dict[str, float] | None = None,
     candidates: int = 1,
+    ranking: str = "prefit",
 ) -> Fit:
     """Fit the parameters `names` (default: choose_parameters from the sensitivity table,
     which is then reported; given names skip it) to the observations, from each start of
-    _starts, keeping the smallest objective; every parameter stays within its physical
+    lensim.calibrate.search.starts, keeping the smallest objective; every parameter stays within its physical
     bound and has a prior towards nominal (lensim.calibrate.bounds). Returns the Fit with
     the as-built lens (its as_built record holds the values, uncertainties, residuals,
     degenerate pairs, bounds, priors, the parameters at a bound and those held at
     nominal). where: the source named in a CoverageError: a given name the chart cannot
     constrain is refused, a chosen one held at nominal. start: values (mm or deg) to
-    start from instead of _starts (a refit near a known solution; missing ones start at
-    0). candidates: the number of first elements fitted in full (candidate_sets: the
-    linear model at the nominal lens can rank the wrong element first), the smallest
-    objective kept (each candidate's RMS in as_built.candidates); with names, their image
-    parameters and number of elements are kept and the elements chosen again."""
+    start from instead of those starts (a refit near a known solution; missing ones start at
+    0). candidates: the number of first elements fitted in full, the best-ranked
+    (candidate_sets), the smallest objective kept (each candidate's RMS in
+    as_built.candidates); with names, their image parameters and number of elements are
+    kept and the elements chosen again. ranking: how the first elements are ranked,
+    "prefit" (by their image prefits, lensim.calibrate.search.prefit_ranking: about 8
+    traces and 11 image fits per element) or "linear" (the linear model at the nominal
+    lens, element_ranking: it can rank the wrong element first); both rankings are
+    recorded in as_built.ranking."""
     t0 = time.perf_counter()
     model = Model(lens, obs)
     measured = np.concatenate(obs.measured)
     base = model.predict({})
     kinds = parameter_scales(lens, obs)
+    if ranking not in ("prefit", "linear"):
+        raise InputError(where, "ranking", f"expected prefit or linear, got {ranking!r}")
     context = {"kinds": kinds, "columns": {}, "base": base, "measured": measured, "where": where, "progress": progress}
+    context["ranking"] = ranking
     context["edges"] = len(obs.edges)
     table, sets = _parameter_sets(model, names, elements_fitted, candidates, context)
     outcomes = _fit_sets(model, sets, context, start, hold=names is None or candidates > 1)

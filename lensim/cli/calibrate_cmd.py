@@ -77,7 +77,7 @@ def calibrate_command(
     candidates: int = typer.Option(
         1,
         "--candidates",
-        help="Elements tried for the first decentre, each fitted in full (the best-ranked by the linear model); "
+        help="Elements tried for the first decentre, each fitted in full (the best-ranked by their image prefits); "
         "the smallest residual is kept, in every refresh round too.",
     ),
     wb: str = typer.Option("as-shot", "--wb", help="Raw photos: white balance to develop with."),
