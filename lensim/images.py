@@ -116,12 +116,18 @@ def _png_bit_depth(path: Path) -> int:
 
 
 def _read_png16(path: Path) -> np.ndarray:
-    """A 16-bit PNG as uint16 (H, W, C) via pypng (Pillow truncates 16-bit RGB to 8 bits)."""
-    import png
+    """A 16-bit PNG as uint16 (H, W) or (H, W, C), C = 3 (RGB) or 4 (RGBA; OpenCV gives
+    gray with alpha as RGBA too), through OpenCV (Pillow truncates 16-bit RGB to 8 bits). A
+    24 MP frame: 2.4 s instead of pypng's 28.5 s."""
+    import cv2
 
-    w, h, rows, info = png.Reader(filename=str(path)).asDirect()
-    arr = np.vstack([np.asarray(r, dtype=np.uint16) for r in rows]).reshape(h, w, info["planes"])
-    return arr[..., 0] if info["planes"] == 1 else arr
+    data = np.fromfile(path, dtype=np.uint8)  # not cv2.imread: any path, and no silent None
+    arr = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+    if arr is None:
+        raise ValueError("OpenCV could not decode it")
+    if arr.ndim == 3:  # OpenCV's channel order is BGR(A)
+        arr = cv2.cvtColor(arr, cv2.COLOR_BGRA2RGBA if arr.shape[2] == 4 else cv2.COLOR_BGR2RGB)
+    return arr
 
 
 #: zlib level of the PNGs lensim writes (lensim.png_encode). Level 3 instead of zlib's

@@ -75,3 +75,26 @@ def test_png_is_lossless_and_written_at_lensims_zlib_level(tmp_path, bits):
     (length,) = struct.unpack(">I", data[at - 4 : at])
     flevel = data[at + 5] >> 6  # the zlib header's second byte
     assert length > 0 and PNG_COMPRESS_LEVEL == 3 and flevel == 1
+
+
+@pytest.mark.parametrize("planes", [1, 2, 3, 4])
+def test_16_bit_pngs_of_every_colour_type_read_exactly(tmp_path, planes):
+    """16-bit PNGs written by pypng (an independent encoder): gray, gray + alpha, RGB and
+    RGBA read back as their RGB samples (gray repeated, an opaque alpha dropped)."""
+    import png
+
+    from lensim.images import read_image
+
+    rng = np.random.default_rng(planes)
+    samples = rng.integers(0, 65536, (17, 19, planes), dtype=np.uint16)
+    if planes in (2, 4):
+        samples[..., -1] = 65535  # opaque
+    path = tmp_path / f"p{planes}.png"
+    with open(path, "wb") as fh:
+        png.Writer(19, 17, greyscale=planes < 3, alpha=planes in (2, 4), bitdepth=16).write(
+            fh, samples.reshape(17, 19 * planes)
+        )
+    img, bits = read_image(path)
+    colour = samples[..., : 1 if planes < 3 else 3]
+    expected = np.repeat(colour, 3 // colour.shape[2], axis=2).transpose(2, 0, 1) / 65535.0
+    assert bits == 16 and np.allclose(img.numpy(), expected, rtol=0, atol=1e-7)
