@@ -56,6 +56,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import math
 import os
 import subprocess
 import sys
@@ -354,6 +355,16 @@ def gather(
         photos[m] = per_photo(ev / m, "model")
     keys = ("steps", "epochs_done", "seconds", "val_psnr_db", "val_input_psnr_db", "wall_s")
     train_info = {m: {k: runs[m][k] for k in keys} for m in runs}
+    if (ev / "oracle@posed-truth" / "metrics.json").exists():
+        posed_oracle = json.loads((ev / "oracle@posed-truth" / "metrics.json").read_text())["methods"]["wiener"]
+        rows["wiener (true PSFs: posed banks)"] = posed_oracle
+        photos["wiener (true PSFs: posed banks)"] = per_photo(ev / "oracle@posed-truth", "wiener")
+    for m in MODELS:
+        if (ev / f"{m}@posed-calibrated" / "metrics.json").exists():
+            rows[f"{m}, posed calibrated stage"] = json.loads(
+                (ev / f"{m}@posed-calibrated" / "metrics.json").read_text()
+            )["methods"]["model"]
+            photos[f"{m}, posed calibrated stage"] = per_photo(ev / f"{m}@posed-calibrated", "model")
     rows["universal (zero-shot)"] = json.loads((ev / "universal" / "metrics.json").read_text())["methods"]["universal"]
     photos["universal (zero-shot)"] = per_photo(ev / "universal", "universal")
     stages = {p.parent.name: json.loads(p.read_text())["seconds"] for p in sorted((out / "pairs").glob("*/done"))}
@@ -369,9 +380,11 @@ def table(res: dict) -> str:
         cells = [f"{m['psnr_db']:.2f} / {m['ssim']:.3f}"]
         cells += [f"{m['zones'][z]['psnr_db']:.2f} / {m['zones'][z]['ssim']:.3f}" for z in zones]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
-    zs = {n: {z: res["metrics"][n]["zones"][z]["psnr_db"] for z in zones} for n in MODELS if n in res["metrics"]}
+    zs = {n: {z: res["metrics"][n]["zones"][z]["psnr_db"] for z in zones} for n in res["metrics"]}
     lines += ["", "| difference (dB) | " + " | ".join(zones) + " |", "| --- | --- | --- | --- |"]
-    for a, b in (("calibrated", "nominal"), ("tolerances", "calibrated"), ("tolerances", "nominal")):
+    cal = "calibrated, posed calibrated stage"
+    for a, b in (("calibrated", "nominal"), ("tolerances", "calibrated"), ("tolerances", "nominal"), (cal, "nominal"),
+                 ("tolerances", cal)):  # fmt: skip
         if a not in zs or b not in zs:
             continue
         lines.append(f"| {a} - {b} | " + " | ".join(f"{zs[a][z] - zs[b][z]:+.2f}" for z in zones) + " |")
@@ -389,6 +402,7 @@ def table(res: dict) -> str:
             mark = " (its own)" if stage == MODELS[m] else ""
             cells = " | ".join(f"{v[k]:.2f}" for k in ("all", *ZONES))
             lines.append(f"| {m} | {stage}{mark} | {cells} |")
+    lines += seeds_table(res.get("seeds", {}))
     lines += ["", "| model | steps | epochs | trained s | val PSNR |", "| --- | --- | --- | --- | --- |"]
     for n, t in res["training"].items():
         lines.append(f"| {n} | {t['steps']} | {t['epochs_done']} | {t['seconds']:.0f} | {t['val_psnr_db']:.2f} |")
@@ -399,7 +413,7 @@ def stage_swap(out: Path) -> dict[str, dict[str, dict]]:
     """Each network's PSNR (all and per zone) with each stage bank evaluated so far."""
     swap: dict[str, dict[str, dict]] = {}
     for m, own in MODELS.items():
-        for stage in ("nominal", "calibrated", "truth"):
+        for stage in ("nominal", "calibrated", "truth", "posed-calibrated", "posed-truth"):
             d = out / "evals" / (m if stage == own else f"{m}@{stage}") / "metrics.json"
             if d.exists():
                 v = json.loads(d.read_text())["methods"]["model"]
@@ -407,11 +421,157 @@ def stage_swap(out: Path) -> dict[str, dict[str, dict]]:
     return swap
 
 
+def stage_kernels(out: Path, camera: str, s: dict) -> dict[str, dict[str, float]]:
+    """How far each stage's kernels are from the test photos' (the true lens's posed
+    banks): per zone, the mean NCC at the test crops' centres of the kernels of the
+    nominal lens, and of the true and calibrated lenses' banks along +y turned (the
+    stages) and posed (--render posed)."""
+    import numpy as np
+
+    from lensim.evaluate.metrics import zone_index
+    from lensim.render.mapping import SensorMapping
+    from lensim.render.posed import pixel_sources
+
+    p, lenses = Posed(out, s), lenses_of(camera)
+    manifest = json.loads((out / "pairs" / "test" / "manifest.json").read_text())
+    pitch, size = p.sensor.pixel_pitch_um * 1e-3, s["size"]
+    crops = [c for r in manifest["records"] for c in r["crops"]]
+    points = [(c["sensor_left"] + size / 2, c["sensor_top"] + size / 2) for c in crops]
+    xy = [((col - p.sensor.width / 2) * pitch, (row - p.sensor.height / 2) * pitch) for col, row in points]
+    half = float(np.hypot(p.sensor.width, p.sensor.height)) / 2 * pitch
+
+    def kernels(banks) -> list[np.ndarray]:
+        if not isinstance(banks, dict):
+            return [banks.psfs_at(np.array([x]), np.array([y]))[0] for x, y in xy]
+        out_ = []
+        for x, y in xy:
+            one = SensorMapping(1, 1, pitch * 1e3, x - pitch / 2, y - pitch / 2)
+            key = next(k for k, m in pixel_sources((1, 1), one, True).items() if m[0, 0])
+            out_.append(banks[key].psfs_at(np.array([x]), np.array([y]))[0])
+        return out_
+
+    def ncc(a: np.ndarray, b: np.ndarray) -> float:
+        n = max(a.shape[-1], b.shape[-1])  # banks' kernel sizes differ: both centred in n x n
+        a, b = (np.pad(k, [(0, 0)] + [((n - k.shape[-1]) // 2, (n - k.shape[-1] + 1) // 2)] * 2) for k in (a, b))
+        a, b = a - a.mean(), b - b.mean()
+        return float((a * b).sum() / np.sqrt((a * a).sum() * (b * b).sum()))
+
+    truth = kernels(p.banks(lenses["truth"]).banks)
+    cands = {"nominal": p.bank(lenses["nominal"]), "truth turned": p.bank(lenses["truth"])}
+    cands["calibrated turned"] = p.bank(lenses["calibrated"])
+    cands["calibrated posed"] = p.banks(lenses["calibrated"]).banks
+    zones = [ZONES[int(zone_index(np.array(np.hypot(x, y) / half)))] for x, y in xy]
+    res = {}
+    for name, banks in cands.items():
+        v = [ncc(a, b) for a, b in zip(kernels(banks), truth, strict=True)]
+        res[name] = {z: float(np.mean([n for n, q in zip(v, zones, strict=True) if q == z])) for z in ZONES}
+    return res
+
+
+def _crop_source(crop: dict, size: int, sensor) -> str:
+    """The posed source (lensim.render.posed.pixel_sources) of a crop's centre pixel."""
+    from lensim.render.mapping import native_mapping
+    from lensim.render.posed import pixel_sources
+
+    one = native_mapping(1, 1, sensor, crop["sensor_top"] + size // 2, crop["sensor_left"] + size // 2)
+    return next(k for k, m in pixel_sources((1, 1), one, True).items() if m[0, 0])
+
+
+def source_subsets(out: Path, s: dict) -> dict[str, Path]:
+    """The test pairs split by the posed source of each crop's centre: OUT/pairs/test@<key>
+    (a manifest of those crops, the crop files linked), made once."""
+    from lensim.sensor.profile import load_sensor
+
+    test = out / "pairs" / "test"
+    manifest = json.loads((test / "manifest.json").read_text())
+    sensor = load_sensor(SENSOR)
+    groups: dict[str, list[dict]] = {}
+    for rec in manifest["records"]:
+        by: dict[str, list[dict]] = {}
+        for c in rec["crops"]:
+            by.setdefault(_crop_source(c, s["size"], sensor), []).append(c)
+        for key, crops in by.items():
+            groups.setdefault(key, []).append({**rec, "crops": crops})
+    folders = {}
+    for key, records in sorted(groups.items()):
+        d = out / "pairs" / f"test@{key.replace('/', '-')}"
+        if not (d / "manifest.json").exists():
+            d.mkdir(parents=True, exist_ok=True)
+            if not (d / "pairs").exists():
+                (d / "pairs").symlink_to(test / "pairs")
+            sub = {**manifest, "records": records, "pairs": sum(len(r["crops"]) for r in records)}
+            (d / "manifest.json").write_text(json.dumps(sub))
+        folders[key] = d
+    return folders
+
+
+def posed_stage_evaluate(out: Path, name: str, s: dict, lens, methods: str, model: Path | None) -> Path:
+    """`lensim evaluate` of the test pairs with a posed stage: each crop's stage (and
+    Wiener filter) with the bank of the posed source its centre lies in (the lens's
+    posed banks; exact where the whole crop has that source), the crops' rows merged
+    into OUT/evals/<name> (metrics.csv, metrics.json: lensim.evaluate.harness.summarize)."""
+    import csv as csv_
+
+    from lensim.evaluate.harness import summarize
+
+    d = out / "evals" / name
+    if (d / "metrics.json").exists():
+        return d
+    banks = Posed(out, s).banks(lens).banks
+    rows: list[dict] = []
+    for key, subset in source_subsets(out, s).items():
+        part = evaluate(out, f"{name}/{key.replace('/', '-')}", subset, methods, str(banks[key].directory), model)
+        with open(part / "metrics.csv", newline="") as f:
+            rows += list(csv_.DictReader(f))
+    fields = list(rows[0])
+    with open(d / "metrics.csv", "w", newline="") as f:
+        w = csv_.DictWriter(f, fieldnames=fields)
+        w.writeheader()
+        w.writerows(rows)
+
+    def num(v: str) -> float:
+        return float(v) if v not in ("", None) else math.nan
+
+    typed = [{k: (v if k in ("method", "source", "input") else num(v)) for k, v in r.items()} for r in rows]
+    (d / "metrics.json").write_text(json.dumps(summarize(typed), indent=1))
+    return d
+
+
+def seed_runs(out: Path) -> dict[str, dict[str, dict]]:
+    """Each network's PSNR and SSIM (all and per zone, its own stage) per training seed
+    evaluated so far (seed 0: the run named as the model, seed k: "<model>-s<k>")."""
+    found: dict[str, dict[str, dict]] = {}
+    for m in MODELS:
+        for d in sorted((out / "evals").glob(f"{m}*/metrics.json")):
+            name = d.parent.name
+            seed = 0 if name == m else int(name[len(m) + 2 :]) if name.startswith(f"{m}-s") else None
+            if seed is None:
+                continue
+            v = json.loads(d.read_text())["methods"]["model"]
+            zones = {z: [v["zones"][z]["psnr_db"], v["zones"][z]["ssim"]] for z in ZONES}
+            found.setdefault(m, {})[str(seed)] = {"all": [v["psnr_db"], v["ssim"]], **zones}
+    return found
+
+
+def seeds_table(seeds: dict[str, dict[str, dict]]) -> list[str]:
+    """PSNR (dB) per zone of each network per seed, and the seeds' mean."""
+    if not any(len(v) > 1 for v in seeds.values()):
+        return []
+    lines = ["", "| network | seed | all | centre | middle | edge |", "| --- | --- | --- | --- | --- | --- |"]
+    for m, by_seed in seeds.items():
+        for seed, v in sorted(by_seed.items()):
+            lines.append(f"| {m} | {seed} | " + " | ".join(f"{v[k][0]:.2f}" for k in ("all", *ZONES)) + " |")
+        mean = {k: sum(v[k][0] for v in by_seed.values()) / len(by_seed) for k in ("all", *ZONES)}
+        lines.append(f"| {m} | mean | " + " | ".join(f"{mean[k]:.2f}" for k in ("all", *ZONES)) + " |")
+    return lines
+
+
 def report(out: Path, results: Path | None, runs: dict[str, dict], s: dict, seconds: float, camera: str) -> None:
     """OUT/restoration.json and OUT/table.md from the stages done so far (copied to results)."""
     res = gather(out, runs, seconds, camera, s.get("render") == "posed")
     res["settings"] = s
     res["stage_swap"] = stage_swap(out)
+    res["seeds"] = seed_runs(out)
     (out / "restoration.json").write_text(json.dumps(res, indent=1))
     (out / "table.md").write_text(table(res))
     if results:
@@ -427,6 +587,7 @@ def main() -> None:
     ap.add_argument("--camera", default="larger_decentre", choices=sorted(CAMERAS), help="the perturbed camera")
     ap.add_argument("--render", default="posed", choices=("posed", "turned"), help="how lenses with poses render")
     ap.add_argument("--epochs", type=int, default=0, help="train this many epochs (0: the time budget)")
+    ap.add_argument("--seeds", default="0", help="training seeds, comma-separated (seed 0 first: the main table)")
     ap.add_argument("--tiny", action="store_true", help="a dry run at tiny sizes")
     args = ap.parse_args()
     s = {**(TINY if args.tiny else FULL), "render": args.render, "epochs": args.epochs}
@@ -450,12 +611,26 @@ def main() -> None:
         runs[m] = train(args.out, m, pairs[m], s["budget"], s["train_crop"], epochs=args.epochs)
         evaluate(args.out, m, test, "input,model", bank_of(pairs[stage_lens]), args.out / "runs" / m)
         done()
+    if args.render == "posed":  # the stages of lenses with poses posed too (per crop: posed_stage_evaluate)
+        lenses = lenses_of(args.camera)
+        posed_stage_evaluate(args.out, "oracle@posed-truth", s, lenses["truth"], "input,wiener", None)
+        done()
+        for m in ("calibrated", "nominal", "tolerances"):
+            run = args.out / "runs" / m
+            posed_stage_evaluate(args.out, f"{m}@posed-calibrated", s, lenses["calibrated"], "input,model", run)
+            done()
     banks = {"nominal": bank_of(pairs["nominal"]), "calibrated": bank_of(pairs["calibrated"]), "truth": bank_of(test)}
     for m in MODELS:  # every network with every stage bank: what the training pairs do, what the stage does
         for stage, bank in banks.items():
             if stage != MODELS[m]:
                 evaluate(args.out, f"{m}@{stage}", test, "input,model", bank, args.out / "runs" / m)
     done()
+    for seed in [int(k) for k in args.seeds.split(",") if k and int(k) != 0]:  # the same networks, other seeds
+        for m, stage_lens in MODELS.items():
+            name = f"{m}-s{seed}"
+            train(args.out, name, pairs[m], s["budget"], s["train_crop"], seed=seed, epochs=args.epochs)
+            evaluate(args.out, name, test, "input,model", bank_of(pairs[stage_lens]), args.out / "runs" / name)
+            done()
     elapsed.write_text(json.dumps({"seconds": before + time.perf_counter() - t0}))
     log("done")
 
