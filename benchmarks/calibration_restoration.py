@@ -572,6 +572,8 @@ def report(out: Path, results: Path | None, runs: dict[str, dict], s: dict, seco
     res["settings"] = s
     res["stage_swap"] = stage_swap(out)
     res["seeds"] = seed_runs(out)
+    if (out / "stage_kernels.json").exists():  # NCC of each stage's kernels with the test photos' PSFs, per zone
+        res["stage_kernel_ncc"] = json.loads((out / "stage_kernels.json").read_text())
     (out / "restoration.json").write_text(json.dumps(res, indent=1))
     (out / "table.md").write_text(table(res))
     if results:
@@ -613,6 +615,9 @@ def main() -> None:
         done()
     if args.render == "posed":  # the stages of lenses with poses posed too (per crop: posed_stage_evaluate)
         lenses = lenses_of(args.camera)
+        kernels = args.out / "stage_kernels.json"
+        if not kernels.exists():
+            kernels.write_text(json.dumps(stage_kernels(args.out, args.camera, s), indent=1))
         posed_stage_evaluate(args.out, "oracle@posed-truth", s, lenses["truth"], "input,wiener", None)
         done()
         for m in ("calibrated", "nominal", "tolerances"):
