@@ -365,6 +365,14 @@ def gather(
                 (ev / f"{m}@posed-calibrated" / "metrics.json").read_text()
             )["methods"]["model"]
             photos[f"{m}, posed calibrated stage"] = per_photo(ev / f"{m}@posed-calibrated", "model")
+    for m in ("calibrated", "tolerances"):  # trained with posed stages (posed_stage_pairs)
+        for stage, label in (("posed-calibrated", "posed calibrated stage"), ("nominal", "nominal stage")):
+            d = ev / f"{m}@posed-stage@{stage}"
+            if (d / "metrics.json").exists():
+                rows[f"{m} (posed stages in training), {label}"] = json.loads((d / "metrics.json").read_text())[
+                    "methods"
+                ]["model"]
+                photos[f"{m} (posed stages in training), {label}"] = per_photo(d, "model")
     rows["universal (zero-shot)"] = json.loads((ev / "universal" / "metrics.json").read_text())["methods"]["universal"]
     photos["universal (zero-shot)"] = per_photo(ev / "universal", "universal")
     stages = {p.parent.name: json.loads(p.read_text())["seconds"] for p in sorted((out / "pairs").glob("*/done"))}
@@ -537,6 +545,43 @@ def posed_stage_evaluate(out: Path, name: str, s: dict, lens, methods: str, mode
     return d
 
 
+def posed_stage_pairs(out: Path, name: str, s: dict) -> Path:
+    """A copy of OUT/pairs/<name> (posed pairs of the calibrated lens or of tolerance
+    draws; crop files linked) whose pairs' Wiener stage in training is posed: one record
+    per crop, its stage the bank of its centre's posed source (of its draw's banks for
+    tolerance pairs), through lensim's per-record stage rule ("stage_bank":
+    "tolerance_draw", the banks listed as the manifest's draws)."""
+    from lensim.data.pairs import STAGE_PER_DRAW
+    from lensim.sensor.profile import load_sensor
+
+    src = out / "pairs" / name
+    dst = out / "pairs" / f"{name}@posed-stage"
+    if (dst / "manifest.json").exists():
+        return dst
+    manifest = json.loads((src / "manifest.json").read_text())
+    if "tolerances" in manifest:
+        posed = [d["posed_banks"] for d in manifest["tolerances"]["draws"]]
+    else:
+        posed = [manifest["posed_banks"]]
+    sensor = load_sensor(SENSOR)
+    banks: list[dict] = []
+    records = []
+    for rec in manifest["records"]:
+        for crop in rec["crops"]:
+            k, key = rec.get("tolerance_draw", 0), _crop_source(crop, s["size"], sensor)
+            entry = {"bank": posed[k][key], "draw": k, "source": key}
+            if entry not in banks:
+                banks.append(entry)
+            records.append({**rec, "crops": [crop], "tolerance_draw": banks.index(entry)})
+    dst.mkdir(parents=True, exist_ok=True)
+    if not (dst / "pairs").exists():
+        (dst / "pairs").symlink_to(src / "pairs")
+    tolerances = {**manifest.get("tolerances", {}), "draws": banks}
+    new = {**manifest, "records": records, "stage_bank": STAGE_PER_DRAW, "tolerances": tolerances}
+    (dst / "manifest.json").write_text(json.dumps(new))
+    return dst
+
+
 def seed_runs(out: Path) -> dict[str, dict[str, dict]]:
     """Each network's PSNR and SSIM (all and per zone, its own stage) per training seed
     evaluated so far (seed 0: the run named as the model, seed k: "<model>-s<k>")."""
@@ -623,6 +668,13 @@ def main() -> None:
         for m in ("calibrated", "nominal", "tolerances"):
             run = args.out / "runs" / m
             posed_stage_evaluate(args.out, f"{m}@posed-calibrated", s, lenses["calibrated"], "input,model", run)
+            done()
+        for m in ("calibrated", "tolerances"):  # (b), (c) trained with posed stages too
+            name = f"{m}@posed-stage"
+            train(args.out, name, posed_stage_pairs(args.out, m, s), s["budget"], s["train_crop"], epochs=args.epochs)
+            run = args.out / "runs" / name
+            posed_stage_evaluate(args.out, f"{name}@posed-calibrated", s, lenses["calibrated"], "input,model", run)
+            evaluate(args.out, f"{name}@nominal", test, "input,model", bank_of(pairs["nominal"]), run)
             done()
     banks = {"nominal": bank_of(pairs["nominal"]), "calibrated": bank_of(pairs["calibrated"]), "truth": bank_of(test)}
     for m in MODELS:  # every network with every stage bank: what the training pairs do, what the stage does
