@@ -278,3 +278,32 @@ def test_cli_restores_a_photo_and_refuses_a_missing_bank(world, run, tmp_path, c
     code, _, err = run_cli(args, capsys, monkeypatch)
     assert code == 2 and len(err.strip().splitlines()) == 1 and "nothing" in err, err
     assert not (tmp_path / "r2" / "photo.png").exists()
+
+
+def test_stage_of_a_lens_with_poses_takes_each_pixels_own_sources_bank():
+    """Banks by source (lensim.render.posed.posed_banks): each pixel's stage is the one
+    computed with the bank of its source (its quadrant, split at the optical axis, and the
+    mirrored lens's where the kernel is taken mirrored); one bank under every key gives
+    the plain stage."""
+    from lensim.render.posed import MIRROR, QUADRANTS, pixel_sources
+
+    bank = _bank()
+    other = _bank()
+    for f in other.fields:
+        f.rgb = np.ascontiguousarray(np.flip(f.rgb, -2))  # the kernels turned upside down
+    img, _ = read_image(sample_image_path("kodim23"))
+    image = img[:, 200:296, 300:390]
+    mapping = SensorMapping(96, 90, PITCH_UM, -40 * PITCH_UM * 1e-3, -30 * PITCH_UM * 1e-3)  # across the axis
+    stage = WienerStage(tile=32, noise_floor=1e-5, ramp=8, margin=6)
+    keys = [k + m for k in QUADRANTS for m in ("", MIRROR)]
+    plain = wiener_channels(image, mapping, bank, None, stage)
+    assert torch.equal(wiener_channels(image, mapping, dict.fromkeys(keys, bank), None, stage), plain)
+    banks = {k: other if k in ("ur", "ll" + MIRROR, "lr" + MIRROR) else bank for k in keys}
+    out = wiener_channels(image, mapping, banks, None, stage)
+    flipped = wiener_channels(image, mapping, other, None, stage)
+    sources = pixel_sources((96, 90), mapping, mirrored=True)
+    assert all(sources[k].any() for k in keys)  # every source has pixels in this frame
+    for key, mask in sources.items():
+        want = flipped if banks[key] is other else plain
+        assert torch.equal(out[:, torch.from_numpy(mask)], want[:, torch.from_numpy(mask)])
+    assert not torch.equal(out, plain)

@@ -134,11 +134,24 @@ def wiener_channels(
     """The stage's output for one image: (3, H, W) float32 sRGB in [0, 1].
 
     image: (3, H, W) sRGB in [0, 1]; mapping: its pixels on the sensor
-    (lensim.render.mapping.SensorMapping, at the bank's pitch); bank: lensim.psf.bank.PSFBank;
-    capture: the capture record (ccm, r_gain, b_gain, shot, read; lensim.data.pairs
-    crop_capture) or None. The Wiener oracle itself (lensim.evaluate.baselines.wiener)."""
+    (lensim.render.mapping.SensorMapping, at the bank's pitch); bank: lensim.psf.bank.PSFBank,
+    or the banks of a lens with poses by source (lensim.render.posed.posed_banks): then each
+    pixel takes the stage computed with its own source's bank, as the lens is rendered
+    (compose_rendered; only the sources with pixels in the image are computed, each over
+    the whole image); capture: the capture record (ccm, r_gain, b_gain, shot, read;
+    lensim.data.pairs crop_capture) or None. The Wiener oracle itself
+    (lensim.evaluate.baselines.wiener)."""
     from lensim.evaluate.baselines import wiener
 
+    if isinstance(bank, Mapping):
+        from lensim.render.posed import compose_rendered
+
+        return compose_rendered(
+            lambda key: wiener_channels(image, mapping, bank[key], capture, stage),
+            bank.keys(),
+            mapping,
+            (int(image.shape[-2]), int(image.shape[-1])),
+        )
     st = stage or WienerStage()
     return wiener(image, mapping, bank, capture, st.tile, None, st.noise_floor, st.ramp, st.margin)
 
