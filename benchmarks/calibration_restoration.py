@@ -61,6 +61,7 @@ import os
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 LENS, SENSOR, DISTANCE_M = "phone_wide", "phone", 1.0
@@ -373,8 +374,15 @@ def gather(
                     "methods"
                 ]["model"]
                 photos[f"{m} (posed stages in training), {label}"] = per_photo(d, "model")
-    rows["universal (zero-shot)"] = json.loads((ev / "universal" / "metrics.json").read_text())["methods"]["universal"]
-    photos["universal (zero-shot)"] = per_photo(ev / "universal", "universal")
+    zero_shot = {"": "nominal stage", "@calibrated": "calibrated lens's turned stage"}
+    zero_shot |= {"@posed-calibrated": "posed calibrated stage", "@posed-truth": "posed true stage"}
+    for suffix, label in zero_shot.items():
+        d = ev / f"universal{suffix}"
+        if (d / "metrics.json").exists():
+            rows[f"universal (zero-shot), {label}"] = json.loads((d / "metrics.json").read_text())["methods"][
+                "universal"
+            ]
+            photos[f"universal (zero-shot), {label}"] = per_photo(d, "universal")
     stages = {p.parent.name: json.loads(p.read_text())["seconds"] for p in sorted((out / "pairs").glob("*/done"))}
     fit = str(CAMERAS[camera][1].relative_to(RESULTS.parent.parent))
     return {"camera": camera, "truth": CAMERAS[camera][0], "fit": fit, "metrics": rows, "per_photo": photos,
@@ -627,6 +635,16 @@ def report(out: Path, results: Path | None, runs: dict[str, dict], s: dict, seco
             (results / f).write_text((out / f).read_text())
 
 
+def zero_shot_stages(out: Path, s: dict, lenses: dict, make: Callable[[str], Path]) -> None:
+    """The shipped universal model zero-shot (`lensim restore --lens as_built.yaml`) on the
+    test pairs with the calibrated lens's turned stage (lensim before the posed stage), its
+    posed stage and the true lens's posed stage."""
+    test = out / "pairs" / "test"
+    evaluate(out, "universal@calibrated", test, "input,universal", bank_of(make("calibrated")), None)
+    for stage in ("calibrated", "truth"):
+        posed_stage_evaluate(out, f"universal@posed-{stage}", s, lenses[stage], "input,universal", None)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path("/tmp/calibration-restoration"), help="work folder (resumable)")
@@ -664,6 +682,7 @@ def main() -> None:
         if not kernels.exists():
             kernels.write_text(json.dumps(stage_kernels(args.out, args.camera, s), indent=1))
         posed_stage_evaluate(args.out, "oracle@posed-truth", s, lenses["truth"], "input,wiener", None)
+        zero_shot_stages(args.out, s, lenses, make)
         done()
         for m in ("calibrated", "nominal", "tolerances"):
             run = args.out / "runs" / m

@@ -23,7 +23,7 @@ import lensim.restore.universal as uni
 from cli_runner import run_cli
 from lensim.data.pairs import make_dataset
 from lensim.errors import InputError
-from lensim.images import write_image
+from lensim.images import read_image, write_image
 from lensim.restore.config import TrainConfig
 from lensim.restore.models import build_model
 from lensim.restore.psfnet import uses_wiener
@@ -371,3 +371,34 @@ def test_pretraining_on_a_device_this_machine_lacks_is_one_line(tmp_path, capsys
     code, _, err = run_cli(args, capsys, monkeypatch)
     assert code == 2 and len(err.strip().splitlines()) == 1 and "--device" in err and "CUDA" in err, err
     assert not (tmp_path / "run").exists()
+
+
+def test_zero_shot_restore_with_an_as_built_lens_uses_its_posed_banks(shipped, camera, tmp_path, capsys, monkeypatch):
+    """A lens with poses (what `lensim calibrate` writes) restores zero-shot with its banks
+    by sensor source (8: each quadrant's and its mirrored lens's, lensim.render.posed), the
+    stage composed per pixel; a raw file with it is one line."""
+    from lensim.calibrate.tolerances import perturbed_lens
+    from lensim.optics.lens_file import load_lens, save_lens
+
+    monkeypatch.setattr(uni, "MODEL_DIR", shipped)
+    monkeypatch.setenv("LENSIM_CACHE", str(tmp_path / "cache"))
+    as_built = tmp_path / "as_built.yaml"
+    save_lens(perturbed_lens(load_lens("cooke_triplet", warn=False), {"e2.decentre_x": 0.03}), as_built)
+    photo, sensor = _photo(tmp_path), str(camera["sensor_file"])
+    outs = {}
+    for lens in ("cooke_triplet", str(as_built)):
+        out = tmp_path / f"o-{len(outs)}"
+        code, _, err = run_cli(
+            ["restore", "--lens", lens, "--sensor", sensor, str(photo), "-o", str(out), "--quiet"], capsys, monkeypatch
+        )
+        assert code == 0, err
+        outs[lens] = read_image(out / "photo.png")[0]
+    assert len(list((tmp_path / "cache").rglob("manifest.json"))) == 1 + 8  # the nominal lens's, the 8 posed
+    assert not torch.equal(outs["cooke_triplet"], outs[str(as_built)])
+    from tests.raw_fixtures import random_mosaic, write_dng
+
+    raw = write_dng(tmp_path / "shot.dng", random_mosaic(96, 128, 600, 4000))
+    args = ["restore", "--lens", str(as_built), "--sensor", sensor, str(raw), "-o", str(tmp_path / "o-raw")]
+    code, _, err = run_cli(args, capsys, monkeypatch)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "--lens" in err and "poses" in err, err
+    assert not (tmp_path / "o-raw").exists() or not any((tmp_path / "o-raw").iterdir())

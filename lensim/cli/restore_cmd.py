@@ -224,12 +224,19 @@ def restore_command(
         _check_tiling(tile, overlap, default=defaults)
     lens_obj = check_zero_shot(info, sensor_data, lens_file, fno) if zero_shot else None
     decoded = _check_photos(photos, offset, (sensor_w, sensor_h), getattr(model, "uses_wiener", False))
-    bank_dir: Path | None = bank
+    bank_dir: Path | dict[str, Path] | None = bank
     if zero_shot and bank_dir is None:
         bank_dir = zero_shot_bank_folder(model, lens_obj, sensor_data, (fno, focus_m), quiet or json_out)
     photo_settings = _photo_settings(photos, shooting, info)
     stage = _stage_inputs(model, info, bank_dir, sensor_data)
     written = []
+    if raws and stage is not None and isinstance(stage[0], dict):
+        raise InputError(
+            "--lens",
+            None,
+            "is a lens with poses, whose Wiener stage is composed per sensor quadrant for developed "
+            "photos (PNG, TIFF, JPEG) only; raw files cannot be restored with it yet",
+        )
     with folder_lock(output), _tile_memory(workers):  # one writer at a time
         if raws:
             from lensim.raw.restore import RestoreSettings
@@ -422,9 +429,17 @@ def _load_model(
     return model, info, sensor_data, (int(res[0]), int(res[1]))
 
 
-def _stage_inputs(model: Any, info: dict, bank: Path | None, sensor_data: dict) -> tuple[Any, Any] | None:
+def _stage_inputs(
+    model: Any, info: dict, bank: Path | dict[str, Path] | None, sensor_data: dict
+) -> tuple[Any, Any] | None:
     """(PSF bank, sensor profile) for a PSF-informed network (lensim.restore.psf_stage), else
-    None; a bank that is not found is one line naming --bank."""
+    None; a bank that is not found is one line naming --bank. A lens with poses' folders
+    by source give its banks by source (the stage composes them per pixel)."""
+    if isinstance(bank, dict):
+        from lensim.psf.bank import PSFBank
+        from lensim.sensor.profile import sensor_from_dict
+
+        return {k: PSFBank.load(v) for k, v in bank.items()}, sensor_from_dict(sensor_data, str(info["path"]))
     if not getattr(model, "uses_wiener", False):
         if bank is not None:
             raise InputError("--bank", None, "applies to a PSF-informed network (--arch psfnet); this one is not")

@@ -44,20 +44,30 @@ def universal_inputs(
 
 def zero_shot_bank_folder(
     model: Any, lens: Any, sensor_data: dict, shooting: tuple[float | None, float | None], quiet: bool
-) -> Path | None:
+) -> Path | dict[str, Path] | None:
     """The PSF bank folder of the lens (loaded) at the sensor's pitch and shooting =
     (fno, focus_m), from the bank cache or computed into it with a progress bar, for a
-    universal model that is PSF-informed (lensim.restore.psfnet); None for one that is not."""
+    universal model that is PSF-informed (lensim.restore.psfnet); for a lens with poses
+    (an as-built lens from `lensim calibrate`) its banks' folders by sensor source
+    (lensim.render.posed.posed_banks: 8 banks); None for a model that is not PSF-informed."""
     if not getattr(model, "uses_wiener", False):
         return None
     from lensim.cli.common import progress_bar
+    from lensim.render.mapping import native_mapping
+    from lensim.render.posed import posed_banks
     from lensim.restore.universal import zero_shot_bank
     from lensim.sensor.profile import sensor_from_dict
 
     sensor = sensor_from_dict(sensor_data, "--sensor")
-    with progress_bar("PSF bank of the lens", "fields", quiet) as report:
-        bank = zero_shot_bank(lens, sensor, shooting[0], shooting[1], progress=report)
-    return Path(bank.directory)
+    title = "PSF banks of the lens with poses (8)" if lens.has_poses else "PSF bank of the lens"
+    with progress_bar(title, "fields", quiet) as report:
+        banks = posed_banks(
+            lens,
+            native_mapping(sensor.height, sensor.width, sensor, 0, 0),
+            lambda one: zero_shot_bank(one, sensor, shooting[0], shooting[1], progress=report),
+        )
+    folders = {key: Path(str(bank.directory)) for key, bank in banks.items()}  # cached banks: in their folders
+    return folders["all"] if "all" in folders else folders
 
 
 def check_zero_shot(info: dict, sensor_data: dict, lens: str, fno: float | None) -> Any:
