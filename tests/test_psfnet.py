@@ -307,3 +307,12 @@ def test_stage_of_a_lens_with_poses_takes_each_pixels_own_sources_bank():
         want = flipped if banks[key] is other else plain
         assert torch.equal(out[:, torch.from_numpy(mask)], want[:, torch.from_numpy(mask)])
     assert not torch.equal(out, plain)
+    # a frame whose sources' boxes (grown by whole tiles) are smaller than it: each source is
+    # computed on its box only, and its pixels are still what the whole-frame stage gives
+    big = img[:, 100:420, 120:420]
+    wide = SensorMapping(320, 300, PITCH_UM, -170 * PITCH_UM * 1e-3, -150 * PITCH_UM * 1e-3)
+    whole = {id(b): wiener_channels(big, wide, b, None, stage) for b in (bank, other)}
+    out = wiener_channels(big, wide, banks, None, stage)
+    for key, mask in pixel_sources((320, 300), wide, mirrored=True).items():
+        m = torch.from_numpy(mask)
+        assert torch.allclose(out[:, m], whole[id(banks[key])][:, m], rtol=0, atol=1e-6), key

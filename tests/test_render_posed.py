@@ -36,3 +36,19 @@ def test_only_the_sources_with_pixels_in_the_frame_are_rendered():
     assert sorted(asked) == ["lr", "lr" + MIRROR]
     flip = torch.from_numpy(mirrored_pixels(mapping))
     assert isinstance(out, torch.Tensor) and (out[0] == torch.where(flip, 11.0, 1.0)).all()
+
+
+def test_mirrored_pixels_are_azimuth_turns_mirror_flag_elementwise():
+    """mirrored_pixels (numpy) gives, pixel by pixel, what azimuth_turn (one offset at a
+    time) says, on a frame across the axis, the 45-degree lines included."""
+    from lensim.psf.bank.azimuth import azimuth_turn, mirrored_at
+
+    mapping = SensorMapping(41, 37, 1000.0, -18.5, -20.5)  # pixel centres on the axes and diagonals
+    x = mapping.x0_mm + (np.arange(37) + 0.5)
+    y = mapping.y0_mm + (np.arange(41) + 0.5)
+    yy, xx = np.meshgrid(y, x, indexing="ij")
+    offsets = np.degrees(np.arctan2(yy, xx)) - 90.0
+    want = np.array([[azimuth_turn(float(a))[2] for a in row] for row in offsets])
+    assert (mirrored_pixels(mapping) == want).all() and want.any() and not want.all()
+    angles = np.array([-720.0, -405.0, -225.0, -135.0, -45.0, -0.0, 0.0, 45.0, 135.0, 225.0, 315.0, 540.0, 1e-9])
+    assert mirrored_at(angles).tolist() == [azimuth_turn(float(a))[2] for a in angles]

@@ -57,11 +57,10 @@ def mirrored_pixels(mapping: SensorMapping) -> np.ndarray:
     """(H, W) bool: the pixels where a bank along +y takes its kernel mirrored about +y
     (lensim.psf.bank.azimuth.azimuth_turn: half of every quadrant, split by the 45-degree
     lines)."""
-    from lensim.psf.bank.azimuth import azimuth_turn
+    from lensim.psf.bank.azimuth import mirrored_at
 
     x, y = _pixel_mm(mapping)
-    offsets = np.degrees(np.arctan2(y, x)) - 90.0
-    return np.vectorize(lambda a: azimuth_turn(float(a))[2], otypes=[bool])(offsets)
+    return mirrored_at(np.degrees(np.arctan2(y, x)) - 90.0)
 
 
 def pixel_sources(shape: tuple[int, int], mapping: SensorMapping | None, mirrored: bool) -> dict[str, np.ndarray]:

@@ -143,17 +143,44 @@ def wiener_channels(
     (lensim.evaluate.baselines.wiener)."""
     from lensim.evaluate.baselines import wiener
 
-    if isinstance(bank, Mapping):
-        from lensim.render.posed import compose_rendered
-
-        return compose_rendered(
-            lambda key: wiener_channels(image, mapping, bank[key], capture, stage),
-            bank.keys(),
-            mapping,
-            (int(image.shape[-2]), int(image.shape[-1])),
-        )
     st = stage or WienerStage()
+    if isinstance(bank, Mapping):
+        return _posed_stage(image, mapping, bank, capture, st)
     return wiener(image, mapping, bank, capture, st.tile, None, st.noise_floor, st.ramp, st.margin)
+
+
+def _posed_stage(
+    image: torch.Tensor, mapping: Any, banks: Mapping[str, Any], capture: Mapping[str, Any] | None, st: WienerStage
+) -> torch.Tensor:
+    """wiener_channels with banks by source (lensim.render.posed): each source's stage is
+    computed on the box of its pixels grown by `pad` (whole tiles holding every window
+    that reaches the box: the tiles' grid stays the whole image's, so the box's pixels
+    are what a whole-image pass gives) and kept at its pixels. A 24 MP frame with 8 posed
+    banks: 9.9-10.5 s on 2 threads, against 3.3 s with one bank (21-22 s before the boxes
+    and the vectorized mirrored_pixels)."""
+    import numpy as np
+    import torch
+
+    from lensim.render.mapping import SensorMapping
+    from lensim.render.posed import MIRROR, pixel_sources
+
+    if "all" in banks:
+        return wiener_channels(image, mapping, banks["all"], capture, st)
+    h, w = int(image.shape[-2]), int(image.shape[-1])
+    pad = st.tile * (2 + (st.ramp + st.margin) // st.tile)  # a tile's window reaches tile + ramp / 2 + margin
+    p = mapping.pitch_um * 1e-3
+    out = torch.zeros(3, h, w, dtype=torch.float32)
+    for key, mask in pixel_sources((h, w), mapping, any(k.endswith(MIRROR) for k in banks)).items():
+        if not mask.any():
+            continue
+        rows, cols = np.flatnonzero(mask.any(1)), np.flatnonzero(mask.any(0))
+        y0, x0 = max(0, (int(rows[0]) - pad) // st.tile * st.tile), max(0, (int(cols[0]) - pad) // st.tile * st.tile)
+        y1, x1 = min(h, int(rows[-1]) + 1 + pad), min(w, int(cols[-1]) + 1 + pad)
+        box = SensorMapping(y1 - y0, x1 - x0, mapping.pitch_um, mapping.x0_mm + x0 * p, mapping.y0_mm + y0 * p)
+        part = wiener_channels(image[:, y0:y1, x0:x1], box, banks[key], capture, st)
+        inside = torch.from_numpy(mask[y0:y1, x0:x1])
+        out[:, y0:y1, x0:x1][:, inside] = part[:, inside]
+    return out
 
 
 def photo_wiener(

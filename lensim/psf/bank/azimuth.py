@@ -73,6 +73,15 @@ def azimuth_turn(offset_deg: float) -> tuple[int, float, bool, int]:
     return i, abs(beta) - AZIMUTH_STEP_DEG * i, beta < 0, quarter
 
 
+def mirrored_at(offset_deg: np.ndarray) -> np.ndarray:
+    """azimuth_turn's ``mirrored`` for an array of azimuth offsets (deg), elementwise (bool,
+    the same shape): the same arithmetic in numpy (a 24 MP frame's pixels in about 1 s
+    instead of 30 s of azimuth_turn calls)."""
+    offset = np.asarray(offset_deg, dtype=np.float64)
+    alpha = offset - 360.0 * np.round(offset / 360.0)  # math.remainder: -180..180
+    return alpha - 90.0 * np.round(alpha / 90.0) < 0  # np.round, like round, halves to even
+
+
 def finish_turn(kernel: np.ndarray, mirrored: bool, quarter: int, reference_deg: float) -> np.ndarray:
     """The last steps of :func:`azimuth_turn` on a (3, P, P) kernel: the mirror about the
     bank's direction (reference_deg, along +-x or +-y), then the quarter turns."""
