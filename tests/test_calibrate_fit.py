@@ -104,18 +104,25 @@ def test_degenerate_pairs_are_reported():
     assert degenerate_pairs(["a", "b", "c"], cov) == [{"pair": ["a", "b"], "correlation": 0.95}]
 
 
-@pytest.mark.slow
-def test_fitting_each_candidate_element_finds_the_one_the_linear_choice_misses():
-    # with a sensor tilt and focus on top, the linear model at the nominal lens ranks
-    # element 2 first for element 1's decentre, then element 3; fitting every candidate
-    # in full keeps element 1 (the smallest residual)
+def _element_one_case() -> tuple:
+    """The Cooke triplet with focus, a sensor tilt and element 1 decentred: (lens, truth,
+    its simulated observations with MTF noise 0.003, seed 2)."""
     lens = load_lens("cooke_triplet", warn=False)
     truth = {"image.focus": 0.03, "image.tilt_x": 0.2, "e1.decentre_y": -0.04}
     edges = _edges()
     wl, w = list(lens.wavelengths_um), list(lens.wavelength_weights)
     rng = np.random.default_rng(2)
     measured = [m + rng.normal(0.0, 0.003, m.shape) for m in model_mtfs(perturbed_lens(lens, truth), edges, wl, w, 16)]
-    result = fit(lens, Observations(edges, measured, None, wl, w, samples=16), candidates=3, ranking="linear")
+    return lens, truth, Observations(edges, measured, None, wl, w, samples=16)
+
+
+@pytest.mark.slow
+def test_fitting_each_candidate_element_finds_the_one_the_linear_choice_misses():
+    # with a sensor tilt and focus on top, the linear model at the nominal lens ranks
+    # element 2 first for element 1's decentre, then element 3; fitting every candidate
+    # in full keeps element 1 (the smallest residual)
+    lens, truth, obs = _element_one_case()
+    result = fit(lens, obs, candidates=3, ranking="linear")
     tried = result.lens.as_built["candidates"]
     assert [c["parameters"][-1] for c in tried] == ["e2.decentre_y", "e3.decentre_y", "e1.decentre_y"]
     assert tried[2]["rms"] < min(tried[0]["rms"], tried[1]["rms"])
@@ -130,13 +137,8 @@ def test_ranking_by_prefits_fits_the_element_the_linear_model_misses():
     # the case above with the defaults (one element fitted in full, ranked by prefits): the
     # linear model at the nominal lens still ranks element 2 first (recorded), the element
     # prefits rank element 1 first, and it is the one fitted
-    lens = load_lens("cooke_triplet", warn=False)
-    truth = {"image.focus": 0.03, "image.tilt_x": 0.2, "e1.decentre_y": -0.04}
-    edges = _edges()
-    wl, w = list(lens.wavelengths_um), list(lens.wavelength_weights)
-    rng = np.random.default_rng(2)
-    measured = [m + rng.normal(0.0, 0.003, m.shape) for m in model_mtfs(perturbed_lens(lens, truth), edges, wl, w, 16)]
-    result = fit(lens, Observations(edges, measured, None, wl, w, samples=16))
+    lens, truth, obs = _element_one_case()
+    result = fit(lens, obs)
     ranking = result.lens.as_built["ranking"]
     assert ranking["by"] == "prefit" and ranking["linear"][0]["move"] == "e2.decentre"
     prefits = ranking["prefits"]
