@@ -225,18 +225,18 @@ def restore_command(
     lens_obj = check_zero_shot(info, sensor_data, lens_file, fno) if zero_shot else None
     decoded = _check_photos(photos, offset, (sensor_w, sensor_h), getattr(model, "uses_wiener", False))
     bank_dir: Path | dict[str, Path] | None = bank
-    if zero_shot and bank_dir is None:
-        bank_dir = zero_shot_bank_folder(model, lens_obj, sensor_data, (fno, focus_m), quiet or json_out)
-    photo_settings = _photo_settings(photos, shooting, info)
-    stage = _stage_inputs(model, info, bank_dir, sensor_data)
-    written = []
-    if raws and stage is not None and isinstance(stage[0], dict):
-        raise InputError(
+    if raws and lens_obj is not None and lens_obj.has_poses and getattr(model, "uses_wiener", False):
+        raise InputError(  # before its 8 banks are computed
             "--lens",
             None,
             "is a lens with poses, whose Wiener stage is composed per sensor quadrant for developed "
             "photos (PNG, TIFF, JPEG) only; raw files cannot be restored with it yet",
         )
+    if zero_shot and bank_dir is None:
+        bank_dir = zero_shot_bank_folder(model, lens_obj, sensor_data, (fno, focus_m), quiet or json_out)
+    photo_settings = _photo_settings(photos, shooting, info)
+    stage = _stage_inputs(model, info, bank_dir, sensor_data)
+    written = []
     with folder_lock(output), _tile_memory(workers):  # one writer at a time
         if raws:
             from lensim.raw.restore import RestoreSettings

@@ -137,8 +137,8 @@ def wiener_channels(
     (lensim.render.mapping.SensorMapping, at the bank's pitch); bank: lensim.psf.bank.PSFBank,
     or the banks of a lens with poses by source (lensim.render.posed.posed_banks): then each
     pixel takes the stage computed with its own source's bank, as the lens is rendered
-    (compose_rendered; only the sources with pixels in the image are computed, each over
-    the whole image); capture: the capture record (ccm, r_gain, b_gain, shot, read;
+    (pixel_sources; only the sources with pixels in the image are computed, each on the
+    box of its pixels: _posed_stage); capture: the capture record (ccm, r_gain, b_gain, shot, read;
     lensim.data.pairs crop_capture) or None. The Wiener oracle itself
     (lensim.evaluate.baselines.wiener)."""
     from lensim.evaluate.baselines import wiener
