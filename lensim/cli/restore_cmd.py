@@ -225,13 +225,6 @@ def restore_command(
     lens_obj = check_zero_shot(info, sensor_data, lens_file, fno) if zero_shot else None
     decoded = _check_photos(photos, offset, (sensor_w, sensor_h), getattr(model, "uses_wiener", False))
     bank_dir: Path | dict[str, Path] | None = bank
-    if raws and lens_obj is not None and lens_obj.has_poses and getattr(model, "uses_wiener", False):
-        raise InputError(  # before its 8 banks are computed
-            "--lens",
-            None,
-            "is a lens with poses, whose Wiener stage is composed per sensor quadrant for developed "
-            "photos (PNG, TIFF, JPEG) only; raw files cannot be restored with it yet",
-        )
     if zero_shot and bank_dir is None:
         bank_dir = zero_shot_bank_folder(model, lens_obj, sensor_data, (fno, focus_m), quiet or json_out)
     photo_settings = _photo_settings(photos, shooting, info)
@@ -252,7 +245,7 @@ def restore_command(
                 conditioning=info["conditioning"],
                 engine=engine,
                 onnx=info.get("onnx"),
-                bank=None if stage is None else str(stage[0].directory),
+                bank=None if stage is None else _bank_folders(stage[0]),
                 precision=precision,
             )
             written += _restore_raws(raws, output, model, settings, dng, (workers, scheduler), quiet or json_out)
@@ -427,6 +420,13 @@ def _load_model(
     if not (isinstance(res, (list, tuple)) and len(res) == 2 and all(isinstance(v, int) and v > 0 for v in res)):
         raise InputError(info["path"], "sensor", "records no sensor resolution; expected --sensor")
     return model, info, sensor_data, (int(res[0]), int(res[1]))
+
+
+def _bank_folders(bank: Any) -> str | dict[str, str]:
+    """A bank's folder, or a lens with poses' banks' folders by source, for the raw workers."""
+    if isinstance(bank, dict):
+        return {k: str(b.directory) for k, b in bank.items()}
+    return str(bank.directory)
 
 
 def _stage_inputs(

@@ -72,8 +72,9 @@ class RestoreSettings:
     each file's EXIF), the checkpoint's conditioning (Conditioning.to_dict(); None: no
     settings) and the engine: "torch", or "onnxruntime" with ``onnx`` the serialized model
     (worker processes build their sessions from it); ``bank``: the PSF bank's folder, for a
-    PSF-informed network (lensim.restore.psf_stage.network_bank); ``precision``: the tiles'
-    arithmetic (lensim.restore.infer.PRECISIONS)."""
+    PSF-informed network (lensim.restore.psf_stage.network_bank), or a lens with poses'
+    bank folders by source (lensim.render.posed.posed_banks; the stage composes them per
+    pixel); ``precision``: the tiles' arithmetic (lensim.restore.infer.PRECISIONS)."""
 
     checkpoint: str
     sensor: dict[str, Any]
@@ -85,7 +86,7 @@ class RestoreSettings:
     conditioning: dict[str, Any] | None = None
     engine: str = "torch"
     onnx: bytes | None = None
-    bank: str | None = None
+    bank: str | dict[str, str] | None = None
     precision: str = "float32"
 
 
@@ -323,7 +324,11 @@ def _stage_image(
         return None
     from lensim.restore.psf_stage import network_bank, photo_wiener, stage_of
 
-    bank = network_bank({"path": settings.checkpoint}, settings.bank)
+    info, given = {"path": settings.checkpoint}, settings.bank
+    if isinstance(given, dict):  # a lens with poses: its banks by source
+        bank: Any = {k: network_bank(info, v) for k, v in given.items()}
+    else:
+        bank = network_bank(info, given)
     return photo_wiener(img, bank, sensor, geometry[0], geometry[1], capture, stage_of(model), source)
 
 
