@@ -152,3 +152,19 @@ def test_a_banks_kernel_size_is_looked_up_without_numba_and_equals_the_fused_one
     monkeypatch.setattr(T, "without_fused_kernel", contextlib.nullcontext)
     assert numba_loaded == "False"
     assert int(size) == suggest_kernel_pixels(load_lens("cooke_triplet", warn=False), 3.9)
+
+
+def test_one_switch_turns_off_both_compiled_kernels():
+    """without_fused_kernel (and USE_FUSED_KERNEL) rule the tracer's kernel and the aiming's
+    compiled launch alike (fused_kernels_allowed)."""
+    from lensim.optics.aiming.rays import _fused_launch_applies
+    from lensim.optics.paraxial import paraxial_data
+
+    lens = load_lens("double_gauss", warn=False)
+    para = paraxial_data(lens)
+    fld, pupil, n0 = torch.zeros(4, 2, dtype=torch.float64), torch.zeros(2048, 2, dtype=torch.float64), torch.ones(1)
+    assert T.fused_kernels_allowed() and _fused_launch_applies(lens, fld, pupil, para, n0, 1)
+    with T.without_fused_kernel():
+        assert not T.fused_kernels_allowed() and not _fused_launch_applies(lens, fld, pupil, para, n0, 1)
+        assert T._fused_kernel(steps(lens, 0, lens.num_surfaces, True, True)) is None
+    assert T.fused_kernels_allowed()

@@ -327,7 +327,8 @@ _FUSED_OFF: contextvars.ContextVar[bool] = contextvars.ContextVar("lensim_fused_
 
 @contextlib.contextmanager
 def without_fused_kernel() -> Iterator[None]:
-    """Within this context (in this thread), trace() runs the torch chunk loop only: for a
+    """Within this context (in this thread), no compiled kernel runs (trace()'s chunk loop and
+    the aiming's torch launch instead; fused_kernels_allowed): for a
     one-off trace of a few thousand rays in a process that may trace nothing else (a bank's
     kernel size, looked up before its cache: the Cooke triplet's 0.06 s instead of 0.8 s,
     most of that numba's import and start). Same results to rounding."""
@@ -338,11 +339,17 @@ def without_fused_kernel() -> Iterator[None]:
         _FUSED_OFF.reset(token)
 
 
+def fused_kernels_allowed() -> bool:
+    """Whether compiled kernels may run here (the tracer's and the fused launch's,
+    lensim.optics.aiming): USE_FUSED_KERNEL, and not within without_fused_kernel."""
+    return USE_FUSED_KERNEL and not _FUSED_OFF.get()
+
+
 def _fused_kernel(chunk_steps: list):
     """The fused kernel (lensim.optics.trace_fused) as fn(p, d, o, v, z0, n, *outputs) on
     torch tensors, or None where it does not cover the steps (or there are none). numba is
     imported here, on the first trace, not with lensim."""
-    if not chunk_steps or not USE_FUSED_KERNEL:
+    if not chunk_steps or not fused_kernels_allowed():
         return None
     from lensim.optics import trace_fused
 
@@ -421,7 +428,7 @@ def trace(
     status, failed_at = host_empty((B,), torch.int8, device), host_empty((B,), torch.int16, device)
     rec = host_empty((len(chunk_steps), B, 3), DTYPE, device) if record and chunk_steps else None
     z0 = float(zv[start]) if start < len(zv) else 0.0
-    use_fused = not _FUSED_OFF.get() and device.type == "cpu" and rec is None and B >= FUSED_MIN_BATCH
+    use_fused = device.type == "cpu" and rec is None and B >= FUSED_MIN_BATCH
     fused_fn = _fused_kernel(chunk_steps) if use_fused else None
 
     def run(task) -> None:

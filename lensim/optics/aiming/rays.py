@@ -140,7 +140,7 @@ def _fused_launch_applies(
     values: tuple[object, ...] = (fld, pupil, n0, para.epd_mm, para.entrance_pupil_z_mm)
     return (
         lens.infinite_object
-        and trace_mod.USE_FUSED_KERNEL
+        and trace_mod.fused_kernels_allowed()
         and W * fld.shape[0] * pupil.shape[0] >= FUSED_LAUNCH_MIN
         and all(not isinstance(v, torch.Tensor) or (v.device.type == "cpu" and not v.requires_grad) for v in values)
     )
