@@ -48,8 +48,10 @@ def quadrant_azimuths(mapping: SensorMapping) -> dict[str, float]:
 
 
 def _pixel_mm(mapping: SensorMapping) -> tuple[np.ndarray, np.ndarray]:
-    rows, cols = np.mgrid[: mapping.height, : mapping.width]
+    """The pixel centres' sensor x (1, W) and y (H, 1) in mm, broadcasting to (H, W)
+    (a 24 MP frame's full grids would be 0.8 GB of temporaries)."""
     p = mapping.pitch_um * 1e-3
+    cols, rows = np.arange(mapping.width)[None, :], np.arange(mapping.height)[:, None]
     return mapping.x0_mm + (cols + 0.5) * p, mapping.y0_mm + (rows + 0.5) * p
 
 
