@@ -35,8 +35,13 @@ and this script computed them all with the nominal lens's). Scored by `lensim ev
 per field zone (centre, middle, edge) and per photo.
 
 The Wiener stages and the "wiener (true lens's bank)" oracle use a lens's bank along +y
-turned to every azimuth (the pairs' "bank": PosedBanks.stage), what `lensim restore` has
+turned to every azimuth (the pairs' "bank": PosedBanks.stage), what `lensim restore` had
 for a lens file; with --render posed the test photos went through the posed banks instead.
+Since lensim gives pairs rendered through posed banks their posed stage (the manifest's
+"posed_banks": `lensim train`, `evaluate` and `restore` use them; CHANGELOG), a
+rerun trains (b) and (c) --render posed with posed stages and scores the oracle with the
+posed banks where this script passes no --bank: the committed restoration_v3 rows
+"(b) calibrated" and "(c) tolerances" (turned stages) reproduce at commits before that.
 
     nice -n 15 env OMP_NUM_THREADS=1 python benchmarks/calibration_restoration.py \\
         --camera larger_decentre --epochs 18 --out /tmp/crv3 \\

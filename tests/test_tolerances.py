@@ -262,8 +262,8 @@ def test_dataset_make_draws_pairs_through_perturbed_lenses(tmp_path, capsys, mon
 
 def _posed_draws(tmp_path, args, turned, capsys, monkeypatch):
     """--posed-draws: each draw's photos through its posed banks (8: a quadrant's lens and its
-    mirrored lens's, lensim.render.posed), the stage still its one bank; same crops and
-    targets, other inputs."""
+    mirrored lens's, lensim.render.posed), and their Wiener stage too (keyed apart from the
+    turned draws' stage); same crops and targets, other inputs."""
     import json
 
     from cli_runner import run_cli
@@ -284,6 +284,22 @@ def _posed_draws(tmp_path, args, turned, capsys, monkeypatch):
         assert torch.equal(*targets)
         diff = max(diff, float((inputs[0] - inputs[1]).abs().max()))
     assert diff > 0
+    from lensim.data.pairs import crop_capture
+    from lensim.evaluate.harness import record_banks
+    from lensim.render.mapping import native_mapping
+    from lensim.restore.psf_stage import cached_path, ensure_wiener_cache, stage_bank_entry, wiener_channels
+    from lensim.sensor.profile import sensor_from_dict
+
+    root, sensor = tmp_path / "posed", sensor_from_dict(manifest["sensor"])
+    assert stage_bank_entry(manifest) == {"tolerance_draw": [d["posed_banks"] for d in draws]}
+    folder, bank_of = ensure_wiener_cache(root), record_banks(manifest, root)
+    for i, rec in enumerate(manifest["records"]):
+        banks, crop = bank_of(i, rec), rec["crops"][0]
+        assert {k: str(b.directory) for k, b in banks.items()} == draws[rec["tolerance_draw"]]["posed_banks"]
+        x, _ = read_image(root / crop["input"])
+        mapping = native_mapping(*x.shape[1:], sensor, crop["sensor_top"], crop["sensor_left"])
+        want = wiener_channels(x, mapping, banks, crop_capture(rec, crop)).clamp(0, 1)
+        assert (read_image(cached_path(folder, root / crop["input"]))[0] - want).abs().max() < 1.0 / 65535 + 1e-6
 
 
 def _stage_is_each_draws_own(data, args, capsys, monkeypatch):

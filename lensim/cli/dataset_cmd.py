@@ -25,7 +25,7 @@ from lensim.cli.validate import at_least, choice, even, in_range, input_folder, 
 from lensim.errors import InputError
 
 if TYPE_CHECKING:
-    from lensim.data.pairs import ToleranceBanks
+    from lensim.data.pairs import PosedBanks, ToleranceBanks
     from lensim.optics.lens import Lens
     from lensim.psf.bank import BankSettings, GridAxes, GridBank, PSFBank
     from lensim.sensor.profile import SensorProfile
@@ -155,7 +155,12 @@ def make(
     restoration uses by default) is the nominal lens's; the PSF-informed network's Wiener
     stage of each pair uses its own draw's bank. With --posed-draws each draw's photos go
     through its posed banks (lensim.render.posed; the manifest's draws list them as
-    "posed_banks"); its stage stays the draw's bank.
+    "posed_banks"), and so does their Wiener stage.
+
+    A lens with poses (an as-built lens from `lensim calibrate`: decentred or tilted
+    elements, a tilted sensor) renders through its posed banks, one per sensor quadrant and
+    its mirrored lens's (8, computed with the lens's own bank: the manifest's "bank"; they
+    are its "posed_banks"); `lensim train`, `evaluate` and `restore` then use them too.
 
     Example: lensim dataset make photos/ --lens double_gauss --sensor full_frame --fno 2,2.8,4 --focus-m inf,3 -o data/
 
@@ -181,7 +186,7 @@ def make(
         raise InputError("--posed-draws", None, "renders tolerance draws; expected --tolerances with it")
     sensor = load_sensor(sensor_file)
     quiet = quiet or json_out
-    bank: PSFBank | GridBank | ToleranceBanks
+    bank: PSFBank | GridBank | ToleranceBanks | PosedBanks
     if tolerances is not None:
         _check_tolerances(tolerances, tolerance_draws, bank_dir, axes)
         bank = _tolerance_banks(
@@ -194,7 +199,14 @@ def make(
             scheduler,
         )
     elif bank_dir is not None:
-        bank, _ = bank_or_grid_for_lens(bank_dir, lens_file)
+        bank, bank_lens = bank_or_grid_for_lens(bank_dir, lens_file)
+        if bank_lens.has_poses:
+            raise InputError(
+                "--bank",
+                None,
+                "is a bank of a lens with poses, which renders through its posed banks (one per sensor "
+                "quadrant and its mirrored lens's); expected --lens LENS without --bank (they are computed)",
+            )
     else:
         bank = _lens_bank(lens_file, sharp_dir, size, sensor, settings, axes, workers, quiet, scheduler)
     with progress_bar("pairs", "photos", quiet) as cb:
@@ -240,16 +252,26 @@ def _lens_bank(
     workers: int,
     quiet: bool,
     scheduler: str | None,
-) -> PSFBank | GridBank:
+) -> PSFBank | GridBank | PosedBanks:
     """The lens's bank at the sensor's pitch (a grid of banks over ``axes`` when given),
-    cached or computed, once the spectral response and the photos are known to work."""
+    cached or computed, once the spectral response and the photos are known to work; a
+    lens with poses: its posed banks (_posed_lens_banks)."""
     from lensim.data.pairs import check_photos, list_images
     from lensim.optics.lens_file import load_lens
     from lensim.psf.bank import get_bank
 
     lens = load_lens(lens_file or assets.DEFAULT_LENS)
+    if lens.has_poses and axes.given:
+        raise InputError(
+            "--lens",
+            lens_file,
+            "is a lens with poses, rendered through its posed banks at one setting; expected no "
+            "--fno, --focus-m, --object-m or --config lists with it",
+        )
     check_response(settings, sensor.spectral_response, sensor=sensor)
     check_photos(list_images(sharp_dir), size)  # before the bank, which takes minutes
+    if lens.has_poses:
+        return _posed_lens_banks(lens, sensor, settings, (workers, scheduler), quiet)
     with progress_bar("PSF grid" if axes.given else "PSF bank", "fields", quiet) as report:
         return get_bank(
             lens,
@@ -261,6 +283,31 @@ def _lens_bank(
             scheduler=scheduler,
             progress=report,
         )
+
+
+def _posed_lens_banks(
+    lens: Lens, sensor: SensorProfile, settings: BankSettings, where: tuple[int, str | None], quiet: bool
+) -> PosedBanks:
+    """A lens with poses' posed banks over the whole sensor (lensim.render.posed.sensor_banks)
+    and its own bank (the pairs' "bank"), cached or computed together; where: (workers,
+    scheduler)."""
+    from lensim.data.pairs import PosedBanks
+    from lensim.psf.bank import BankRequest, PSFBank, get_banks
+    from lensim.render.posed import sensor_banks
+
+    lenses = [lens]
+
+    def index_of(one: Lens) -> int:
+        lenses.append(one)
+        return len(lenses) - 1
+
+    keyed = sensor_banks(lens, sensor, index_of)
+    requests = [BankRequest(m, sensor.pixel_pitch_um, settings, response=sensor.spectral_response) for m in lenses]
+    with progress_bar(f"PSF banks of the lens with poses ({len(lenses)})", "fields", quiet) as report:
+        computed = get_banks(requests, workers=where[0], scheduler=where[1], progress=report)
+    banks = [b for b in computed if isinstance(b, PSFBank)]
+    by_source = keyed if isinstance(keyed, dict) else {"all": keyed}
+    return PosedBanks({k: banks[i] for k, i in by_source.items()}, banks[0])
 
 
 def _check_tolerances(tolerances: Path, draws: int, bank_dir: Path | None, axes: GridAxes) -> None:

@@ -18,7 +18,7 @@ from lensim.cli.bank_options import scheduler_option
 from lensim.cli.common import console, print_json, progress_bar
 from lensim.cli.validate import at_least, choice, distinct_outputs, output_folder, scheduler_address
 from lensim.cli.validate import device as check_device
-from lensim.cli.zero_shot import check_zero_shot, universal_inputs, zero_shot_bank_folder
+from lensim.cli.zero_shot import check_zero_shot, run_lens_bank_folder, universal_inputs, zero_shot_bank_folder
 from lensim.errors import InputError, OutOfMemory
 from lensim.io import folder_lock
 
@@ -80,7 +80,12 @@ def restore_command(
     sensor_file: str = typer.Option(
         None, "--sensor", help="Sensor profile of the photos (default: the one trained for)."
     ),
-    lens_file: str = typer.Option(None, "--lens", help="Lens of the photos (only checked against the checkpoint's)."),
+    lens_file: str = typer.Option(
+        None,
+        "--lens",
+        help="Lens of the photos (checked against the checkpoint's); a lens with poses (an as-built lens "
+        "from `lensim calibrate`) gives a PSF-informed network's stage its posed banks (8, computed and cached).",
+    ),
     sensor_offset: str = typer.Option(
         None,
         "--sensor-offset",
@@ -174,6 +179,11 @@ def restore_command(
     file written by `lensim export` (its metadata gives the sensor and lens trained for), or
     a run, exported on the fly in memory.
 
+    A PSF-informed network's Wiener stage takes --bank, else the bank of the pairs it was
+    trained on (pairs of a lens with poses: their posed banks, one per sensor quadrant and
+    its mirrored lens's, composed per pixel); with --lens a lens with poses, that lens's
+    posed banks.
+
     Zero-shot: CHECKPOINT 'universal' (or, with --lens, no CHECKPOINT) restores with the
     shipped universal model (lensim.restore.universal), no training run: --lens (a file, a
     built-in or a library lens) and --sensor say what took the photos; a sensor pitch or
@@ -227,6 +237,8 @@ def restore_command(
     bank_dir: Path | dict[str, Path] | None = bank
     if zero_shot and bank_dir is None:
         bank_dir = zero_shot_bank_folder(model, lens_obj, sensor_data, (fno, focus_m), quiet or json_out)
+    elif bank_dir is None:  # a lens with poses: its posed banks (the run's, or computed)
+        bank_dir = run_lens_bank_folder(model, info, lens_file, sensor_data, (fno, focus_m), quiet or json_out)
     photo_settings = _photo_settings(photos, shooting, info)
     stage = _stage_inputs(model, info, bank_dir, sensor_data)
     written = []

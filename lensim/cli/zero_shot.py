@@ -49,25 +49,57 @@ def zero_shot_bank_folder(
     (fno, focus_m), from the bank cache or computed into it with a progress bar, for a
     universal model that is PSF-informed (lensim.restore.psfnet); for a lens with poses
     (an as-built lens from `lensim calibrate`) its banks' folders by sensor source
-    (lensim.render.posed.posed_banks: 8 banks); None for a model that is not PSF-informed."""
+    (lensim.render.posed.sensor_banks: 8 banks); None for a model that is not PSF-informed."""
     if not getattr(model, "uses_wiener", False):
         return None
     from lensim.cli.common import progress_bar
-    from lensim.render.mapping import native_mapping
-    from lensim.render.posed import posed_banks
+    from lensim.render.posed import sensor_banks
     from lensim.restore.universal import zero_shot_bank
     from lensim.sensor.profile import sensor_from_dict
 
     sensor = sensor_from_dict(sensor_data, "--sensor")
     title = "PSF banks of the lens with poses (8)" if lens.has_poses else "PSF bank of the lens"
     with progress_bar(title, "fields", quiet) as report:
-        banks = posed_banks(
-            lens,
-            native_mapping(sensor.height, sensor.width, sensor, 0, 0),
-            lambda one: zero_shot_bank(one, sensor, shooting[0], shooting[1], progress=report),
+        banks = sensor_banks(
+            lens, sensor, lambda one: zero_shot_bank(one, sensor, shooting[0], shooting[1], progress=report)
         )
-    folders = {key: Path(str(bank.directory)) for key, bank in banks.items()}  # cached banks: in their folders
-    return folders["all"] if "all" in folders else folders
+    if isinstance(banks, dict):  # cached banks: in their folders
+        return {key: Path(str(bank.directory)) for key, bank in banks.items()}
+    return Path(str(banks.directory))
+
+
+def run_lens_bank_folder(
+    model: Any,
+    info: dict,
+    lens_file: str | None,
+    sensor_data: dict,
+    shooting: tuple[float | None, float | None],
+    quiet: bool,
+) -> Path | dict[str, Path] | None:
+    """The banks' folders a trained PSF-informed network's stage takes for photos of
+    --lens when that lens has poses (lensim.render.posed.sensor_banks): None (the run's
+    own bank, lensim.restore.psf_stage.network_bank) when no lens is given, the network
+    is not PSF-informed, the lens has no poses, or the run's pairs were rendered through
+    this very lens's posed banks (its stage takes those); else the lens's posed banks as
+    zero-shot computes them (zero_shot_bank_folder)."""
+    if lens_file is None or not getattr(model, "uses_wiener", False):
+        return None
+    import json
+
+    from lensim.optics.lens_file import lens_to_dict, load_lens
+    from lensim.restore.psf_stage import network_bank
+
+    lens = load_lens(lens_file, warn=False)
+    if not lens.has_poses:
+        return None
+    same = json.dumps(info.get("lens"), sort_keys=True, default=str)
+    if same == json.dumps(lens_to_dict(lens), sort_keys=True, default=str):
+        try:
+            if isinstance(network_bank(info), dict):
+                return None
+        except InputError:
+            pass  # the run's pairs are not here: the lens's banks are computed
+    return zero_shot_bank_folder(model, lens, sensor_data, shooting, quiet)
 
 
 def check_zero_shot(info: dict, sensor_data: dict, lens: str, fno: float | None) -> Any:

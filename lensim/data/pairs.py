@@ -98,7 +98,8 @@ class ToleranceBanks:
     uses the bank of its own draw (the manifest's "stage_bank": STAGE_PER_DRAW;
     lensim.restore.psf_stage.stage_bank_entry). posed: per draw, the banks its photos are
     simulated through instead of banks[k] (a draw with decentres or tilts has poses:
-    PosedBanks); the stage stays banks[k]."""
+    PosedBanks), recorded as the draw's "posed_banks"; its Wiener stage uses them too
+    (lensim.evaluate.harness.record_banks)."""
 
     banks: list[PSFBank]
     lens: dict
@@ -113,9 +114,11 @@ class PosedBanks:
     """The banks that render a lens with poses (lensim.render.posed.posed_banks: one per
     sensor quadrant and its mirrored lens's), each pixel of a photo simulated through its
     own (lensim.render.pipeline.simulate). stage: the lens's bank along +y (turned to
-    every azimuth), the pairs' "bank": what a restoration of the lens uses. In
+    every azimuth), the pairs' "bank" (kept for what reads one bank: a restoration of the
+    lens, its Wiener stage and the oracles use "posed_banks", the folders of ``banks``:
+    lensim.render.posed.sensor_banks, lensim.evaluate.harness.record_banks). In
     ToleranceBanks.posed, draw k's photos are simulated through posed[k] (and its Wiener
-    stage is banks[k] as without)."""
+    stage too)."""
 
     banks: dict[str, PSFBank]
     stage: PSFBank
@@ -520,6 +523,8 @@ def _claim_folder(out: Path, settings: dict) -> bool:
     # the bank folders may move; an older tolerance folder (draw 0's bank as "bank", no
     # "stage_bank") resumes, its photos being the same, and gets today's manifest
     diff = sorted(k for k in settings if k not in ("bank", "stage_bank", "posed_banks") and prev.get(k) != settings[k])
+    if ("posed_banks" in prev) != ("posed_banks" in settings):  # their folders may move, not come or go
+        diff.append("posed_banks")
     if diff:
         raise InputError(
             str(out),

@@ -16,7 +16,10 @@ crop's sensor offset). Outputs are clipped to [0, 1] before scoring. Built-in me
 oracles using the true bank), and ``model`` / ``plain`` (the plain network baseline;
 ``plain-unet`` is its old name, an alias: :data:`METHOD_ALIASES`) from `lensim train`
 checkpoints (:func:`checkpoint_method`, via lensim.restore.infer; a PSF-informed network
-gets each crop's Wiener stage image, lensim.restore.psf_stage).
+gets each crop's Wiener stage image, lensim.restore.psf_stage). Pairs of a lens with poses
+(made through its posed banks: the manifest's "posed_banks", or a tolerance draw's) give
+each crop those banks by source (:func:`record_banks`): the oracles and the stage compose
+them per pixel as the pairs were rendered (lensim.render.posed).
 
 Aggregation (the summary JSON):
   * ``psnr_db``, ``ssim``: mean over crops of each crop's PSNR (dB) and mean SSIM;
@@ -73,15 +76,16 @@ class CropContext:
     """What a method may know about a crop besides its pixels.
 
     mapping: the crop's pixels on the sensor (pitch um, corner position mm); sensor: the
-    dataset's sensor profile; bank: the PSF bank the pairs were simulated with (None when
-    it could not be found); capture: the record's capture draw (ccm, white-balance gains,
+    dataset's sensor profile; bank: the PSF bank the pairs were simulated with, or the
+    banks by source of a lens with poses (lensim.render.posed.sensor_banks; None when
+    not found); capture: the record's capture draw (ccm, white-balance gains,
     noise), or None; top, left: sensor pixel of the crop's top-left pixel; record, crop:
     indices in the manifest; settings: the record's shooting settings (fno, focus_m,
     focal_mm; lensim.restore.conditioning.record_settings), None for pairs without."""
 
     mapping: SensorMapping
     sensor: SensorProfile
-    bank: PSFBank | None
+    bank: PSFBank | dict[str, PSFBank] | None
     capture: Mapping[str, Any] | None
     top: int
     left: int
@@ -97,7 +101,7 @@ Method = Callable[[torch.Tensor, CropContext], torch.Tensor]
 # methods
 
 
-def _need_bank(ctx: CropContext, name: str) -> PSFBank:
+def _need_bank(ctx: CropContext, name: str) -> PSFBank | dict[str, PSFBank]:
     if ctx.bank is None:
         raise ParameterError(
             None,
@@ -107,19 +111,37 @@ def _need_bank(ctx: CropContext, name: str) -> PSFBank:
     return ctx.bank
 
 
+def _oracle(name: str, baseline: Callable[..., torch.Tensor], options: Mapping[str, Any]) -> Method:
+    """A baseline given the crop's bank; with banks by source (a lens with poses) each
+    source's result at its pixels, the whole crop restored once per source it holds
+    (lensim.render.posed.compose_rendered: as the crop was rendered)."""
+    from lensim.render.posed import compose_rendered
+
+    def run(image: torch.Tensor, ctx: CropContext) -> torch.Tensor:
+        bank = _need_bank(ctx, name)
+        if not isinstance(bank, Mapping):
+            return baseline(image, ctx.mapping, bank, ctx.capture, **options)
+        return compose_rendered(
+            lambda key: baseline(image, ctx.mapping, bank[key], ctx.capture, **options),
+            bank,
+            ctx.mapping,
+            (int(image.shape[-2]), int(image.shape[-1])),
+        )
+
+    return run
+
+
 def builtin_method(name: str, **options: Any) -> Method:
     """A built-in method by name: ``input`` (identity), ``wiener``, ``rl``, ``unsharp``;
     options go to the baseline (e.g. ``iterations`` for rl, ``sigma_px`` for unsharp)."""
     if name == "input":
         return lambda image, ctx: image
     if name == "wiener":
-        return lambda image, ctx: baselines.wiener(image, ctx.mapping, _need_bank(ctx, name), ctx.capture, **options)
+        return _oracle(name, baselines.wiener, options)
     if name == "rl":
-        return lambda image, ctx: baselines.richardson_lucy(
-            image, ctx.mapping, _need_bank(ctx, name), ctx.capture, **options
-        )
+        return _oracle(name, baselines.richardson_lucy, options)
     if name == "unsharp":
-        return lambda image, ctx: baselines.unsharp_mask(image, ctx.mapping, ctx.bank, ctx.capture, **options)
+        return lambda image, ctx: baselines.unsharp_mask(image, ctx.mapping, None, ctx.capture, **options)  # no bank
     raise InputError(
         None, "methods", f"unknown method {name!r}; expected one of {', '.join(BUILTIN_METHODS + CHECKPOINT_METHODS)}"
     )
@@ -206,15 +228,30 @@ def _stage_image(model: Any, image: torch.Tensor, ctx: CropContext) -> torch.Ten
 # dataset
 
 
+def pairs_bank_entry(manifest: Mapping[str, Any]) -> Any:
+    """The bank folder the pairs (or a tolerance draw's pairs) were rendered with, as the
+    manifest names it: its "posed_banks" (a lens with poses: folders by source,
+    lensim.data.pairs.PosedBanks) when there, else its "bank"."""
+    posed = manifest.get("posed_banks")
+    return dict(posed) if isinstance(posed, Mapping) and posed else manifest.get("bank")
+
+
 def _load_bank(
     manifest: Mapping[str, Any], pairs_dir: Path, bank: PSFBank | GridBank | str | Path | None
-) -> PSFBank | GridBank | None:
-    """The bank (or grid of banks) the pairs were made with: given, or the manifest's."""
+) -> PSFBank | GridBank | dict[str, PSFBank] | None:
+    """The bank (or grid of banks) the pairs were made with: given, or the manifest's
+    (:func:`pairs_bank_entry`; banks by source for a lens with poses, None if one is
+    missing)."""
     if isinstance(bank, (PSFBank, GridBank)):
         return bank
     if bank is not None:
         return GridBank.load(bank) if is_grid(bank) else PSFBank.load(bank)
-    path = manifest.get("bank")
+    entry = pairs_bank_entry(manifest)
+    if isinstance(entry, dict):
+        found = {k: _load_bank({"bank": v}, pairs_dir, None) for k, v in entry.items()}
+        ok = all(isinstance(b, PSFBank) for b in found.values())
+        return {k: b for k, b in found.items() if isinstance(b, PSFBank)} if ok else None
+    path = entry
     if not path:
         return None
     for cand in (Path(path), pairs_dir / path):
@@ -225,9 +262,11 @@ def _load_bank(
     return None
 
 
-def _record_bank(bank: PSFBank | GridBank | None, record: Mapping[str, Any], where: str) -> PSFBank | None:
+def _record_bank(
+    bank: PSFBank | GridBank | dict[str, PSFBank] | None, record: Mapping[str, Any], where: str
+) -> PSFBank | dict[str, PSFBank] | None:
     """The bank a record's photo was simulated with: a grid's bank of the record's
-    setting (its grid_setting), else the one bank."""
+    setting (its grid_setting), else the one bank (or banks by source)."""
     if not isinstance(bank, GridBank):
         return bank
     k = record.get("grid_setting")
@@ -241,22 +280,26 @@ def _record_bank(bank: PSFBank | GridBank | None, record: Mapping[str, Any], whe
 
 
 def tolerance_draw_banks(manifest: Mapping[str, Any]) -> list[Any] | None:
-    """Each draw's bank folder (as the manifest names it) of pairs made through tolerance
-    draws (lensim.data.pairs.ToleranceBanks: the manifest's "tolerances"), else None."""
+    """Each draw's bank folder (as the manifest names it; a draw rendered through its
+    posed banks, ``--posed-draws``: their folders by source, :func:`pairs_bank_entry`) of
+    pairs made through tolerance draws (lensim.data.pairs.ToleranceBanks: the manifest's
+    "tolerances"), else None."""
     tol = manifest.get("tolerances")
     if not isinstance(tol, Mapping):
         return None
     draws = tol.get("draws")
-    return [d.get("bank") if isinstance(d, Mapping) else None for d in (draws if isinstance(draws, list) else [])]
+    return [pairs_bank_entry(d) if isinstance(d, Mapping) else None for d in (draws if isinstance(draws, list) else [])]
 
 
 def record_banks(
     manifest: Mapping[str, Any], pairs_dir: Path, bank: PSFBank | GridBank | str | Path | None = None
-) -> Callable[[int, Mapping[str, Any]], PSFBank | None]:
+) -> Callable[[int, Mapping[str, Any]], PSFBank | dict[str, PSFBank] | None]:
     """(record index, record) -> the PSF bank that record's photo was simulated with
-    (CropContext.bank): the manifest's bank, a grid's bank of the record's setting, or for
-    pairs made through tolerance draws the bank of the record's draw (its "tolerance_draw";
-    the manifest's "bank" is then the nominal lens's). ``bank`` (a bank, grid or folder)
+    (CropContext.bank, and the Wiener stage's: lensim.restore.psf_stage): the manifest's
+    bank, a grid's bank of the record's setting, or for pairs made through tolerance draws
+    the bank of the record's draw (its "tolerance_draw"; the manifest's "bank" is then the
+    nominal lens's); pairs (or draws) of a lens with poses rendered through its posed banks
+    give those by source (:func:`pairs_bank_entry`). ``bank`` (a bank, grid or folder)
     replaces the manifest's when given. None where the bank is not found; a record without
     a valid setting or draw is a one-line InputError naming the manifest."""
     from functools import lru_cache
@@ -269,11 +312,12 @@ def record_banks(
     folders = draws
 
     @lru_cache(maxsize=8)  # evaluate reads records in order, draws mixed (dataset make draws 8 by default)
-    def load(k: int) -> PSFBank | None:
-        found = _load_bank({"bank": folders[k]}, pairs_dir, None)
-        return found if isinstance(found, PSFBank) else None
+    def load(k: int) -> PSFBank | dict[str, PSFBank] | None:
+        entry = folders[k]
+        found = _load_bank({"posed_banks": entry} if isinstance(entry, dict) else {"bank": entry}, pairs_dir, None)
+        return found if isinstance(found, (PSFBank, dict)) else None
 
-    def pick(i: int, rec: Mapping[str, Any]) -> PSFBank | None:
+    def pick(i: int, rec: Mapping[str, Any]) -> PSFBank | dict[str, PSFBank] | None:
         k = rec.get("tolerance_draw")
         if isinstance(k, bool) or not isinstance(k, int) or not 0 <= k < len(folders):
             raise InputError(
@@ -352,7 +396,7 @@ def _select_crops(records: list[dict], sources: Sequence[str] | None) -> list[tu
 def _crop_rows(
     pairs_dir: Path,
     sensor: SensorProfile,
-    bank: PSFBank | None,
+    bank: PSFBank | dict[str, PSFBank] | None,
     methods: Mapping[str, Method],
     ri: int,
     ci: int,

@@ -10,6 +10,11 @@ kernel mirrored (mirrored_pixels). Every pixel then takes the image of its sourc
 position, so a frame anywhere on the sensor, a training crop included, is split where
 the optical axis splits it), mirrored or not. compose_quadrants composes images already
 rendered; compose_rendered renders only the sources that have pixels in the frame.
+
+sensor_banks is the one rule every command follows: a lens with poses gets its posed
+banks (over the whole sensor), any other lens its one bank; pairs made through posed
+banks record them (the pairs manifest's "posed_banks"), and their Wiener stage, their
+oracles and a restoration of their lens use them (lensim.evaluate.harness.record_banks).
 """
 
 from __future__ import annotations
@@ -23,8 +28,8 @@ import torch
 
 if TYPE_CHECKING:
     from lensim.optics.lens import Lens
-    from lensim.psf.bank import PSFBank
     from lensim.render.mapping import SensorMapping
+    from lensim.sensor.profile import SensorProfile
 
 #: the sensor's quadrants: (bottom half?, right half?), named by their corner
 QUADRANTS = {"ur": (0, 1), "lr": (1, 1), "ul": (0, 0), "ll": (1, 0)}
@@ -32,6 +37,8 @@ QUADRANTS = {"ur": (0, 1), "lr": (1, 1), "ul": (0, 0), "ll": (1, 0)}
 MIRROR = "/mirror"
 #: an image: (C, H, W) numpy array or torch tensor
 Image = TypeVar("Image", np.ndarray, torch.Tensor)
+#: what bank_of gives: a PSFBank, or anything standing for one (an index, a folder)
+Bank = TypeVar("Bank")
 
 
 def quadrant_azimuths(mapping: SensorMapping) -> dict[str, float]:
@@ -123,7 +130,7 @@ def compose_quadrants(images: Mapping[str, np.ndarray], mapping: SensorMapping |
     return compose_rendered(lambda k: np.asarray(images[k]), images, mapping, shape)
 
 
-def posed_banks(lens: Lens, mapping: SensorMapping, bank_of: Callable[[Lens], PSFBank]) -> dict[str, PSFBank]:
+def posed_banks(lens: Lens, mapping: SensorMapping, bank_of: Callable[[Lens], Bank]) -> dict[str, Bank]:
     """The banks that render a lens on the frame: one ("all") for a rotationally symmetric
     lens; for a lens with poses (a bank turns its +y PSFs to every azimuth) one per
     quadrant, the lens turned to the quadrant's diagonal (quadrant_azimuths of the
@@ -140,3 +147,15 @@ def posed_banks(lens: Lens, mapping: SensorMapping, bank_of: Callable[[Lens], PS
         turned = lens_at_azimuth(lens, a)
         out[k], out[k + MIRROR] = bank_of(turned), bank_of(mirrored_lens(turned))
     return out
+
+
+def sensor_banks(lens: Lens, sensor: SensorProfile, bank_of: Callable[[Lens], Bank]) -> Bank | dict[str, Bank]:
+    """What renders and restores a lens on the sensor (the rule every command follows):
+    bank_of(lens) for a rotationally symmetric lens; for a lens with poses (an as-built lens
+    from `lensim calibrate`, a tolerance draw with decentres or tilts) its posed banks by
+    source over the whole sensor (posed_banks: 8 of them), which a frame anywhere on the
+    sensor composes per pixel (pixel_sources)."""
+    from lensim.render.mapping import native_mapping
+
+    banks = posed_banks(lens, native_mapping(sensor.height, sensor.width, sensor, 0, 0), bank_of)
+    return banks["all"] if "all" in banks else banks

@@ -27,7 +27,11 @@ computed once and read by the training crops. Layout:
                                                   "crops": how many} written last
 
 The stage of a crop is computed with the bank its photo was simulated with
-(:func:`stage_bank_entry`): the manifest's "bank" (a grid's bank of the record's setting),
+(:func:`stage_bank_entry`; lensim.evaluate.harness.record_banks): the manifest's "bank" (a
+grid's bank of the record's setting); for pairs of a lens with poses, rendered through its
+posed banks (the manifest's "posed_banks"; `lensim dataset make --lens as_built.yaml`),
+those banks by source at the crop's place on the sensor (:func:`wiener_channels`), as for
+a tolerance draw rendered through its posed banks (``--posed-draws``: its "posed_banks");
 and for pairs made through tolerance draws (``lensim dataset make --tolerances``; their
 manifest says "stage_bank": "tolerance_draw") the bank of the record's draw, not the
 nominal lens's, which is their "bank" (what a restoration has at inference). Measured
@@ -236,8 +240,10 @@ def network_bank(info: Mapping[str, Any], bank: Any = None) -> Any:
     """The PSF bank a PSF-informed network restores with: ``bank`` (a PSFBank or its
     folder) when given, else the bank of the pairs the network was trained on (``info``:
     what lensim.restore.checkpoint.load_checkpoint / engines.load_engine return; its
-    "dataset" manifest's "bank"). One-line InputError naming the checkpoint (field "bank")
-    when neither is found, or when it is a grid of banks (one setting's bank is needed)."""
+    "dataset" manifest's "bank", or the posed banks by source of pairs of a lens with
+    poses: lensim.evaluate.harness.pairs_bank_entry). One-line InputError naming the
+    checkpoint (field "bank") when neither is found, or when it is a grid of banks (one
+    setting's bank is needed)."""
     from lensim.psf.bank import GridBank, PSFBank
 
     where = str(info.get("path", "checkpoint"))
@@ -270,16 +276,18 @@ def network_bank(info: Mapping[str, Any], bank: Any = None) -> Any:
 
 def stage_bank_entry(manifest: Mapping[str, Any]) -> Any:
     """What the Wiener stage of a pairs folder is computed with, as its cache key records
-    it: the manifest's "bank" (for a grid, each record's setting's bank), or for pairs made
-    through tolerance draws ("stage_bank": "tolerance_draw"; older manifests have their
-    "tolerances" only) {"tolerance_draw": [each draw's bank folder]}: each record's stage
-    uses the bank of the draw its photo went through (its "tolerance_draw";
-    lensim.evaluate.harness.record_banks)."""
+    it: the manifest's "bank" (for a grid, each record's setting's bank), or its posed
+    banks' folders by source (pairs of a lens with poses: a dict, so that a stage of
+    posed banks never reads a cache of the single bank's), or for pairs made through
+    tolerance draws ("stage_bank": "tolerance_draw"; older manifests have their
+    "tolerances" only) {"tolerance_draw": [each draw's bank folder, or posed banks' folders]}:
+    each record's stage uses the bank of the draw its photo went through (its
+    "tolerance_draw"; lensim.evaluate.harness.record_banks)."""
     from lensim.data.pairs import STAGE_PER_DRAW
-    from lensim.evaluate.harness import tolerance_draw_banks
+    from lensim.evaluate.harness import pairs_bank_entry, tolerance_draw_banks
 
     draws = tolerance_draw_banks(manifest)
-    return manifest.get("bank") if draws is None else {STAGE_PER_DRAW: draws}
+    return pairs_bank_entry(manifest) if draws is None else {STAGE_PER_DRAW: draws}
 
 
 def _stage_banks(manifest: Mapping[str, Any], root: Path, bank: Any) -> Callable[[int, Mapping[str, Any]], Any]:
@@ -287,6 +295,7 @@ def _stage_banks(manifest: Mapping[str, Any], root: Path, bank: Any) -> Callable
     (lensim.evaluate.harness.record_banks); a bank not found is a one-line InputError naming
     the manifest."""
     from lensim.data.manifest import MANIFEST
+    from lensim.data.pairs import STAGE_PER_DRAW
     from lensim.evaluate.harness import record_banks
 
     resolve = record_banks(manifest, root, bank)
@@ -295,7 +304,9 @@ def _stage_banks(manifest: Mapping[str, Any], root: Path, bank: Any) -> Callable
         found = resolve(i, rec)
         if found is None:
             entry = stage_bank_entry(manifest)
-            named = entry if not isinstance(entry, dict) else next(iter(entry.values()))[rec["tolerance_draw"]]
+            if isinstance(entry, dict) and STAGE_PER_DRAW in entry:
+                entry = entry[STAGE_PER_DRAW][rec["tolerance_draw"]]
+            named = ", ".join(sorted(map(str, entry.values()))) if isinstance(entry, dict) else entry
             raise InputError(
                 str(root / MANIFEST),
                 "bank",
@@ -341,7 +352,7 @@ def ensure_wiener_cache(
     found is a one-line InputError naming the pairs folder. progress(done, total) counts
     crops."""
     from lensim.data.manifest import MANIFEST, read_pairs_manifest
-    from lensim.data.pairs import crop_capture
+    from lensim.data.pairs import STAGE_PER_DRAW, crop_capture
     from lensim.images import read_image, write_image
     from lensim.io import atomic_write_json
     from lensim.render.mapping import native_mapping
@@ -351,7 +362,7 @@ def ensure_wiener_cache(
     st = stage or WienerStage()
     manifest = read_pairs_manifest(root)
     entry = stage_bank_entry(manifest)
-    if bank is not None and isinstance(entry, dict):
+    if bank is not None and isinstance(entry, dict) and STAGE_PER_DRAW in entry:
         raise InputError(
             str(root / MANIFEST),
             "bank",
