@@ -191,3 +191,37 @@ def test_a_bank_or_a_grid_for_a_lens_with_poses_is_one_line(story, tmp_path, cap
         code, _, err = run_cli([*base, *extra, "-o", str(tmp_path / "p")], capsys, monkeypatch)
         assert code == 2 and len(err.strip().splitlines()) == 1 and named in err and "poses" in err, err
         assert not (tmp_path / "p").exists()
+
+
+def test_simulate_renders_a_lens_with_poses_through_its_posed_banks(story, tmp_path, capsys, monkeypatch):
+    photo = story["base"] / "sharp" / "coffee.png"  # the tiny sensor's size
+    args = ["simulate", str(photo), "--lens", str(story["as_built"]), "--sensor", str(story["sensor_file"]), *BANK]
+    code, _, err = run_cli([*args, "-o", str(tmp_path / "sim"), "--quiet"], capsys, monkeypatch)
+    assert code == 0, err
+    folders = json.loads((tmp_path / "sim" / "coffee.json").read_text())["bank"]
+    manifest = json.loads((story["pairs"] / "manifest.json").read_text())
+    assert set(folders) == set(manifest["posed_banks"]) and len(set(folders.values())) == 8
+    for extra, named in ((["--distortion"], "--distortion"), (["--bank", manifest["bank"]], "--bank")):
+        code, _, err = run_cli([*args, *extra, "-o", str(tmp_path / "bad"), "--quiet"], capsys, monkeypatch)
+        assert code == 2 and len(err.strip().splitlines()) == 1 and named in err and "poses" in err, err
+        assert not (tmp_path / "bad").exists()
+
+
+def test_tolerance_pairs_about_a_lens_with_poses_restore_with_its_posed_banks(story, tmp_path, capsys, monkeypatch):
+    """Tolerance draws about an as-built lens: the pairs record the as-built lens's posed
+    banks (the same folders its own pairs have), what a restoration of a run trained on
+    them takes by default, while each pair's stage stays its own draw's."""
+    from lensim.restore.psf_stage import network_bank, stage_bank_entry
+
+    tol = tmp_path / "tol.yaml"
+    tol.write_text("elements: {'2': {decentre_mm: 0.01}}\n")
+    pairs = tmp_path / "pairs"
+    args = ["dataset", "make", str(story["base"] / "sharp"), "--lens", str(story["as_built"]), "-o", str(pairs)]
+    args += ["--sensor", str(story["sensor_file"]), "--size", "48", "--crops", "1", *BANK]
+    code, _, err = run_cli([*args, "--tolerances", str(tol), "--tolerance-draws", "1"], capsys, monkeypatch)
+    assert code == 0, err
+    manifest = json.loads((pairs / "manifest.json").read_text())
+    own = json.loads((story["pairs"] / "manifest.json").read_text())
+    assert manifest["posed_banks"] == own["posed_banks"] and manifest["bank"] == own["bank"]
+    assert _folders(network_bank({"dataset": str(pairs)})) == own["posed_banks"]
+    assert stage_bank_entry(manifest) == {"tolerance_draw": [manifest["tolerances"]["draws"][0]["bank"]]}

@@ -336,7 +336,8 @@ def _tolerance_banks(
 ) -> ToleranceBanks:
     """The nominal lens's bank and the banks of draws 0..draws-1 of `seed` (how: draws,
     seed, posed: also each draw's posed banks, lensim.render.posed.posed_banks over the
-    whole sensor), cached (a rerun or a killed run reuses every field computed), computed
+    whole sensor; a nominal lens with poses, an as-built one, also gets its posed banks:
+    ToleranceBanks.nominal_posed), cached (a rerun or a killed run reuses every field computed), computed
     together once the photos are known to work. job: (folder of sharp photos, crop size,
     sensor, bank settings)."""
     from lensim.calibrate.tolerances import drawn_lens, load_tolerances
@@ -344,7 +345,7 @@ def _tolerance_banks(
     from lensim.optics.lens_file import lens_to_dict, load_lens
     from lensim.psf.bank import BankRequest, PSFBank, get_banks
     from lensim.render.mapping import native_mapping
-    from lensim.render.posed import posed_banks
+    from lensim.render.posed import posed_banks, sensor_banks
 
     draws, seed, posed = how
     sharp_dir, size, sensor, settings = job
@@ -355,20 +356,23 @@ def _tolerance_banks(
     drawn = [drawn_lens(lens, tol, seed, k) for k in range(draws)]
     records = [{k: m.as_built[k] for k in ("seed", "draw", "parameters")} for m in drawn]
     lenses = [lens, *drawn]
+
+    def index_of(one: Lens) -> int:
+        lenses.append(one)
+        return len(lenses) - 1
+
     keyed: list[dict[str, int]] = []  # each draw's posed banks as indices into lenses (appended)
     if posed:
         full = native_mapping(sensor.height, sensor.width, sensor, 0, 0)
-
-        def index_of(one: Lens) -> int:
-            lenses.append(one)
-            return len(lenses) - 1
-
-        keyed = [posed_banks(m, full, index_of) for m in drawn]  # type: ignore[arg-type, misc]
+        keyed = [posed_banks(m, full, index_of) for m in drawn]
+    nominal = sensor_banks(lens, sensor, index_of)  # 0, or a lens with poses' posed banks
     requests = [BankRequest(m, sensor.pixel_pitch_um, settings, response=sensor.spectral_response) for m in lenses]
     with progress_bar("PSF banks (nominal lens, tolerance draws)", "fields", quiet) as report:
         computed = get_banks(requests, workers=workers, scheduler=scheduler, progress=report)
     banks = [b for b in computed if isinstance(b, PSFBank)]
     out = ToleranceBanks(banks[1 : draws + 1], lens_to_dict(lens), str(tolerances), records, banks[0])
+    if isinstance(nominal, dict):
+        out.nominal_posed = {k: banks[i] for k, i in nominal.items()}
     if posed:
         out.posed = [
             PosedBanks({k: banks[i] for k, i in ks.items()}, b) for ks, b in zip(keyed, out.banks, strict=True)

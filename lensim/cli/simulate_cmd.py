@@ -85,7 +85,9 @@ def simulate_command(
     pitch and cached (the bank options are those of `psf bank` and `dataset make`, with the
     same defaults). Writes OUT/<name>.png and OUT/<name>.json (the draws: colour
     temperature, noise levels, seed; with --fno/--object-m/--focus-m/--config, the resolved
-    shooting settings).
+    shooting settings). A lens with poses (an as-built lens from `lensim calibrate`) is
+    simulated through its posed banks (one per sensor quadrant and its mirrored lens's: 8),
+    each pixel through its own.
 
     Example: lensim simulate photo.png --lens cooke_triplet --sensor apsc_mirrorless -o sim/
     """
@@ -109,16 +111,17 @@ def simulate_command(
     else:
         given_bank = None
         lens, described = lens_and_record(lens_file or assets.DEFAULT_LENS, shooting)
+    _check_poses(lens, given_bank is not None, distortion)
     sensor = load_sensor(sensor_file)
     if given_bank is None and (blur or distortion):
         check_response(settings, sensor.spectral_response, sensor=sensor)
-    banks: dict[tuple[int, int], PSFBank] = {}
+    banks: dict[tuple[int, int], PSFBank | dict[str, PSFBank]] = {}
     results = []
     for i, path in enumerate(images):
         img, in_bits = read_image(path)
         h, w = img.shape[1:]
         mapping = map_to_sensor(h, w, sensor)
-        bank = None
+        bank: PSFBank | dict[str, PSFBank] | None = None
         if blur or distortion:
             if given_bank is not None:
                 check_bank_fits(given_bank, mapping, str(bank_dir))
@@ -126,7 +129,7 @@ def simulate_command(
             else:
                 if (h, w) not in banks:
                     pupil_given = ctx.get_parameter_source("pupil_samples").name != "DEFAULT"
-                    banks[(h, w)] = _photo_bank(
+                    banks[(h, w)] = _photo_banks(
                         path, (w, h), mapping.pitch_um, lens, sensor, settings, pupil_given, workers, quiet or json_out
                     )
                 bank = banks[(h, w)]
@@ -153,7 +156,7 @@ def simulate_command(
             "seed": seed + i,
             "lens": lens.source,
             "sensor": sensor.name,
-            "bank": None if bank is None else str(bank.directory),
+            "bank": None if bank is None else _folders(bank),
             **params.to_dict(),
         }
         if described is not None:
@@ -164,6 +167,51 @@ def simulate_command(
             console.print(f"wrote {target} (pitch {mapping.pitch_um:.3g} um, {params.kelvin:.0f} K)", highlight=False)
     if json_out:
         print_json(results)
+
+
+def _check_poses(lens: Lens, bank_given: bool, distortion: bool) -> None:
+    """A lens with poses is simulated through its posed banks (lensim.render.posed.sensor_banks,
+    computed here), without distortion: one line naming --bank or --distortion otherwise."""
+    from lensim.errors import InputError
+
+    if lens.has_poses and bank_given:
+        raise InputError(
+            "--bank",
+            None,
+            "is a bank of a lens with poses, which renders through its posed banks (one per sensor "
+            "quadrant and its mirrored lens's); expected --lens LENS without --bank (they are computed)",
+        )
+    if lens.has_poses and distortion:
+        raise InputError(
+            "--distortion", None, "through the posed banks of a lens with poses is not modelled; expected none"
+        )
+
+
+def _folders(bank: PSFBank | dict[str, PSFBank]) -> str | dict[str, str]:
+    """A bank's folder, or a lens with poses' banks' folders by source (the photo's record)."""
+    return {k: str(b.directory) for k, b in bank.items()} if isinstance(bank, dict) else str(bank.directory)
+
+
+def _photo_banks(
+    path: Path,
+    size_wh: tuple[int, int],
+    pitch_um: float,
+    lens: Lens,
+    sensor: SensorProfile,
+    settings: BankSettings,
+    pupil_given: bool,
+    workers: int,
+    quiet: bool,
+) -> PSFBank | dict[str, PSFBank]:
+    """_photo_bank of the lens, or of a lens with poses its posed banks by source
+    (lensim.render.posed.sensor_banks), each at the photo's pitch."""
+    from lensim.render.posed import sensor_banks
+
+    return sensor_banks(
+        lens,
+        sensor,
+        lambda one: _photo_bank(path, size_wh, pitch_um, one, sensor, settings, pupil_given, workers, quiet),
+    )
 
 
 def _photo_bank(

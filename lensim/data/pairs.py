@@ -99,7 +99,9 @@ class ToleranceBanks:
     lensim.restore.psf_stage.stage_bank_entry). posed: per draw, the banks its photos are
     simulated through instead of banks[k] (a draw with decentres or tilts has poses:
     PosedBanks), recorded as the draw's "posed_banks"; its Wiener stage uses them too
-    (lensim.evaluate.harness.record_banks)."""
+    (lensim.evaluate.harness.record_banks). nominal_posed: a nominal lens with poses' posed
+    banks (lensim.render.posed.sensor_banks; tolerances about an as-built lens), the pairs'
+    "posed_banks": what a restoration uses instead of ``nominal``."""
 
     banks: list[PSFBank]
     lens: dict
@@ -107,6 +109,7 @@ class ToleranceBanks:
     draws: list[dict]
     nominal: PSFBank
     posed: list[PosedBanks] | None = None
+    nominal_posed: dict[str, PSFBank] | None = None
 
 
 @dataclass
@@ -282,7 +285,8 @@ def _tolerance_use(banks: ToleranceBanks, photos: int, seed: int) -> _BankUse:
     draw's index per photo. The recorded "bank" is the nominal lens's (ToleranceBanks),
     each draw's bank is in "tolerances", and "stage_bank" says that each pair's Wiener
     stage uses its draw's."""
-    if any(b.directory is None for b in [*banks.banks, banks.nominal]) or not banks.banks:
+    nominal_posed = list((banks.nominal_posed or {}).values())
+    if any(b.directory is None for b in [*banks.banks, banks.nominal, *nominal_posed]) or not banks.banks:
         raise InputError(None, "bank", "expected banks stored on disk (workers load them)")
     picks = grid_settings_of_photos(seed, photos, len(banks.banks))
     dirs = [str(b.directory) for b in banks.banks]
@@ -299,6 +303,8 @@ def _tolerance_use(banks: ToleranceBanks, photos: int, seed: int) -> _BankUse:
             ],
         },
     }
+    if banks.nominal_posed:
+        recorded["posed_banks"] = {k: str(b.directory) for k, b in banks.nominal_posed.items()}
     render = posed if posed else dirs
     return _BankUse(
         [render[k] for k in picks], [None] * photos, list(picks), recorded, banks.banks[0].pixel_pitch_um, dirs[0]
