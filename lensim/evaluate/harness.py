@@ -281,7 +281,7 @@ def _record_bank(
 
 def tolerance_draw_banks(manifest: Mapping[str, Any]) -> list[Any] | None:
     """Each draw's bank folder (as the manifest names it; a draw rendered through its
-    posed banks, ``--posed-draws``: their folders by source, :func:`pairs_bank_entry`) of
+    posed banks: their folders by source, :func:`pairs_bank_entry`) of
     pairs made through tolerance draws (lensim.data.pairs.ToleranceBanks: the manifest's
     "tolerances"), else None."""
     tol = manifest.get("tolerances")

@@ -29,9 +29,9 @@ computed once and read by the training crops. Layout:
 The stage of a crop is computed with the bank its photo was simulated with
 (:func:`stage_bank_entry`; lensim.evaluate.harness.record_banks): the manifest's "bank" (a
 grid's bank of the record's setting); for pairs of a lens with poses, rendered through its
-posed banks (the manifest's "posed_banks"; `lensim dataset make --lens as_built.yaml`),
+posed banks (the manifest's "posed_banks"; an as-built lens from `lensim calibrate`),
 those banks by source at the crop's place on the sensor (:func:`wiener_channels`), as for
-a tolerance draw rendered through its posed banks (``--posed-draws``: its "posed_banks");
+a tolerance draw rendered through its posed banks (the draw's "posed_banks");
 and for pairs made through tolerance draws (``lensim dataset make --tolerances``; their
 manifest says "stage_bank": "tolerance_draw") the bank of the record's draw, not the
 nominal lens's, which is their "bank" (what a restoration has at inference). Measured
