@@ -38,24 +38,31 @@ pytestmark = pytest.mark.usefixtures("one_torch_thread")
 # ----------------------------------------------------------------------------- the stage
 
 
-def _direct_wiener(window: np.ndarray, kernel: np.ndarray, var_n: float, margin: int) -> np.ndarray:
-    """Wiener deconvolution of one (n, n) window with one (P, P) kernel, written out with
-    NumPy: mean removed, raised-cosine taper over the outer ``margin`` pixels, the kernel's
-    OTF about its centre pixel, NSR of the 1/|f|^2 prior scaled by the window's mean
-    squared gradient (wiener_tiles' docstring), the mean restored as mean / kernel sum."""
-    n, p = window.shape[0], kernel.shape[0]
+def _direct_wiener(window: np.ndarray, kernels: list[np.ndarray], var_n: float, margin: int) -> np.ndarray:
+    """Wiener deconvolution of one (n, n) window with (P, P) kernels (one, or several draws'),
+    written out with NumPy: mean removed, raised-cosine taper over the outer ``margin``
+    pixels, each kernel's OTF H about its centre pixel, the filter conj(E[H]) / (E[|H|^2] +
+    NSR) (E: the mean over the kernels; one kernel: conj(H) / (|H|^2 + NSR)), NSR of the
+    1/|f|^2 prior scaled by the window's mean squared gradient (wiener_tiles' docstring),
+    the mean restored as mean E[H(0)] / E[|H(0)|^2] (one kernel: mean / kernel sum)."""
+    n = window.shape[0]
     ramp = 0.5 - 0.5 * np.cos(np.pi * (np.arange(margin) + 0.5) / margin)
     taper = np.concatenate([ramp, np.ones(n - 2 * margin), ramp[::-1]])
-    big = np.zeros((n, n))
-    big[:p, :p] = kernel
-    otf = np.fft.fft2(np.roll(big, (-(p // 2), -(p // 2)), axis=(0, 1)))
+    otfs = []
+    for kernel in kernels:
+        p = kernel.shape[0]
+        big = np.zeros((n, n))
+        big[:p, :p] = kernel
+        otfs.append(np.fft.fft2(np.roll(big, (-(p // 2), -(p // 2)), axis=(0, 1))))
+    mean_h = np.mean(otfs, axis=0)
+    power = np.mean([np.abs(h) ** 2 for h in otfs], axis=0)
     f = np.fft.fftfreq(n)
     g2 = 4 * np.sin(np.pi * f)[:, None] ** 2 + 4 * np.sin(np.pi * f)[None, :] ** 2
     grad = np.mean(np.diff(window, axis=1) ** 2) + np.mean(np.diff(window, axis=0) ** 2)
     amp = max(grad - 4 * var_n, 4 * var_n, 1e-8)
     y = np.fft.fft2((window - window.mean()) * taper[:, None] * taper[None, :])
-    x = np.conj(otf) * y / (np.abs(otf) ** 2 + var_n / amp * g2)
-    return np.real(np.fft.ifft2(x)) + window.mean() / kernel.sum()
+    x = np.conj(mean_h) * y / (power + var_n / amp * g2)
+    return np.real(np.fft.ifft2(x)) + window.mean() * mean_h[0, 0].real / power[0, 0]
 
 
 def _trapezoid(count: int, tile: int, ramp: int, size: int) -> np.ndarray:
@@ -71,11 +78,25 @@ def _trapezoid(count: int, tile: int, ramp: int, size: int) -> np.ndarray:
     return w
 
 
-def test_stage_equals_a_direct_per_tile_wiener():
+def _other_banks() -> list:
+    """Two banks unlike _bank(): its kernels turned upside down, and shifted one pixel."""
+    flipped, shifted = _bank(), _bank()
+    for f in flipped.fields:
+        f.rgb = np.ascontiguousarray(np.flip(f.rgb, -2))
+    for f in shifted.fields:
+        f.rgb = np.ascontiguousarray(np.roll(f.rgb, 1, -1))
+    return [flipped, shifted]
+
+
+@pytest.mark.parametrize("robust", [False, True], ids=["one bank", "three draws"])
+def test_stage_equals_a_direct_per_tile_wiener(robust):
     """Every pixel of the stage is the cross-fade of the direct Wiener deconvolutions of its
     tiles' windows, each with the bank's kernel at its tile's centre (``bank.psf_at``) and
-    its window's own NSR, per channel, in the energy domain."""
+    its window's own NSR, per channel, in the energy domain; with several draws' banks (the
+    tolerance-robust stage) the filter is conj(E[H]) / (E[|H|^2] + NSR) over their kernels
+    at the tile's centre."""
     bank = _bank()
+    draws = [bank, *_other_banks()] if robust else [bank]
     img, _ = read_image(sample_image_path("kodim23"))
     image = img[:, 200:296, 300:390]
     mapping = SensorMapping(96, 90, PITCH_UM, 1.3, 1.7)  # off axis: rotated, asymmetric kernels
@@ -87,7 +108,7 @@ def test_stage_equals_a_direct_per_tile_wiener():
         "read": 2e-3,
     }
     stage = WienerStage(tile=32, noise_floor=1e-5, ramp=8, margin=6)
-    out = wiener_channels(image, mapping, bank, capture, stage)
+    out = wiener_channels(image, mapping, draws if robust else bank, capture, stage)
     assert out.shape == (3, 96, 90) and out.dtype == torch.float32
     cam = B.to_energy(image, capture).numpy()
     t, m, half = stage.tile, stage.margin, stage.ramp // 2 + stage.margin
@@ -98,11 +119,11 @@ def test_stage_equals_a_direct_per_tile_wiener():
     for a in range(3):
         for b in range(3):
             x_mm, y_mm = mapping.pixel_to_mm(torch.tensor((a + 0.5) * t - 0.5), torch.tensor((b + 0.5) * t - 0.5))
-            k = bank.psf_at(float(x_mm), float(y_mm))
+            ks = [d.psf_at(float(x_mm), float(y_mm)) for d in draws]
             for ch in range(3):
                 win = padded[ch, a * t : a * t + n, b * t : b * t + n]
                 var_n = capture["shot"] * max(win.mean(), 0) + capture["read"] ** 2 + stage.noise_floor
-                res = _direct_wiener(win.astype(np.float64), k[ch].astype(np.float64), var_n, m)
+                res = _direct_wiener(win.astype(np.float64), [k[ch].astype(np.float64) for k in ks], var_n, m)
                 direct[ch, a * t : a * t + n, b * t : b * t + n] += (
                     np.pad(wy[a], (half, half + t))[a * t : a * t + n, None]
                     * np.pad(wx[b], (half, half + t))[None, b * t : b * t + n]
@@ -116,8 +137,48 @@ def test_stage_equals_a_direct_per_tile_wiener():
     # and it can fail: the kernels of the neighbouring tile, or no cross-fade, are far off
     assert np.abs(direct - np.roll(direct, 1, axis=-1)).mean() > 20 * err.mean()
     # and the oracle baseline is the same computation (one home)
-    oracle = B.wiener(image, mapping, bank, capture, tile=32, noise_floor=1e-5, ramp=8, margin=6)
+    oracle = B.wiener(
+        image, mapping, tuple(draws) if robust else bank, capture, tile=32, noise_floor=1e-5, ramp=8, margin=6
+    )
     assert torch.equal(oracle, out)
+    if robust:  # and the draws' spread matters: the robust stage is not the first draw's
+        plain = B.to_energy(wiener_channels(image, mapping, bank, capture, stage), capture).numpy()
+        assert np.abs(plain - ref).mean() > 20 * err.mean()
+
+
+def test_robust_stage_of_equal_draws_is_the_stage():
+    """The tolerance-robust stage over draws that are all the same lens is that lens's
+    stage, for banks and for lenses with poses (banks by source; a symmetric draw's one
+    bank in every source); draws that differ give another image."""
+    from lensim.render.posed import MIRROR, QUADRANTS
+    from lensim.restore.psf_stage import draws_by_source
+
+    bank = _bank()
+    other = _other_banks()[0]
+    img, _ = read_image(sample_image_path("kodim23"))
+    image = img[:, 200:296, 300:390]
+    mapping = SensorMapping(96, 90, PITCH_UM, -40 * PITCH_UM * 1e-3, -30 * PITCH_UM * 1e-3)  # across the axis
+    stage = WienerStage(tile=32, noise_floor=1e-5, ramp=8, margin=6)
+    plain = wiener_channels(image, mapping, bank, None, stage)
+    same = wiener_channels(image, mapping, [bank, bank, bank], None, stage)
+    assert torch.allclose(same, plain, rtol=0, atol=2e-6), (same - plain).abs().max()
+    keys = [k + m for k in QUADRANTS for m in ("", MIRROR)]
+    posed = dict.fromkeys(keys, bank)
+    assert torch.allclose(wiener_channels(image, mapping, [posed, bank, posed], None, stage), plain, atol=2e-6)
+    assert draws_by_source([posed, bank])["ur"] == (bank, bank)
+    with pytest.raises(ValueError, match="same sources"):
+        draws_by_source([posed, {"ur": bank}])
+    mixed = wiener_channels(image, mapping, [bank, other], None, stage)
+    assert (mixed - plain).abs().mean() > 1e-4  # 50 times the tolerance above
+    # posed draws: each source's pixels get the robust stage over the draws' banks of that source
+    flip = {k: other if k.startswith("u") else bank for k in keys}
+    out = wiener_channels(image, mapping, [posed, flip], None, stage)
+    from lensim.render.posed import pixel_sources
+
+    for key, mask in pixel_sources((96, 90), mapping, mirrored=True).items():
+        want = mixed if key.startswith("u") else plain
+        m = torch.from_numpy(mask)
+        assert torch.allclose(out[:, m], want[:, m], rtol=0, atol=2e-6), key
 
 
 def test_stage_settings_are_checked():

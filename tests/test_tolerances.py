@@ -300,6 +300,49 @@ def _posed_draws(tmp_path, args, turned, capsys, monkeypatch):
         mapping = native_mapping(*x.shape[1:], sensor, crop["sensor_top"], crop["sensor_left"])
         want = wiener_channels(x, mapping, banks, crop_capture(rec, crop)).clamp(0, 1)
         assert (read_image(cached_path(folder, root / crop["input"]))[0] - want).abs().max() < 1.0 / 65535 + 1e-6
+    _robust_stage(tmp_path / "posed", tmp_path / "robust", manifest)
+
+
+def _robust_stage(data, robust, manifest):
+    """Pairs whose manifest says "stage_bank": "tolerance_robust": every crop's cached
+    stage is the tolerance-robust stage over all the draws' posed banks (wiener_channels
+    with the list), not its own draw's, in its own cache folder; evaluate's methods get the
+    draws' banks."""
+    import json
+
+    from lensim.data.pairs import crop_capture
+    from lensim.evaluate import harness
+    from lensim.images import read_image
+    from lensim.psf.bank import PSFBank
+    from lensim.render.mapping import native_mapping
+    from lensim.restore.psf_stage import cached_path, ensure_wiener_cache, wiener_channels
+    from lensim.sensor.profile import sensor_from_dict
+
+    robust.mkdir()
+    (robust / "pairs").symlink_to(data / "pairs")
+    (robust / "manifest.json").write_text(json.dumps({**manifest, "stage_bank": "tolerance_robust"}))
+    posed = [{k: PSFBank.load(f) for k, f in d["posed_banks"].items()} for d in manifest["tolerances"]["draws"]]
+    folder = ensure_wiener_cache(robust)
+    assert folder != ensure_wiener_cache(data).parent / folder.name
+    sensor = sensor_from_dict(manifest["sensor"])
+    for rec in manifest["records"]:
+        crop = rec["crops"][0]
+        x, _ = read_image(robust / crop["input"])
+        stored, _ = read_image(cached_path(folder, robust / crop["input"]))
+        mapping = native_mapping(*x.shape[1:], sensor, crop["sensor_top"], crop["sensor_left"])
+        want, own = (
+            wiener_channels(x, mapping, b, crop_capture(rec, crop)).clamp(0, 1)
+            for b in (posed, posed[rec["tolerance_draw"]])
+        )
+        assert (stored - want).abs().max() < 1.0 / 65535 + 1e-6
+        assert (stored - own).abs().max() > 100 / 65535
+    seen: list = []
+    harness.evaluate_rows(robust, {"spy": lambda image, ctx: seen.append(ctx) or image})
+    assert seen and all(
+        [{k: str(b.directory) for k, b in d.items()} for d in c.bank]
+        == [d["posed_banks"] for d in manifest["tolerances"]["draws"]]
+        for c in seen
+    )
 
 
 def _stage_is_each_draws_own(data, args, capsys, monkeypatch):

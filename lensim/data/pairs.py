@@ -85,6 +85,11 @@ class PairJob:
 #: A pairs manifest's "stage_bank" when each record's Wiener stage (lensim.restore.psf_stage)
 #: uses its own tolerance draw's bank, tolerances.draws[record["tolerance_draw"]].bank.
 STAGE_PER_DRAW = "tolerance_draw"
+#: A pairs manifest's "stage_bank" when every record's Wiener stage is the tolerance-robust
+#: one over all the draws (lensim.restore.psf_stage.wiener_channels with the draws' banks,
+#: each draw's posed banks where it has them): what a restoration of a unit whose draw is
+#: unknown can compute.
+STAGE_ROBUST = "tolerance_robust"
 
 
 @dataclass

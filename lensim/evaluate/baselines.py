@@ -67,7 +67,7 @@ of ``sigma_px`` pixels (defaults 1.0 px and 0.6). It uses neither the mapping no
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -194,7 +194,7 @@ def tiled_deconvolve(
 def wiener(
     image: torch.Tensor,
     mapping: SensorMapping,
-    bank: PSFBank,
+    bank: PSFBank | Sequence[PSFBank],
     capture: Mapping[str, Any] | None = None,
     tile: int = WT.DEFAULT_TILE,
     nsr: float | None = None,
@@ -203,8 +203,10 @@ def wiener(
     margin: int = WT.DEFAULT_MARGIN,
 ) -> torch.Tensor:
     """Non-blind Wiener deconvolution with the true PSF bank (an oracle), per tile in the
-    energy domain; sRGB (3, H, W) in [0, 1] in and out. tile, ramp, margin (pixels): the
-    tiles' layout (lensim.evaluate.wiener_tiles, the computation's one home)."""
+    energy domain; sRGB (3, H, W) in [0, 1] in and out. bank: the lens's bank, or several
+    (a tolerance distribution's draws, the unit's unknown): the minimum-mean-square-error
+    filter over them per tile. tile, ramp, margin (pixels): the tiles' layout
+    (lensim.evaluate.wiener_tiles, the computation's one home)."""
     _check_image(image)
     # float32 colour conversions: the deconvolution is float32 anyway (a 24 MP frame's
     # conversions took 1.6 of the stage's 4.9 s in float64)

@@ -50,7 +50,7 @@ import numpy as np
 import torch
 
 from lensim.data.manifest import MANIFEST, read_pairs_manifest
-from lensim.data.pairs import crop_capture
+from lensim.data.pairs import STAGE_ROBUST, crop_capture
 from lensim.errors import InputError, ParameterError
 from lensim.evaluate import baselines
 from lensim.evaluate.metrics import ZONES, image_scores, normalized_radius
@@ -114,11 +114,17 @@ def _need_bank(ctx: CropContext, name: str) -> PSFBank | dict[str, PSFBank]:
 def _oracle(name: str, baseline: Callable[..., torch.Tensor], options: Mapping[str, Any]) -> Method:
     """A baseline given the crop's bank; with banks by source (a lens with poses) each
     source's result at its pixels, the whole crop restored once per source it holds
-    (lensim.render.posed.compose_rendered: as the crop was rendered)."""
+    (lensim.render.posed.compose_rendered: as the crop was rendered). Several draws' banks
+    (a tuple: the tolerance-robust filter, for the Wiener oracle) go to the baseline
+    together, per source where the draws have poses (psf_stage.draws_by_source)."""
     from lensim.render.posed import compose_rendered
 
     def run(image: torch.Tensor, ctx: CropContext) -> torch.Tensor:
-        bank = _need_bank(ctx, name)
+        bank: Any = _need_bank(ctx, name)
+        if isinstance(bank, (list, tuple)) and any(isinstance(b, Mapping) for b in bank):
+            from lensim.restore.psf_stage import draws_by_source
+
+            bank = draws_by_source(bank)
         if not isinstance(bank, Mapping):
             return baseline(image, ctx.mapping, bank, ctx.capture, **options)
         return compose_rendered(
@@ -244,6 +250,8 @@ def _load_bank(
     missing)."""
     if isinstance(bank, (PSFBank, GridBank)):
         return bank
+    if isinstance(bank, (list, tuple)):  # several draws' banks: the tolerance-robust stage
+        return tuple(bank)  # type: ignore[return-value]
     if bank is not None:
         return GridBank.load(bank) if is_grid(bank) else PSFBank.load(bank)
     entry = pairs_bank_entry(manifest)
@@ -291,6 +299,22 @@ def tolerance_draw_banks(manifest: Mapping[str, Any]) -> list[Any] | None:
     return [pairs_bank_entry(d) if isinstance(d, Mapping) else None for d in (draws if isinstance(draws, list) else [])]
 
 
+def robust_stage_banks(manifest: Mapping[str, Any], pairs_dir: Path) -> tuple[Any, ...] | None:
+    """The banks of the tolerance-robust stage of pairs whose manifest says "stage_bank":
+    STAGE_ROBUST (lensim.data.pairs): every draw's bank, or its posed banks by source where
+    the manifest lists them (:func:`pairs_bank_entry`), as a tuple
+    (lensim.restore.psf_stage.wiener_channels takes it); None for other pairs or where a
+    bank is not found."""
+    if manifest.get("stage_bank") != STAGE_ROBUST:
+        return None
+    tol = manifest.get("tolerances")
+    draws = tol.get("draws") if isinstance(tol, Mapping) else None
+    if not isinstance(draws, list) or not draws or not all(isinstance(d, Mapping) for d in draws):
+        raise InputError(str(pairs_dir / MANIFEST), "tolerances", "expected the draws of the tolerance-robust stage")
+    found = [_load_bank(d, pairs_dir, None) for d in draws]
+    return tuple(found) if all(isinstance(b, (PSFBank, dict)) for b in found) else None
+
+
 def record_banks(
     manifest: Mapping[str, Any], pairs_dir: Path, bank: PSFBank | GridBank | str | Path | None = None
 ) -> Callable[[int, Mapping[str, Any]], PSFBank | dict[str, PSFBank] | None]:
@@ -299,12 +323,18 @@ def record_banks(
     bank, a grid's bank of the record's setting, or for pairs made through tolerance draws
     the bank of the record's draw (its "tolerance_draw"; the manifest's "bank" is then the
     nominal lens's); pairs (or draws) of a lens with poses rendered through its posed banks
-    give those by source (:func:`pairs_bank_entry`). ``bank`` (a bank, grid or folder)
-    replaces the manifest's when given. None where the bank is not found; a record without
+    give those by source (:func:`pairs_bank_entry`); pairs whose stage is the
+    tolerance-robust one ("stage_bank": STAGE_ROBUST) give every draw's banks, a tuple
+    (:func:`robust_stage_banks`). ``bank`` (a bank, grid or folder, or a list of banks or of
+    lenses' posed banks by source: the tolerance-robust stage) replaces the manifest's when
+    given. None where the bank is not found; a record without
     a valid setting or draw is a one-line InputError naming the manifest."""
     from functools import lru_cache
 
     where = str(pairs_dir / MANIFEST)
+    if bank is None and manifest.get("stage_bank") == STAGE_ROBUST:
+        robust = robust_stage_banks(manifest, pairs_dir)
+        return lambda i, rec: robust  # type: ignore[return-value]
     draws = tolerance_draw_banks(manifest) if bank is None else None
     if draws is None:
         the_bank = _load_bank(manifest, pairs_dir, bank)

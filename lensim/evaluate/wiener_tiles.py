@@ -37,6 +37,15 @@ lensim.evaluate.baselines (module docstring): NSR(f) = sigma_n^2 |G(f)|^2 / A, |
 least 4 sigma_n^2), sigma_n^2 = shot * mean(y) + read^2 + noise_floor at the window's mean
 energy; or a constant ``nsr``.
 
+Several banks (a tolerance distribution's draws, for a unit whose draw is unknown): each
+tile's filter is the linear minimum-mean-square-error filter over the draws,
+``X = conj(E[H]) Y / (E[|H|^2] + NSR(f))``, E the mean over the banks' transfer functions
+at that tile and channel (equal weights; the NSR is the window's, as above), the mean
+restored through its response at zero frequency (E[H(0)] / E[|H(0)|^2]). With one bank,
+or every bank the same, it is the filter above; a draw-to-draw spread of H's phase at a
+frequency shrinks |E[H]| there against E[|H|^2], so the filter restores less of what the
+draws disagree on.
+
 Memory: the image and the output (float32, about 24 bytes per pixel; each row of tiles
 reads its mirrored strip of the image), plus one row of tiles' windows and spectra at a
 time, and the polar nodes' transfer functions (about 150 kB each, kept with the bank).
@@ -45,7 +54,7 @@ time, and the polar nodes' transfer functions (about 150 kB each, kept with the 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -146,13 +155,18 @@ class _Solver:
         amp = (gx + gy - 4 * var_n).clamp_min(4 * var_n).clamp_min(1e-8)
         return var_n / amp
 
-    def __call__(self, win: torch.Tensor, h: torch.Tensor, stats: tuple[torch.Tensor, ...]) -> torch.Tensor:
+    def __call__(
+        self, win: torch.Tensor, h: torch.Tensor, stats: tuple[torch.Tensor, ...], h2: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """win (B, C, n, n) float32, h: the kernels' transfer functions (B, C, n, n//2+1)
-        complex64, stats: :func:`_box_stats` of the windows -> restored windows (B, C, n, n)
-        float32. Complex products are written out in real arithmetic (faster on CPU)."""
+        complex64 (several banks: their mean E[H]), stats: :func:`_box_stats` of the windows,
+        h2: E[|H|^2] (B, C, n, n//2+1) float32 over several banks (None: |h|^2) -> restored
+        windows (B, C, n, n) float32. Complex products are written out in real arithmetic
+        (faster on CPU)."""
         mean = stats[0]
         hr, hi = h.real, h.imag
-        inv = hr.square().addcmul_(hi, hi).addcmul_(self._ratio(*stats), self.g2).reciprocal_()
+        power = hr.square().addcmul_(hi, hi) if h2 is None else h2.clone()
+        inv = power.addcmul_(self._ratio(*stats), self.g2).reciprocal_()
         fr, fi = hr * inv, hi * inv  # the filter conj(H) / (|H|^2 + NSR) is fr - i fi
         y = torch.view_as_real(torch.fft.rfft2((win - mean).mul_(self.taper)))
         yr, yi = y[..., 0], y[..., 1]
@@ -201,10 +215,26 @@ class _TileOTFs:
         return h
 
 
+def _mean_row(otfs: list[_TileOTFs], i: int) -> tuple[torch.Tensor, torch.Tensor | None]:
+    """Row i's transfer functions: one bank's, and None; several banks': their mean E[H]
+    (complex64) and mean power E[|H|^2] (float32), each (nx, 3, n, n//2+1)."""
+    if len(otfs) == 1:
+        return otfs[0].row(i), None
+    mean: torch.Tensor | None = None
+    power: torch.Tensor | None = None
+    for o in otfs:
+        h = o.row(i)
+        p = h.real.square().addcmul_(h.imag, h.imag)
+        mean = h if mean is None else mean.add_(h)
+        power = p if power is None else power.add_(p)
+    assert mean is not None and power is not None
+    return mean.div_(len(otfs)), power.div_(len(otfs))
+
+
 def wiener_deconvolve(
     cam: torch.Tensor,
     mapping: SensorMapping,
-    bank: PSFBank,
+    bank: PSFBank | Sequence[PSFBank],
     capture: Mapping[str, Any] | None = None,
     nsr: float | None = None,
     noise_floor: float = 1e-5,
@@ -212,7 +242,9 @@ def wiener_deconvolve(
     layout: tuple[int, int, int] = (DEFAULT_TILE, DEFAULT_RAMP, DEFAULT_MARGIN),
 ) -> torch.Tensor:
     """Wiener-deconvolve an energy-domain image (3, H, W) with the bank's kernels per tile
-    (module docstring); returns float32 (3, H, W). capture: its noise draw (``shot``,
+    (module docstring); returns float32 (3, H, W). bank: one bank, or several (a tolerance
+    distribution's draws): then each tile's filter is the minimum-mean-square-error filter
+    over them (module docstring). capture: its noise draw (``shot``,
     ``read``) sets the NSR; unit_sum: kernels normalized to sum 1 (no relative
     illumination); layout: (tile, ramp, margin) in pixels, ramp even and <= tile.
     InputError when the bank is not at the mapping's pitch or does not reach its corners."""
@@ -221,13 +253,17 @@ def wiener_deconvolve(
         raise ValueError(f"expected tile >= 1, an even ramp in [0, tile] and margin >= 0, got {layout}")
     if (mapping.height, mapping.width) != tuple(cam.shape[-2:]):
         raise ValueError(f"the mapping is for a {mapping.width}x{mapping.height} image; got {tuple(cam.shape[-2:])}")
-    check_bank_fits(bank, mapping, str(bank.directory or "<bank>"))
+    banks = [bank] if isinstance(bank, PSFBank) else list(bank)
+    if not banks:
+        raise ValueError("expected a PSF bank, or several; got none")
+    for b in banks:
+        check_bank_fits(b, mapping, str(b.directory or "<bank>"))
     c, h, w = cam.shape
     wy, wx = tile_weights(h, tile, ramp), tile_weights(w, tile, ramp)
     n, off = tile + ramp + 2 * margin, ramp // 2 + margin
     cam = cam.detach().to(device="cpu", dtype=torch.float32)
     cols = mirrored_index(-off, (len(wx) - 1) * tile + n - off, w)
-    otfs = _TileOTFs(bank, mapping, (len(wy), len(wx)), tile, n, unit_sum)
+    otfs = [_TileOTFs(b, mapping, (len(wy), len(wx)), tile, n, unit_sum) for b in banks]
     solve = _Solver(n, margin, capture, nsr, noise_floor)
     out = torch.zeros(c, (len(wy) - 1) * tile + tile + ramp, (len(wx) - 1) * tile + tile + ramp)
     core = slice(margin, margin + tile + ramp)
@@ -235,7 +271,8 @@ def wiener_deconvolve(
         strip = cam.index_select(1, mirrored_index(i * tile - off, i * tile - off + n, h)).index_select(2, cols)
         rows = strip.unfold(2, n, tile).permute(2, 0, 1, 3)  # (nx, C, n, n)
         stats = _box_stats(strip, n, tile, len(wx))
-        res = solve(rows, otfs.row(i), stats)[..., core, core] * (wy[i][:, None] * wx[:, None, :])[:, None]
+        hs, h2 = _mean_row(otfs, i)
+        res = solve(rows, hs, stats, h2)[..., core, core] * (wy[i][:, None] * wx[:, None, :])[:, None]
         band = out[:, i * tile : i * tile + tile + ramp]
         for j in range(len(wx)):
             band[:, :, j * tile : j * tile + tile + ramp] += res[j]

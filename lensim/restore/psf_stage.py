@@ -53,7 +53,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -142,15 +142,47 @@ def wiener_channels(
     or the banks of a lens with poses by source (lensim.render.posed.posed_banks): then each
     pixel takes the stage computed with its own source's bank, as the lens is rendered
     (pixel_sources; only the sources with pixels in the image are computed, each on the
-    box of its pixels: _posed_stage); capture: the capture record (ccm, r_gain, b_gain, shot, read;
-    lensim.data.pairs crop_capture) or None. The Wiener oracle itself
-    (lensim.evaluate.baselines.wiener)."""
+    box of its pixels: _posed_stage); or a list (tuple) of either, a tolerance
+    distribution's draws, for a unit whose draw is unknown: the tolerance-robust stage, per
+    tile and channel the minimum-mean-square-error linear filter over the draws,
+    conj(E[H]) / (E[|H|^2] + NSR) (lensim.evaluate.wiener_tiles; draws with poses: per
+    source, the draws' banks of that source, a symmetric draw's one bank in every source);
+    capture: the capture record (ccm, r_gain, b_gain, shot, read; lensim.data.pairs
+    crop_capture) or None. The Wiener oracle itself (lensim.evaluate.baselines.wiener)."""
     from lensim.evaluate.baselines import wiener
 
     st = stage or WienerStage()
-    if isinstance(bank, Mapping):
+    if isinstance(bank, (list, tuple)):
+        if not bank:
+            raise ValueError("expected a PSF bank, or several; got an empty list")
+        if any(isinstance(b, Mapping) for b in bank):
+            return _posed_stage(image, mapping, draws_by_source(bank), capture, st)
+        bank = tuple(bank)
+    elif isinstance(bank, Mapping):
         return _posed_stage(image, mapping, bank, capture, st)
     return wiener(image, mapping, bank, capture, st.tile, None, st.noise_floor, st.ramp, st.margin)
+
+
+def draws_by_source(draws: Sequence[Any]) -> dict[str, tuple[Any, ...]]:
+    """Several draws' banks (each a PSFBank, or a lens with poses' banks by source:
+    lensim.render.posed.posed_banks) -> per posed source, the draws' banks of that source
+    (a symmetric draw's one bank, or its "all", in every source): the tolerance-robust
+    stage's banks (wiener_channels). Every draw with poses must have the same sources."""
+    from lensim.render.posed import MIRROR, QUADRANTS
+
+    posed = [set(b) - {"all"} for b in draws if isinstance(b, Mapping) and set(b) - {"all"}]
+    keys = posed[0] if posed else {"all"}
+    if any(k != keys for k in posed):
+        raise ValueError(f"expected every draw with poses to have the same sources, got {sorted(map(sorted, posed))}")
+    if posed and not keys <= {q + m for q in QUADRANTS for m in ("", MIRROR)}:
+        raise ValueError(f"unknown posed sources {sorted(keys)}")
+
+    def of(b: Any, key: str) -> Any:
+        if not isinstance(b, Mapping):
+            return b
+        return b[key] if key in b else b["all"]
+
+    return {k: tuple(of(b, k) for b in draws) for k in sorted(keys)}
 
 
 def _posed_stage(
@@ -282,10 +314,16 @@ def stage_bank_entry(manifest: Mapping[str, Any]) -> Any:
     tolerance draws ("stage_bank": "tolerance_draw"; older manifests have their
     "tolerances" only) {"tolerance_draw": [each draw's bank folder, or posed banks' folders]}:
     each record's stage uses the bank of the draw its photo went through (its
-    "tolerance_draw"; lensim.evaluate.harness.record_banks)."""
-    from lensim.data.pairs import STAGE_PER_DRAW
+    "tolerance_draw"; lensim.evaluate.harness.record_banks); for pairs whose stage is the
+    tolerance-robust one ("stage_bank": "tolerance_robust") {"tolerance_robust": [each
+    draw's bank folder, or posed banks' folders]}: every record's stage is the robust stage
+    over all the draws."""
+    from lensim.data.pairs import STAGE_PER_DRAW, STAGE_ROBUST
     from lensim.evaluate.harness import pairs_bank_entry, tolerance_draw_banks
 
+    if manifest.get("stage_bank") == STAGE_ROBUST:  # every record: the robust stage over all draws
+        draws = manifest["tolerances"]["draws"]
+        return {STAGE_ROBUST: [pairs_bank_entry(d) for d in draws]}
     draws = tolerance_draw_banks(manifest)
     return pairs_bank_entry(manifest) if draws is None else {STAGE_PER_DRAW: draws}
 
@@ -295,7 +333,7 @@ def _stage_banks(manifest: Mapping[str, Any], root: Path, bank: Any) -> Callable
     (lensim.evaluate.harness.record_banks); a bank not found is a one-line InputError naming
     the manifest."""
     from lensim.data.manifest import MANIFEST
-    from lensim.data.pairs import STAGE_PER_DRAW
+    from lensim.data.pairs import STAGE_PER_DRAW, STAGE_ROBUST
     from lensim.evaluate.harness import record_banks
 
     resolve = record_banks(manifest, root, bank)
@@ -304,7 +342,9 @@ def _stage_banks(manifest: Mapping[str, Any], root: Path, bank: Any) -> Callable
         found = resolve(i, rec)
         if found is None:
             entry = stage_bank_entry(manifest)
-            if isinstance(entry, dict) and STAGE_PER_DRAW in entry:
+            if isinstance(entry, dict) and STAGE_ROBUST in entry:
+                entry = {str(k): v for k, v in enumerate(entry[STAGE_ROBUST])}
+            elif isinstance(entry, dict) and STAGE_PER_DRAW in entry:
                 entry = entry[STAGE_PER_DRAW][rec["tolerance_draw"]]
             named = ", ".join(sorted(map(str, entry.values()))) if isinstance(entry, dict) else entry
             raise InputError(
@@ -366,7 +406,7 @@ def ensure_wiener_cache(
         raise InputError(
             str(root / MANIFEST),
             "bank",
-            "names pairs made through tolerance draws, whose Wiener stage uses each draw's bank; "
+            "names pairs made through tolerance draws, whose Wiener stage uses the draws' banks; "
             "expected no other bank",
         )
     folder = root / CACHE_DIR / cache_key(st, entry)
@@ -413,6 +453,7 @@ __all__ = [
     "cache_key",
     "cached_path",
     "check_native_scale",
+    "draws_by_source",
     "ensure_wiener_cache",
     "network_bank",
     "photo_wiener",
