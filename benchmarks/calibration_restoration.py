@@ -51,6 +51,27 @@ posed banks where this script passes no --bank: the committed restoration_v3 row
         --camera focus_decentre --render turned \\
         --out /tmp/calibration-restoration --results benchmarks/results/calibration/restoration
 
+Another tolerance file (--tolerance-tag TAG --tolerance-file FILE --tolerance-draws N; posed
+rendering): after the runs above, pairs through N draws of FILE (OUT/pairs/tolerances-TAG,
+each draw's photos through its posed banks) and the tolerance-robust Wiener stage over those
+draws (lensim.restore.psf_stage.wiener_channels with the draws' posed banks: per tile and
+channel conj(E[H]) / (E[|H|^2] + NSR) over the draws, each pixel through its source's
+banks), what a restoration of a unit whose draw is unknown can compute. Evaluated: the
+Wiener filter alone with it and with the nominal lens's bank, the networks trained so far
+with it at test; then the networks --robust-train names, trained on those pairs, each
+evaluated with the stage it trained with: "nominal-stage" (the nominal lens's bank on
+every pair), "robust" (the tolerance-robust stage on every pair: "stage_bank":
+"tolerance_robust"), "posed-stage" (each pair its draw's posed bank, as (c') above; tested
+with the nominal stage).
+
+    # the committed restoration_v4 (on a copy of restoration_v3's work folder):
+    cp -al /tmp/crv3 /tmp/crv4
+    nice -n 15 env OMP_NUM_THREADS=1 python benchmarks/calibration_restoration.py \
+        --camera larger_decentre --epochs 18 --out /tmp/crv4 \
+        --tolerance-tag wide --tolerance-file benchmarks/results/calibration/restoration_v4/tolerances-wide.yaml \
+        --tolerance-draws 12 --robust-train robust,nominal-stage \
+        --results benchmarks/results/calibration/restoration_v4
+
 Resumable: every stage's output is kept under --out (lenses, photos, pairs, runs, evals)
 and skipped on a rerun (dataset make and train resume themselves); --results gets
 table.md and restoration.json.
@@ -229,15 +250,15 @@ class Posed:
         banks = posed_banks(lens, self.full, self.bank)
         return banks["all"] if "all" in banks else PosedBanks(banks, self.bank(lens))
 
-    def draws(self, lens, tolerances: Path):
-        """ToleranceBanks of draws 0..s["draws"]-1 of seed 0 (as `lensim dataset make
-        --tolerances` draws them), each draw's photos through its posed banks."""
+    def draws(self, lens, tolerances: Path, count: int | None = None):
+        """ToleranceBanks of draws 0..count-1 (default s["draws"]) of seed 0 (as `lensim
+        dataset make --tolerances` draws them), each draw's photos through its posed banks."""
         from lensim.calibrate.tolerances import drawn_lens, load_tolerances
         from lensim.data.pairs import ToleranceBanks
         from lensim.optics.lens_file import lens_to_dict
 
         tol = load_tolerances(tolerances, lens)
-        drawn = [drawn_lens(lens, tol, 0, k) for k in range(self.s["draws"])]
+        drawn = [drawn_lens(lens, tol, 0, k) for k in range(count or self.s["draws"])]
         posed = [self.banks(m) for m in drawn]
         records = [{k: m.as_built[k] for k in ("seed", "draw", "parameters")} for m in drawn]
         stages = [p.stage if hasattr(p, "stage") else p for p in posed]
@@ -329,6 +350,125 @@ def evaluate(out: Path, name: str, test: Path, methods: str, bank: str | None, m
     return d
 
 
+def evaluate_banks(out: Path, name: str, test: Path, methods: str, banks: tuple, model: Path | None) -> Path:
+    """As :func:`evaluate` (its outputs: metrics.csv, metrics.json), in this process, with a
+    stage no lens file gives: ``banks``, several draws' banks (each a lens with poses' banks
+    by source), is the tolerance-robust stage (lensim.restore.psf_stage.wiener_channels) of
+    "wiener" and of the network's stage, each pixel through its own source's banks."""
+    from lensim.evaluate import harness
+    from lensim.io import atomic_write_json
+    from lensim.jsonable import jsonable
+
+    d = out / "evals" / name
+    if (d / "metrics.json").exists():
+        return d
+    log(f"evaluate {name}")
+    table: dict = {}
+    for m in methods.split(","):
+        if m == "model":
+            table[m] = harness.checkpoint_method(model)
+        elif m != "input":
+            table[m] = harness.builtin_method(m)
+    rows = harness.evaluate_rows(test, table, bank=banks)
+    d.mkdir(parents=True, exist_ok=True)
+    harness.write_csv(rows, d / "metrics.csv")
+    atomic_write_json(d / "metrics.json", jsonable(harness.summarize(rows)), indent=2)
+    return d
+
+
+def stage_pairs(out: Path, name: str, stage: str) -> Path:
+    """A copy of OUT/pairs/<name> (pairs through tolerance draws; crop files linked) whose
+    pairs' Wiener stage in training is ``stage``: "nominal-stage" the nominal lens's bank
+    (the manifest's "bank") on every pair (the draws kept as "photos_tolerances"), "robust"
+    the tolerance-robust stage over all the draws' posed banks on every pair ("stage_bank":
+    "tolerance_robust"). OUT/pairs/<name>@<stage>, made once."""
+    from lensim.data.pairs import STAGE_ROBUST
+
+    src = out / "pairs" / name
+    dst = out / "pairs" / f"{name}@{stage}"
+    if (dst / "manifest.json").exists():
+        return dst
+    manifest = json.loads((src / "manifest.json").read_text())
+    if stage == "nominal-stage":
+        new = {k: v for k, v in manifest.items() if k not in ("tolerances", "stage_bank")}
+        new["photos_tolerances"] = manifest["tolerances"]
+    elif stage == "robust":
+        new = {**manifest, "stage_bank": STAGE_ROBUST}
+    else:
+        raise SystemExit(f"unknown training stage {stage!r}")
+    dst.mkdir(parents=True, exist_ok=True)
+    if not (dst / "pairs").exists():
+        (dst / "pairs").symlink_to(src / "pairs")
+    (dst / "manifest.json").write_text(json.dumps(new))
+    return dst
+
+
+#: --robust-train's trainings: stage in training -> what the network is tested with
+ROBUST_TRAININGS = ("robust", "nominal-stage", "posed-stage")
+
+
+def robust_phase(
+    out: Path, s: dict, args: argparse.Namespace, pairs: dict[str, Path], done: Callable[[], None]
+) -> None:
+    """The --tolerance-tag runs (module docstring): pairs through --tolerance-draws draws of
+    --tolerance-file, the tolerance-robust stage's checks, the --robust-train networks
+    (nothing without --tolerance-tag)."""
+    tag, n = args.tolerance_tag, args.tolerance_draws
+    if not tag:
+        return
+    name = f"tolerances-{tag}"
+    kept = out / "lenses" / f"{name}.yaml"
+    text = args.tolerance_file.read_text()
+    if kept.exists() and kept.read_text() != text:
+        raise SystemExit(f"{kept} differs from {args.tolerance_file}: another tag, or another work folder")
+    kept.parent.mkdir(parents=True, exist_ok=True)
+    kept.write_text(text)
+    p = Posed(out, s)
+    lenses = lenses_of(args.camera)
+    draws = p.draws(lenses["nominal"], kept, n)
+    robust = tuple(d.banks for d in draws.posed)
+    test = pairs["test"]
+    p.pairs(name, out / "photos" / "train", draws, s["crops"])
+    evaluate(out, "oracle@nominal", test, "input,wiener", bank_of(pairs["nominal"]), None)
+    evaluate_banks(out, f"oracle@robust-{tag}", test, "input,wiener", robust, None)
+    done()
+    for m in ("nominal", "tolerances@posed-stage", "calibrated@posed-stage"):  # the networks so far
+        if (out / "runs" / m / "summary.json").exists():
+            evaluate_banks(out, f"{m}@robust-{tag}", test, "input,model", robust, out / "runs" / m)
+            done()
+    for stage in [k for k in args.robust_train.split(",") if k]:
+        if stage not in ROBUST_TRAININGS:
+            raise SystemExit(f"--robust-train: unknown {stage!r}; expected some of {', '.join(ROBUST_TRAININGS)}")
+        folder = posed_stage_pairs(out, name, s) if stage == "posed-stage" else stage_pairs(out, name, stage)
+        run_name = f"{name}@{stage}"
+        train(out, run_name, folder, s["budget"], s["train_crop"], epochs=args.epochs)
+        run = out / "runs" / run_name
+        if stage == "robust":
+            evaluate_banks(out, f"{run_name}@robust-{tag}", test, "input,model", robust, run)
+            posed_stage_evaluate(out, f"{run_name}@posed-calibrated", s, lenses["calibrated"], "input,model", run)
+        else:
+            evaluate(out, f"{run_name}@nominal", test, "input,model", bank_of(pairs["nominal"]), run)
+        done()
+
+
+def robust_rows(out: Path, tag: str) -> dict[str, tuple[Path, str]]:
+    """The --tolerance-tag evaluations found under OUT/evals: label -> (folder, method)."""
+    ev, name = out / "evals", f"tolerances-{tag}"
+    robust = f"tolerance-robust stage ({tag})"
+    cands = {
+        "wiener (nominal lens's bank)": ("oracle@nominal", "wiener"),
+        f"wiener ({robust})": (f"oracle@robust-{tag}", "wiener"),
+        f"nominal, {robust}": (f"nominal@robust-{tag}", "model"),
+        f"calibrated (posed stages in training), {robust}": (f"calibrated@posed-stage@robust-{tag}", "model"),
+        f"tolerances (posed stages in training), {robust}": (f"tolerances@posed-stage@robust-{tag}", "model"),
+        f"{name} (nominal stage in training), nominal stage": (f"{name}@nominal-stage@nominal", "model"),
+        f"{name} (posed stages in training), nominal stage": (f"{name}@posed-stage@nominal", "model"),
+        f"{name} ({robust} in training), {robust}": (f"{name}@robust@robust-{tag}", "model"),
+        f"{name} ({robust} in training), posed calibrated stage": (f"{name}@robust@posed-calibrated", "model"),
+    }
+    return {k: (ev / d, m) for k, (d, m) in cands.items() if (ev / d / "metrics.json").exists()}
+
+
 def per_photo(evals: Path, method: str) -> dict[str, dict[str, float]]:
     """Per test photo: the mean PSNR (dB) over its crops ("all"), and per zone over the
     crops with pixels in that zone (each crop's PSNR over its pixels there)."""
@@ -346,7 +486,12 @@ def per_photo(evals: Path, method: str) -> dict[str, dict[str, float]]:
 
 
 def gather(
-    out: Path, runs: dict[str, dict], seconds: float, camera: str = "focus_decentre", posed: bool = False
+    out: Path,
+    runs: dict[str, dict],
+    seconds: float,
+    camera: str = "focus_decentre",
+    posed: bool = False,
+    tag: str | None = None,
 ) -> dict:
     """Per method: overall and per-zone PSNR/SSIM, per-photo PSNR; each model's steps.
     The Wiener oracle is the true lens's bank: its PSFs exactly with the turned rendering,
@@ -388,10 +533,27 @@ def gather(
                 "universal"
             ]
             photos[f"universal (zero-shot), {label}"] = per_photo(d, "universal")
+    if tag:
+        for label, (d, method) in robust_rows(out, tag).items():
+            rows[label] = json.loads((d / "metrics.json").read_text())["methods"][method]
+            photos[label] = per_photo(d, method)
     stages = {p.parent.name: json.loads(p.read_text())["seconds"] for p in sorted((out / "pairs").glob("*/done"))}
     fit = str(CAMERAS[camera][1].relative_to(RESULTS.parent.parent))
     return {"camera": camera, "truth": CAMERAS[camera][0], "fit": fit, "metrics": rows, "per_photo": photos,
             "training": train_info, "pairs_seconds": stages, "run_seconds_all_invocations": seconds}  # fmt: skip
+
+
+def robust_differences(zs: dict[str, dict[str, float]], tag: str | None) -> list[str]:
+    """Rows of the difference table: each --tolerance-tag row against (b') and (a)."""
+    if not tag:
+        return []
+    a, b = "nominal", "calibrated (posed stages in training), posed calibrated stage"
+    lines = []
+    for c in [n for n in zs if n.startswith(f"tolerances-{tag} ") or f"tolerance-robust stage ({tag})" in n]:
+        for ref in (b, a):
+            if ref in zs:
+                lines.append(f"| {c} - {ref} | " + " | ".join(f"{zs[c][z] - zs[ref][z]:+.2f}" for z in ZONES) + " |")
+    return lines
 
 
 def table(res: dict) -> str:
@@ -409,6 +571,7 @@ def table(res: dict) -> str:
         if a not in zs or b not in zs:
             continue
         lines.append(f"| {a} - {b} | " + " | ".join(f"{zs[a][z] - zs[b][z]:+.2f}" for z in zones) + " |")
+    lines += robust_differences(zs, res.get("settings", {}).get("tolerance_tag"))
     names = list(res["per_photo"])
     for zone in ("all", "edge"):
         what = "all crops" if zone == "all" else "edge zone"
@@ -626,7 +789,10 @@ def seeds_table(seeds: dict[str, dict[str, dict]]) -> list[str]:
 
 def report(out: Path, results: Path | None, runs: dict[str, dict], s: dict, seconds: float, camera: str) -> None:
     """OUT/restoration.json and OUT/table.md from the stages done so far (copied to results)."""
-    res = gather(out, runs, seconds, camera, s.get("render") == "posed")
+    res = gather(out, runs, seconds, camera, s.get("render") == "posed", s.get("tolerance_tag"))
+    for m in sorted((out / "runs").glob("tolerances-*/summary.json")):  # the --tolerance-tag networks
+        keys = ("steps", "epochs_done", "seconds", "val_psnr_db", "val_input_psnr_db", "wall_s")
+        res["training"][m.parent.name] = {k: json.loads(m.read_text())[k] for k in keys}
     res["settings"] = s
     res["stage_swap"] = stage_swap(out)
     res["seeds"] = seed_runs(out)
@@ -650,6 +816,16 @@ def zero_shot_stages(out: Path, s: dict, lenses: dict, make: Callable[[str], Pat
         posed_stage_evaluate(out, f"universal@posed-{stage}", s, lenses[stage], "input,universal", None)
 
 
+def settings_of(args: argparse.Namespace) -> dict:
+    """The run's settings (FULL or TINY, the rendering, epochs, the --tolerance-tag runs')."""
+    if args.tolerance_tag and (args.tolerance_file is None or args.render != "posed"):
+        raise SystemExit("--tolerance-tag needs --tolerance-file and the posed rendering")
+    s = {**(TINY if args.tiny else FULL), "render": args.render, "epochs": args.epochs}
+    if args.tolerance_tag:
+        s |= {"tolerance_tag": args.tolerance_tag, "tolerance_draws": args.tolerance_draws}
+    return s
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path("/tmp/calibration-restoration"), help="work folder (resumable)")
@@ -659,8 +835,14 @@ def main() -> None:
     ap.add_argument("--epochs", type=int, default=0, help="train this many epochs (0: the time budget)")
     ap.add_argument("--seeds", default="0", help="training seeds, comma-separated (seed 0 first: the main table)")
     ap.add_argument("--tiny", action="store_true", help="a dry run at tiny sizes")
+    ap.add_argument("--tolerance-tag", default=None, help="name of another tolerance file's runs (posed rendering)")
+    ap.add_argument("--tolerance-file", type=Path, default=None, help="that tolerance file")
+    ap.add_argument("--tolerance-draws", type=int, default=8, help="how many of its draws (seed 0)")
+    ap.add_argument(
+        "--robust-train", default="robust", help=f"networks to train on them: {', '.join(ROBUST_TRAININGS)}"
+    )
     args = ap.parse_args()
-    s = {**(TINY if args.tiny else FULL), "render": args.render, "epochs": args.epochs}
+    s = settings_of(args)
     t0 = time.perf_counter()
     elapsed = args.out / "elapsed.json"  # seconds of earlier invocations (a killed run's are lost)
     before = json.loads(elapsed.read_text())["seconds"] if elapsed.exists() else 0.0
@@ -706,6 +888,7 @@ def main() -> None:
             if stage != MODELS[m]:
                 evaluate(args.out, f"{m}@{stage}", test, "input,model", bank, args.out / "runs" / m)
     done()
+    robust_phase(args.out, s, args, pairs, done)
     for seed in [int(k) for k in args.seeds.split(",") if k and int(k) != 0]:  # the same networks, other seeds
         for m, stage_lens in MODELS.items():
             name = f"{m}-s{seed}"
