@@ -451,6 +451,12 @@ def robust_phase(
         done()
 
 
+def tolerance_tags(out: Path, tag: str | None = None) -> list[str]:
+    """The --tolerance-tag runs of this work folder (OUT/lenses/tolerances-<tag>.yaml), and ``tag``."""
+    found = {p.stem[len("tolerances-") :] for p in (out / "lenses").glob("tolerances-*.yaml")}
+    return sorted(found | ({tag} if tag else set()))
+
+
 def robust_rows(out: Path, tag: str) -> dict[str, tuple[Path, str]]:
     """The --tolerance-tag evaluations found under OUT/evals: label -> (folder, method)."""
     ev, name = out / "evals", f"tolerances-{tag}"
@@ -533,8 +539,8 @@ def gather(
                 "universal"
             ]
             photos[f"universal (zero-shot), {label}"] = per_photo(d, "universal")
-    if tag:
-        for label, (d, method) in robust_rows(out, tag).items():
+    for other in tolerance_tags(out, tag):
+        for label, (d, method) in robust_rows(out, other).items():
             rows[label] = json.loads((d / "metrics.json").read_text())["methods"][method]
             photos[label] = per_photo(d, method)
     stages = {p.parent.name: json.loads(p.read_text())["seconds"] for p in sorted((out / "pairs").glob("*/done"))}
@@ -571,7 +577,8 @@ def table(res: dict) -> str:
         if a not in zs or b not in zs:
             continue
         lines.append(f"| {a} - {b} | " + " | ".join(f"{zs[a][z] - zs[b][z]:+.2f}" for z in zones) + " |")
-    lines += robust_differences(zs, res.get("settings", {}).get("tolerance_tag"))
+    for tag in res.get("tolerance_tags", []):
+        lines += robust_differences(zs, tag)
     names = list(res["per_photo"])
     for zone in ("all", "edge"):
         what = "all crops" if zone == "all" else "edge zone"
@@ -794,6 +801,7 @@ def report(out: Path, results: Path | None, runs: dict[str, dict], s: dict, seco
         keys = ("steps", "epochs_done", "seconds", "val_psnr_db", "val_input_psnr_db", "wall_s")
         res["training"][m.parent.name] = {k: json.loads(m.read_text())[k] for k in keys}
     res["settings"] = s
+    res["tolerance_tags"] = tolerance_tags(out, s.get("tolerance_tag"))
     res["stage_swap"] = stage_swap(out)
     res["seeds"] = seed_runs(out)
     if (out / "stage_kernels.json").exists():  # NCC of each stage's kernels with the test photos' PSFs, per zone
