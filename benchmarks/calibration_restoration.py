@@ -429,6 +429,10 @@ def robust_phase(
     robust = tuple(d.banks for d in draws.posed)
     test = pairs["test"]
     p.pairs(name, out / "photos" / "train", draws, s["crops"])
+    kernels = out / f"draw_kernels-{tag}.json"  # the draws' kernels against the unit's
+    if not kernels.exists():
+        found = stage_kernels(out, args.camera, s, {tag: list(robust)})
+        kernels.write_text(json.dumps({k: v for k, v in found.items() if k.startswith(tag)}, indent=1))
     evaluate(out, "oracle@nominal", test, "input,wiener", bank_of(pairs["nominal"]), None)
     evaluate_banks(out, f"oracle@robust-{tag}", test, "input,wiener", robust, None)
     done()
@@ -612,11 +616,17 @@ def stage_swap(out: Path) -> dict[str, dict[str, dict]]:
     return swap
 
 
-def stage_kernels(out: Path, camera: str, s: dict) -> dict[str, dict[str, float]]:
+def stage_kernels(out: Path, camera: str, s: dict, draws: dict[str, list] | None = None) -> dict[str, dict[str, float]]:
     """How far each stage's kernels are from the test photos' (the true lens's posed
     banks): per zone, the mean NCC at the test crops' centres of the kernels of the
     nominal lens, and of the true and calibrated lenses' banks along +y turned (the
-    stages) and posed (--render posed)."""
+    stages) and posed (--render posed). draws: name -> several draws' posed banks (by
+    source): "<name> draws, mean" and "<name> draws, best" (the mean over the draws, and
+    the best draw's, of that NCC per zone) and "<name> coherence", per zone the mean over
+    the crops' centres and channels of sum |E[H]|^2 / sum E[|H|^2] over 0.1-0.5 cycles
+    per pixel (the draws' transfer functions H, unit sum; 1: the draws agree, the
+    tolerance-robust filter is the Wiener filter of their mean; near 0: it restores
+    little there)."""
     import numpy as np
 
     from lensim.evaluate.metrics import zone_index
@@ -652,11 +662,43 @@ def stage_kernels(out: Path, camera: str, s: dict) -> dict[str, dict[str, float]
     cands["calibrated turned"] = p.bank(lenses["calibrated"])
     cands["calibrated posed"] = p.banks(lenses["calibrated"]).banks
     zones = [ZONES[int(zone_index(np.array(np.hypot(x, y) / half)))] for x, y in xy]
+
+    def by_zone(v: list[float]) -> dict[str, float]:
+        return {z: float(np.mean([n for n, q in zip(v, zones, strict=True) if q == z])) for z in ZONES}
+
     res = {}
     for name, banks in cands.items():
-        v = [ncc(a, b) for a, b in zip(kernels(banks), truth, strict=True)]
-        res[name] = {z: float(np.mean([n for n, q in zip(v, zones, strict=True) if q == z])) for z in ZONES}
+        res[name] = by_zone([ncc(a, b) for a, b in zip(kernels(banks), truth, strict=True)])
+    for name, several in (draws or {}).items():
+        ks = [kernels(b) for b in several]
+        per = [by_zone([ncc(a, b) for a, b in zip(k, truth, strict=True)]) for k in ks]
+        res[f"{name} draws, mean"] = {z: float(np.mean([d[z] for d in per])) for z in ZONES}
+        res[f"{name} draws, best"] = {z: float(np.max([d[z] for d in per])) for z in ZONES}
+        res[f"{name} coherence"] = by_zone([_coherence([k[i] for k in ks]) for i in range(len(xy))])
     return res
+
+
+def _coherence(kernels: list, n: int = 64) -> float:
+    """sum |E[H]|^2 / sum E[|H|^2] over 0.1-0.5 cycles per pixel, mean over the channels,
+    of (3, P, P) kernels (several draws' at one point; H: each one's transfer function at
+    n x n, unit sum)."""
+    import numpy as np
+
+    f = np.hypot(*np.meshgrid(np.fft.fftfreq(n), np.fft.fftfreq(n), indexing="ij"))
+    band = (f >= 0.1) & (f <= 0.5)
+    hs = []
+    for k in kernels:
+        p = min(k.shape[-1], n)
+        big = np.zeros((3, n, n))
+        c = (k.shape[-1] - p) // 2
+        big[:, :p, :p] = k[:, c : c + p, c : c + p]
+        big = np.roll(big, (-(p // 2), -(p // 2)), axis=(1, 2))
+        h = np.fft.fft2(big)
+        hs.append(h / h[:, :1, :1])
+    h = np.array(hs)  # (draws, 3, n, n)
+    common = (np.abs(h.mean(axis=0)) ** 2)[:, band].sum(axis=-1)
+    power = (np.abs(h) ** 2).mean(axis=0)[:, band].sum(axis=-1)
+    return float(np.mean(common / power))
 
 
 def _crop_source(crop: dict, size: int, sensor) -> str:
@@ -806,6 +848,8 @@ def report(out: Path, results: Path | None, runs: dict[str, dict], s: dict, seco
     res["seeds"] = seed_runs(out)
     if (out / "stage_kernels.json").exists():  # NCC of each stage's kernels with the test photos' PSFs, per zone
         res["stage_kernel_ncc"] = json.loads((out / "stage_kernels.json").read_text())
+        for d in sorted(out.glob("draw_kernels-*.json")):  # the --tolerance-tag draws'
+            res["stage_kernel_ncc"] |= json.loads(d.read_text())
     (out / "restoration.json").write_text(json.dumps(res, indent=1))
     (out / "table.md").write_text(table(res))
     if results:
