@@ -19,7 +19,11 @@ both signs of focus (and with each element parameter at +-ELEMENT_START: a decen
 the MTF at second order near nominal) and the full fit runs from the best start of each
 sign, the smaller residual kept (lensim.calibrate.search). The element fitted is the one
 whose prefits leave the smallest objective (search.prefit_ranking; the linear model at
-the nominal lens, element_ranking, is recorded beside it). Uncertainties come from the
+the nominal lens, element_ranking, is recorded beside it). Further element moves (with
+elements_fitted above 1: a unit whose every element is a little off) are added one after
+another, each the decentre or tilt, of any element, that the linear model at the current
+fit ranks first (_add_moves: there a move acts at first order), and the set is fitted
+again from the current values (as_built.steps records them). Uncertainties come from the
 Jacobian at the optimum: cov = s^2 (J^T J)^-1, s^2 the residual variance. Before
 fitting, a parameter the chart's edges cannot constrain (its predicted 1-sigma
 uncertainty at the assumed noise is above its scale) is refused with a CoverageError
@@ -31,7 +35,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -45,6 +49,8 @@ from lensim.optics.lens import Lens
 #: element tilt scale (deg); the other scales follow the lens (parameter_scales)
 ELEMENT_TILT_DEG = 0.05
 KINDS = ("focus", "tilt_x", "tilt_y", "decentre_x", "decentre_y")
+#: the parameters of each element the fit may move
+ELEMENT_KINDS = ("decentre_x", "decentre_y", "tilt_x", "tilt_y")
 #: how an element may move in the fit (each with its _x and _y parameter)
 ELEMENT_MOVES = ("decentre", "tilt")
 #: an element's tilt is fitted instead of its decentre when it leaves less than this
@@ -170,7 +176,7 @@ def sensitivity_table(
     one's change (the Jacobian column in units of its scale)."""
     names = list(IMAGE_PARAMETERS)
     for k in range(1, len(elements(model.lens)) + 1):
-        names += [f"e{k}.{kind}" for kind in ("decentre_x", "decentre_y", "tilt_x", "tilt_y")]
+        names += [f"e{k}.{kind}" for kind in ELEMENT_KINDS]
     rows, columns = [], {}
     for i, name in enumerate(names):
         step = scale_of(name, scales)
@@ -213,6 +219,20 @@ def element_costs(gap: np.ndarray, columns: dict[str, np.ndarray], chosen: Seque
         move = "tilt" if tilt else "decentre"
         costs.append((cost[move], f"{t}.{move}"))
     return sorted(costs, key=lambda c: c[0])
+
+
+def move_costs(gap: np.ndarray, columns: dict[str, np.ndarray], chosen: Sequence[str]) -> list[tuple[float, str]]:
+    """(squared residual, move) of every element move ("e2.decentre", "e1.tilt": its x and
+    y parameters) whose columns are known and that is not in `chosen`, the tilt of a chosen
+    element's decentre included, fitted with `chosen` in the linear model; smallest first
+    (ties keep the elements' order, decentre before tilt)."""
+    moves = {n.rpartition("_")[0] for n in columns if n.startswith("e") and n not in chosen}
+    known = [
+        m
+        for m in sorted(moves, key=lambda m: (int(m[1 : m.index(".")]), m))
+        if f"{m}_x" in columns and f"{m}_y" in columns and f"{m}_x" not in chosen and f"{m}_y" not in chosen
+    ]
+    return sorted(((_move_cost(gap, columns, chosen, m), m) for m in known), key=lambda c: c[0])
 
 
 def element_ranking(gap: np.ndarray, columns: dict[str, np.ndarray], chosen: Sequence[str]) -> list[str]:
@@ -284,17 +304,19 @@ def _parameter_sets(
     model: Model, names: Sequence[str] | None, elements_fitted: int, candidates: int, context: dict
 ) -> tuple[list[dict], list[list[str]]]:
     """The sensitivity table (empty when names are given and candidates is 1) and the
-    parameter sets to fit: names as given; or candidate_sets of the first elements ranked
-    by _ranked_firsts, with the image parameters and the number of elements of names when
-    they are given (the elements chosen again)."""
+    parameter sets to fit: names as given; or candidate_sets of the first element's move
+    ranked by _ranked_firsts, with the image parameters of names when they are given; the
+    further moves (elements_fitted - 1, or those of names beyond the first: the moves are
+    chosen again) are added after the fit by _add_moves (context["further_moves"])."""
     if names is not None and candidates <= 1:
         return [], [list(names)]
     table, context["columns"] = sensitivity_table(model, context["base"], context["kinds"], context.get("progress"))
     image = IMAGE_PARAMETERS if names is None else [n for n in names if n.startswith("image.")]
-    count = elements_fitted if names is None else len({n.partition(".")[0] for n in names if n not in image})
+    count = elements_fitted if names is None else len({n.rpartition("_")[0] for n in names if n not in image})
+    context["further_moves"] = max(count - 1, 0)
     gap = context["measured"] - context["base"]
     firsts = _ranked_firsts(model, gap, image, context) if count >= 1 else None
-    return table, candidate_sets(gap, context["columns"], count, candidates, image, firsts)
+    return table, candidate_sets(gap, context["columns"], min(count, 1), candidates, image, firsts)
 
 
 def _covariance(jac: np.ndarray, noise: float) -> np.ndarray:
@@ -424,6 +446,51 @@ def _fit_sets(
     return out
 
 
+def _columns_at(model: Model, values: dict[str, float], context: dict) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """The model at values and its change (per scale) for each fitted parameter and every
+    element's decentre and tilt: the linear model at a fitted lens (one trace per element
+    parameter), where a further element's move acts at first order."""
+    kinds = context["kinds"]
+    base = model.predict(values)
+    names = list(values)
+    for k in range(1, len(elements(model.lens)) + 1):
+        names += [f"e{k}.{kind}" for kind in ELEMENT_KINDS if f"e{k}.{kind}" not in values]
+    columns = {}
+    for n in names:
+        moved = dict(values)
+        moved[n] = moved.get(n, 0.0) + scale_of(n, kinds)
+        columns[n] = model.predict(moved) - base
+    return base, columns
+
+
+def _add_moves(model: Model, outcome: _Outcome, context: dict, count: int) -> tuple[_Outcome, list[dict]]:
+    """Add up to `count` element moves to a fitted set, one after another: the move that
+    leaves the smallest residual in the linear model at the current fit (move_costs on
+    _columns_at; a chosen element's tilt beside its decentre included) is added and the set
+    fitted again from the current values. Stops early when no move is left or the chart
+    cannot constrain the move (it is held at nominal). Returns the last outcome and one
+    record per step: the move, its linear-model RMS and the fitted RMS (MTF)."""
+    steps: list[dict] = []
+    for _ in range(count):
+        values = dict(zip(outcome.names, (outcome.best.x * outcome.scales).tolist(), strict=True))
+        base, columns = _columns_at(model, values, context)
+        gap = context["measured"] - base
+        costs = move_costs(gap, columns, outcome.names)
+        if not costs:
+            break
+        cost, move = costs[0]
+        names = [*outcome.names, f"{move}_x", f"{move}_y"]
+        try:
+            step = _fit_set(model, names, context, values, hold=True)
+        except CoverageError:
+            break
+        if f"{move}_x" not in step.names and f"{move}_y" not in step.names:
+            break
+        outcome = replace(step, held=outcome.held + step.held)
+        steps.append({"move": move, "linear_rms": float(np.sqrt(cost / gap.size)), "rms": _rms(step.best)})
+    return outcome, steps
+
+
 def _record(chosen: _Outcome, outcomes: list[_Outcome], context: dict, sigma: dict[str, float]) -> dict:
     """The as_built record of a fit (lensim.calibrate.fit.fit's docstring)."""
     names, units, run = chosen.names, chosen.scales, chosen.best
@@ -443,6 +510,8 @@ def _record(chosen: _Outcome, outcomes: list[_Outcome], context: dict, sigma: di
     }
     if "ranking_record" in context:
         record["ranking"] = context["ranking_record"]
+    if context.get("steps"):
+        record["steps"] = context["steps"]
     if len(outcomes) > 1:
         record["candidates"] = [{"parameters": o.names, "rms": _rms(o.best), "held": o.held} for o in outcomes]
     return record
@@ -470,8 +539,10 @@ def fit(
     start from instead of those starts (a refit near a known solution; missing ones start at
     0). candidates: the number of first elements fitted in full, the best-ranked
     (candidate_sets), the smallest objective kept (each candidate's RMS in
-    as_built.candidates); with names, their image parameters and number of elements are
-    kept and the elements chosen again. ranking: how the first elements are ranked,
+    as_built.candidates); with names, their image parameters and number of element moves
+    are kept and the moves chosen again. elements_fitted: the element moves (each an
+    element's decentre or tilt, x and y) fitted: the first as above, the others added one
+    at a time (_add_moves). ranking: how the first elements are ranked,
     "prefit" (by their image prefits, lensim.calibrate.search.prefit_ranking: about 8
     traces and 11 image fits per element) or "linear" (the linear model at the nominal
     lens, element_ranking: it can rank the wrong element first); both rankings are
@@ -489,6 +560,8 @@ def fit(
     table, sets = _parameter_sets(model, names, elements_fitted, candidates, context)
     outcomes = _fit_sets(model, sets, context, start, hold=names is None or candidates > 1)
     chosen = min(outcomes, key=lambda o: o.best.cost)
+    if context.get("further_moves"):
+        chosen, context["steps"] = _add_moves(model, chosen, context, context["further_moves"])
     names, units, run = chosen.names, chosen.scales, chosen.best
     dof = max(measured.size - len(names), 1)
     cov = np.linalg.pinv(run.jac.T @ run.jac) * max(float(np.sum(run.data**2)) / dof, 1e-300)

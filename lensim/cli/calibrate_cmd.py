@@ -73,7 +73,13 @@ def calibrate_command(
     output: Path = typer.Option(..., "-o", "--output", help="As-built lens file to write (.yaml or .json)."),
     lens_file: str = typer.Option(assets.DEFAULT_LENS, "--lens", help="Lens file or built-in lens name."),
     sensor_file: str = typer.Option(None, "--sensor", help="Sensor profile file or built-in name (default: built-in)."),
-    elements: int = typer.Option(1, "--elements", help="Elements whose decentre (x, y) is fitted (the best-fitting)."),
+    elements: int = typer.Option(
+        1,
+        "--elements",
+        help="Element moves fitted, each an element's decentre or tilt (x, y): the first ranked by image "
+        "prefits, each further one by the linear model at the current fit (a unit whose every element is "
+        "off needs several).",
+    ),
     candidates: int = typer.Option(
         1,
         "--candidates",
@@ -127,7 +133,7 @@ def calibrate_command(
     if output.suffix.lower() not in (".json", ".yaml", ".yml"):
         raise InputError(str(output), "--output", "expected a .json, .yaml or .yml file name for a native lens file")
     output_file(output)
-    in_range(elements, 0, 4, "--elements", what="a number of elements")
+    in_range(elements, 0, 6, "--elements", what="a number of element moves")
     at_least(model_samples, 16, "--model-samples", what="a number of pupil samples")
     in_range(refresh_rounds, 0, 20, "--refresh-rounds", what="a number of rounds")
     in_range(candidates, 1, 20, "--candidates", what="a number of elements")
