@@ -102,9 +102,10 @@ def _homography(frame_mm: tuple[float, float], fill: float = 0.97) -> np.ndarray
 class World:
     """The sensor, mapping, nominal lens at the chart distance, chart and bank settings."""
 
-    def __init__(self, cache: Path, candidates: int = 1, elements: int = ELEMENTS_FITTED) -> None:
+    def __init__(self, cache: Path, candidates: int = 1, elements: int = ELEMENTS_FITTED, moves: int = 0) -> None:
         self.candidates = candidates
         self.elements = elements
+        self.moves = moves
         self.rounds = REFRESH_ROUNDS
         self.sensor = load_sensor(SENSOR)
         self.mapping = map_to_sensor(ROWS, COLS, self.sensor)
@@ -213,9 +214,8 @@ def run_camera(world: World, name: str, truth, out: Path) -> dict:
         log(f"{name}: round {r['round']} ({r['start_from']}): {_short(r['values'])} {rms}; {cost}{bound}")
 
     obs = observations([data], world.spectrum)
-    refined = refine(
-        world.lens, obs, [sim], first, world.rounds, name, done=done, on_round=checkpoint, candidates=world.candidates
-    )
+    options = {"candidates": world.candidates, "moves": world.moves}
+    refined = refine(world.lens, obs, [sim], first, world.rounds, name, done=done, on_round=checkpoint, **options)
     rounds_s = sum(r["simulate_s"] + r["fit_s"] for r in refined.rounds)
     log(f"{name}: refined ({'converged' if refined.converged else 'not converged'}); ratios and PSFs")
     result = {
@@ -238,6 +238,7 @@ def run_camera(world: World, name: str, truth, out: Path) -> dict:
         "starts": first.lens.as_built.get("starts", []),
         "ranking": first.lens.as_built.get("ranking"),
         "elements_fitted": world.elements,
+        "moves_after_refresh": world.moves,
         "candidates": world.candidates,
         "before": ratios(world, photo, world.lens, det),
         "after": ratios(world, photo, refined.lens, det),
@@ -389,6 +390,7 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=REFRESH_ROUNDS, help="most transfer refreshes (--refresh-rounds)")
     ap.add_argument("--candidates", type=int, default=1, help="elements fitted in full for the choice (--candidates)")
     ap.add_argument("--elements", type=int, default=ELEMENTS_FITTED, help="elements fitted (--elements)")
+    ap.add_argument("--refresh-moves", type=int, default=0, help="element moves added in round 1 (refine's moves)")
     ap.add_argument("--table-only", action="store_true", help="only gather OUT/*.json into OUT/table.md")
     ap.add_argument("--truth-again", action="store_true", help="add the true lens's zone ratios to OUT/<camera>.json")
     ap.add_argument(
@@ -401,7 +403,7 @@ def main() -> None:
         return
     torch.set_num_threads(1)
     args.out.mkdir(parents=True, exist_ok=True)
-    world = World(args.cache, args.candidates, args.elements)
+    world = World(args.cache, args.candidates, args.elements, args.refresh_moves)
     world.rounds = args.rounds
     results = []
     for name in args.cameras.split(","):

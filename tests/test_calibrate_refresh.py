@@ -151,3 +151,24 @@ def test_the_mirrored_lens_has_the_mirrored_psf():
     a, m = psf(posed), psf(mirrored_lens(posed))
     assert np.max(np.abs(a[:, ::-1] - m)) < 1e-5 * a.max()
     assert np.max(np.abs(a - m)) > 0.1 * a.max()
+
+
+def test_a_move_added_after_the_refresh_is_chosen_at_the_refreshed_transfer():
+    # refine(moves=1): the first round refreshes the transfer, refits the first fit's set
+    # and adds the move the linear model at that fit ranks first (element 1's decentre,
+    # which the first fit did not have); the later rounds refit the grown set
+    lens = load_lens("cooke_triplet", warn=False)
+    wl, w = list(lens.wavelengths_um), list(lens.wavelength_weights)
+    edges = _edges()
+    truth = {"image.focus": 0.03, "e2.decentre_x": 0.02, "e1.decentre_y": -0.03}
+    simulate = _camera(lens, edges, wl, w)
+    optical = model_mtfs(lens, edges, wl, w, SAMPLES)
+    system = [s / np.maximum(o, 1e-12) for s, o in zip(simulate(lens), optical, strict=True)]
+    obs = Observations(edges, simulate(perturbed_lens(lens, truth)), system, wl, w, samples=SAMPLES)
+    first = fit(lens, obs, ["image.focus", "e2.decentre_x", "e2.decentre_y"])
+    refined = refine(lens, obs, [simulate], first, rounds=4, moves=1)
+    assert [s["move"] for s in refined.rounds[0]["steps"]] == ["e1.decentre"]
+    assert all("steps" not in r for r in refined.rounds[1:]) and len(refined.rounds) >= 2
+    for name, value in truth.items():
+        assert refined.values[name] == pytest.approx(value, abs=0.003), name
+    assert refined.rms_after < 0.3 * first.rms_after

@@ -466,28 +466,29 @@ def _columns_at(model: Model, values: dict[str, float], context: dict) -> tuple[
 def _add_moves(model: Model, outcome: _Outcome, context: dict, count: int) -> tuple[_Outcome, list[dict]]:
     """Add up to `count` element moves to a fitted set, one after another: the move that
     leaves the smallest residual in the linear model at the current fit (move_costs on
-    _columns_at; a chosen element's tilt beside its decentre included) is added and the set
-    fitted again from the current values. Stops early when no move is left or the chart
-    cannot constrain the move (it is held at nominal). Returns the last outcome and one
-    record per step: the move, its linear-model RMS and the fitted RMS (MTF)."""
+    _columns_at; a chosen element's tilt beside its decentre included) and that the chart
+    can constrain with the others (check_coverage; a move it cannot, such as the last
+    element's tilt tied to the sensor's, is skipped with the reason) is added and the set
+    fitted again from the current values. Returns the last outcome and one record per
+    step: the move, its linear-model RMS, the fitted RMS (MTF) and the moves skipped."""
     steps: list[dict] = []
     for _ in range(count):
         values = dict(zip(outcome.names, (outcome.best.x * outcome.scales).tolist(), strict=True))
         base, columns = _columns_at(model, values, context)
         gap = context["measured"] - base
-        costs = move_costs(gap, columns, outcome.names)
-        if not costs:
+        skipped, step = [], None
+        for cost, move in move_costs(gap, columns, outcome.names):
+            try:
+                step = _fit_set(model, [*outcome.names, f"{move}_x", f"{move}_y"], context, values, hold=False)
+            except CoverageError as e:
+                skipped.append({"move": move, "parameter": e.field, "reason": e.message})
+                continue
+            steps.append({"move": move, "linear_rms": float(np.sqrt(cost / gap.size)), "rms": _rms(step.best)})
+            steps[-1]["skipped"] = skipped
             break
-        cost, move = costs[0]
-        names = [*outcome.names, f"{move}_x", f"{move}_y"]
-        try:
-            step = _fit_set(model, names, context, values, hold=True)
-        except CoverageError:
+        if step is None:
             break
-        if f"{move}_x" not in step.names and f"{move}_y" not in step.names:
-            break
-        outcome = replace(step, held=outcome.held + step.held)
-        steps.append({"move": move, "linear_rms": float(np.sqrt(cost / gap.size)), "rms": _rms(step.best)})
+        outcome = replace(step, held=outcome.held)
     return outcome, steps
 
 
@@ -527,6 +528,7 @@ def fit(
     start: dict[str, float] | None = None,
     candidates: int = 1,
     ranking: str = "prefit",
+    add_moves: int = 0,
 ) -> Fit:
     """Fit the parameters `names` (default: choose_parameters from the sensitivity table,
     which is then reported; given names skip it) to the observations, from each start of
@@ -546,7 +548,8 @@ def fit(
     "prefit" (by their image prefits, lensim.calibrate.search.prefit_ranking: about 8
     traces and 11 image fits per element) or "linear" (the linear model at the nominal
     lens, element_ranking: it can rank the wrong element first); both rankings are
-    recorded in as_built.ranking."""
+    recorded in as_built.ranking. add_moves: element moves added (_add_moves) after the
+    given names are fitted (a refresh round adds them at a refreshed transfer)."""
     t0 = time.perf_counter()
     model = Model(lens, obs)
     measured = np.concatenate(obs.measured)
@@ -560,7 +563,8 @@ def fit(
     table, sets = _parameter_sets(model, names, elements_fitted, candidates, context)
     outcomes = _fit_sets(model, sets, context, start, hold=names is None or candidates > 1)
     chosen = min(outcomes, key=lambda o: o.best.cost)
-    if context.get("further_moves"):
+    context["further_moves"] = context.get("further_moves", 0) + add_moves
+    if context["further_moves"]:
         chosen, context["steps"] = _add_moves(model, chosen, context, context["further_moves"])
     names, units, run = chosen.names, chosen.scales, chosen.best
     dof = max(measured.size - len(names), 1)

@@ -179,7 +179,8 @@ def _round(
     measured = np.concatenate(obs.measured)
     rms_start = float(np.sqrt(np.mean((Model(lens, new).predict(start) - measured) ** 2)))
     k = options.get("candidates", 1)
-    result = fit(lens, new, list(start), where=options.get("where", "chart"), start=start, candidates=k)
+    where = options.get("where", "chart")
+    result = fit(lens, new, list(start), where=where, start=start, candidates=k, add_moves=options.get("moves", 0))
     record = {
         "start": dict(start),
         "values": result.values,
@@ -193,7 +194,7 @@ def _round(
         "evaluations": result.evaluations,
         "traces": result.traces,
     }
-    for key in ("candidates", "at_bound", "held_at_nominal", "bounds", "priors"):
+    for key in ("candidates", "at_bound", "held_at_nominal", "bounds", "priors", "steps"):
         if key in result.lens.as_built:
             record[key] = result.lens.as_built[key]
     return record
@@ -210,6 +211,7 @@ def refine(
     done: Sequence[dict] = (),
     on_round: Callable[[list[dict]], None] | None = None,
     candidates: int = 1,
+    moves: int = 0,
 ) -> Refined:
     """Refresh the system transfer at the fitted lens and refit, up to `rounds` times (the
     module docstring). lens: the nominal lens the fit perturbs; obs: the observations of
@@ -219,12 +221,15 @@ def refine(
     after each one (a long calibration checkpoints them). candidates: with more than 1,
     each round fits that many elements' decentres (the best-ranked in the linear model,
     lensim.calibrate.fit.candidate_sets) from the current image values and keeps the
-    smallest residual, so a choice the nominal transfer biased can change."""
+    smallest residual, so a choice the nominal transfer biased can change. moves: element
+    moves added in the first round, after its transfer refresh (lensim.calibrate.fit.fit's
+    add_moves): chosen at a refreshed transfer, not the nominal one the first fit had."""
     history = [dict(r) for r in done]
     converged = bool(history) and history[-1]["moved_sigma"] < 1.0
     while not converged and len(history) < rounds:
         start, how = next_start(history, accelerate) if history else (dict(first.values), "first fit")
-        record = _round(lens, obs, simulators, start, {"where": where, "candidates": candidates})
+        options = {"where": where, "candidates": candidates, "moves": moves if not history else 0}
+        record = _round(lens, obs, simulators, start, options)
         history.append(record | {"round": len(history) + 1, "start_from": how})
         converged = record["moved_sigma"] < 1.0
         if on_round is not None:
