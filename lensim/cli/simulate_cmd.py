@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -97,6 +98,7 @@ def simulate_command(
     from lensim.render.kernels import check_bank_fits
     from lensim.render.mapping import map_to_sensor
     from lensim.render.pipeline import simulate
+    from lensim.render.posed import sensor_banks
     from lensim.sensor.profile import load_sensor
 
     settings = bank_settings(fields, wavelengths, pupil_samples, cache)
@@ -129,9 +131,19 @@ def simulate_command(
             else:
                 if (h, w) not in banks:
                     pupil_given = ctx.get_parameter_source("pupil_samples").name != "DEFAULT"
-                    banks[(h, w)] = _photo_banks(
-                        path, (w, h), mapping.pitch_um, lens, sensor, settings, pupil_given, workers, quiet or json_out
+                    # a lens with poses: its posed banks by source, each at the photo's pitch
+                    bank_of = partial(
+                        _photo_bank,
+                        path,
+                        (w, h),
+                        mapping.pitch_um,
+                        sensor=sensor,
+                        settings=settings,
+                        pupil_given=pupil_given,
+                        workers=workers,
+                        quiet=quiet or json_out,
                     )
+                    banks[(h, w)] = sensor_banks(lens, sensor, bank_of)
                 bank = banks[(h, w)]
         gen = torch.Generator().manual_seed(seed + i)
         raw_path = output / (path.stem + ".dng") if raw else None
@@ -190,28 +202,6 @@ def _check_poses(lens: Lens, bank_given: bool, distortion: bool) -> None:
 def _folders(bank: PSFBank | dict[str, PSFBank]) -> str | dict[str, str]:
     """A bank's folder, or a lens with poses' banks' folders by source (the photo's record)."""
     return {k: str(b.directory) for k, b in bank.items()} if isinstance(bank, dict) else str(bank.directory)
-
-
-def _photo_banks(
-    path: Path,
-    size_wh: tuple[int, int],
-    pitch_um: float,
-    lens: Lens,
-    sensor: SensorProfile,
-    settings: BankSettings,
-    pupil_given: bool,
-    workers: int,
-    quiet: bool,
-) -> PSFBank | dict[str, PSFBank]:
-    """_photo_bank of the lens, or of a lens with poses its posed banks by source
-    (lensim.render.posed.sensor_banks), each at the photo's pitch."""
-    from lensim.render.posed import sensor_banks
-
-    return sensor_banks(
-        lens,
-        sensor,
-        lambda one: _photo_bank(path, size_wh, pitch_um, one, sensor, settings, pupil_given, workers, quiet),
-    )
 
 
 def _photo_bank(
