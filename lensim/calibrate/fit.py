@@ -36,6 +36,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -557,7 +558,8 @@ def fit(
     kinds = parameter_scales(lens, obs)
     if ranking not in ("prefit", "linear"):
         raise InputError(where, "ranking", f"expected prefit or linear, got {ranking!r}")
-    context = {"kinds": kinds, "columns": {}, "base": base, "measured": measured, "where": where, "progress": progress}
+    context: dict[str, Any] = {"kinds": kinds, "columns": {}, "base": base, "measured": measured}
+    context.update(where=where, progress=progress)
     context["ranking"] = ranking
     context["edges"] = len(obs.edges)
     table, sets = _parameter_sets(model, names, elements_fitted, candidates, context)
