@@ -260,3 +260,15 @@ def _lens_of(
             raise InputError(str(bank_dir), "lens", "the bank records no lens; expected --lens") from None
         at = "" if shooting is None or shooting.is_default else " at these settings"
         raise InputError("--lens", f"{lens_file}{at}", f"{e.message}, or no --lens") from None
+
+
+def refuse_posed_bank(lens: Lens) -> None:
+    """A --bank given for a lens with poses is refused in one line: such a lens renders
+    through its posed banks (lensim.render.posed.sensor_banks), which the command computes."""
+    if lens.has_poses:
+        raise InputError(
+            "--bank",
+            None,
+            "is a bank of a lens with poses, which renders through its posed banks (one per sensor "
+            "quadrant and its mirrored lens's); expected --lens LENS without --bank (they are computed)",
+        )

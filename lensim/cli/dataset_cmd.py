@@ -15,6 +15,7 @@ from lensim.cli.bank_options import (
     check_response,
     fields_option,
     pupil_samples_option,
+    refuse_posed_bank,
     scheduler_option,
     setting_list_option,
     wavelengths_option,
@@ -200,13 +201,7 @@ def make(
         )
     elif bank_dir is not None:
         bank, bank_lens = bank_or_grid_for_lens(bank_dir, lens_file)
-        if bank_lens.has_poses:
-            raise InputError(
-                "--bank",
-                None,
-                "is a bank of a lens with poses, which renders through its posed banks (one per sensor "
-                "quadrant and its mirrored lens's); expected --lens LENS without --bank (they are computed)",
-            )
+        refuse_posed_bank(bank_lens)
     else:
         bank = _lens_bank(lens_file, sharp_dir, size, sensor, settings, axes, workers, quiet, scheduler)
     with progress_bar("pairs", "photos", quiet) as cb:

@@ -23,6 +23,7 @@ from lensim.cli.bank_options import (
     lens_and_record,
     object_m_option,
     pupil_samples_option,
+    refuse_posed_bank,
     shooting_settings,
     wavelengths_option,
 )
@@ -186,13 +187,8 @@ def _check_poses(lens: Lens, bank_given: bool, distortion: bool) -> None:
     computed here), without distortion: one line naming --bank or --distortion otherwise."""
     from lensim.errors import InputError
 
-    if lens.has_poses and bank_given:
-        raise InputError(
-            "--bank",
-            None,
-            "is a bank of a lens with poses, which renders through its posed banks (one per sensor "
-            "quadrant and its mirrored lens's); expected --lens LENS without --bank (they are computed)",
-        )
+    if bank_given:
+        refuse_posed_bank(lens)
     if lens.has_poses and distortion:
         raise InputError(
             "--distortion", None, "through the posed banks of a lens with poses is not modelled; expected none"
