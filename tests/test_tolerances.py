@@ -324,6 +324,14 @@ def _robust_stage(data, robust, manifest):
     posed = [{k: PSFBank.load(f) for k, f in d["posed_banks"].items()} for d in manifest["tolerances"]["draws"]]
     folder = ensure_wiener_cache(robust)
     assert folder != ensure_wiener_cache(data).parent / folder.name
+    # another bank would be computed into the robust stage's cache: refused, as for per-draw stages
+    with pytest.raises(InputError, match="tolerance draws"):
+        ensure_wiener_cache(robust, bank=manifest["bank"])
+    broken = robust.parent / "robust_without_draws"
+    broken.mkdir()
+    (broken / "manifest.json").write_text(json.dumps({**manifest, "stage_bank": "tolerance_robust", "tolerances": {}}))
+    with pytest.raises(InputError, match="robust_without_draws.*tolerances"):
+        ensure_wiener_cache(broken)
     sensor = sensor_from_dict(manifest["sensor"])
     for rec in manifest["records"]:
         crop = rec["crops"][0]

@@ -299,6 +299,16 @@ def tolerance_draw_banks(manifest: Mapping[str, Any]) -> list[Any] | None:
     return [pairs_bank_entry(d) if isinstance(d, Mapping) else None for d in (draws if isinstance(draws, list) else [])]
 
 
+def robust_draws(manifest: Mapping[str, Any], where: str) -> list[Mapping[str, Any]]:
+    """The draws (the manifest's "tolerances" "draws") of pairs whose Wiener stage is the
+    tolerance-robust one; a manifest without them is a one-line InputError naming `where`."""
+    tol = manifest.get("tolerances")
+    draws = tol.get("draws") if isinstance(tol, Mapping) else None
+    if not isinstance(draws, list) or not draws or not all(isinstance(d, Mapping) for d in draws):
+        raise InputError(where, "tolerances", "expected the draws of the tolerance-robust stage")
+    return draws
+
+
 def robust_stage_banks(manifest: Mapping[str, Any], pairs_dir: Path) -> tuple[Any, ...] | None:
     """The banks of the tolerance-robust stage of pairs whose manifest says "stage_bank":
     STAGE_ROBUST (lensim.data.pairs): every draw's bank, or its posed banks by source where
@@ -307,11 +317,7 @@ def robust_stage_banks(manifest: Mapping[str, Any], pairs_dir: Path) -> tuple[An
     bank is not found."""
     if manifest.get("stage_bank") != STAGE_ROBUST:
         return None
-    tol = manifest.get("tolerances")
-    draws = tol.get("draws") if isinstance(tol, Mapping) else None
-    if not isinstance(draws, list) or not draws or not all(isinstance(d, Mapping) for d in draws):
-        raise InputError(str(pairs_dir / MANIFEST), "tolerances", "expected the draws of the tolerance-robust stage")
-    found = [_load_bank(d, pairs_dir, None) for d in draws]
+    found = [_load_bank(d, pairs_dir, None) for d in robust_draws(manifest, str(pairs_dir / MANIFEST))]
     return tuple(found) if all(isinstance(b, (PSFBank, dict)) for b in found) else None
 
 

@@ -306,7 +306,7 @@ def network_bank(info: Mapping[str, Any], bank: Any = None) -> Any:
 # ----------------------------------------------------------------------------- cache
 
 
-def stage_bank_entry(manifest: Mapping[str, Any]) -> Any:
+def stage_bank_entry(manifest: Mapping[str, Any], where: str = "manifest.json") -> Any:
     """What the Wiener stage of a pairs folder is computed with, as its cache key records
     it: the manifest's "bank" (for a grid, each record's setting's bank), or its posed
     banks' folders by source (pairs of a lens with poses: a dict, so that a stage of
@@ -317,13 +317,13 @@ def stage_bank_entry(manifest: Mapping[str, Any]) -> Any:
     "tolerance_draw"; lensim.evaluate.harness.record_banks); for pairs whose stage is the
     tolerance-robust one ("stage_bank": "tolerance_robust") {"tolerance_robust": [each
     draw's bank folder, or posed banks' folders]}: every record's stage is the robust stage
-    over all the draws."""
+    over all the draws. where: the manifest's path, named by a one-line InputError when a
+    robust stage's draws are missing."""
     from lensim.data.pairs import STAGE_PER_DRAW, STAGE_ROBUST
-    from lensim.evaluate.harness import pairs_bank_entry, tolerance_draw_banks
+    from lensim.evaluate.harness import pairs_bank_entry, robust_draws, tolerance_draw_banks
 
     if manifest.get("stage_bank") == STAGE_ROBUST:  # every record: the robust stage over all draws
-        draws = manifest["tolerances"]["draws"]
-        return {STAGE_ROBUST: [pairs_bank_entry(d) for d in draws]}
+        return {STAGE_ROBUST: [pairs_bank_entry(d) for d in robust_draws(manifest, where)]}
     draws = tolerance_draw_banks(manifest)
     return pairs_bank_entry(manifest) if draws is None else {STAGE_PER_DRAW: draws}
 
@@ -392,7 +392,7 @@ def ensure_wiener_cache(
     found is a one-line InputError naming the pairs folder. progress(done, total) counts
     crops."""
     from lensim.data.manifest import MANIFEST, read_pairs_manifest
-    from lensim.data.pairs import STAGE_PER_DRAW, crop_capture
+    from lensim.data.pairs import STAGE_PER_DRAW, STAGE_ROBUST, crop_capture
     from lensim.images import read_image, write_image
     from lensim.io import atomic_write_json
     from lensim.render.mapping import native_mapping
@@ -401,8 +401,8 @@ def ensure_wiener_cache(
     root = Path(dataset_dir)
     st = stage or WienerStage()
     manifest = read_pairs_manifest(root)
-    entry = stage_bank_entry(manifest)
-    if bank is not None and isinstance(entry, dict) and STAGE_PER_DRAW in entry:
+    entry = stage_bank_entry(manifest, str(root / MANIFEST))
+    if bank is not None and isinstance(entry, dict) and (STAGE_PER_DRAW in entry or STAGE_ROBUST in entry):
         raise InputError(
             str(root / MANIFEST),
             "bank",
